@@ -1,0 +1,48 @@
+"""Initial dot pattern by low-discrepancy dart throwing (paper §2.1)."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+from scipy.stats import qmc
+
+from .density import DensityMap
+
+
+def initial_dots(
+    density: DensityMap, n: int, seed: int, cell_weights: np.ndarray | None = None
+) -> np.ndarray:
+    """Throw ``n`` darts at the map with a scrambled 3-D Sobol sequence.
+
+    Point ``(U0, U1, U2)`` picks cell k with probability ``P_k = rho_k / sum(rho)`` from
+    ``U0`` and the position inside the cell from ``(U1, U2)``, as in the paper.
+
+    Args:
+        density: the fill-fraction map (cells of equal area).
+        n: number of dots.
+        seed: seed of the scrambling (same seed, same dots).
+        cell_weights: optional ``[ny, nx]`` multiplier of each cell's probability (share of
+            the cell inside the domain).
+
+    Returns:
+        ``[n, 2]`` float64 positions, mm, in generation order.
+    """
+    g = density.grid if cell_weights is None else density.grid * cell_weights
+    p = g.ravel()
+    cum = np.cumsum(p)
+    cum /= cum[-1]
+    sampler = qmc.Sobol(d=3, scramble=True, seed=np.random.default_rng(seed))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # balance warning for n != 2^k
+        u = sampler.random(n)
+    k = np.searchsorted(cum, u[:, 0], side="right")
+    last = int(np.flatnonzero(p > 0)[-1])
+    k = np.minimum(k, last)
+    ny, nx = density.shape
+    dx, dy = density.cell_size
+    iy, ix = np.divmod(k, nx)
+    xy = np.empty((n, 2))
+    xy[:, 0] = density.x0 + (ix + u[:, 1]) * dx
+    xy[:, 1] = density.y0 + (iy + u[:, 2]) * dy
+    return xy

@@ -1,0 +1,174 @@
+"""The guarantee pass: after relaxation, no collision, no protrusion, no dot where rho = 0.
+
+Every penalty of the paper is soft, so a converged layout can still hold a few pairs
+closer than one diameter and dots poking out of the panel. This pass fixes them by
+projection (Gauss-Seidel): clamp each dot into the panel (and back into its own start
+cell if it drifted into a zero-density cell), then push every pair closer than the
+minimum distance apart symmetrically to exactly that distance plus a few nm, and repeat
+until a whole sweep changes nothing. Positions are then rounded to 1 nm (the resolution
+of every output format) and checked independently with a KD-tree.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .density import DensityMap
+from .neighbors import neighbor_pairs
+
+#: Output resolution, mm (1 nm): positions are rounded to this.
+RESOLUTION = 1e-6
+#: Margin kept beyond each limit so rounding to RESOLUTION cannot break it, mm.
+MARGIN = 3e-6
+
+
+@nb.njit(cache=True)
+def _push_pairs(xy, ptr, nbr, target, slack):  # pragma: no cover - compiled
+    moved = 0
+    t2 = target * target
+    for i in range(xy.shape[0]):
+        for k in range(ptr[i], ptr[i + 1]):
+            j = nbr[k]
+            dx = xy[i, 0] - xy[j, 0]
+            dy = xy[i, 1] - xy[j, 1]
+            d2 = dx * dx + dy * dy
+            if d2 >= t2:
+                continue
+            d = np.sqrt(d2)
+            if d < 1e-12:
+                dx, dy, d = (1.0, 0.0, 1.0) if i < j else (-1.0, 0.0, 1.0)
+            p = 0.5 * (target + slack - d) / d
+            xy[i, 0] += p * dx
+            xy[i, 1] += p * dy
+            xy[j, 0] -= p * dx
+            xy[j, 1] -= p * dy
+            moved += 1
+    return moved
+
+
+@nb.njit(cache=True)
+def _fix_dots(xy, lo, hi, grid, x0, y0, cw, ch, home, eps):  # pragma: no cover
+    ny, nx = grid.shape
+    fixed = 0
+    for i in range(xy.shape[0]):
+        x = min(max(xy[i, 0], lo[0]), hi[0])
+        y = min(max(xy[i, 1], lo[1]), hi[1])
+        ix = min(max(int(np.floor((x - x0) / cw)), 0), nx - 1)
+        iy = min(max(int(np.floor((y - y0) / ch)), 0), ny - 1)
+        if grid[iy, ix] <= 0.0:
+            hy, hx = home[i] // nx, home[i] % nx
+            x = min(max(x, x0 + hx * cw + eps), x0 + (hx + 1) * cw - eps)
+            y = min(max(y, y0 + hy * ch + eps), y0 + (hy + 1) * ch - eps)
+            x = min(max(x, lo[0]), hi[0])
+            y = min(max(y, lo[1]), hi[1])
+        if x != xy[i, 0] or y != xy[i, 1]:
+            xy[i, 0] = x
+            xy[i, 1] = y
+            fixed += 1
+    return fixed
+
+
+@dataclass
+class LegalizeResult:
+    """Outcome of :func:`legalize`: positions ``[n, 2]`` mm, sweeps run, dots moved."""
+
+    xy: np.ndarray
+    sweeps: int
+    pair_fixes: int
+    dot_fixes: int
+
+
+def legalize(
+    xy: np.ndarray,
+    density: DensityMap,
+    home_cell: np.ndarray,
+    box: tuple[float, float, float, float],
+    dot_radius: float,
+    dmin: float,
+    max_sweeps: int = 1000,
+) -> LegalizeResult:
+    """Project ``xy`` onto the feasible set and round it to :data:`RESOLUTION`.
+
+    Args:
+        xy: ``[n, 2]`` positions, mm (copied).
+        density: the map; dots may not sit in its zero cells.
+        home_cell: ``[n]`` flat index of each dot's start cell (a non-zero cell).
+        box: panel ``(xmin, ymin, xmax, ymax)``, mm.
+        dot_radius: r0, mm; centres keep r0 from the panel edges.
+        dmin: minimum centre distance, mm.
+        max_sweeps: give up (the caller raises) after this many sweeps.
+
+    Returns:
+        :class:`LegalizeResult`; ``sweeps == max_sweeps`` means it did not settle.
+    """
+    xy = np.array(xy, dtype=np.float64, order="C")
+    lo = np.array([box[0] + dot_radius + MARGIN, box[1] + dot_radius + MARGIN])
+    hi = np.array([box[2] - dot_radius - MARGIN, box[3] - dot_radius - MARGIN])
+    cw, ch = density.cell_size
+    target = dmin + MARGIN
+    pair_fixes = dot_fixes = 0
+    home = np.asarray(home_cell, dtype=np.int64)
+    sweeps = 0
+    for sweeps in range(1, max_sweeps + 1):
+        fixed = _fix_dots(
+            xy, lo, hi, density.grid, density.x0, density.y0, cw, ch, home, MARGIN
+        )
+        ptr, nbr = neighbor_pairs(xy, 0.5 * target, 0.02)
+        moved = _push_pairs(xy, ptr, nbr, target, 0.5 * MARGIN)
+        pair_fixes += moved
+        dot_fixes += fixed
+        if moved == 0 and fixed == 0:
+            break
+    else:
+        sweeps = max_sweeps
+    xy = np.round(xy / RESOLUTION) * RESOLUTION
+    return LegalizeResult(xy=xy, sweeps=sweeps, pair_fixes=pair_fixes, dot_fixes=dot_fixes)
+
+
+@dataclass(frozen=True)
+class Violations:
+    """Counts of guarantee violations: pairs closer than dmin, dots out of the panel,
+    dots in zero-density cells."""
+
+    collisions: int
+    protruding: int
+    in_empty: int
+
+    @property
+    def ok(self) -> bool:
+        return self.collisions == 0 and self.protruding == 0 and self.in_empty == 0
+
+
+def check_guarantee(
+    xy: np.ndarray,
+    density: DensityMap,
+    box: tuple[float, float, float, float],
+    dot_radius: float,
+    dmin: float,
+) -> Violations:
+    """Count violations with a KD-tree (an engine independent of the optimizer's grid)."""
+    tree = cKDTree(xy)
+    close = tree.query_pairs(dmin, output_type="ndarray")
+    if len(close):
+        d = np.linalg.norm(xy[close[:, 0]] - xy[close[:, 1]], axis=1)
+        collisions = int((d < dmin).sum())
+    else:
+        collisions = 0
+    out = (
+        (xy[:, 0] - dot_radius < box[0])
+        | (xy[:, 0] + dot_radius > box[2])
+        | (xy[:, 1] - dot_radius < box[1])
+        | (xy[:, 1] + dot_radius > box[3])
+    )
+    inside = (
+        (xy[:, 0] >= density.x0)
+        & (xy[:, 0] <= density.x0 + density.width)
+        & (xy[:, 1] >= density.y0)
+        & (xy[:, 1] <= density.y0 + density.height)
+    )
+    empty = inside & (density.at(xy) <= 0.0)
+    return Violations(collisions, int(out.sum()), int(empty.sum()))

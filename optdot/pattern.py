@@ -1,0 +1,186 @@
+"""The :class:`Pattern`: what the optimizer produces and every exporter and QA check reads.
+
+File formats written by ``optdot generate``:
+
+* CSV: header ``x_mm,y_mm,diameter_mm``, one dot a row, 6 decimals (1 nm).
+* NPZ: arrays ``xy`` ``[n, 2]`` (mm), ``diameter`` (mm), ``box`` ``[4]`` (mm) and
+  ``meta`` (JSON text); a zip with fixed timestamps so equal patterns give equal bytes.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .atomic import atomic_path
+from .errors import ExportError, PatternFileError
+
+CSV_HEADER = "x_mm,y_mm,diameter_mm"
+
+
+@dataclass(frozen=True, eq=False)
+class Pattern:
+    """Dot centres on a panel.
+
+    Attributes:
+        xy: ``[n, 2]`` float64 dot centres, mm, rounded to 1 nm.
+        diameter: dot diameter, mm (all dots equal).
+        box: panel ``(xmin, ymin, xmax, ymax)``, mm.
+        meta: provenance (job name, seed, method, iterations, ...). Deterministic values
+            only; timings live in :attr:`stats`.
+        stats: run statistics that may vary between runs (seconds, memory).
+    """
+
+    xy: np.ndarray
+    diameter: float
+    box: tuple[float, float, float, float]
+    meta: dict[str, Any] = field(default_factory=dict)
+    stats: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        xy = np.ascontiguousarray(self.xy, dtype=np.float64)
+        if xy.ndim != 2 or xy.shape[1] != 2:
+            raise ValueError(f"xy must have shape [n, 2], got {xy.shape}")
+        xy.setflags(write=False)
+        object.__setattr__(self, "xy", xy)
+        object.__setattr__(self, "box", tuple(float(v) for v in self.box))
+
+    @property
+    def n(self) -> int:
+        """Number of dots."""
+        return int(self.xy.shape[0])
+
+    @property
+    def radius(self) -> float:
+        """Dot radius, mm."""
+        return 0.5 * self.diameter
+
+
+def save_pattern(pattern: Pattern, path: str | Path) -> None:
+    """Write ``pattern`` to ``.csv`` or ``.npz`` atomically (see module doc).
+
+    Raises:
+        ExportError: unknown suffix or unwritable path.
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in (".csv", ".npz"):
+        raise ExportError(f"{path}: pattern files are .csv or .npz, not {suffix or 'no suffix'!r}")
+    with atomic_path(path) as tmp:
+        if suffix == ".csv":
+            tmp.write_bytes(pattern_csv_bytes(pattern))
+        else:
+            _write_npz(pattern, tmp)
+
+
+def pattern_csv_bytes(pattern: Pattern) -> bytes:
+    """The CSV text of a pattern, as bytes."""
+    buf = io.StringIO()
+    buf.write(CSV_HEADER + "\n")
+    if pattern.n:
+        data = np.column_stack([pattern.xy, np.full(pattern.n, pattern.diameter)])
+        np.savetxt(buf, data, fmt="%.6f", delimiter=",")
+    return buf.getvalue().encode("ascii")
+
+
+def _write_npz(pattern: Pattern, path: Path) -> None:
+    arrays = {
+        "xy": pattern.xy,
+        "diameter": np.array(pattern.diameter),
+        "box": np.array(pattern.box),
+        "meta": np.array(json.dumps(pattern.meta, sort_keys=True)),
+    }
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        for name, arr in arrays.items():
+            buf = io.BytesIO()
+            np.lib.format.write_array(buf, np.asarray(arr), allow_pickle=False)
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            info.compress_type = zipfile.ZIP_DEFLATED
+            zf.writestr(info, buf.getvalue())
+
+
+def load_pattern(path: str | Path, box: tuple[float, float, float, float] | None = None) -> Pattern:
+    """Read a pattern written by :func:`save_pattern`.
+
+    Args:
+        path: ``.csv`` or ``.npz``.
+        box: panel box to use when the file does not hold one (CSV); default is the
+            dots' bounding box grown by one radius.
+
+    Raises:
+        PatternFileError: missing, unreadable or malformed file (one line, names the file).
+    """
+    path = Path(path)
+    if not path.exists():
+        raise PatternFileError(f"{path}: pattern file not found")
+    suffix = path.suffix.lower()
+    if suffix == ".npz":
+        return _load_npz(path, box)
+    if suffix == ".csv":
+        return _load_csv(path, box)
+    raise PatternFileError(f"{path}: unknown pattern format {suffix!r} (use .csv or .npz)")
+
+
+def _load_csv(path: Path, box: tuple[float, float, float, float] | None) -> Pattern:
+    try:
+        with open(path, encoding="ascii") as fh:
+            header = fh.readline().strip()
+            if header != CSV_HEADER:
+                raise PatternFileError(
+                    f"{path}: line 1: header must be {CSV_HEADER!r}, got {header[:60]!r}"
+                )
+            data = np.loadtxt(fh, delimiter=",", ndmin=2, dtype=np.float64)
+    except (UnicodeDecodeError, ValueError) as e:
+        raise PatternFileError(f"{path}: malformed pattern CSV ({_first_line(e)})") from None
+    except OSError as e:
+        raise PatternFileError(f"{path}: cannot read ({e.strerror})") from None
+    if data.size == 0:
+        raise PatternFileError(f"{path}: no dots in the file")
+    if data.shape[1] != 3:
+        raise PatternFileError(f"{path}: expected 3 columns ({CSV_HEADER}), got {data.shape[1]}")
+    return _validated(path, data[:, :2], data[:, 2], box, {})
+
+
+def _load_npz(path: Path, box: tuple[float, float, float, float] | None) -> Pattern:
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            xy = np.asarray(z["xy"], dtype=np.float64)
+            diameter = np.asarray(z["diameter"], dtype=np.float64)
+            file_box = tuple(np.asarray(z["box"], dtype=np.float64).tolist())
+            meta = json.loads(str(z["meta"])) if "meta" in z else {}
+    except KeyError as e:
+        raise PatternFileError(f"{path}: missing array {e} in pattern .npz") from None
+    except (OSError, ValueError, zipfile.BadZipFile, json.JSONDecodeError) as e:
+        raise PatternFileError(f"{path}: not a readable pattern .npz ({_first_line(e)})") from None
+    if xy.ndim != 2 or xy.shape[1] != 2 or len(xy) == 0:
+        raise PatternFileError(f"{path}: xy must have shape [n, 2] with n > 0, got {xy.shape}")
+    if len(file_box) != 4:
+        raise PatternFileError(f"{path}: box must have 4 numbers, got {len(file_box)}")
+    return _validated(path, xy, np.broadcast_to(diameter, (len(xy),)), box or file_box, meta)
+
+
+def _validated(path, xy, diam, box, meta) -> Pattern:
+    if not np.all(np.isfinite(xy)) or not np.all(np.isfinite(diam)):
+        raise PatternFileError(f"{path}: NaN or infinite coordinate or diameter")
+    if np.any(diam <= 0):
+        raise PatternFileError(f"{path}: diameters must be > 0 mm")
+    if np.ptp(diam) > 1e-9:
+        raise PatternFileError(f"{path}: all dots must have one diameter (found {np.unique(diam)[:3]}...)")
+    d = float(diam[0])
+    if box is None:
+        lo = xy.min(axis=0) - d / 2
+        hi = xy.max(axis=0) + d / 2
+        box = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+    if not (box[2] > box[0] and box[3] > box[1]):
+        raise PatternFileError(f"{path}: empty panel box {box}")
+    return Pattern(xy=xy, diameter=d, box=box, meta=meta)
+
+
+def _first_line(e: Exception) -> str:
+    return str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__

@@ -1,0 +1,88 @@
+"""Regenerate the bundled sample jobs and their density grids (deterministic).
+
+Run: python samples/make_samples.py   (writes samples/<name>/job.toml and density.csv)
+
+Each map is a smooth fill-fraction field of the kind a backlight engineer gets from an
+optical simulation: low fill where light is strong (near sources), high fill far away.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+
+
+def _centers(width: float, height: float, cell: float) -> tuple[np.ndarray, np.ndarray]:
+    nx, ny = round(width / cell), round(height / cell)
+    x = (np.arange(nx) + 0.5) * width / nx
+    y = (np.arange(ny) + 0.5) * height / ny
+    return np.meshgrid(x, y)  # [ny, nx], row 0 = bottom
+
+
+def led(width=36.0, height=18.0, n_led=4):
+    """Edge-lit: LEDs along the bottom edge, hot spots in front of each, steep gradient."""
+    X, Y = _centers(width, height, 0.25)
+    xs = (np.arange(n_led) + 0.5) * width / n_led
+    light = sum(np.exp(-((X - x) ** 2 + (Y + 0.3) ** 2) / (2 * 1.6**2)) for x in xs)
+    base = 0.08 + 0.42 * (1 - np.exp(-Y / 6.0))
+    return np.clip(base - 0.07 * light, 0.03, 0.55)
+
+
+def tsuno(width=34.0, height=22.0):
+    """Corner-lit: one LED in the lower-left corner with an empty region right next to it."""
+    X, Y = _centers(width, height, 0.25)
+    rr = np.hypot(X, Y)
+    g = 0.10 + 0.35 * (1 - np.exp(-rr / 10.0))
+    g[rr < 4.0] = 0.0  # keep-out around the corner LED: no dots
+    return np.clip(g, 0.0, 0.55)
+
+
+def chokka(width=52.0, height=40.0, nx=4, ny=3):
+    """Direct-lit: an LED array behind the film; sparse over each LED, dense between."""
+    X, Y = _centers(width, height, 0.5)
+    px, py = width / nx, height / ny
+    dx = (X % px) - px / 2
+    dy = (Y % py) - py / 2
+    return 0.28 - 0.18 * np.exp(-(dx**2 + dy**2) / (2 * 3.0**2))
+
+
+def uniform(width=10.0, height=10.0):
+    """Uniform 20 % fill: the simplest case, and the one generic blue-noise samplers handle."""
+    return np.full((20, 20), 0.2)
+
+
+def tiny(width=3.0, height=2.0):
+    """A small gradient with a zero column, for tests and quick tries."""
+    X, Y = _centers(width, height, 0.25)
+    g = 0.1 + 0.3 * X / width
+    g[:, 0] = 0.0
+    return g
+
+
+SAMPLES = {
+    "led": (led, 36.0, 15.0, "edge-lit light guide, 4 LEDs along the bottom edge (~117k dots)"),
+    "tsuno": (tsuno, 28.0, 17.0, "corner-lit, empty region around the corner LED (~111k dots)"),
+    "chokka": (chokka, 52.0, 40.0, "direct-lit 4x3 LED array behind a diffuser (~287k dots)"),
+    "uniform": (uniform, 10.0, 10.0, "uniform 20 % fill (~12k dots)"),
+    "tiny": (tiny, 3.0, 2.0, "small gradient with an empty column, for tests (~500 dots)"),
+}
+
+
+def main() -> None:
+    for name, (fn, w, h, what) in SAMPLES.items():
+        d = HERE / name
+        d.mkdir(exist_ok=True)
+        g = fn(w, h)
+        np.savetxt(d / "density.csv", g, fmt="%.4f", delimiter=",")
+        (d / "job.toml").write_text(
+            f'# {what}\nname = "{name}"\n\n[domain]\nwidth = {w}\nheight = {h}\n\n'
+            f'[density]\ngrid = "density.csv"\n\n[dots]\ndiameter = 0.046\n\n'
+            f'[optimize]\nmethod = "optdot"\nmax_iter = 200\nseed = 1\n'
+        )
+
+
+if __name__ == "__main__":
+    main()
