@@ -1,0 +1,57 @@
+"""Mask and preview writers. They read a :class:`optdot.pattern.Pattern` and never reach
+into the optimizer.
+
+=========  ======================================================
+format     writer
+=========  ======================================================
+GDSII      :func:`exporters.gds.write_gds` (gdstk)
+OASIS      :func:`exporters.gds.write_oas` (gdstk)
+DXF        :func:`exporters.dxf.write_dxf` (streamed, ezdxf template)
+CSV        :func:`optdot.pattern.pattern_csv_bytes`
+SVG/PNG    :func:`exporters.preview.write_svg`, :func:`exporters.preview.write_png`
+=========  ======================================================
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from optdot.atomic import atomic_path
+from optdot.pattern import Pattern, pattern_csv_bytes
+
+from .options import ExportOptions
+
+FORMATS = ("gds", "oas", "dxf", "csv", "svg", "png")
+
+
+def write(pattern: Pattern, fmt: str, path: str | Path, opts: ExportOptions | None = None) -> None:
+    """Write ``pattern`` as ``fmt`` (one of :data:`FORMATS`) to ``path``, atomically."""
+    opts = opts or ExportOptions()
+    if fmt == "gds":
+        from .gds import write_gds
+
+        write_gds(pattern, path, opts)
+    elif fmt == "oas":
+        from .gds import write_oas
+
+        write_oas(pattern, path, opts)
+    elif fmt == "dxf":
+        from .dxf import write_dxf
+
+        write_dxf(pattern, path, opts)
+    elif fmt == "csv":
+        with atomic_path(path) as tmp:
+            tmp.write_bytes(pattern_csv_bytes(pattern))
+    elif fmt == "svg":
+        from .preview import write_svg
+
+        write_svg(pattern, path)
+    elif fmt == "png":
+        from .preview import write_png
+
+        write_png(pattern, path)
+    else:
+        raise ValueError(f"unknown format {fmt!r}")
+
+
+__all__ = ["FORMATS", "ExportOptions", "write"]

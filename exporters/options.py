@@ -1,0 +1,50 @@
+"""Options shared by the mask exporters."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from optdot.errors import ExportError
+
+DXF_VERSIONS = ("R12", "R2000", "R2004", "R2007", "R2010", "R2013", "R2018")
+
+
+@dataclass(frozen=True)
+class ExportOptions:
+    """How masks are written.
+
+    Attributes:
+        tolerance_um: max distance between the true circle and its polygon, µm (GDS/OAS).
+        flatten: write one polygon per dot instead of one dot cell + references.
+        layer, datatype: GDS/OAS layer of the dots.
+        outline_layer, outline_datatype: GDS/OAS layer of the panel outline.
+        top_cell: name of the top cell.
+        dot_cell: name of the dot cell.
+        dxf_version: DXF release (R2010 default; R12 for older CAM).
+    """
+
+    tolerance_um: float = 0.01
+    flatten: bool = False
+    layer: int = 1
+    datatype: int = 0
+    outline_layer: int = 2
+    outline_datatype: int = 0
+    top_cell: str = "TOP"
+    dot_cell: str = "DOT"
+    dxf_version: str = "R2010"
+
+    def __post_init__(self) -> None:
+        if not 1e-4 <= self.tolerance_um <= 10:
+            raise ExportError(f"--tolerance {self.tolerance_um} µm is out of range (0.0001..10)")
+        for name in ("layer", "datatype", "outline_layer", "outline_datatype"):
+            v = getattr(self, name)
+            if not 0 <= v <= 65535:
+                raise ExportError(f"--{name.replace('_', '-')} {v} is out of range (0..65535)")
+        for name in ("top_cell", "dot_cell"):
+            v = getattr(self, name)
+            if not v or not v.isascii() or not all(c.isalnum() or c in "_-$?" for c in v):
+                raise ExportError(f"--{name.replace('_', '-')} {v!r}: use letters, digits, _ - $ ?")
+        if self.top_cell == self.dot_cell:
+            raise ExportError("--top-cell and the dot cell must differ")
+        if self.dxf_version not in DXF_VERSIONS:
+            raise ExportError(f"--dxf-version {self.dxf_version!r}: use one of {DXF_VERSIONS}")

@@ -1,0 +1,104 @@
+"""Previews for people: an SVG and a PNG of the pattern.
+
+PNG: left, the whole panel as a coverage map (share of area covered by dots, binned to at
+most ~400 px a side); right, a true-scale zoom tile (1 mm², dots drawn as circles).
+SVG: every dot as a circle when there are at most 200k dots, else the zoom tile only
+(a browser cannot draw millions of SVG circles), always with the panel outline.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from optdot.atomic import atomic_path
+from optdot.pattern import Pattern
+
+SVG_MAX_DOTS = 200_000
+TILE_MM = 1.0
+
+
+def zoom_tile(pattern: Pattern, size: float = TILE_MM) -> tuple[float, float, float, float]:
+    """A ``size`` mm square window around the panel centre, clipped to the panel."""
+    x0, y0, x1, y1 = pattern.box
+    cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+    h = 0.5 * min(size, x1 - x0, y1 - y0)
+    return cx - h, cy - h, cx + h, cy + h
+
+
+def coverage_image(pattern: Pattern, max_px: int = 400) -> tuple[np.ndarray, tuple]:
+    """Covered area share per pixel, ``[ny, nx]``, and its extent (x0, x1, y0, y1) mm."""
+    x0, y0, x1, y1 = pattern.box
+    px = max((x1 - x0), (y1 - y0)) / max_px
+    nx = max(1, int(round((x1 - x0) / px)))
+    ny = max(1, int(round((y1 - y0) / px)))
+    h, _, _ = np.histogram2d(pattern.xy[:, 1], pattern.xy[:, 0], bins=(ny, nx), range=((y0, y1), (x0, x1)))
+    dot_area = np.pi * pattern.radius**2
+    cell = (x1 - x0) / nx * (y1 - y0) / ny
+    return h * dot_area / cell, (x0, x1, y0, y1)
+
+
+def write_png(pattern: Pattern, path: str | Path, dpi: int = 110) -> None:
+    """Write the PNG preview atomically."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import EllipseCollection
+
+    img, ext = coverage_image(pattern)
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.8), gridspec_kw={"width_ratios": [1.6, 1]})
+    im = a.imshow(img, origin="lower", extent=ext, cmap="viridis", interpolation="nearest")
+    a.set_title(f"{pattern.n:,} dots: coverage")
+    a.set_xlabel("x (mm)")
+    a.set_ylabel("y (mm)")
+    fig.colorbar(im, ax=a, label="fill fraction")
+    tx0, ty0, tx1, ty1 = zoom_tile(pattern)
+    a.add_patch(plt.Rectangle((tx0, ty0), tx1 - tx0, ty1 - ty0, fill=False, ec="red"))
+    sel = _in_window(pattern, (tx0, ty0, tx1, ty1))
+    d = pattern.diameter
+    b.add_collection(
+        EllipseCollection(
+            d, d, 0, units="xy", offsets=pattern.xy[sel], offset_transform=b.transData, fc="k"
+        )
+    )
+    b.set_xlim(tx0, tx1)
+    b.set_ylim(ty0, ty1)
+    b.set_aspect("equal")
+    b.set_title(f"true-scale zoom ({tx1 - tx0:.2g} mm tile)")
+    b.set_xlabel("x (mm)")
+    b.set_ylabel("y (mm)")
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=dpi, metadata={"Software": None})
+    plt.close(fig)
+
+
+def write_svg(pattern: Pattern, path: str | Path) -> None:
+    """Write the SVG preview atomically (units: mm, y up as in the pattern)."""
+    x0, y0, x1, y1 = pattern.box
+    window = (x0, y0, x1, y1) if pattern.n <= SVG_MAX_DOTS else zoom_tile(pattern)
+    wx0, wy0, wx1, wy1 = window
+    sel = _in_window(pattern, window)
+    r = pattern.radius
+    out = [
+        '<?xml version="1.0" encoding="UTF-8"?>\n',
+        f'<svg xmlns="http://www.w3.org/2000/svg" width="{wx1 - wx0:.6f}mm" '
+        f'height="{wy1 - wy0:.6f}mm" viewBox="{wx0:.6f} {-wy1:.6f} {wx1 - wx0:.6f} {wy1 - wy0:.6f}">\n',
+        f"<title>{pattern.n} dots, diameter {pattern.diameter} mm</title>\n",
+        f'<rect x="{x0:.6f}" y="{-y1:.6f}" width="{x1 - x0:.6f}" height="{y1 - y0:.6f}" '
+        'fill="none" stroke="red" stroke-width="0.01"/>\n<g fill="black">\n',
+    ]
+    out += [f'<circle cx="{x:.6f}" cy="{-y:.6f}" r="{r:.6f}"/>\n' for x, y in pattern.xy[sel].tolist()]
+    out.append("</g>\n</svg>\n")
+    with atomic_path(path) as tmp:
+        tmp.write_text("".join(out), encoding="utf-8")
+
+
+def _in_window(pattern: Pattern, w: tuple[float, float, float, float]) -> np.ndarray:
+    xy = pattern.xy
+    r = pattern.radius
+    return (
+        (xy[:, 0] > w[0] - r) & (xy[:, 0] < w[2] + r) & (xy[:, 1] > w[1] - r) & (xy[:, 1] < w[3] + r)
+    )

@@ -1,0 +1,112 @@
+"""Read masks written by the exporters back into a :class:`~optdot.pattern.Pattern`.
+
+Used by ``optdot qa`` on GDSII/OASIS/DXF files. Dots are the references to the dot cell
+(or, in flattened files, the polygons on the dot layer, centred at their vertex mean);
+the panel box is the outline's bounding box.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from optdot.errors import PatternFileError
+from optdot.pattern import Pattern, load_pattern
+
+from .options import ExportOptions
+
+
+def read_any(path: str | Path, opts: ExportOptions | None = None, box=None) -> Pattern:
+    """Read ``.csv``/``.npz`` (pattern files) or ``.gds``/``.oas``/``.dxf`` (masks)."""
+    path = Path(path)
+    opts = opts or ExportOptions()
+    suffix = path.suffix.lower()
+    if not path.exists():
+        raise PatternFileError(f"{path}: file not found")
+    if suffix in (".csv", ".npz"):
+        return load_pattern(path, box)
+    try:
+        if suffix in (".gds", ".gds2", ".oas"):
+            return _read_layout(path, opts)
+        if suffix == ".dxf":
+            return _read_dxf(path)
+    except PatternFileError:
+        raise
+    except Exception as e:  # reader libraries raise many types on corrupt files
+        raise PatternFileError(f"{path}: cannot read ({type(e).__name__}: {e})") from None
+    raise PatternFileError(f"{path}: unknown format {suffix!r} (csv, npz, gds, oas, dxf)")
+
+
+def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
+    import gdstk
+
+    lib = gdstk.read_oas(str(path)) if path.suffix.lower() == ".oas" else gdstk.read_gds(str(path))
+    lib_unit = lib.unit  # metres per user unit
+    to_mm = lib_unit * 1e3
+    tops = lib.top_level()
+    if len(tops) != 1:
+        raise PatternFileError(f"{path}: expected one top cell, found {len(tops)}")
+    top = tops[0]
+    centres: list[np.ndarray] = []
+    diameter = None
+    for ref in top.references:
+        cell = ref.cell
+        pts = [p for p in cell.polygons if (p.layer, p.datatype) == (opts.layer, opts.datatype)]
+        if not pts:
+            continue
+        r = float(np.max(np.hypot(*pts[0].points.T)))
+        diameter = 2 * r * to_mm
+        origins = np.array([ref.origin])
+        if ref.repetition.size > 1:
+            origins = np.array(ref.repetition.offsets) + np.array(ref.origin)
+        centres.append(origins * to_mm)
+    for poly in top.polygons:
+        if (poly.layer, poly.datatype) != (opts.layer, opts.datatype):
+            continue
+        pts = poly.points
+        c = pts.mean(axis=0)
+        diameter = 2 * float(np.max(np.hypot(*(pts - c).T))) * to_mm
+        reps = np.array(poly.repetition.offsets) if poly.repetition.size > 1 else np.zeros((1, 2))
+        centres.append((c + reps) * to_mm)
+    if not centres or diameter is None:
+        raise PatternFileError(f"{path}: no dots on layer {opts.layer}/{opts.datatype}")
+    outline = [
+        p for p in top.polygons if (p.layer, p.datatype) == (opts.outline_layer, opts.outline_datatype)
+    ]
+    box = None
+    if outline:
+        b = np.array(outline[0].bounding_box()) * to_mm
+        box = (float(b[0, 0]), float(b[0, 1]), float(b[1, 0]), float(b[1, 1]))
+    xy = np.round(np.concatenate(centres), 6)
+    return _pattern(path, xy, diameter, box)
+
+
+def _read_dxf(path: Path) -> Pattern:
+    import ezdxf
+
+    doc = ezdxf.readfile(str(path))
+    msp = doc.modelspace()
+    circles = msp.query('CIRCLE[layer=="DOTS"]')
+    if not len(circles):
+        raise PatternFileError(f"{path}: no CIRCLE entities on layer DOTS")
+    xy = np.array([(c.dxf.center.x, c.dxf.center.y) for c in circles])
+    radii = np.array([c.dxf.radius for c in circles])
+    box = None
+    for e in msp.query('LWPOLYLINE POLYLINE[layer=="OUTLINE"]'):
+        pts = np.array([p[:2] for p in e.get_points()]) if e.dxftype() == "LWPOLYLINE" else np.array(
+            [v.dxf.location[:2] for v in e.vertices]
+        )
+        box = (float(pts[:, 0].min()), float(pts[:, 1].min()), float(pts[:, 0].max()), float(pts[:, 1].max()))
+        break
+    if np.ptp(radii) > 1e-9:
+        raise PatternFileError(f"{path}: dots of different diameters")
+    return _pattern(path, np.round(xy, 6), 2 * float(radii[0]), box)
+
+
+def _pattern(path: Path, xy: np.ndarray, diameter: float, box) -> Pattern:
+    if box is None:
+        lo = xy.min(axis=0) - diameter / 2
+        hi = xy.max(axis=0) + diameter / 2
+        box = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+    return Pattern(xy=xy, diameter=round(diameter, 6), box=box, meta={"source": str(path)})

@@ -1,0 +1,227 @@
+"""Command line: ``optdot generate | export | qa``.
+
+Exit codes (README, "Exit codes"): 0 success; 1 the QA gate failed; 2 bad input (job,
+grid, pattern file, option, unwritable output, too big for memory); 3 the optimizer could
+not meet the spacing guarantee; 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import functools
+import sys
+from pathlib import Path
+
+import click
+
+from .errors import OptdotError
+
+
+def _user_errors(fn):
+    """Turn :class:`OptdotError` into one line on stderr and its exit code."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        try:
+            return fn(*args, **kwargs)
+        except OptdotError as e:
+            click.echo(f"optdot: error: {e}", err=True)
+            sys.exit(e.exit_code)
+        except KeyboardInterrupt:
+            click.echo("optdot: interrupted", err=True)
+            sys.exit(130)
+
+    return wrapper
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="optdot")
+def main() -> None:
+    """Non-overlapping random dot patterns for light guides, their masks, and QA."""
+
+
+def _job_options(fn):
+    fn = click.option("--seed", type=click.IntRange(0, 2**63 - 1), help="Override optimize.seed.")(fn)
+    fn = click.option("--max-iter", type=click.IntRange(0, 100_000), help="Override optimize.max_iter.")(fn)
+    fn = click.option("--method", type=click.Choice(["optdot", "md"]), help="Override optimize.method.")(fn)
+    fn = click.option(
+        "--formulation", type=click.Choice(["optdot", "paper"]), help="Override optimize.formulation."
+    )(fn)
+    fn = click.option("--quiet", "-q", is_flag=True, help="No progress bar.")(fn)
+    return fn
+
+
+def run_job(job_path: Path, seed, max_iter, method, formulation, quiet):
+    """Load a job, apply CLI overrides and generate its pattern with a progress bar."""
+    from .generate import generate
+    from .job import load_job
+    from .progress import ProgressBar
+
+    job = load_job(job_path).with_overrides(
+        seed=seed, max_iter=max_iter, method=method, formulation=formulation
+    )
+    bar = ProgressBar(job.optimize.max_iter, label=job.optimize.method, enabled=False if quiet else None)
+    try:
+        pattern = generate(job, progress=bar)
+    finally:
+        bar.close()
+    return job, pattern
+
+
+@main.command()
+@click.argument("job_file", type=click.Path(path_type=Path))
+@click.option("-o", "--output", type=click.Path(path_type=Path), required=True, help="Pattern file to write (.csv or .npz).")
+@_job_options
+@_user_errors
+def generate(job_file, output, seed, max_iter, method, formulation, quiet):
+    """Generate the dot pattern of JOB_FILE and write it to OUTPUT."""
+    from .pattern import save_pattern
+
+    if output.suffix.lower() not in (".csv", ".npz"):
+        raise click.BadParameter("must end in .csv or .npz", param_hint="'-o' / '--output'")
+    _, pattern = run_job(job_file, seed, max_iter, method, formulation, quiet)
+    save_pattern(pattern, output)
+    m = pattern.meta
+    if not quiet:
+        click.echo(
+            f"{output}: {pattern.n} dots, {m['iterations']} iterations, "
+            f"{pattern.stats['total_s']:.1f} s",
+            err=True,
+        )
+
+
+def _load_source(source: Path, job_path, seed, max_iter, method, formulation, quiet):
+    """(job or None, pattern) from a job file (generated now) or a pattern/mask file."""
+    from exporters.readback import read_any
+
+    from .job import load_job
+
+    if source.suffix.lower() == ".toml":
+        return run_job(source, seed, max_iter, method, formulation, quiet)
+    job = load_job(job_path) if job_path else None
+    box = (0.0, 0.0, job.width, job.height) if job else None
+    return job, read_any(source, box=box)
+
+
+def _gate(job, pattern, collision=None, close=None):
+    from .job import QAParams
+    from .qa import run_qa
+
+    params = job.qa if job else QAParams()
+    if close is not None:
+        from dataclasses import replace
+
+        params = replace(params, close_distance=close)
+    if collision is None:
+        collision = job.collision_distance if job else pattern.diameter
+    return run_qa(pattern, job.density if job else None, params, collision)
+
+
+def _check_outputs(outputs: dict[str, Path]) -> None:
+    from .errors import ExportError
+
+    seen: dict[Path, str] = {}
+    for fmt, p in outputs.items():
+        rp = p.resolve()
+        if rp in seen:
+            raise ExportError(f"{p}: given for both --{seen[rp]} and --{fmt}")
+        seen[rp] = fmt
+        if not p.parent.resolve().is_dir():
+            raise ExportError(f"{p}: output directory {p.parent} does not exist")
+        if p.exists() and p.is_dir():
+            raise ExportError(f"{p}: is a directory")
+
+
+@main.command()
+@click.argument("source", type=click.Path(path_type=Path))
+@click.option("--gds", type=click.Path(path_type=Path), help="GDSII mask to write.")
+@click.option("--oas", type=click.Path(path_type=Path), help="OASIS mask to write.")
+@click.option("--dxf", type=click.Path(path_type=Path), help="DXF drawing to write.")
+@click.option("--csv", type=click.Path(path_type=Path), help="CSV pattern to write.")
+@click.option("--svg", type=click.Path(path_type=Path), help="SVG preview to write.")
+@click.option("--png", type=click.Path(path_type=Path), help="PNG preview to write.")
+@click.option("--job", "job_path", type=click.Path(path_type=Path), help="Job file for the QA gate when SOURCE is a pattern.")
+@click.option("--tolerance", type=float, default=0.01, show_default=True, help="Circle polygon tolerance, µm (GDS/OAS).")
+@click.option("--flatten", is_flag=True, help="Plain polygons instead of a dot cell + references.")
+@click.option("--layer", type=int, default=1, show_default=True, help="GDS/OAS layer of the dots.")
+@click.option("--datatype", type=int, default=0, show_default=True, help="GDS/OAS datatype of the dots.")
+@click.option("--outline-layer", type=int, default=2, show_default=True, help="GDS/OAS layer of the outline.")
+@click.option("--top-cell", default="TOP", show_default=True, help="Name of the top cell.")
+@click.option("--dxf-version", default="R2010", show_default=True, help="DXF release: R2010, R2000, R12, ...")
+@click.option("--force", is_flag=True, help="Write masks even if the QA gate fails.")
+@_job_options
+@_user_errors
+def export(source, gds, oas, dxf, csv, svg, png, job_path, tolerance, flatten, layer, datatype,
+           outline_layer, top_cell, dxf_version, force, seed, max_iter, method, formulation, quiet):
+    """Write masks and previews of SOURCE (a job file, or a pattern .csv/.npz).
+
+    Existing output files are replaced (atomically: a failed run leaves them as they were).
+    Masks are written only if the QA gate passes, unless --force.
+    """
+    import exporters
+    from exporters.options import ExportOptions
+
+    outputs = {k: v for k, v in (("gds", gds), ("oas", oas), ("dxf", dxf), ("csv", csv),
+                                 ("svg", svg), ("png", png)) if v is not None}
+    if not outputs:
+        raise click.UsageError("give at least one of --gds --oas --dxf --csv --svg --png")
+    opts = ExportOptions(tolerance_um=tolerance, flatten=flatten, layer=layer, datatype=datatype,
+                         outline_layer=outline_layer, top_cell=top_cell, dxf_version=dxf_version)
+    _check_outputs(outputs)
+    job, pattern = _load_source(source, job_path, seed, max_iter, method, formulation, quiet)
+    qa = _gate(job, pattern)
+    if not qa.passed:
+        failed = "; ".join(f"{c.name}: {_num(c.value)} > {_num(c.limit)}" for c in qa.checks if not c.passed)
+        if not force:
+            click.echo(f"optdot: QA gate failed, nothing written ({failed}); use --force to write anyway", err=True)
+            sys.exit(1)
+        click.echo(f"optdot: warning: QA gate failed ({failed}); writing anyway (--force)", err=True)
+    for fmt, path in outputs.items():
+        exporters.write(pattern, fmt, path, opts)
+        if not quiet:
+            click.echo(f"{path}: {fmt.upper()}, {pattern.n} dots", err=True)
+
+
+@main.command()
+@click.argument("pattern_file", type=click.Path(path_type=Path))
+@click.option("--job", "job_path", type=click.Path(path_type=Path), help="Job file: target map and thresholds.")
+@click.option("--html", "html_path", type=click.Path(path_type=Path), help="HTML report to write.")
+@click.option("--json", "json_path", type=click.Path(path_type=Path), help="JSON report to write.")
+@click.option("--collision", type=float, help="Collision distance, mm (default: dot diameter + gap).")
+@click.option("--close", type=float, help="Too-close distance, mm (default 0.060).")
+@click.option("--quiet", "-q", is_flag=True, help="Only the exit code.")
+@_user_errors
+def qa(pattern_file, job_path, html_path, json_path, collision, close, quiet):
+    """Check PATTERN_FILE (csv, npz, gds, oas, dxf) before tooling: exit 0 pass, 1 fail."""
+    from exporters.readback import read_any
+
+    from .job import load_job
+    from .report import write_html, write_json
+
+    for v, name in ((collision, "--collision"), (close, "--close")):
+        if v is not None and not v > 0:
+            raise click.BadParameter("must be > 0 mm", param_hint=name)
+    outs = {k: v for k, v in (("html", html_path), ("json", json_path)) if v is not None}
+    _check_outputs(outs)
+    job = load_job(job_path) if job_path else None
+    box = (0.0, 0.0, job.width, job.height) if job else None
+    pattern = read_any(pattern_file, box=box)
+    result = _gate(job, pattern, collision, close)
+    if json_path:
+        write_json(result, json_path)
+    if html_path:
+        write_html(result, pattern, html_path, title=f"optdot QA: {pattern_file.name}")
+    if not quiet:
+        for c in result.checks:
+            mark = "PASS" if c.passed else "FAIL"
+            where = f"  at {c.where[:3]}" if (c.where and not c.passed) else ""
+            click.echo(f"{mark}  {c.name}: {_num(c.value)} (limit {_num(c.limit)}){where}")
+        click.echo(f"verdict: {'PASS' if result.passed else 'FAIL'}")
+    sys.exit(0 if result.passed else 1)
+
+
+def _num(v) -> str:
+    return f"{v:.4g}" if isinstance(v, float) else str(v)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

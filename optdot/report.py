@@ -1,0 +1,151 @@
+"""The QA report: one self-contained HTML file (plots embedded as PNG) and the JSON."""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .atomic import atomic_path
+from .pattern import Pattern
+from .qa import QAResult
+
+
+def write_json(result: QAResult, path: str | Path) -> None:
+    """Write the JSON report atomically (every number, for scripts)."""
+    text = json.dumps(result.to_json(), indent=2, sort_keys=True, default=_jsonable)
+    with atomic_path(path) as tmp:
+        tmp.write_text(text + "\n", encoding="utf-8")
+
+
+def write_html(result: QAResult, pattern: Pattern, path: str | Path, title: str = "optdot QA") -> None:
+    """Write the HTML report atomically: verdict first, then the plots and the numbers."""
+    figs = _figures(result, pattern)
+    verdict = "PASS" if result.passed else "FAIL"
+    color = "#1a7f37" if result.passed else "#cf222e"
+    rows = "".join(
+        f"<tr><td>{'✔' if c.passed else '✘'}</td><td>{html.escape(c.name)}</td>"
+        f"<td>{_fmt(c.value)}</td><td>{_fmt(c.limit)}</td>"
+        f"<td>{html.escape(', '.join(f'({x:.3f}, {y:.3f})' for x, y in c.where[:5]))}</td></tr>"
+        for c in result.checks
+    )
+    imgs = "".join(
+        f"<figure><img alt='{html.escape(cap)}' src='data:image/png;base64,{b64}'>"
+        f"<figcaption>{html.escape(cap)}</figcaption></figure>"
+        for cap, b64 in figs
+    )
+    metrics = html.escape(json.dumps(result.metrics, indent=1, default=_jsonable))
+    doc = f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>
+<style>body{{font-family:sans-serif;margin:2em;max-width:1200px}}
+.verdict{{font-size:2em;color:#fff;background:{color};padding:.3em .6em;display:inline-block}}
+table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:.2em .5em}}
+figure{{display:inline-block;margin:.5em}}img{{max-width:560px}}</style></head><body>
+<h1>{html.escape(title)}</h1><div class="verdict" id="verdict">{verdict}</div>
+<p>{pattern.n:,} dots, diameter {pattern.diameter * 1e3:.1f} µm, panel {pattern.box[2] - pattern.box[0]:.3f} × {pattern.box[3] - pattern.box[1]:.3f} mm</p>
+<h2>Gate</h2><table><tr><th></th><th>check</th><th>value</th><th>limit</th><th>where (mm, first 5)</th></tr>{rows}</table>
+<h2>Plots</h2>{imgs}<h2>All numbers</h2><pre>{metrics}</pre></body></html>
+"""
+    with atomic_path(path) as tmp:
+        tmp.write_text(doc, encoding="utf-8")
+
+
+def _figures(result: QAResult, pattern: Pattern) -> list[tuple[str, str]]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import EllipseCollection
+
+    out: list[tuple[str, str]] = []
+    a = result.arrays
+    xy = pattern.xy
+    x0, y0, x1, y1 = pattern.box
+
+    def save(fig, caption):
+        buf = io.BytesIO()
+        fig.tight_layout()
+        fig.savefig(buf, format="png", dpi=90, metadata={"Software": None})
+        plt.close(fig)
+        out.append((caption, base64.b64encode(buf.getvalue()).decode("ascii")))
+
+    from exporters.preview import coverage_image
+
+    img, ext = coverage_image(pattern, 300)
+    fig, ax = plt.subplots(figsize=(6, 4))
+    im = ax.imshow(img, origin="lower", extent=ext, interpolation="nearest")
+    fig.colorbar(im, ax=ax, label="fill fraction")
+    close = a["close"]
+    if len(close):
+        mid = 0.5 * (xy[close[:, 0]] + xy[close[:, 1]])
+        ax.plot(mid[:, 0], mid[:, 1], ",", color="orange")
+    col = a["collisions"]
+    if len(col):
+        mid = 0.5 * (xy[col[:, 0]] + xy[col[:, 1]])
+        ax.plot(mid[:, 0], mid[:, 1], "rx", ms=8)
+    for key in ("protruding", "in_empty"):
+        if key in a and len(a[key]):
+            ax.plot(xy[a[key], 0], xy[a[key], 1], "m+", ms=8)
+    ax.set(xlabel="x (mm)", ylabel="y (mm)", title="Overview: coverage; close pairs (orange), defects (x, +)")
+    save(fig, "overview")
+
+    tx0, ty0, tx1, ty1 = a["tile"]
+    s = min(1.0, tx1 - tx0)
+    fig, ax = plt.subplots(figsize=(5, 5))
+    sel = (xy[:, 0] > tx0) & (xy[:, 0] < tx0 + s) & (xy[:, 1] > ty0) & (xy[:, 1] < ty0 + s)
+    d = pattern.diameter
+    ax.add_collection(EllipseCollection(d, d, 0, units="xy", offsets=xy[sel], offset_transform=ax.transData, fc="k"))
+    idx = np.flatnonzero(sel)
+    bad = close[np.isin(close[:, 0], idx)] if len(close) else close
+    for i, j in bad[:2000]:
+        ax.plot(*xy[[i, j]].T, color="orange", lw=1)
+    ax.set(xlim=(tx0, tx0 + s), ylim=(ty0, ty0 + s), aspect="equal", xlabel="x (mm)", ylabel="y (mm)",
+           title="True-scale zoom of the densest region (close pairs in orange)")
+    save(fig, "densest region")
+
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    nn = a["nn"]
+    if len(nn) and np.isfinite(nn).all():
+        ax.hist(nn * 1e3, bins=100, color="steelblue")
+    m = result.metrics
+    ax.axvline(m["collision_distance_mm"] * 1e3, color="red", label="collision")
+    ax.axvline(m["close_distance_mm"] * 1e3, color="orange", label="too close")
+    ax.set(xlabel="nearest-neighbour distance (µm)", ylabel="dots", title="Nearest-neighbour distances")
+    ax.legend()
+    save(fig, "nearest-neighbour histogram")
+
+    if "coverage_error" in a:
+        rel, ext = a["coverage_error"]
+        fig, ax = plt.subplots(figsize=(6, 4))
+        v = max(float(np.abs(rel).max()), 1e-3)
+        im = ax.imshow(rel * 100, origin="lower", extent=ext, cmap="RdBu_r", vmin=-v * 100, vmax=v * 100)
+        fig.colorbar(im, ax=ax, label="coverage error (%)")
+        ax.set(xlabel="x (mm)", ylabel="y (mm)", title="Coverage vs target (1 mm Gaussian)")
+        save(fig, "coverage error")
+
+    freq, power = a["spectrum"]
+    if len(freq):
+        fig, ax = plt.subplots(figsize=(6, 3.5))
+        ax.plot(freq, power)
+        ax.set(xlabel="spatial frequency (1/mm)", ylabel="power (Poisson = 1)",
+               title="Radially averaged power spectrum, densest 2 mm tile")
+        save(fig, "spectrum")
+    return out
+
+
+def _fmt(v) -> str:
+    return f"{v:.4g}" if isinstance(v, float) else str(v)
+
+
+def _jsonable(o):
+    if isinstance(o, np.integer):
+        return int(o)
+    if isinstance(o, np.floating):
+        return float(o)
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(type(o).__name__)
