@@ -10,6 +10,7 @@ is an ordinary DXF that ezdxf's audit accepts (tests/test_exporters.py).
 from __future__ import annotations
 
 import io
+import re
 from pathlib import Path
 
 import ezdxf
@@ -20,6 +21,17 @@ from optdot.pattern import Pattern
 
 from .options import ExportOptions
 
+_FIXED = {
+    "$TDCREATE": "2451544.5",
+    "$TDUCREATE": "2451544.5",
+    "$TDUPDATE": "2451544.5",
+    "$TDUUPDATE": "2451544.5",
+    "$TDINDWG": "0.0",
+    "$TDUSRTIMER": "0.0",
+    "$FINGERPRINTGUID": "{00000000-0000-0000-0000-000000000000}",
+    "$VERSIONGUID": "{00000000-0000-0000-0000-000000000000}",
+}
+_STAMP = re.compile(r"^(\S+) @ \d{4}-\d\d-\d\dT[0-9:.]+[+-]\d\d:\d\d$")
 _MARK_X, _MARK_Y = 123456.654321, 654321.123456  # template circle, found by its coordinates
 
 
@@ -42,7 +54,7 @@ def _template(pattern: Pattern, version: str) -> tuple[str, str, str, int]:
     buf = io.StringIO()
     doc.write(buf)
     text = buf.getvalue()
-    lines = text.split("\n")
+    lines = _sorted_classes(text.split("\n"))
     ix = lines.index(f"{_MARK_X}") if f"{_MARK_X}" in lines else _find_float(lines, _MARK_X)
     start = ix
     while lines[start] != "CIRCLE":
@@ -65,12 +77,33 @@ def _template(pattern: Pattern, version: str) -> tuple[str, str, str, int]:
         else:
             value = value.replace("%", "%%")
         fmt += [code, value]
+    for i, line in enumerate(lines):  # fixed dates and GUIDs: same input, same bytes
+        if line in _FIXED:
+            lines[i + 2] = _FIXED[line]
+        elif _STAMP.match(line):  # ezdxf's CREATED_BY/WRITTEN_BY_EZDXF time stamps
+            lines[i] = _STAMP.sub(r"\1 @ 2000-01-01T00:00:00+00:00", line)
     seed_line = lines.index("$HANDSEED")
     seed = int(lines[seed_line + 2], 16)
     head = "\n".join(lines[:start]) + "\n"
     tail = "\n".join(lines[end:])
     head = head.replace(f"$HANDSEED\n  5\n{lines[seed_line + 2]}\n", "$HANDSEED\n  5\n{SEED}\n", 1)
     return head, "\n".join(fmt) + "\n", tail, seed
+
+
+def _sorted_classes(lines: list[str]) -> list[str]:
+    """ezdxf emits the CLASSES section in set order (varies with PYTHONHASHSEED); sort it."""
+    if "CLASSES" not in lines:
+        return lines
+    a = lines.index("CLASSES") + 1
+    b = a
+    while lines[b] != "ENDSEC":
+        b += 1
+    b -= 1  # the "  0" before ENDSEC
+    body = lines[a:b]
+    starts = [i for i in range(0, len(body), 2) if body[i].strip() == "0" and body[i + 1] == "CLASS"]
+    items = [body[s:e] for s, e in zip(starts, starts[1:] + [len(body)])]
+    items.sort(key=lambda it: it[3])  # by class name
+    return lines[:a] + [x for it in items for x in it] + lines[b:]
 
 
 def _find_float(lines: list[str], value: float) -> int:

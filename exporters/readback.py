@@ -55,19 +55,20 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
         pts = [p for p in cell.polygons if (p.layer, p.datatype) == (opts.layer, opts.datatype)]
         if not pts:
             continue
-        r = float(np.max(np.hypot(*pts[0].points.T)))
-        diameter = 2 * r * to_mm
+        # vertices sit on the circle, snapped to the database grid: their mean radius
+        # recovers the diameter to well under 1 nm
+        diameter = round(2 * float(np.mean(np.hypot(*pts[0].points.T))) * to_mm, 6)
         origins = np.array([ref.origin])
         if ref.repetition.size > 1:
-            origins = np.array(ref.repetition.offsets) + np.array(ref.origin)
+            origins = ref.repetition.get_offsets() + np.array(ref.origin)
         centres.append(origins * to_mm)
     for poly in top.polygons:
         if (poly.layer, poly.datatype) != (opts.layer, opts.datatype):
             continue
         pts = poly.points
         c = pts.mean(axis=0)
-        diameter = 2 * float(np.max(np.hypot(*(pts - c).T))) * to_mm
-        reps = np.array(poly.repetition.offsets) if poly.repetition.size > 1 else np.zeros((1, 2))
+        diameter = round(2 * float(np.mean(np.hypot(*(pts - c).T))) * to_mm, 6)
+        reps = poly.repetition.get_offsets() if poly.repetition.size > 1 else np.zeros((1, 2))
         centres.append((c + reps) * to_mm)
     if not centres or diameter is None:
         raise PatternFileError(f"{path}: no dots on layer {opts.layer}/{opts.datatype}")

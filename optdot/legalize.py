@@ -57,8 +57,11 @@ def _fix_dots(xy, lo, hi, grid, x0, y0, cw, ch, home, eps):  # pragma: no cover
     for i in range(xy.shape[0]):
         x = min(max(xy[i, 0], lo[0]), hi[0])
         y = min(max(xy[i, 1], lo[1]), hi[1])
-        ix = min(max(int(np.floor((x - x0) / cw)), 0), nx - 1)
-        iy = min(max(int(np.floor((y - y0) / ch)), 0), ny - 1)
+        # the cell of the position as it will be written (rounded to 1 nm)
+        xr = np.floor(x * 1e6 + 0.5) / 1e6
+        yr = np.floor(y * 1e6 + 0.5) / 1e6
+        ix = min(max(int(np.floor((xr - x0) / cw)), 0), nx - 1)
+        iy = min(max(int(np.floor((yr - y0) / ch)), 0), ny - 1)
         if grid[iy, ix] <= 0.0:
             hy, hx = home[i] // nx, home[i] % nx
             x = min(max(x, x0 + hx * cw + eps), x0 + (hx + 1) * cw - eps)
@@ -125,7 +128,7 @@ def legalize(
             break
     else:
         sweeps = max_sweeps
-    xy = np.round(xy / RESOLUTION) * RESOLUTION
+    xy = np.round(xy, 6)  # = nearest double to the 1 nm decimal, as the CSV parses back
     return LegalizeResult(xy=xy, sweeps=sweeps, pair_fixes=pair_fixes, dot_fixes=dot_fixes)
 
 

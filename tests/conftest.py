@@ -1,0 +1,46 @@
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLES = ROOT / "samples"
+
+
+def write_job(tmp: Path, grid: np.ndarray | str, **sections) -> Path:
+    """Write a job + grid into ``tmp``; ``sections`` override/add TOML lines per section."""
+    if isinstance(grid, str):
+        (tmp / "density.csv").write_text(grid)
+    else:
+        np.savetxt(tmp / "density.csv", grid, delimiter=",", fmt="%.6g")
+    base = {
+        "domain": {"width": 2.0, "height": 1.5},
+        "density": {"grid": '"density.csv"'},
+        "dots": {"diameter": 0.046},
+        "optimize": {"max_iter": 60, "seed": 3},
+    }
+    for k, v in sections.items():
+        base.setdefault(k, {}).update(v)
+    lines = []
+    for sec, kv in base.items():
+        lines.append(f"[{sec}]")
+        lines += [f"{k} = {v}" for k, v in kv.items()]
+    path = tmp / "job.toml"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.fixture(scope="session")
+def tiny_job():
+    from optdot.job import load_job
+
+    return load_job(SAMPLES / "tiny" / "job.toml")
+
+
+@pytest.fixture(scope="session")
+def tiny_pattern(tiny_job):
+    from optdot.generate import generate
+
+    return generate(tiny_job)

@@ -1,0 +1,59 @@
+import numpy as np
+import pytest
+
+from optdot.generate import generate
+from optdot.job import load_job
+from optdot.legalize import check_guarantee, legalize
+from optdot.pattern import pattern_csv_bytes
+from optdot.qa import close_pairs
+
+from .conftest import SAMPLES, write_job
+
+
+def assert_guarantee(job, p):
+    v = check_guarantee(p.xy, job.density, p.box, p.radius, job.min_distance)
+    assert v.ok, v
+    assert len(close_pairs(p.xy, job.diameter)) == 0  # independent engine (GEOS)
+    assert abs(p.n - job.n_dots) <= max(1, 0.001 * job.n_dots)
+
+
+def test_tiny_sample_guarantee_and_determinism(tiny_job, tiny_pattern):
+    assert_guarantee(tiny_job, tiny_pattern)
+    again = generate(tiny_job)
+    assert pattern_csv_bytes(again) == pattern_csv_bytes(tiny_pattern)
+    other = generate(tiny_job.with_overrides(seed=2))
+    assert pattern_csv_bytes(other) != pattern_csv_bytes(tiny_pattern)
+
+
+@pytest.mark.parametrize("formulation", ["paper", "optdot"])
+def test_dense_map_with_gap(tmp_path, formulation):
+    g = np.full((4, 6), 0.6)
+    g[0, 0] = 0.0
+    job = load_job(write_job(tmp_path, g, optimize={"gap": 0.004, "formulation": f'"{formulation}"'}))
+    p = generate(job)
+    assert_guarantee(job, p)
+    assert len(close_pairs(p.xy, 0.050)) == 0
+
+
+def test_relaxation_improves_on_initial(tiny_job):
+    p = generate(tiny_job.with_overrides(max_iter=0))
+    q = generate(tiny_job)
+    # even with no iteration the guarantee pass delivers a legal pattern
+    assert_guarantee(tiny_job, p)
+    assert len(close_pairs(q.xy, 0.060)) < len(close_pairs(p.xy, 0.060))
+
+
+def test_legalize_fixes_planted_defects(tiny_job, tiny_pattern):
+    xy = tiny_pattern.xy.copy()
+    xy[1] = xy[0] + [0.01, 0.0]  # collision
+    xy[2] = [0.001, 1.0]  # protruding and in the empty column
+    home = tiny_job.density.cell_index(tiny_pattern.xy)
+    res = legalize(xy, tiny_job.density, home, tiny_pattern.box, 0.023, 0.046)
+    v = check_guarantee(res.xy, tiny_job.density, tiny_pattern.box, 0.023, 0.046)
+    assert v.ok and res.pair_fixes >= 1 and res.dot_fixes >= 1
+
+
+def test_uniform_sample_counts():
+    job = load_job(SAMPLES / "uniform" / "job.toml").with_overrides(max_iter=30)
+    p = generate(job)
+    assert_guarantee(job, p)

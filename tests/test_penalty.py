@@ -1,0 +1,89 @@
+import numpy as np
+import pytest
+from scipy.optimize import approx_fprime
+
+from optdot.circles import circle_radius, container_half_sides
+from optdot.neighbors import neighbor_pairs, pairs_brute_force
+from optdot.penalty import PenaltyTerms, penalty_fast, penalty_reference
+
+
+def make_terms(n=120, seed=0, w_hard=10.0, empty=True):
+    rng = np.random.default_rng(seed)
+    xy = rng.random((n, 2)) * [1.0, 0.8]
+    rho = rng.uniform(0.1, 0.6, n)
+    r = circle_radius(rho, 0.023)
+    mask = np.zeros((4, 5), np.uint8)
+    if empty:
+        mask[0, :2] = 1
+        mask[2, 3] = 1
+    terms = PenaltyTerms(
+        radius=r,
+        panel_radius=0.7 * r,
+        center=xy + rng.normal(0, 0.05, xy.shape),
+        half_side=container_half_sides(r, 4.0) * 0.5,
+        box=(0.0, 0.0, 1.0, 0.8),
+        dmin=0.046,
+        dot_radius=0.023,
+        w_hard=w_hard,
+        empty=mask,
+        grid_box=(0.0, 0.0, 0.2, 0.2),
+    )
+    return xy, terms
+
+
+def fast(xy, terms):
+    reff = np.maximum(terms.radius, terms.dmin / 2)
+    ptr, nbr = neighbor_pairs(xy, reff, 0.0)
+    g = np.empty_like(xy)
+    return penalty_fast(np.ascontiguousarray(xy), terms, ptr, nbr, g), g
+
+
+@pytest.mark.parametrize("w_hard,empty", [(0.0, False), (10.0, True), (10.0, False)])
+def test_fast_matches_reference(w_hard, empty):
+    xy, terms = make_terms(w_hard=w_hard, empty=empty)
+    f1, g1 = fast(xy, terms)
+    f2, g2 = penalty_reference(xy, terms, pairs_brute_force(xy, np.full(len(xy), 1.0)))
+    assert f1 > 0
+    assert f1 == pytest.approx(f2, rel=1e-12)
+    np.testing.assert_allclose(g1, g2, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_gradient_matches_finite_differences(seed):
+    xy, terms = make_terms(n=60, seed=seed)
+
+    def f(x):
+        return fast(x.reshape(-1, 2), terms)[0]
+
+    x = xy.ravel()
+    g = fast(xy, terms)[1].ravel()
+    num = approx_fprime(x, f, 1e-8)
+    # piecewise quadratic: away from kinks the finite difference is exact to O(eps)
+    assert np.abs(g - num).max() < 1e-5 * max(1.0, np.abs(g).max())
+
+
+def test_penalty_zero_when_feasible():
+    xy = np.array([[0.3, 0.3], [0.6, 0.3]])
+    r = np.array([0.1, 0.1])
+    terms = PenaltyTerms(r, r, xy.copy(), r * 2, (0, 0, 1, 1), 0.046, 0.023, 10.0)
+    assert fast(xy, terms)[0] == 0.0
+
+
+def test_each_term_pushes_the_right_way():
+    r = np.array([0.1, 0.1])
+    # overlapping pair: gradient pushes them apart
+    xy = np.array([[0.4, 0.5], [0.5, 0.5]])
+    terms = PenaltyTerms(r, r, xy.copy(), r * 2, (0, 0, 1, 1), 0.046, 0.023, 0.0)
+    f, g = fast(xy, terms)
+    assert f == pytest.approx(0.1**2)
+    assert g[0, 0] > 0 and g[1, 0] < 0  # descent moves 0 left, 1 right
+    # protruding from the panel at x = 0.05 < r
+    xy = np.array([[0.05, 0.5], [0.7, 0.5]])
+    terms = PenaltyTerms(r, r, xy.copy(), r * 2, (0, 0, 1, 1), 0.046, 0.023, 0.0)
+    f, g = fast(xy, terms)
+    assert f == pytest.approx(0.05**2) and g[0, 0] < 0
+    # outside its container (centre moved 0.15 > h - r = 0.1)
+    terms = PenaltyTerms(r, r, np.array([[0.5, 0.5], [0.7, 0.5]]), r * 2, (0, 0, 1, 1), 0.046, 0.023, 0.0)
+    xy = np.array([[0.35, 0.5], [0.7, 0.5]])
+    f, g = fast(xy, terms)
+    assert f == pytest.approx(0.05**2) and g[0, 0] < 0
