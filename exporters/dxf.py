@@ -100,8 +100,10 @@ def _sorted_classes(lines: list[str]) -> list[str]:
         b += 1
     b -= 1  # the "  0" before ENDSEC
     body = lines[a:b]
-    starts = [i for i in range(0, len(body), 2) if body[i].strip() == "0" and body[i + 1] == "CLASS"]
-    items = [body[s:e] for s, e in zip(starts, starts[1:] + [len(body)])]
+    starts = [
+        i for i in range(0, len(body), 2) if body[i].strip() == "0" and body[i + 1] == "CLASS"
+    ]
+    items = [body[s:e] for s, e in zip(starts, starts[1:] + [len(body)], strict=True)]
     items.sort(key=lambda it: it[3])  # by class name
     return lines[:a] + [x for it in items for x in it] + lines[b:]
 
@@ -129,10 +131,9 @@ def write_dxf(pattern: Pattern, path: str | Path, opts: ExportOptions) -> None:
         for a in range(0, n, chunk):
             xy = pattern.xy[a : a + chunk]
             if has_handle:
-                rows = zip(handles[a : a + chunk].tolist(), xy[:, 0].tolist(), xy[:, 1].tolist())
+                h = handles[a : a + chunk].tolist()
+                rows = zip(h, xy[:, 0].tolist(), xy[:, 1].tolist(), strict=True)
             else:
-                rows = zip(xy[:, 0].tolist(), xy[:, 1].tolist())
+                rows = zip(xy[:, 0].tolist(), xy[:, 1].tolist(), strict=True)
             fh.write("".join(fmt % row for row in rows))
         fh.write(tail)
-
-

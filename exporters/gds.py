@@ -13,6 +13,7 @@ import math
 from pathlib import Path
 
 import gdstk
+
 from optdot.atomic import atomic_path
 from optdot.errors import ExportError
 from optdot.neighbors import spatial_order
@@ -91,4 +92,3 @@ def write_oas(pattern: Pattern, path: str | Path, opts: ExportOptions) -> None:
     lib = build_library(pattern, opts, oasis=True)
     with atomic_path(path) as tmp:
         lib.write_oas(tmp, compression_level=6, circle_tolerance=opts.tolerance_um)
-

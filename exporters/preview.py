@@ -33,7 +33,9 @@ def coverage_image(pattern: Pattern, max_px: int = 400) -> tuple[np.ndarray, tup
     px = max((x1 - x0), (y1 - y0)) / max_px
     nx = max(1, int(round((x1 - x0) / px)))
     ny = max(1, int(round((y1 - y0) / px)))
-    h, _, _ = np.histogram2d(pattern.xy[:, 1], pattern.xy[:, 0], bins=(ny, nx), range=((y0, y1), (x0, x1)))
+    h, _, _ = np.histogram2d(
+        pattern.xy[:, 1], pattern.xy[:, 0], bins=(ny, nx), range=((y0, y1), (x0, x1))
+    )
     dot_area = np.pi * pattern.radius**2
     cell = (x1 - x0) / nx * (y1 - y0) / ny
     return h * dot_area / cell, (x0, x1, y0, y1)
@@ -85,12 +87,15 @@ def write_svg(pattern: Pattern, path: str | Path) -> None:
     out = [
         '<?xml version="1.0" encoding="UTF-8"?>\n',
         f'<svg xmlns="http://www.w3.org/2000/svg" width="{wx1 - wx0:.6f}mm" '
-        f'height="{wy1 - wy0:.6f}mm" viewBox="{wx0:.6f} {-wy1:.6f} {wx1 - wx0:.6f} {wy1 - wy0:.6f}">\n',
+        f'height="{wy1 - wy0:.6f}mm" '
+        f'viewBox="{wx0:.6f} {-wy1:.6f} {wx1 - wx0:.6f} {wy1 - wy0:.6f}">\n',
         f"<title>{pattern.n} dots, diameter {pattern.diameter} mm</title>\n",
         f'<rect x="{x0:.6f}" y="{-y1:.6f}" width="{x1 - x0:.6f}" height="{y1 - y0:.6f}" '
         'fill="none" stroke="red" stroke-width="0.01"/>\n<g fill="black">\n',
     ]
-    out += [f'<circle cx="{x:.6f}" cy="{-y:.6f}" r="{r:.6f}"/>\n' for x, y in pattern.xy[sel].tolist()]
+    out += [
+        f'<circle cx="{x:.6f}" cy="{-y:.6f}" r="{r:.6f}"/>\n' for x, y in pattern.xy[sel].tolist()
+    ]
     out.append("</g>\n</svg>\n")
     with atomic_path(path) as tmp:
         tmp.write_text("".join(out), encoding="utf-8")
@@ -100,5 +105,8 @@ def _in_window(pattern: Pattern, w: tuple[float, float, float, float]) -> np.nda
     xy = pattern.xy
     r = pattern.radius
     return (
-        (xy[:, 0] > w[0] - r) & (xy[:, 0] < w[2] + r) & (xy[:, 1] > w[1] - r) & (xy[:, 1] < w[3] + r)
+        (xy[:, 0] > w[0] - r)
+        & (xy[:, 0] < w[2] + r)
+        & (xy[:, 1] > w[1] - r)
+        & (xy[:, 1] < w[3] + r)
     )

@@ -73,7 +73,9 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
     if not centres or diameter is None:
         raise PatternFileError(f"{path}: no dots on layer {opts.layer}/{opts.datatype}")
     outline = [
-        p for p in top.polygons if (p.layer, p.datatype) == (opts.outline_layer, opts.outline_datatype)
+        p
+        for p in top.polygons
+        if (p.layer, p.datatype) == (opts.outline_layer, opts.outline_datatype)
     ]
     box = None
     if outline:
@@ -95,10 +97,17 @@ def _read_dxf(path: Path) -> Pattern:
     radii = np.array([c.dxf.radius for c in circles])
     box = None
     for e in msp.query('LWPOLYLINE POLYLINE[layer=="OUTLINE"]'):
-        pts = np.array([p[:2] for p in e.get_points()]) if e.dxftype() == "LWPOLYLINE" else np.array(
-            [v.dxf.location[:2] for v in e.vertices]
+        pts = (
+            np.array([p[:2] for p in e.get_points()])
+            if e.dxftype() == "LWPOLYLINE"
+            else np.array([v.dxf.location[:2] for v in e.vertices])
         )
-        box = (float(pts[:, 0].min()), float(pts[:, 1].min()), float(pts[:, 0].max()), float(pts[:, 1].max()))
+        box = (
+            float(pts[:, 0].min()),
+            float(pts[:, 1].min()),
+            float(pts[:, 0].max()),
+            float(pts[:, 1].max()),
+        )
         break
     if np.ptp(radii) > 1e-9:
         raise PatternFileError(f"{path}: dots of different diameters")

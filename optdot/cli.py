@@ -40,11 +40,19 @@ def main() -> None:
 
 
 def _job_options(fn):
-    fn = click.option("--seed", type=click.IntRange(0, 2**63 - 1), help="Override optimize.seed.")(fn)
-    fn = click.option("--max-iter", type=click.IntRange(0, 100_000), help="Override optimize.max_iter.")(fn)
-    fn = click.option("--method", type=click.Choice(["optdot", "md"]), help="Override optimize.method.")(fn)
+    fn = click.option("--seed", type=click.IntRange(0, 2**63 - 1), help="Override optimize.seed.")(
+        fn
+    )
     fn = click.option(
-        "--formulation", type=click.Choice(["optdot", "paper"]), help="Override optimize.formulation."
+        "--max-iter", type=click.IntRange(0, 100_000), help="Override optimize.max_iter."
+    )(fn)
+    fn = click.option(
+        "--method", type=click.Choice(["optdot", "md"]), help="Override optimize.method."
+    )(fn)
+    fn = click.option(
+        "--formulation",
+        type=click.Choice(["optdot", "paper"]),
+        help="Override optimize.formulation.",
     )(fn)
     fn = click.option("--quiet", "-q", is_flag=True, help="No progress bar.")(fn)
     return fn
@@ -59,7 +67,9 @@ def run_job(job_path: Path, seed, max_iter, method, formulation, quiet):
     job = load_job(job_path).with_overrides(
         seed=seed, max_iter=max_iter, method=method, formulation=formulation
     )
-    bar = ProgressBar(job.optimize.max_iter, label=job.optimize.method, enabled=False if quiet else None)
+    bar = ProgressBar(
+        job.optimize.max_iter, label=job.optimize.method, enabled=False if quiet else None
+    )
     try:
         pattern = generate(job, progress=bar)
     finally:
@@ -69,7 +79,13 @@ def run_job(job_path: Path, seed, max_iter, method, formulation, quiet):
 
 @main.command()
 @click.argument("job_file", type=click.Path(path_type=Path))
-@click.option("-o", "--output", type=click.Path(path_type=Path), required=True, help="Pattern file to write (.csv or .npz).")
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(path_type=Path),
+    required=True,
+    help="Pattern file to write (.csv or .npz).",
+)
 @_job_options
 @_user_errors
 def generate(job_file, output, seed, max_iter, method, formulation, quiet):
@@ -139,19 +155,57 @@ def _check_outputs(outputs: dict[str, Path]) -> None:
 @click.option("--csv", type=click.Path(path_type=Path), help="CSV pattern to write.")
 @click.option("--svg", type=click.Path(path_type=Path), help="SVG preview to write.")
 @click.option("--png", type=click.Path(path_type=Path), help="PNG preview to write.")
-@click.option("--job", "job_path", type=click.Path(path_type=Path), help="Job file for the QA gate when SOURCE is a pattern.")
-@click.option("--tolerance", type=float, default=0.01, show_default=True, help="Circle polygon tolerance, µm (GDS/OAS).")
+@click.option(
+    "--job",
+    "job_path",
+    type=click.Path(path_type=Path),
+    help="Job file for the QA gate when SOURCE is a pattern.",
+)
+@click.option(
+    "--tolerance",
+    type=float,
+    default=0.01,
+    show_default=True,
+    help="Circle polygon tolerance, µm (GDS/OAS).",
+)
 @click.option("--flatten", is_flag=True, help="Plain polygons instead of a dot cell + references.")
 @click.option("--layer", type=int, default=1, show_default=True, help="GDS/OAS layer of the dots.")
-@click.option("--datatype", type=int, default=0, show_default=True, help="GDS/OAS datatype of the dots.")
-@click.option("--outline-layer", type=int, default=2, show_default=True, help="GDS/OAS layer of the outline.")
+@click.option(
+    "--datatype", type=int, default=0, show_default=True, help="GDS/OAS datatype of the dots."
+)
+@click.option(
+    "--outline-layer", type=int, default=2, show_default=True, help="GDS/OAS layer of the outline."
+)
 @click.option("--top-cell", default="TOP", show_default=True, help="Name of the top cell.")
-@click.option("--dxf-version", default="R2010", show_default=True, help="DXF release: R2010, R2000, R12, ...")
+@click.option(
+    "--dxf-version", default="R2010", show_default=True, help="DXF release: R2010, R2000, R12, ..."
+)
 @click.option("--force", is_flag=True, help="Write masks even if the QA gate fails.")
 @_job_options
 @_user_errors
-def export(source, gds, oas, dxf, csv, svg, png, job_path, tolerance, flatten, layer, datatype,
-           outline_layer, top_cell, dxf_version, force, seed, max_iter, method, formulation, quiet):
+def export(
+    source,
+    gds,
+    oas,
+    dxf,
+    csv,
+    svg,
+    png,
+    job_path,
+    tolerance,
+    flatten,
+    layer,
+    datatype,
+    outline_layer,
+    top_cell,
+    dxf_version,
+    force,
+    seed,
+    max_iter,
+    method,
+    formulation,
+    quiet,
+):
     """Write masks and previews of SOURCE (a job file, or a pattern .csv/.npz).
 
     Existing output files are replaced (atomically: a failed run leaves them as they were).
@@ -160,21 +214,45 @@ def export(source, gds, oas, dxf, csv, svg, png, job_path, tolerance, flatten, l
     import exporters
     from exporters.options import ExportOptions
 
-    outputs = {k: v for k, v in (("gds", gds), ("oas", oas), ("dxf", dxf), ("csv", csv),
-                                 ("svg", svg), ("png", png)) if v is not None}
+    outputs = {
+        k: v
+        for k, v in (
+            ("gds", gds),
+            ("oas", oas),
+            ("dxf", dxf),
+            ("csv", csv),
+            ("svg", svg),
+            ("png", png),
+        )
+        if v is not None
+    }
     if not outputs:
         raise click.UsageError("give at least one of --gds --oas --dxf --csv --svg --png")
-    opts = ExportOptions(tolerance_um=tolerance, flatten=flatten, layer=layer, datatype=datatype,
-                         outline_layer=outline_layer, top_cell=top_cell, dxf_version=dxf_version)
+    opts = ExportOptions(
+        tolerance_um=tolerance,
+        flatten=flatten,
+        layer=layer,
+        datatype=datatype,
+        outline_layer=outline_layer,
+        top_cell=top_cell,
+        dxf_version=dxf_version,
+    )
     _check_outputs(outputs)
     job, pattern = _load_source(source, job_path, seed, max_iter, method, formulation, quiet)
     qa = _gate(job, pattern)
     if not qa.passed:
-        failed = "; ".join(f"{c.name}: {_num(c.value)} > {_num(c.limit)}" for c in qa.checks if not c.passed)
+        failed = "; ".join(
+            f"{c.name}: {_num(c.value)} > {_num(c.limit)}" for c in qa.checks if not c.passed
+        )
         if not force:
-            click.echo(f"optdot: QA gate failed, nothing written ({failed}); use --force to write anyway", err=True)
+            click.echo(
+                f"optdot: QA gate failed, nothing written ({failed}); use --force to write anyway",
+                err=True,
+            )
             sys.exit(1)
-        click.echo(f"optdot: warning: QA gate failed ({failed}); writing anyway (--force)", err=True)
+        click.echo(
+            f"optdot: warning: QA gate failed ({failed}); writing anyway (--force)", err=True
+        )
     for fmt, path in outputs.items():
         exporters.write(pattern, fmt, path, opts)
         if not quiet:
@@ -183,10 +261,17 @@ def export(source, gds, oas, dxf, csv, svg, png, job_path, tolerance, flatten, l
 
 @main.command()
 @click.argument("pattern_file", type=click.Path(path_type=Path))
-@click.option("--job", "job_path", type=click.Path(path_type=Path), help="Job file: target map and thresholds.")
+@click.option(
+    "--job",
+    "job_path",
+    type=click.Path(path_type=Path),
+    help="Job file: target map and thresholds.",
+)
 @click.option("--html", "html_path", type=click.Path(path_type=Path), help="HTML report to write.")
 @click.option("--json", "json_path", type=click.Path(path_type=Path), help="JSON report to write.")
-@click.option("--collision", type=float, help="Collision distance, mm (default: dot diameter + gap).")
+@click.option(
+    "--collision", type=float, help="Collision distance, mm (default: dot diameter + gap)."
+)
 @click.option("--close", type=float, help="Too-close distance, mm (default 0.060).")
 @click.option("--quiet", "-q", is_flag=True, help="Only the exit code.")
 @_user_errors

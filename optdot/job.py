@@ -122,7 +122,9 @@ class QAParams:
 
     def __post_init__(self) -> None:
         if self.collision_distance is not None:
-            _check(self.collision_distance > 0, "qa.collision_distance", self.collision_distance, "> 0")
+            _check(
+                self.collision_distance > 0, "qa.collision_distance", self.collision_distance, "> 0"
+            )
         _check(self.close_distance > 0, "qa.close_distance", self.close_distance, "> 0")
         _check(self.max_collisions >= 0, "qa.max_collisions", self.max_collisions, ">= 0")
         _check(
@@ -172,9 +174,7 @@ class Job:
             if not (math.isfinite(v) and 0 < v <= 10_000):
                 raise JobError(f"{where}: {key} = {v!r} must be a size in mm, 0 < x <= 10000")
         if not (math.isfinite(self.diameter) and 0 < self.diameter <= 10):
-            raise JobError(
-                f"{where}: dots.diameter = {self.diameter!r} must be in mm, 0 < d <= 10"
-            )
+            raise JobError(f"{where}: dots.diameter = {self.diameter!r} must be in mm, 0 < d <= 10")
         if self.diameter >= min(self.width, self.height):
             raise JobError(f"{where}: dots.diameter = {self.diameter} does not fit the panel")
         _validate_grid(self.density.grid, f"{where}: density.grid")

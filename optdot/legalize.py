@@ -116,18 +116,15 @@ def legalize(
     pair_fixes = dot_fixes = 0
     home = np.asarray(home_cell, dtype=np.int64)
     sweeps = 0
-    for sweeps in range(1, max_sweeps + 1):
-        fixed = _fix_dots(
-            xy, lo, hi, density.grid, density.x0, density.y0, cw, ch, home, MARGIN
-        )
+    while sweeps < max_sweeps:
+        sweeps += 1
+        fixed = _fix_dots(xy, lo, hi, density.grid, density.x0, density.y0, cw, ch, home, MARGIN)
         ptr, nbr = neighbor_pairs(xy, 0.5 * target, 0.02)
         moved = _push_pairs(xy, ptr, nbr, target, 0.5 * MARGIN)
         pair_fixes += moved
         dot_fixes += fixed
         if moved == 0 and fixed == 0:
             break
-    else:
-        sweeps = max_sweeps
     xy = np.round(xy, 6)  # = nearest double to the 1 nm decimal, as the CSV parses back
     return LegalizeResult(xy=xy, sweeps=sweeps, pair_fixes=pair_fixes, dot_fixes=dot_fixes)
 

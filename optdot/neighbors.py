@@ -136,9 +136,7 @@ def csr_to_pairs(ptr: np.ndarray, nbr: np.ndarray) -> np.ndarray:
     return p
 
 
-def pairs_brute_force(
-    xy: np.ndarray, radius: np.ndarray | float, skin: float = 0.0
-) -> np.ndarray:
+def pairs_brute_force(xy: np.ndarray, radius: np.ndarray | float, skin: float = 0.0) -> np.ndarray:
     """O(n²) reference of :func:`neighbor_pairs`, as sorted ``[K, 2]`` int64 pairs, i < j."""
     xy = np.asarray(xy, dtype=np.float64)
     n = len(xy)

@@ -171,7 +171,9 @@ def _validated(path, xy, diam, box, meta) -> Pattern:
     if np.any(diam <= 0):
         raise PatternFileError(f"{path}: diameters must be > 0 mm")
     if np.ptp(diam) > 1e-9:
-        raise PatternFileError(f"{path}: all dots must have one diameter (found {np.unique(diam)[:3]}...)")
+        raise PatternFileError(
+            f"{path}: all dots must have one diameter (found {np.unique(diam)[:3]}...)"
+        )
     d = float(diam[0])
     if box is None:
         lo = xy.min(axis=0) - d / 2

@@ -85,9 +85,7 @@ def _empty_depth(x, y, rp, empty, gx0, gy0, cw, ch):  # pragma: no cover - compi
     by = 0.0
     found = False
     for cy in range(max(int(np.floor((y - rp - gy0) / ch)), 0), min(iy + int(rp / ch) + 2, ny)):
-        for cx in range(
-            max(int(np.floor((x - rp - gx0) / cw)), 0), min(ix + int(rp / cw) + 2, nx)
-        ):
+        for cx in range(max(int(np.floor((x - rp - gx0) / cw)), 0), min(ix + int(rp / cw) + 2, nx)):
             if not empty[cy, cx]:
                 continue
             px = min(max(x, gx0 + cx * cw), gx0 + (cx + 1) * cw)

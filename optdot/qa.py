@@ -81,7 +81,9 @@ def psi6(xy: np.ndarray, tree: cKDTree | None = None) -> np.ndarray:
     return np.exp(6j * np.arctan2(v[..., 1], v[..., 0])).mean(axis=1)
 
 
-def patch_coherence(xy: np.ndarray, psi: np.ndarray, patch: float = 2.0, min_dots: int = 50) -> float:
+def patch_coherence(
+    xy: np.ndarray, psi: np.ndarray, patch: float = 2.0, min_dots: int = 50
+) -> float:
     """Mean over ``patch``-mm squares of |mean psi6| (high = hexagonal grains)."""
     key = np.floor(xy / patch).astype(np.int64)
     _, inv = np.unique(key[:, 0] * 1_000_003 + key[:, 1], return_inverse=True)
@@ -119,7 +121,9 @@ def radial_spectrum(xy: np.ndarray, window: tuple[float, float, float, float], p
     return freq[m][1:], p[m][1:]
 
 
-def run_qa(pattern: Pattern, density: DensityMap | None, params: QAParams, collision: float) -> QAResult:
+def run_qa(
+    pattern: Pattern, density: DensityMap | None, params: QAParams, collision: float
+) -> QAResult:
     """Measure ``pattern`` and apply the gate.
 
     Args:
@@ -167,23 +171,34 @@ def run_qa(pattern: Pattern, density: DensityMap | None, params: QAParams, colli
     nn = tree.query(xy, k=2)[0][:, 1] if n > 1 else np.full(n, np.inf)
     arrays["nn"] = nn
     m["nn_min_mm"] = float(nn.min()) if n > 1 else None
-    m["nn_percentiles_mm"] = {str(q): float(np.percentile(nn, q)) for q in (1, 5, 50, 95)} if n > 1 else {}
+    m["nn_percentiles_mm"] = (
+        {str(q): float(np.percentile(nn, q)) for q in (1, 5, 50, 95)} if n > 1 else {}
+    )
 
     x0, y0, x1, y1 = pattern.box
     out = (xy[:, 0] - r0 < x0) | (xy[:, 0] + r0 > x1) | (xy[:, 1] - r0 < y0) | (xy[:, 1] + r0 > y1)
     m["protruding"] = int(out.sum())
     arrays["protruding"] = np.flatnonzero(out)
     checks.append(
-        Check("dots protruding from the panel", int(out.sum()), params.max_protruding,
-              int(out.sum()) <= params.max_protruding, _where(xy[out]))
+        Check(
+            "dots protruding from the panel",
+            int(out.sum()),
+            params.max_protruding,
+            int(out.sum()) <= params.max_protruding,
+            _where(xy[out]),
+        )
     )
 
     psi = psi6(xy, tree)
     m["psi6_local_mean"] = float(np.abs(psi).mean()) if n else 0.0
     m["psi6_coherence_2mm"] = patch_coherence(xy, psi, 2.0)
     checks.append(
-        Check("psi6 coherence over 2 mm patches (moiré risk)", m["psi6_coherence_2mm"],
-              params.max_psi6_coherence, m["psi6_coherence_2mm"] <= params.max_psi6_coherence)
+        Check(
+            "psi6 coherence over 2 mm patches (moiré risk)",
+            m["psi6_coherence_2mm"],
+            params.max_psi6_coherence,
+            m["psi6_coherence_2mm"] <= params.max_psi6_coherence,
+        )
     )
 
     if density is not None:
@@ -195,7 +210,9 @@ def run_qa(pattern: Pattern, density: DensityMap | None, params: QAParams, colli
     arrays["tile"] = tile
     if len(power):
         lo = freq > 0.3 / (np.median(nn) if n > 1 else 1)
-        m["spectrum_peak_ratio"] = float(power[lo].max() / np.median(power[lo])) if lo.any() else None
+        m["spectrum_peak_ratio"] = (
+            float(power[lo].max() / np.median(power[lo])) if lo.any() else None
+        )
     return QAResult(metrics=m, checks=checks, arrays=arrays)
 
 
@@ -204,16 +221,23 @@ def _density_checks(pattern, density, params, nn, m, arrays, checks) -> None:
     r0 = pattern.radius
     dot_area = math.pi * r0 * r0
     inside = (
-        (xy[:, 0] >= density.x0) & (xy[:, 0] <= density.x0 + density.width)
-        & (xy[:, 1] >= density.y0) & (xy[:, 1] <= density.y0 + density.height)
+        (xy[:, 0] >= density.x0)
+        & (xy[:, 0] <= density.x0 + density.width)
+        & (xy[:, 1] >= density.y0)
+        & (xy[:, 1] <= density.y0 + density.height)
     )
     rho = np.where(inside, density.at(xy), np.nan)
     empty = inside & (rho <= 0)
     m["in_empty_cells"] = int(empty.sum())
     arrays["in_empty"] = np.flatnonzero(empty)
     checks.append(
-        Check("dots in zero-density cells", int(empty.sum()), params.max_in_empty,
-              int(empty.sum()) <= params.max_in_empty, _where(xy[empty]))
+        Check(
+            "dots in zero-density cells",
+            int(empty.sum()),
+            params.max_in_empty,
+            int(empty.sum()) <= params.max_in_empty,
+            _where(xy[empty]),
+        )
     )
     # nearest neighbour in units of the local hexagonal spacing 2 r'
     ok = inside & (rho > 0)
@@ -238,7 +262,10 @@ def _density_checks(pattern, density, params, nn, m, arrays, checks) -> None:
     gs, ts = gs / w, ts / w
     valid = ts > 0.02
     rel = np.where(valid, (gs - ts) / np.where(valid, ts, 1), 0.0)
-    arrays["coverage_error"] = (rel, (density.x0, density.x0 + density.width, density.y0, density.y0 + density.height))
+    arrays["coverage_error"] = (
+        rel,
+        (density.x0, density.x0 + density.width, density.y0, density.y0 + density.height),
+    )
     rms = float(np.sqrt(np.mean(rel[valid] ** 2))) if valid.any() else 0.0
     iw = np.unravel_index(np.argmax(np.abs(rel)), rel.shape)
     worst_xy = [density.x0 + (iw[1] + 0.5) * cw, density.y0 + (iw[0] + 0.5) * ch]
@@ -249,19 +276,30 @@ def _density_checks(pattern, density, params, nn, m, arrays, checks) -> None:
         np.sqrt(np.mean(((got - target)[target > 0] / target[target > 0]) ** 2))
     )
     checks.append(
-        Check(f"coverage error RMS after {params.smoothing:g} mm smoothing", rms,
-              params.max_coverage_rms, rms <= params.max_coverage_rms, [worst_xy])
+        Check(
+            f"coverage error RMS after {params.smoothing:g} mm smoothing",
+            rms,
+            params.max_coverage_rms,
+            rms <= params.max_coverage_rms,
+            [worst_xy],
+        )
     )
     # coverage in a 1 mm band along each edge vs target
     band = {}
     x0, y0, x1, y1 = pattern.box
     for name, sel_d, sel_t in (
-        ("left", xy[:, 0] < x0 + 1, None), ("right", xy[:, 0] > x1 - 1, None),
-        ("bottom", xy[:, 1] < y0 + 1, None), ("top", xy[:, 1] > y1 - 1, None),
+        ("left", xy[:, 0] < x0 + 1, None),
+        ("right", xy[:, 0] > x1 - 1, None),
+        ("bottom", xy[:, 1] < y0 + 1, None),
+        ("top", xy[:, 1] > y1 - 1, None),
     ):
         del sel_t
-        bx = {"left": (x0, x0 + 1, y0, y1), "right": (x1 - 1, x1, y0, y1),
-              "bottom": (x0, x1, y0, y0 + 1), "top": (x0, x1, y1 - 1, y1)}[name]
+        bx = {
+            "left": (x0, x0 + 1, y0, y1),
+            "right": (x1 - 1, x1, y0, y1),
+            "bottom": (x0, x1, y0, y0 + 1),
+            "top": (x0, x1, y1 - 1, y1),
+        }[name]
         want = _target_area(density, bx)
         band[name] = float(sel_d.sum() * dot_area / want) if want > 0 else None
     m["edge_band_coverage_ratio"] = band
@@ -283,8 +321,12 @@ def _densest_tile(pattern: Pattern, size: float) -> tuple[float, float, float, f
     s = min(size, x1 - x0, y1 - y0)
     nxb = max(1, int((x1 - x0) / s))
     nyb = max(1, int((y1 - y0) / s))
-    h, _, _ = np.histogram2d(pattern.xy[:, 0], pattern.xy[:, 1], bins=(nxb, nyb),
-                             range=((x0, x0 + nxb * s), (y0, y0 + nyb * s)))
+    h, _, _ = np.histogram2d(
+        pattern.xy[:, 0],
+        pattern.xy[:, 1],
+        bins=(nxb, nyb),
+        range=((x0, x0 + nxb * s), (y0, y0 + nyb * s)),
+    )
     i, j = np.unravel_index(np.argmax(h), h.shape)
     return x0 + i * s, y0 + j * s, x0 + (i + 1) * s, y0 + (j + 1) * s
 

@@ -22,7 +22,9 @@ def write_json(result: QAResult, path: str | Path) -> None:
         tmp.write_text(text + "\n", encoding="utf-8")
 
 
-def write_html(result: QAResult, pattern: Pattern, path: str | Path, title: str = "optdot QA") -> None:
+def write_html(
+    result: QAResult, pattern: Pattern, path: str | Path, title: str = "optdot QA"
+) -> None:
     """Write the HTML report atomically: verdict first, then the plots and the numbers."""
     figs = _figures(result, pattern)
     verdict = "PASS" if result.passed else "FAIL"
@@ -90,7 +92,11 @@ def _figures(result: QAResult, pattern: Pattern) -> list[tuple[str, str]]:
     for key in ("protruding", "in_empty"):
         if key in a and len(a[key]):
             ax.plot(xy[a[key], 0], xy[a[key], 1], "m+", ms=8)
-    ax.set(xlabel="x (mm)", ylabel="y (mm)", title="Overview: coverage; close pairs (orange), defects (x, +)")
+    ax.set(
+        xlabel="x (mm)",
+        ylabel="y (mm)",
+        title="Overview: coverage; close pairs (orange), defects (x, +)",
+    )
     save(fig, "overview")
 
     tx0, ty0, tx1, ty1 = a["tile"]
@@ -98,13 +104,23 @@ def _figures(result: QAResult, pattern: Pattern) -> list[tuple[str, str]]:
     fig, ax = plt.subplots(figsize=(5, 5))
     sel = (xy[:, 0] > tx0) & (xy[:, 0] < tx0 + s) & (xy[:, 1] > ty0) & (xy[:, 1] < ty0 + s)
     d = pattern.diameter
-    ax.add_collection(EllipseCollection(d, d, 0, units="xy", offsets=xy[sel], offset_transform=ax.transData, fc="k"))
+    ax.add_collection(
+        EllipseCollection(
+            d, d, 0, units="xy", offsets=xy[sel], offset_transform=ax.transData, fc="k"
+        )
+    )
     idx = np.flatnonzero(sel)
     bad = close[np.isin(close[:, 0], idx)] if len(close) else close
     for i, j in bad[:2000]:
         ax.plot(*xy[[i, j]].T, color="orange", lw=1)
-    ax.set(xlim=(tx0, tx0 + s), ylim=(ty0, ty0 + s), aspect="equal", xlabel="x (mm)", ylabel="y (mm)",
-           title="True-scale zoom of the densest region (close pairs in orange)")
+    ax.set(
+        xlim=(tx0, tx0 + s),
+        ylim=(ty0, ty0 + s),
+        aspect="equal",
+        xlabel="x (mm)",
+        ylabel="y (mm)",
+        title="True-scale zoom of the densest region (close pairs in orange)",
+    )
     save(fig, "densest region")
 
     fig, ax = plt.subplots(figsize=(6, 3.5))
@@ -114,7 +130,9 @@ def _figures(result: QAResult, pattern: Pattern) -> list[tuple[str, str]]:
     m = result.metrics
     ax.axvline(m["collision_distance_mm"] * 1e3, color="red", label="collision")
     ax.axvline(m["close_distance_mm"] * 1e3, color="orange", label="too close")
-    ax.set(xlabel="nearest-neighbour distance (µm)", ylabel="dots", title="Nearest-neighbour distances")
+    ax.set(
+        xlabel="nearest-neighbour distance (µm)", ylabel="dots", title="Nearest-neighbour distances"
+    )
     ax.legend()
     save(fig, "nearest-neighbour histogram")
 
@@ -122,7 +140,9 @@ def _figures(result: QAResult, pattern: Pattern) -> list[tuple[str, str]]:
         rel, ext = a["coverage_error"]
         fig, ax = plt.subplots(figsize=(6, 4))
         v = max(float(np.abs(rel).max()), 1e-3)
-        im = ax.imshow(rel * 100, origin="lower", extent=ext, cmap="RdBu_r", vmin=-v * 100, vmax=v * 100)
+        im = ax.imshow(
+            rel * 100, origin="lower", extent=ext, cmap="RdBu_r", vmin=-v * 100, vmax=v * 100
+        )
         fig.colorbar(im, ax=ax, label="coverage error (%)")
         ax.set(xlabel="x (mm)", ylabel="y (mm)", title="Coverage vs target (1 mm Gaussian)")
         save(fig, "coverage error")
@@ -131,8 +151,11 @@ def _figures(result: QAResult, pattern: Pattern) -> list[tuple[str, str]]:
     if len(freq):
         fig, ax = plt.subplots(figsize=(6, 3.5))
         ax.plot(freq, power)
-        ax.set(xlabel="spatial frequency (1/mm)", ylabel="power (Poisson = 1)",
-               title="Radially averaged power spectrum, densest 2 mm tile")
+        ax.set(
+            xlabel="spatial frequency (1/mm)",
+            ylabel="power (Poisson = 1)",
+            title="Radially averaged power spectrum, densest 2 mm tile",
+        )
         save(fig, "spectrum")
     return out
 

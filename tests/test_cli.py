@@ -64,7 +64,9 @@ def test_klayout_reads_masks(exported, fmt):
     top = ly.top_cell()
     centres = []
     for inst in top.each_inst():
-        for arr in inst.cell_inst.each_trans() if inst.is_regular_array() else [inst.cell_inst.trans]:
+        for arr in (
+            inst.cell_inst.each_trans() if inst.is_regular_array() else [inst.cell_inst.trans]
+        ):
             centres.append([arr.disp.x * 1e-6, arr.disp.y * 1e-6])
     centres = np.array(centres)
     if len(centres) != ref.n:  # OASIS repetitions may come as one instance array
@@ -109,7 +111,11 @@ def test_klayout_reads_dxf(exported):
     opt.dxf_unit = 1000.0  # drawing units are mm; KLayout ignores $INSUNITS
     opt.dxf_polyline_mode = 2
     ly.read(str(exported["dxf"]), opt)
-    n = sum(1 for _ in ly.top_cell().begin_shapes_rec(ly.layer(kdb.LayerInfo("DOTS"))).each()) if hasattr(kdb.RecursiveShapeIterator, "each") else None
+    n = (
+        sum(1 for _ in ly.top_cell().begin_shapes_rec(ly.layer(kdb.LayerInfo("DOTS"))).each())
+        if hasattr(kdb.RecursiveShapeIterator, "each")
+        else None
+    )
     region = kdb.Region(ly.top_cell().begin_shapes_rec(ly.layer(kdb.LayerInfo("DOTS"))))
     assert region.count() == load_pattern(exported["csv"]).n or n
 
@@ -129,7 +135,16 @@ def test_previews(exported):
 
 def test_qa_clean_pattern_passes(exported, tmp_path):
     for fmt in ("csv", "gds", "oas", "dxf"):
-        r = run("qa", exported[fmt], "--job", TINY, "--json", tmp_path / "r.json", "--html", tmp_path / "r.html")
+        r = run(
+            "qa",
+            exported[fmt],
+            "--job",
+            TINY,
+            "--json",
+            tmp_path / "r.json",
+            "--html",
+            tmp_path / "r.html",
+        )
         assert r.exit_code == 0, (fmt, r.output)
     rep = json.loads((tmp_path / "r.json").read_text())
     assert rep["verdict"] == "PASS" and rep["metrics"]["pairs_below_collision"] == 0
@@ -141,13 +156,17 @@ def test_qa_finds_planted_defects(exported, tmp_path):
     p = load_pattern(exported["csv"])
     xy = p.xy.copy()
     i = int(np.argmin(np.hypot(xy[:, 0] - 1.5, xy[:, 1] - 1.0)))
-    planted = np.array([xy[i] + [0.0, 0.02], [2.99, 1.0], [0.1, 1.0]])  # collision, protruding, empty column
+    planted = np.array(
+        [xy[i] + [0.0, 0.02], [2.99, 1.0], [0.1, 1.0]]
+    )  # collision, protruding, empty column
     d = np.hypot(*(xy[:, None, :] - planted[None]).transpose(2, 0, 1)).min(axis=1)
     keep = (d > 0.1) | (np.arange(len(xy)) == i)
     xy = np.vstack([xy[keep], planted])
     i = int(np.flatnonzero(keep).tolist().index(i))
     bad = tmp_path / "bad.csv"
-    bad.write_text("x_mm,y_mm,diameter_mm\n" + "".join(f"{x:.6f},{y:.6f},0.046000\n" for x, y in xy))
+    bad.write_text(
+        "x_mm,y_mm,diameter_mm\n" + "".join(f"{x:.6f},{y:.6f},0.046000\n" for x, y in xy)
+    )
     r = run("qa", bad, "--job", TINY, "--json", tmp_path / "r.json")
     assert r.exit_code == 1
     m = json.loads((tmp_path / "r.json").read_text())
@@ -184,7 +203,11 @@ BAD = {
     "empty": ("", {}, "empty"),
     "width": ("0.2,0.2\n", {"domain": {"width": -1.0}}, "domain.width"),
     "diameter": ("0.2,0.2\n", {"dots": {"diameter": 0.0}}, "dots.diameter"),
-    "unknown_key": ("0.2,0.2\n", {"optimize": {"max_iters": 5}}, "unknown key 'optimize.max_iters'"),
+    "unknown_key": (
+        "0.2,0.2\n",
+        {"optimize": {"max_iters": 5}},
+        "unknown key 'optimize.max_iters'",
+    ),
     "method": ("0.2,0.2\n", {"optimize": {"method": '"foo"'}}, "optimize.method"),
     "memory": ("0.5,0.5\n", {"domain": {"width": 9000.0, "height": 9000.0}}, "GiB"),
 }

@@ -29,7 +29,9 @@ def test_tiny_sample_guarantee_and_determinism(tiny_job, tiny_pattern):
 def test_dense_map_with_gap(tmp_path, formulation):
     g = np.full((4, 6), 0.6)
     g[0, 0] = 0.0
-    job = load_job(write_job(tmp_path, g, optimize={"gap": 0.004, "formulation": f'"{formulation}"'}))
+    job = load_job(
+        write_job(tmp_path, g, optimize={"gap": 0.004, "formulation": f'"{formulation}"'})
+    )
     p = generate(job)
     assert_guarantee(job, p)
     assert len(close_pairs(p.xy, 0.050)) == 0

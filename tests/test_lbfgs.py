@@ -39,5 +39,5 @@ def test_history_is_monotone_and_callback_called():
         return float((x * x).sum())
 
     res = minimize_lbfgs(fun, np.ones(10), max_iter=5, callback=lambda i, f: seen.append((i, f)))
-    assert all(b <= a for a, b in zip(res.history, res.history[1:]))
+    assert all(b <= a for a, b in zip(res.history, res.history[1:], strict=False))
     assert [i for i, _ in seen] == list(range(1, len(seen) + 1))

@@ -30,7 +30,9 @@ def test_cell_grid_matches_brute_force(n, seed, rmin, spread, skin):
 
 def test_clustered_and_coincident_points():
     rng = np.random.default_rng(1)
-    xy = np.concatenate([rng.normal(0.5, 0.01, (200, 2)), [[0.5, 0.5], [0.5, 0.5]], rng.random((100, 2)) * 30])
+    xy = np.concatenate(
+        [rng.normal(0.5, 0.01, (200, 2)), [[0.5, 0.5], [0.5, 0.5]], rng.random((100, 2)) * 30]
+    )
     r = rng.uniform(0.01, 0.05, len(xy))
     assert np.array_equal(csr_to_pairs(*neighbor_pairs(xy, r, 0.1)), pairs_brute_force(xy, r, 0.1))
 

@@ -83,7 +83,9 @@ def test_each_term_pushes_the_right_way():
     f, g = fast(xy, terms)
     assert f == pytest.approx(0.05**2) and g[0, 0] < 0
     # outside its container (centre moved 0.15 > h - r = 0.1)
-    terms = PenaltyTerms(r, r, np.array([[0.5, 0.5], [0.7, 0.5]]), r * 2, (0, 0, 1, 1), 0.046, 0.023, 0.0)
+    terms = PenaltyTerms(
+        r, r, np.array([[0.5, 0.5], [0.7, 0.5]]), r * 2, (0, 0, 1, 1), 0.046, 0.023, 0.0
+    )
     xy = np.array([[0.35, 0.5], [0.7, 0.5]])
     f, g = fast(xy, terms)
     assert f == pytest.approx(0.05**2) and g[0, 0] < 0
