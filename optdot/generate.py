@@ -84,21 +84,16 @@ def generate(job: Job, progress: Progress | None = None) -> Pattern:
     timings["initial_s"] = time.perf_counter() - t0
 
     t1 = time.perf_counter()
-    if opt.method == "md":
-        from .md import md_relax
-
-        res = md_relax(xy0, rho[order], job, progress=progress)
-    else:
-        terms = build_terms(job, xy0, rho[order])
-        res = relax(
-            xy0,
-            terms,
-            max_iter=opt.max_iter,
-            memory=opt.lbfgs_memory,
-            ftol=opt.ftol,
-            skin=opt.skin,
-            callback=progress,
-        )
+    terms = build_terms(job, xy0, rho[order])
+    res = relax(
+        xy0,
+        terms,
+        max_iter=opt.max_iter,
+        memory=opt.lbfgs_memory,
+        ftol=opt.ftol,
+        skin=opt.skin,
+        callback=progress,
+    )
     timings["relax_s"] = time.perf_counter() - t1
 
     t2 = time.perf_counter()

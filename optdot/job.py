@@ -18,7 +18,7 @@ import numpy as np
 from .density import HEX_PACKING_LIMIT, DensityMap
 from .errors import JobError
 
-METHODS = ("optdot", "md")
+METHODS = ("optdot",)  # "md" (Idé et al. 2003 baseline) is not implemented yet
 FORMULATIONS = ("paper", "optdot")
 
 
@@ -27,8 +27,8 @@ class OptimizeParams:
     """How the dots are relaxed.
 
     Attributes:
-        method: ``"optdot"`` (L-BFGS on penalty (3), the paper's method) or ``"md"``
-            (Idé et al. 2003 molecular dynamics baseline).
+        method: ``"optdot"`` (L-BFGS on penalty (3), the paper's method); the MD
+            baseline of Idé et al. (2003) is not implemented yet.
         max_iter: iterations of L-BFGS or MD steps (paper: 200).
         seed: seed of the scrambled low-discrepancy sequence.
         formulation: ``"paper"`` reproduces the paper exactly (radius factor 1, panel
