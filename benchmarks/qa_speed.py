@@ -46,7 +46,8 @@ def main() -> None:
         write_html(r, p, Path(tmp) / "r.html")
         t_rep = time.perf_counter() - t
     print("dots | qa seconds | report seconds | verdict | peak RSS MB")
-    print(f"{p.n} | {t_qa:.1f} | {t_rep:.1f} | {'PASS' if r.passed else 'FAIL'} | {peak_rss_mb():.0f}")
+    verdict = "PASS" if r.passed else "FAIL"
+    print(f"{p.n} | {t_qa:.1f} | {t_rep:.1f} | {verdict} | {peak_rss_mb():.0f}")
 
 
 if __name__ == "__main__":

@@ -59,3 +59,12 @@ def test_uniform_sample_counts():
     job = load_job(SAMPLES / "uniform" / "job.toml").with_overrides(max_iter=30)
     p = generate(job)
     assert_guarantee(job, p)
+
+
+def test_npy_grid_equals_csv(tmp_path):
+    g = np.array([[0.1, 0.2, 0.0], [0.3, 0.4, 0.2]])
+    a = load_job(write_job(tmp_path, g))
+    np.save(tmp_path / "g.npy", g)
+    b = load_job(write_job(tmp_path, g, density={"grid": '"g.npy"'}))
+    np.testing.assert_array_equal(a.density.grid, b.density.grid)
+    assert a.n_dots == b.n_dots
