@@ -30,7 +30,9 @@ def zoom_tile(pattern: Pattern, size: float = TILE_MM) -> tuple[float, float, fl
 def coverage_image(pattern: Pattern, max_px: int = 400) -> tuple[np.ndarray, tuple]:
     """Covered area share per pixel, ``[ny, nx]``, and its extent (x0, x1, y0, y1) mm."""
     x0, y0, x1, y1 = pattern.box
-    px = max((x1 - x0), (y1 - y0)) / max_px
+    # pixels of at least 6 dot diameters, so each holds several dots and the map reads
+    # as coverage rather than as dot positions
+    px = max(max((x1 - x0), (y1 - y0)) / max_px, 6.0 * pattern.diameter)
     nx = max(1, int(round((x1 - x0) / px)))
     ny = max(1, int(round((y1 - y0) / px)))
     h, _, _ = np.histogram2d(
