@@ -70,6 +70,16 @@ class DensityMap:
         """Fill fraction of the cell holding each point, ``[n]`` float64."""
         return self.grid.ravel()[self.cell_index(xy)]
 
+    def empty_mask(self, xy: np.ndarray) -> np.ndarray:
+        """``[n]`` bool: the point lies inside the map's box, in a cell whose fill is 0."""
+        inside = (
+            (xy[:, 0] >= self.x0)
+            & (xy[:, 0] <= self.x0 + self.width)
+            & (xy[:, 1] >= self.y0)
+            & (xy[:, 1] <= self.y0 + self.height)
+        )
+        return inside & (self.at(xy) <= 0.0)
+
     def dot_count(self, dot_area: float, cell_weights: np.ndarray | None = None) -> int:
         """Number of dots of area ``dot_area`` (mm²) that realise the map.
 

@@ -158,17 +158,18 @@ def check_guarantee(
         collisions = int((d < dmin).sum())
     else:
         collisions = 0
-    out = (
+    out = protruding_mask(xy, box, dot_radius)
+    empty = density.empty_mask(xy)
+    return Violations(collisions, int(out.sum()), int(empty.sum()))
+
+
+def protruding_mask(
+    xy: np.ndarray, box: tuple[float, float, float, float], dot_radius: float
+) -> np.ndarray:
+    """``[n]`` bool: the dot of radius ``dot_radius`` (mm) reaches outside ``box``."""
+    return (
         (xy[:, 0] - dot_radius < box[0])
         | (xy[:, 0] + dot_radius > box[2])
         | (xy[:, 1] - dot_radius < box[1])
         | (xy[:, 1] + dot_radius > box[3])
     )
-    inside = (
-        (xy[:, 0] >= density.x0)
-        & (xy[:, 0] <= density.x0 + density.width)
-        & (xy[:, 1] >= density.y0)
-        & (xy[:, 1] <= density.y0 + density.height)
-    )
-    empty = inside & (density.at(xy) <= 0.0)
-    return Violations(collisions, int(out.sum()), int(empty.sum()))

@@ -18,6 +18,7 @@ from scipy.spatial import cKDTree
 
 from .density import DensityMap
 from .job import QAParams
+from .legalize import protruding_mask
 from .pattern import Pattern
 
 
@@ -175,8 +176,7 @@ def run_qa(
         {str(q): float(np.percentile(nn, q)) for q in (1, 5, 50, 95)} if n > 1 else {}
     )
 
-    x0, y0, x1, y1 = pattern.box
-    out = (xy[:, 0] - r0 < x0) | (xy[:, 0] + r0 > x1) | (xy[:, 1] - r0 < y0) | (xy[:, 1] + r0 > y1)
+    out = protruding_mask(xy, pattern.box, r0)
     m["protruding"] = int(out.sum())
     arrays["protruding"] = np.flatnonzero(out)
     checks.append(
@@ -227,7 +227,7 @@ def _density_checks(pattern, density, params, nn, m, arrays, checks) -> None:
         & (xy[:, 1] <= density.y0 + density.height)
     )
     rho = np.where(inside, density.at(xy), np.nan)
-    empty = inside & (rho <= 0)
+    empty = density.empty_mask(xy)
     m["in_empty_cells"] = int(empty.sum())
     arrays["in_empty"] = np.flatnonzero(empty)
     checks.append(
@@ -287,21 +287,16 @@ def _density_checks(pattern, density, params, nn, m, arrays, checks) -> None:
     # coverage in a 1 mm band along each edge vs target
     band = {}
     x0, y0, x1, y1 = pattern.box
-    for name, sel_d, sel_t in (
-        ("left", xy[:, 0] < x0 + 1, None),
-        ("right", xy[:, 0] > x1 - 1, None),
-        ("bottom", xy[:, 1] < y0 + 1, None),
-        ("top", xy[:, 1] > y1 - 1, None),
-    ):
-        del sel_t
-        bx = {
-            "left": (x0, x0 + 1, y0, y1),
-            "right": (x1 - 1, x1, y0, y1),
-            "bottom": (x0, x1, y0, y0 + 1),
-            "top": (x0, x1, y1 - 1, y1),
-        }[name]
-        want = _target_area(density, bx)
-        band[name] = float(sel_d.sum() * dot_area / want) if want > 0 else None
+    bands = {
+        "left": (x0, x0 + 1, y0, y1),
+        "right": (x1 - 1, x1, y0, y1),
+        "bottom": (x0, x1, y0, y0 + 1),
+        "top": (x0, x1, y1 - 1, y1),
+    }
+    for name, (bx0, bx1, by0, by1) in bands.items():
+        got = ((xy[:, 0] >= bx0) & (xy[:, 0] <= bx1) & (xy[:, 1] >= by0) & (xy[:, 1] <= by1)).sum()
+        want = _target_area(density, (bx0, bx1, by0, by1))
+        band[name] = float(got * dot_area / want) if want > 0 else None
     m["edge_band_coverage_ratio"] = band
 
 
