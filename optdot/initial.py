@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
-from scipy.stats import qmc
 
 from .density import DensityMap
+from .sobol import sobol_points
 
 
 def initial_dots(
@@ -32,10 +30,7 @@ def initial_dots(
     p = g.ravel()
     cum = np.cumsum(p)
     cum /= cum[-1]
-    sampler = qmc.Sobol(d=3, scramble=True, seed=np.random.default_rng(seed))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)  # balance warning for n != 2^k
-        u = sampler.random(n)
+    u = sobol_points(n, seed)
     k = np.searchsorted(cum, u[:, 0], side="right")
     last = int(np.flatnonzero(p > 0)[-1])
     k = np.minimum(k, last)

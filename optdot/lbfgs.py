@@ -36,63 +36,100 @@ class LbfgsResult:
     history: list[float]
 
 
-@nb.njit(cache=True)
-def _dot(a, b):  # pragma: no cover - compiled
+#: Entries per block of the parallel vector kernels. Fixed (not the thread count), so
+#: dot products are summed in the same order on every machine: bit-identical results.
+BLOCK = 16384
+
+
+@nb.njit(parallel=True, cache=True)
+def _update_dot(d, coef, u, scale, v):  # pragma: no cover - compiled
+    """``d <- scale * (d + coef * u)`` in place, then return ``v . d`` (one pass)."""
+    n = d.shape[0]
+    nblock = (n + BLOCK - 1) // BLOCK
+    part = np.zeros(nblock)
+    for b in nb.prange(nblock):
+        s = 0.0
+        for k in range(b * BLOCK, min((b + 1) * BLOCK, n)):
+            t = scale * (d[k] + coef * u[k])
+            d[k] = t
+            s += v[k] * t
+        part[b] = s
     s = 0.0
-    for k in range(a.shape[0]):
-        s += a[k] * b[k]
+    for b in range(nblock):
+        s += part[b]
     return s
 
 
-@nb.njit(cache=True)
-def _two_loop(g, S, Y, rho, newest, count, gamma, d):  # pragma: no cover - compiled
-    """d = -H g by the two-loop recursion over the ``count`` newest (s, y) pairs."""
-    m = S.shape[0]
-    N = g.shape[0]
-    alpha = np.empty(m)
-    for k in range(N):
-        d[k] = -g[k]
-    idx = newest
-    for _ in range(count):
-        a = rho[idx] * _dot(S[idx], d)
-        alpha[idx] = a
-        Yi = Y[idx]
-        for k in range(N):
-            d[k] -= a * Yi[k]
-        idx = (idx - 1) % m
-    for k in range(N):
-        d[k] *= gamma
-    idx = (newest - count + 1) % m
-    for _ in range(count):
-        b = rho[idx] * _dot(Y[idx], d)
-        Si = S[idx]
-        a = alpha[idx]
-        for k in range(N):
-            d[k] += (a - b) * Si[k]
-        idx = (idx + 1) % m
-
-
-@nb.njit(cache=True)
+@nb.njit(parallel=True, cache=True)
 def _axpy(x, a, d, out):  # pragma: no cover - compiled
-    for k in range(x.shape[0]):
+    """``out <- x + a * d``."""
+    for k in nb.prange(x.shape[0]):
         out[k] = x[k] + a * d[k]
 
 
-@nb.njit(cache=True)
-def _store(S, Y, slot, x_new, x, g_new, g):  # pragma: no cover - compiled
-    """S[slot] = x_new - x, Y[slot] = g_new - g; returns (s.y, y.y)."""
+@nb.njit(parallel=True, cache=True)
+def _store(s_out, y_out, x_new, x, g_new, g):  # pragma: no cover - compiled
+    """``s <- x_new - x``, ``y <- g_new - g``; returns ``(s . y, y . y)``."""
+    n = x.shape[0]
+    nblock = (n + BLOCK - 1) // BLOCK
+    psy = np.zeros(nblock)
+    pyy = np.zeros(nblock)
+    for b in nb.prange(nblock):
+        sy = 0.0
+        yy = 0.0
+        for k in range(b * BLOCK, min((b + 1) * BLOCK, n)):
+            s = x_new[k] - x[k]
+            y = g_new[k] - g[k]
+            s_out[k] = s
+            y_out[k] = y
+            sy += s * y
+            yy += y * y
+        psy[b] = sy
+        pyy[b] = yy
     sy = 0.0
     yy = 0.0
-    Ss = S[slot]
-    Ys = Y[slot]
-    for k in range(x.shape[0]):
-        s = x_new[k] - x[k]
-        y = g_new[k] - g[k]
-        Ss[k] = s
-        Ys[k] = y
-        sy += s * y
-        yy += y * y
+    for b in range(nblock):
+        sy += psy[b]
+        yy += pyy[b]
     return sy, yy
+
+
+def _two_loop(
+    g: np.ndarray,
+    S: np.ndarray,
+    Y: np.ndarray,
+    rho: np.ndarray,
+    newest: int,
+    count: int,
+    gamma: float,
+    d: np.ndarray,
+) -> float:
+    """``d <- -H g`` by the two-loop recursion over the ``count`` newest (s, y) pairs.
+
+    Each vector update is fused with the dot product the next step needs, so the
+    recursion reads the history once per loop. Returns ``g . d``.
+    """
+    m = S.shape[0]
+    newest_first = [(newest - t) % m for t in range(count)]
+    oldest_first = newest_first[::-1]
+    d[:] = 0.0
+    # d = -g, then the first loop: a_i = rho_i s_i.d ; d -= a_i y_i (newest to oldest)
+    nxt = S[newest_first[0]] if count else g
+    s = _update_dot(d, -1.0, g, gamma if count == 0 else 1.0, nxt)
+    if count == 0:
+        return s
+    alpha = np.zeros(m)
+    for t, i in enumerate(newest_first):
+        alpha[i] = rho[i] * s
+        last = t + 1 == count
+        nxt = Y[oldest_first[0]] if last else S[newest_first[t + 1]]
+        s = _update_dot(d, -alpha[i], Y[i], gamma if last else 1.0, nxt)
+    # second loop: b_i = rho_i y_i.d ; d += (a_i - b_i) s_i (oldest to newest)
+    for t, i in enumerate(oldest_first):
+        beta = rho[i] * s
+        nxt = g if t + 1 == count else Y[oldest_first[t + 1]]
+        s = _update_dot(d, alpha[i] - beta, S[i], 1.0, nxt)
+    return s
 
 
 def minimize_lbfgs(
@@ -123,8 +160,8 @@ def minimize_lbfgs(
     g = np.empty(N)
     f = fun(x, g)
     nfev = 1
-    S = np.zeros((memory, N))
-    Y = np.zeros((memory, N))
+    S = np.zeros((memory, N), np.float32)  # history in single precision: half the memory traffic
+    Y = np.zeros((memory, N), np.float32)
     rho = np.zeros(memory)
     d = np.empty(N)
     x_new = np.empty(N)
@@ -138,12 +175,10 @@ def minimize_lbfgs(
             nit -= 1
             message = "penalty is zero"
             break
-        _two_loop(g, S, Y, rho, newest, count, gamma, d)
-        gd = _dot(g, d)
+        gd = _two_loop(g, S, Y, rho, newest, count, gamma, d)
         if not gd < 0.0:  # not a descent direction: restart from steepest descent
             count, gamma = 0, gamma0
-            np.multiply(g, -gamma, out=d)
-            gd = _dot(g, d)
+            gd = _two_loop(g, S, Y, rho, newest, count, gamma, d)
         step = 1.0
         ok = False
         for _ in range(40):
@@ -162,7 +197,7 @@ def minimize_lbfgs(
             nit -= 1
             break
         slot = (newest + 1) % memory
-        sy, yy = _store(S, Y, slot, x_new, x, g_new, g)
+        sy, yy = _store(S[slot], Y[slot], x_new, x, g_new, g)
         if sy > 1e-12 * yy and yy > 0.0:
             newest = slot
             rho[slot] = 1.0 / sy

@@ -11,12 +11,19 @@ The result is a CSR half list: the partners of dot i are ``nbr[ptr[i]:ptr[i + 1]
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numba as nb
 import numpy as np
 
 
 @nb.njit(cache=True)
-def _bin_points(xy, x0, y0, cell, nx, ny):  # pragma: no cover - compiled
+def _bin_points(xy, reff, x0, y0, cell, nx, ny):  # pragma: no cover - compiled
+    """Counting sort of the dots into cells; returns cell starts and sorted copies.
+
+    The copies (index, x, y, radius in cell order) make every cell scan read contiguous
+    memory, which is what the scan's speed depends on.
+    """
     n = xy.shape[0]
     cid = np.empty(n, np.int64)
     for i in range(n):
@@ -31,17 +38,32 @@ def _bin_points(xy, x0, y0, cell, nx, ny):  # pragma: no cover - compiled
     for c in range(nx * ny):
         start[c + 1] += start[c]
     fill = start[:-1].copy()
-    order = np.empty(n, np.int64)
+    order = np.empty(n, np.int32)
+    cellmax = np.zeros(nx * ny)
+    bx = np.empty(n)
+    by = np.empty(n)
+    br = np.empty(n)
     for i in range(n):
         c = cid[i]
-        order[fill[c]] = i
+        k = fill[c]
+        order[k] = i
+        bx[k] = xy[i, 0]
+        by[k] = xy[i, 1]
+        br[k] = reff[i]
+        cellmax[c] = max(cellmax[c], reff[i])
         fill[c] += 1
-    return start, order
+    return start, order, bx, by, br, cellmax
 
 
 @nb.njit(cache=True)
-def _scan(i, xy, reff, grow, start, order, x0, y0, cell, nx, ny, out, pos):  # pragma: no cover
-    """Count (out is None-like: size 0) or write the partners of dot i; returns count."""
+def _scan(
+    i, xy, reff, grow, start, order, bx, by, br, x0, y0, cell, nx, ny, buf
+):  # pragma: no cover
+    """Partners of dot i; counts them, and writes them to ``buf`` when it is not empty.
+
+    Branch-free inner loop (a kept partner is written, then the cursor advances by the
+    test's 0/1), so ``buf`` needs one spare slot beyond the count.
+    """
     xi = xy[i, 0]
     yi = xy[i, 1]
     ri = reff[i]
@@ -50,38 +72,117 @@ def _scan(i, xy, reff, grow, start, order, x0, y0, cell, nx, ny, out, pos):  # p
     ix1 = min(int((xi + reach - x0) / cell), nx - 1)
     iy0 = max(int((yi - reach - y0) / cell), 0)
     iy1 = min(int((yi + reach - y0) / cell), ny - 1)
+    write = buf.shape[0] > 0
     cnt = 0
     for cy in range(iy0, iy1 + 1):
-        for cx in range(ix0, ix1 + 1):
-            c = cy * nx + cx
-            for k in range(start[c], start[c + 1]):
-                j = order[k]
-                rj = reff[j]
-                if rj > ri or (rj == ri and j <= i):
-                    continue
-                lim = (ri + rj) * grow
-                dx = xi - xy[j, 0]
-                dy = yi - xy[j, 1]
-                if dx * dx + dy * dy < lim * lim:
-                    if out.shape[0] > 0:
-                        out[pos + cnt] = j
-                    cnt += 1
+        row = cy * nx
+        for k in range(start[row + ix0], start[row + ix1 + 1]):
+            rj = br[k]
+            j = order[k]
+            dx = xi - bx[k]
+            dy = yi - by[k]
+            lim = (ri + rj) * grow
+            keep = (dx * dx + dy * dy < lim * lim) & ((rj < ri) | ((rj == ri) & (j > i)))
+            if write:
+                buf[cnt] = j
+            cnt += np.int64(keep)
     return cnt
+
+
+_CHUNK = 2048
 
 
 @nb.njit(parallel=True, cache=True)
 def _pairs_csr(xy, reff, grow, x0, y0, cell, nx, ny):  # pragma: no cover - compiled
-    start, order = _bin_points(xy, x0, y0, cell, nx, ny)
+    start, order, bx, by, br, cellmax = _bin_points(xy, reff, x0, y0, cell, nx, ny)
     n = xy.shape[0]
     counts = np.zeros(n + 1, np.int64)
     empty = np.empty(0, np.int32)
     for i in nb.prange(n):
-        counts[i + 1] = _scan(i, xy, reff, grow, start, order, x0, y0, cell, nx, ny, empty, 0)
+        counts[i + 1] = _scan(
+            i, xy, reff, grow, start, order, bx, by, br, x0, y0, cell, nx, ny, empty
+        )
     ptr = np.cumsum(counts)
     nbr = np.empty(ptr[n], np.int32)
-    for i in nb.prange(n):
-        _scan(i, xy, reff, grow, start, order, x0, y0, cell, nx, ny, nbr, ptr[i])
-    return ptr, nbr
+    nchunk = (n + _CHUNK - 1) // _CHUNK
+    for c in nb.prange(nchunk):
+        a = c * _CHUNK
+        b = min(a + _CHUNK, n)
+        buf = np.empty(counts[a + 1 : b + 1].max() + 1, np.int32)
+        for i in range(a, b):
+            m = _scan(i, xy, reff, grow, start, order, bx, by, br, x0, y0, cell, nx, ny, buf)
+            nbr[ptr[i] : ptr[i] + m] = buf[:m]
+    return ptr, nbr, start, order, cellmax
+
+
+@dataclass
+class CellGrid:
+    """Dots binned into square cells at build time (cell order = counting sort).
+
+    Attributes:
+        x0, y0: lower-left corner of cell (0, 0), mm.
+        cell: cell side, mm.
+        nx, ny: cells per row and per column.
+        start: ``[nx * ny + 1]`` int64, dots of cell c are ``order[start[c]:start[c + 1]]``.
+        order: ``[n]`` int32 dot indices in cell order.
+        cellmax: ``[nx * ny]`` largest radius binned in each cell, mm.
+    """
+
+    x0: float
+    y0: float
+    cell: float
+    nx: int
+    ny: int
+    start: np.ndarray
+    order: np.ndarray
+    cellmax: np.ndarray
+
+
+@nb.njit(cache=True)
+def _bounds(xy):  # pragma: no cover - compiled
+    x0 = x1 = xy[0, 0]
+    y0 = y1 = xy[0, 1]
+    for i in range(1, xy.shape[0]):
+        x0 = min(x0, xy[i, 0])
+        x1 = max(x1, xy[i, 0])
+        y0 = min(y0, xy[i, 1])
+        y1 = max(y1, xy[i, 1])
+    return x0, y0, x1, y1
+
+
+def cell_side(reff: np.ndarray, skin: float) -> float:
+    """Default grid cell: twice the median reach ``2 * median(reff) * (1 + skin)``, mm."""
+    return 2.0 * float(np.median(reff)) * (1.0 + skin)
+
+
+def _grid_shape(xy: np.ndarray, cell: float) -> tuple[float, float, float, int, int]:
+    x0, y0, x1, y1 = _bounds(xy)
+    # never so small a cell that the grid explodes
+    cell = max(cell, max(x1 - x0, y1 - y0) / 8192.0, np.finfo(float).tiny)
+    nx = int((x1 - x0) / cell) + 1
+    ny = int((y1 - y0) / cell) + 1
+    return x0, y0, cell, nx, ny
+
+
+def neighbor_grid(
+    xy: np.ndarray, radius: np.ndarray | float, skin: float = 0.0, cell: float | None = None
+) -> tuple[np.ndarray, np.ndarray, CellGrid]:
+    """:func:`neighbor_pairs` that also returns the :class:`CellGrid` it binned into.
+
+    ``cell`` (mm) defaults to :func:`cell_side`; callers that build often pass it once.
+    """
+    xy = np.ascontiguousarray(xy, dtype=np.float64)
+    n = xy.shape[0]
+    reff = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, np.float64), (n,)))
+    if n == 0:
+        empty = CellGrid(
+            0.0, 0.0, 1.0, 1, 1, np.zeros(2, np.int64), np.zeros(0, np.int32), np.zeros(1)
+        )
+        return np.zeros(1, np.int64), np.zeros(0, np.int32), empty
+    grow = 1.0 + float(skin)
+    x0, y0, cell, nx, ny = _grid_shape(xy, cell_side(reff, skin) if cell is None else cell)
+    ptr, nbr, start, order, cellmax = _pairs_csr(xy, reff, grow, x0, y0, cell, nx, ny)
+    return ptr, nbr, CellGrid(x0, y0, cell, nx, ny, start, order, cellmax)
 
 
 def neighbor_pairs(
@@ -98,21 +199,115 @@ def neighbor_pairs(
         ``(ptr, nbr)``: CSR half list, ``ptr`` ``[n + 1]`` int64, ``nbr`` ``[K]`` int32;
         every unordered pair appears once.
     """
-    xy = np.ascontiguousarray(xy, dtype=np.float64)
-    n = xy.shape[0]
-    reff = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, np.float64), (n,)))
-    if n == 0:
-        return np.zeros(1, np.int64), np.zeros(0, np.int32)
-    grow = 1.0 + float(skin)
-    lo = xy.min(axis=0)
-    hi = xy.max(axis=0)
-    # cell side: twice the median reach, but never so small that the grid explodes
-    cell = 2.0 * float(np.median(reff)) * grow
-    span = float(max(hi[0] - lo[0], hi[1] - lo[1], cell))
-    cell = max(cell, span / 8192.0, np.finfo(float).tiny)
-    nx = int((hi[0] - lo[0]) / cell) + 1
-    ny = int((hi[1] - lo[1]) / cell) + 1
-    return _pairs_csr(xy, reff, grow, float(lo[0]), float(lo[1]), cell, nx, ny)
+    ptr, nbr, _ = neighbor_grid(xy, radius, skin)
+    return ptr, nbr
+
+
+@nb.njit(cache=True)
+def _mover_pairs(
+    xy, reff, movers, is_mover, grow, start, order, cellmax, x0, y0, cell, nx, ny
+):  # pragma: no cover
+    """Pairs closer than ``re_i + re_j`` now between a mover i and a non-mover j.
+
+    A cell is scanned only if its rectangle is within ``re_i + cellmax * grow`` of the
+    mover: every non-mover j binned there is within ``skin * re_j`` of its bin position.
+    """
+    cap = 64
+    ei = np.empty(cap, np.int32)
+    ej = np.empty(cap, np.int32)
+    m = 0
+    rmax = 0.0
+    for c in range(cellmax.shape[0]):
+        rmax = max(rmax, cellmax[c])
+    for a in range(movers.shape[0]):
+        i = movers[a]
+        xi = xy[i, 0]
+        yi = xy[i, 1]
+        reach = reff[i] + rmax * grow
+        ix0 = max(int((xi - reach - x0) / cell), 0)
+        ix1 = min(int((xi + reach - x0) / cell), nx - 1)
+        iy0 = max(int((yi - reach - y0) / cell), 0)
+        iy1 = min(int((yi + reach - y0) / cell), ny - 1)
+        for cy in range(iy0, iy1 + 1):
+            ey = max(y0 + cy * cell - yi, yi - (y0 + (cy + 1) * cell), 0.0)
+            for cx in range(ix0, ix1 + 1):
+                c = cy * nx + cx
+                if start[c] == start[c + 1]:
+                    continue
+                ex = max(x0 + cx * cell - xi, xi - (x0 + (cx + 1) * cell), 0.0)
+                lim = reff[i] + cellmax[c] * grow + 1e-9 * cell  # binning round-off
+                if ex * ex + ey * ey >= lim * lim:
+                    continue
+                for k in range(start[c], start[c + 1]):
+                    j = order[k]
+                    if is_mover[j]:  # binned where it was, not where it is
+                        continue
+                    lim = reff[i] + reff[j]
+                    dx = xi - xy[j, 0]
+                    dy = yi - xy[j, 1]
+                    if dx * dx + dy * dy < lim * lim:
+                        if m == cap:
+                            cap *= 2
+                            ei2 = np.empty(cap, np.int32)
+                            ej2 = np.empty(cap, np.int32)
+                            ei2[:m] = ei[:m]
+                            ej2[:m] = ej[:m]
+                            ei, ej = ei2, ej2
+                        ei[m] = i
+                        ej[m] = j
+                        m += 1
+    return ei[:m], ej[:m]
+
+
+def mover_pairs(
+    xy: np.ndarray,
+    reff: np.ndarray,
+    movers: np.ndarray,
+    is_mover: np.ndarray,
+    skin: float,
+    grid: CellGrid,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs ``(i, j)`` with ``|x_i - x_j| < re_i + re_j`` now, at least one a mover.
+
+    A *mover* moved more than ``skin * re`` since ``grid`` was built; every other dot is
+    within ``skin * re_j`` of where the grid binned it, so scanning the grid around a
+    mover over the cells within ``re_i + max(re in cell) * (1 + skin)`` finds all its
+    partners. Movers may
+    sit anywhere, so the grid (binned at the old positions) cannot find pairs of two
+    movers: those come from a fresh search over the movers alone.
+
+    Args:
+        xy: ``[n, 2]`` current positions, mm.
+        reff: ``[n]`` effective radii, mm.
+        movers: ``[M]`` int64 mover indices, ascending.
+        is_mover: ``[n]`` bool mask of the same.
+        skin: the skin the grid was built with.
+        grid: the grid of the last full build.
+
+    Returns:
+        ``(ei, ej)``: ``[P]`` int32 each.
+    """
+    ei, ej = _mover_pairs(
+        xy,
+        reff,
+        movers,
+        is_mover,
+        1.0 + skin,
+        grid.start,
+        grid.order,
+        grid.cellmax,
+        grid.x0,
+        grid.y0,
+        grid.cell,
+        grid.nx,
+        grid.ny,
+    )
+    ptr, nbr = neighbor_pairs(xy[movers], reff[movers], 0.0)
+    if len(nbr):
+        mi = movers[np.repeat(np.arange(len(movers)), np.diff(ptr))].astype(np.int32)
+        ei = np.concatenate([ei, mi])
+        ej = np.concatenate([ej, movers[nbr].astype(np.int32)])
+    return ei, ej
 
 
 def pairs_within(xy: np.ndarray, distance: float) -> np.ndarray:

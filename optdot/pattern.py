@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numba as nb
 import numpy as np
 
 from .atomic import atomic_path
@@ -80,13 +81,60 @@ def save_pattern(pattern: Pattern, path: str | Path) -> None:
 
 
 def pattern_csv_bytes(pattern: Pattern) -> bytes:
-    """The CSV text of a pattern, as bytes."""
-    buf = io.StringIO()
-    buf.write(CSV_HEADER + "\n")
-    if pattern.n:
-        data = np.column_stack([pattern.xy, np.full(pattern.n, pattern.diameter)])
-        np.savetxt(buf, data, fmt="%.6f", delimiter=",")
-    return buf.getvalue().encode("ascii")
+    """The CSV text of a pattern, as bytes (``x,y,d`` in mm with 6 decimals = 1 nm)."""
+    data = np.column_stack([pattern.xy, np.full(pattern.n, pattern.diameter)])
+    return (CSV_HEADER + "\n").encode("ascii") + format_fixed6(data)
+
+
+def format_fixed6(values: np.ndarray) -> bytes:
+    """Rows of ``values`` (``[n, k]`` float) as comma-separated ``%.6f`` text lines.
+
+    Same text as ``np.savetxt(fmt="%.6f", delimiter=",")`` for values that are exact to
+    1e-6 (positions are rounded to 1 nm), ten times faster.
+    """
+    values = np.ascontiguousarray(values, dtype=np.float64)
+    if values.size == 0:
+        return b""
+    micro = np.round(values * 1e6)
+    if not np.all(np.abs(micro) < 9e17):
+        raise ValueError("value too large for fixed-point CSV")
+    return _format_micro(micro.astype(np.int64), np.signbit(values)).tobytes()
+
+
+@nb.njit(cache=True)
+def _format_micro(micro, negative):  # pragma: no cover - compiled
+    n, k = micro.shape
+    out = np.empty(n * k * 28, np.uint8)
+    pos = 0
+    digits = np.empty(20, np.uint8)
+    for i in range(n):
+        for c in range(k):
+            v = micro[i, c]
+            if negative[i, c]:
+                out[pos] = 45  # '-'
+                pos += 1
+            v = abs(v)
+            whole = v // 1000000
+            frac = v % 1000000
+            m = 0
+            while True:
+                digits[m] = 48 + whole % 10
+                whole //= 10
+                m += 1
+                if whole == 0:
+                    break
+            for q in range(m - 1, -1, -1):
+                out[pos] = digits[q]
+                pos += 1
+            out[pos] = 46  # '.'
+            pos += 1
+            for q in range(5, -1, -1):
+                out[pos + q] = 48 + frac % 10
+                frac //= 10
+            pos += 6
+            out[pos] = 44 if c < k - 1 else 10  # ',' or newline
+            pos += 1
+    return out[:pos]
 
 
 def _write_npz(pattern: Pattern, path: Path) -> None:

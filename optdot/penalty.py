@@ -101,124 +101,212 @@ def _empty_depth(x, y, rp, empty, gx0, gy0, cw, ch):  # pragma: no cover - compi
     return rp - d, (bx - x) / d, (by - y) / d
 
 
-@nb.njit(cache=True)
-def _penalty_kernel(
-    xy, r, rp, c, h, xmin, ymin, xmax, ymax, dmin, r0, w, ptr, nbr, empty, gbox, grad
-):  # pragma: no cover - compiled
-    n = xy.shape[0]
+#: Dots per block of the parallel kernel. Fixed (not the thread count), so sums are
+#: added in the same order on every machine and results are bit-identical.
+BLOCK = 4096
+
+
+@nb.njit(cache=True, inline="always")
+def _pair_term(xy, r, i, j, dmin, w, grad):  # pragma: no cover - compiled
+    """Add pair (i, j)'s overlap and hard-core gradient to ``grad``; returns its f."""
+    dx = xy[i, 0] - xy[j, 0]
+    dy = xy[i, 1] - xy[j, 1]
+    d2 = dx * dx + dy * dy
+    s = r[i] + r[j]
+    lim = max(s, dmin) if w > 0.0 else s
+    if d2 >= lim * lim:
+        return 0.0
+    d = np.sqrt(d2)
+    if d < 1e-12:
+        # coincident centres: separate along x, deterministically by index
+        dx = 1e-12 if i < j else -1e-12
+        dy = 0.0
+        d = 1e-12
     f = 0.0
-    for i in range(n):
-        grad[i, 0] = 0.0
-        grad[i, 1] = 0.0
-    for i in range(n):
-        xi = xy[i, 0]
-        yi = xy[i, 1]
-        ri = r[i]
-        for k in range(ptr[i], ptr[i + 1]):
-            j = nbr[k]
-            dx = xi - xy[j, 0]
-            dy = yi - xy[j, 1]
-            d2 = dx * dx + dy * dy
-            s = ri + r[j]
-            lim = max(s, dmin) if w > 0.0 else s
-            if d2 >= lim * lim:
-                continue
-            d = np.sqrt(d2)
-            if d < 1e-12:
-                # coincident centres: separate along x, deterministically by index
-                dx = 1e-12 if i < j else -1e-12
-                dy = 0.0
-                d = 1e-12
-            coef = 0.0
-            if d < s:
-                dl = s - d
-                f += dl * dl
-                coef += 2.0 * dl
-            if w > 0.0 and d < dmin:
-                dl = dmin - d
-                f += w * dl * dl
-                coef += 2.0 * w * dl
-            gx = coef * dx / d
-            gy = coef * dy / d
-            grad[i, 0] -= gx
-            grad[i, 1] -= gy
-            grad[j, 0] += gx
-            grad[j, 1] += gy
-    has_empty = False
-    for v in empty.ravel():
-        if v:
-            has_empty = True
-            break
-    for i in range(n):
-        if has_empty:
-            e, ux, uy = _empty_depth(
-                xy[i, 0], xy[i, 1], rp[i], empty, gbox[0], gbox[1], gbox[2], gbox[3]
-            )
-            if e > 0.0:
-                f += e * e
-                grad[i, 0] += 2.0 * e * ux
-                grad[i, 1] += 2.0 * e * uy
-        for a in range(2):
-            v = xy[i, a]
-            lo = xmin if a == 0 else ymin
-            hi = xmax if a == 0 else ymax
-            p = rp[i] - (v - lo)
-            if p > 0.0:
-                f += p * p
-                grad[i, a] -= 2.0 * p
-            p = v + rp[i] - hi
-            if p > 0.0:
-                f += p * p
-                grad[i, a] += 2.0 * p
-            if w > 0.0:
-                p = r0 - (v - lo)
-                if p > 0.0:
-                    f += w * p * p
-                    grad[i, a] -= 2.0 * w * p
-                p = v + r0 - hi
-                if p > 0.0:
-                    f += w * p * p
-                    grad[i, a] += 2.0 * w * p
-            u = v - c[i, a]
-            p = abs(u) + r[i] - h[i]
-            if p > 0.0:
-                f += p * p
-                grad[i, a] += 2.0 * p * (1.0 if u >= 0.0 else -1.0)
+    coef = 0.0
+    if d < s:
+        dl = s - d
+        f += dl * dl
+        coef += 2.0 * dl
+    if w > 0.0 and d < dmin:
+        dl = dmin - d
+        f += w * dl * dl
+        coef += 2.0 * w * dl
+    gx = coef * dx / d
+    gy = coef * dy / d
+    grad[i, 0] -= gx
+    grad[i, 1] -= gy
+    grad[j, 0] += gx
+    grad[j, 1] += gy
     return f
 
 
-def penalty_fast(
-    xy: np.ndarray, terms: PenaltyTerms, ptr: np.ndarray, nbr: np.ndarray, grad: np.ndarray
-) -> float:
-    """Penalty and gradient over a CSR Verlet list (see :mod:`optdot.neighbors`).
+@nb.njit(cache=True, inline="always")
+def _single_terms(i, xy, r, rp, c, h, box, r0, w, empty, has_empty, gbox, grad):  # pragma: no cover
+    """Set ``grad[i]`` to dot i's panel, container and zero-cell terms; returns their f."""
+    f = 0.0
+    g0 = 0.0
+    g1 = 0.0
+    if has_empty:
+        e, ux, uy = _empty_depth(
+            xy[i, 0], xy[i, 1], rp[i], empty, gbox[0], gbox[1], gbox[2], gbox[3]
+        )
+        if e > 0.0:
+            f += e * e
+            g0 += 2.0 * e * ux
+            g1 += 2.0 * e * uy
+    for a in range(2):
+        v = xy[i, a]
+        lo = box[a]
+        hi = box[a + 2]
+        g = 0.0
+        p = rp[i] - (v - lo)
+        if p > 0.0:
+            f += p * p
+            g -= 2.0 * p
+        p = v + rp[i] - hi
+        if p > 0.0:
+            f += p * p
+            g += 2.0 * p
+        if w > 0.0:
+            p = r0 - (v - lo)
+            if p > 0.0:
+                f += w * p * p
+                g -= 2.0 * w * p
+            p = v + r0 - hi
+            if p > 0.0:
+                f += w * p * p
+                g += 2.0 * w * p
+        u = v - c[i, a]
+        p = abs(u) + r[i] - h[i]
+        if p > 0.0:
+            f += p * p
+            g += 2.0 * p * (1.0 if u >= 0.0 else -1.0)
+        if a == 0:
+            g0 += g
+        else:
+            g1 += g
+    grad[i, 0] = g0
+    grad[i, 1] = g1
+    return f
+
+
+@nb.njit(parallel=True, cache=True)
+def _penalty_kernel(
+    xy, r, rp, c, h, box, dmin, r0, w, ptr, mid, nbr, skip, ei, ej, empty, has_empty, gbox, grad
+):  # pragma: no cover - compiled
+    """Blocks of BLOCK dots in parallel (single terms, then pairs inside the block), then
+    the pairs that cross blocks and the extra pairs, serially, in a fixed order."""
+    n = xy.shape[0]
+    nblock = (n + BLOCK - 1) // BLOCK
+    part = np.zeros(nblock)
+    for b in nb.prange(nblock):
+        lo = b * BLOCK
+        hi = min(lo + BLOCK, n)
+        f = 0.0
+        for i in range(lo, hi):
+            f += _single_terms(i, xy, r, rp, c, h, box, r0, w, empty, has_empty, gbox, grad)
+        for i in range(lo, hi):
+            if skip[i]:
+                continue
+            for k in range(ptr[i], mid[i]):
+                j = nbr[k]
+                if not skip[j]:
+                    f += _pair_term(xy, r, i, j, dmin, w, grad)
+        part[b] = f
+    f = 0.0
+    for b in range(nblock):
+        f += part[b]
+    for i in range(n):
+        if skip[i]:
+            continue
+        for k in range(mid[i], ptr[i + 1]):
+            j = nbr[k]
+            if not skip[j]:
+                f += _pair_term(xy, r, i, j, dmin, w, grad)
+    for k in range(ei.shape[0]):
+        f += _pair_term(xy, r, ei[k], ej[k], dmin, w, grad)
+    return f
+
+
+@nb.njit(parallel=True, cache=True)
+def _split_blocks(ptr, nbr):  # pragma: no cover - compiled
+    """Reorder each dot's partners: same BLOCK first; returns (nbr', mid)."""
+    n = ptr.shape[0] - 1
+    out = np.empty_like(nbr)
+    mid = np.empty(n, np.int64)
+    for i in nb.prange(n):
+        b = i // BLOCK
+        k = ptr[i]
+        for q in range(ptr[i], ptr[i + 1]):
+            if nbr[q] // BLOCK == b:
+                out[k] = nbr[q]
+                k += 1
+        mid[i] = k
+        for q in range(ptr[i], ptr[i + 1]):
+            if nbr[q] // BLOCK != b:
+                out[k] = nbr[q]
+                k += 1
+    return out, mid
+
+
+@dataclass
+class PairList:
+    """A CSR half list prepared for :func:`penalty_fast`, plus the extra pairs of movers.
+
+    Attributes:
+        ptr: ``[n + 1]`` int64; partners of i are ``nbr[ptr[i]:ptr[i + 1]]``.
+        nbr: ``[K]`` int32, each row with same-block partners first.
+        mid: ``[n]`` int64, end of row i's same-block partners.
+        skip: ``[n]`` bool, dots whose pairs come only from the extra list.
+        ei, ej: ``[P]`` int32 extra pairs (each once).
+    """
+
+    ptr: np.ndarray
+    nbr: np.ndarray
+    mid: np.ndarray
+    skip: np.ndarray
+    ei: np.ndarray
+    ej: np.ndarray
+
+    @classmethod
+    def from_csr(cls, ptr: np.ndarray, nbr: np.ndarray) -> PairList:
+        """Wrap a CSR half list from :func:`optdot.neighbors.neighbor_pairs`."""
+        nbr2, mid = _split_blocks(ptr, nbr)
+        none = np.zeros(0, np.int32)
+        return cls(ptr, nbr2, mid, np.zeros(len(ptr) - 1, np.bool_), none, none)
+
+
+def penalty_fast(xy: np.ndarray, terms: PenaltyTerms, pairs: PairList, grad: np.ndarray) -> float:
+    """Penalty and gradient over a prepared pair list (see :mod:`optdot.neighbors`).
 
     Args:
         xy: ``[n, 2]`` positions, mm (C-contiguous float64).
         terms: radii, containers, panel.
-        ptr, nbr: CSR half list holding at least every pair closer than
-            ``max(r_i + r_j, dmin)``.
+        pairs: holds at least every pair closer than ``max(r_i + r_j, dmin)``, once.
         grad: ``[n, 2]`` output, overwritten with df/dxy (mm).
 
     Returns:
         f, mm².
     """
-    xmin, ymin, xmax, ymax = terms.box
     return _penalty_kernel(
         xy,
         terms.radius,
         terms.panel_radius,
         terms.center,
         terms.half_side,
-        xmin,
-        ymin,
-        xmax,
-        ymax,
+        np.asarray(terms.box, dtype=np.float64),
         terms.dmin,
         terms.dot_radius,
         terms.w_hard,
-        ptr,
-        nbr,
+        pairs.ptr,
+        pairs.mid,
+        pairs.nbr,
+        pairs.skip,
+        pairs.ei,
+        pairs.ej,
         terms.empty,
+        bool(terms.empty.any()),
         np.asarray(terms.grid_box, dtype=np.float64),
         grad,
     )

@@ -4,7 +4,7 @@ from scipy.optimize import approx_fprime
 
 from optdot.circles import circle_radius, container_half_sides
 from optdot.neighbors import neighbor_pairs, pairs_brute_force
-from optdot.penalty import PenaltyTerms, penalty_fast, penalty_reference
+from optdot.penalty import PairList, PenaltyTerms, penalty_fast, penalty_reference
 
 
 def make_terms(n=120, seed=0, w_hard=10.0, empty=True):
@@ -35,7 +35,7 @@ def fast(xy, terms):
     reff = np.maximum(terms.radius, terms.dmin / 2)
     ptr, nbr = neighbor_pairs(xy, reff, 0.0)
     g = np.empty_like(xy)
-    return penalty_fast(np.ascontiguousarray(xy), terms, ptr, nbr, g), g
+    return penalty_fast(np.ascontiguousarray(xy), terms, PairList.from_csr(ptr, nbr), g), g
 
 
 @pytest.mark.parametrize("w_hard,empty", [(0.0, False), (10.0, True), (10.0, False)])
