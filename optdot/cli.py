@@ -46,9 +46,9 @@ def _job_options(fn):
     fn = click.option(
         "--max-iter", type=click.IntRange(0, 100_000), help="Override optimize.max_iter."
     )(fn)
-    fn = click.option("--method", type=click.Choice(["optdot"]), help="Override optimize.method.")(
-        fn
-    )
+    fn = click.option(
+        "--method", type=click.Choice(["optdot", "md"]), help="Override optimize.method."
+    )(fn)
     fn = click.option(
         "--formulation",
         type=click.Choice(["optdot", "paper"]),

@@ -1,6 +1,7 @@
 """The pipeline: a :class:`~optdot.job.Job` becomes a :class:`~optdot.pattern.Pattern`.
 
-initial dots (§2.1) → circles and containers (§3.3, §3) → relaxation (OptDot or MD)
+initial dots (§2.1) → circles and containers (§3.3, §3) → relaxation (OptDot, or the
+MD baseline of §2.2 on the same initial dots)
 → guarantee pass → Pattern. The core never prints; progress goes to a callback.
 """
 
@@ -16,6 +17,7 @@ from .errors import GuaranteeError
 from .initial import initial_dots
 from .job import Job
 from .legalize import check_guarantee, legalize
+from .md import MDForce, md_relax
 from .memory import check_memory
 from .neighbors import spatial_order
 from .pattern import Pattern
@@ -55,12 +57,15 @@ def build_terms(job: Job, xy0: np.ndarray, rho: np.ndarray) -> PenaltyTerms:
     )
 
 
-def generate(job: Job, progress: Progress | None = None) -> Pattern:
+def generate(job: Job, progress: Progress | None = None, keep_stages: bool = False) -> Pattern:
     """Generate the dot pattern of ``job``.
 
     Args:
         job: a validated job.
-        progress: optional ``progress(iteration, penalty)`` callback.
+        progress: optional ``progress(iteration, value)`` callback (penalty for OptDot,
+            largest force for MD).
+        keep_stages: also put ``initial_xy`` and ``relaxed_xy`` (``[n, 2]``, generation
+            order, before the guarantee pass) in ``pattern.stats``, for comparisons.
 
     Returns:
         The pattern, dots in generation order, positions rounded to 1 nm.
@@ -84,22 +89,47 @@ def generate(job: Job, progress: Progress | None = None) -> Pattern:
     timings["initial_s"] = time.perf_counter() - t0
 
     t1 = time.perf_counter()
-    terms = build_terms(job, xy0, rho[order])
-    res = relax(
-        xy0,
-        terms,
-        max_iter=opt.max_iter,
-        memory=opt.lbfgs_memory,
-        ftol=opt.ftol,
-        skin=opt.skin,
-        callback=progress,
-    )
+    box = (0.0, 0.0, job.width, job.height)
+    r0 = 0.5 * job.diameter
+    if opt.method == "md":
+        law = MDForce(
+            core=job.min_distance,
+            spacing=2.0 * hex_radius(rho[order], r0),
+            decay=opt.md_decay,
+            cutoff=opt.md_cutoff,
+        )
+        md = md_relax(
+            xy0,
+            law,
+            box,
+            r0,
+            steps=opt.max_iter,
+            step=opt.md_step,
+            skin=opt.skin,
+            callback=progress,
+        )
+        relaxed = md.xy
+        info = {"iterations": md.steps, "evaluations": md.steps, "neighbor_builds": md.rebuilds}
+        info.update(md_step_mm=md.eta, message=f"ran {md.steps} MD steps")
+        history = md.history
+    else:
+        res = relax(
+            xy0,
+            build_terms(job, xy0, rho[order]),
+            max_iter=opt.max_iter,
+            memory=opt.lbfgs_memory,
+            ftol=opt.ftol,
+            skin=opt.skin,
+            callback=progress,
+        )
+        relaxed = res.xy
+        info = {"iterations": res.nit, "evaluations": res.nfev, "neighbor_builds": res.rebuilds}
+        info.update(penalty=float(res.penalty), message=res.message)
+        history = res.history
     timings["relax_s"] = time.perf_counter() - t1
 
     t2 = time.perf_counter()
-    box = (0.0, 0.0, job.width, job.height)
-    r0 = 0.5 * job.diameter
-    leg = legalize(res.xy, job.density, home[order], box, r0, job.min_distance)
+    leg = legalize(relaxed, job.density, home[order], box, r0, job.min_distance)
     viol = check_guarantee(leg.xy, job.density, box, r0, job.min_distance)
     if not viol.ok:
         raise GuaranteeError(
@@ -119,15 +149,14 @@ def generate(job: Job, progress: Progress | None = None) -> Pattern:
         "seed": opt.seed,
         "max_iter": opt.max_iter,
         "n": int(n),
-        "iterations": int(res.nit),
-        "evaluations": int(res.nfev),
-        "penalty": float(res.penalty),
-        "message": res.message,
-        "neighbor_builds": int(res.rebuilds),
+        **info,
         "legalize_sweeps": int(leg.sweeps),
         "legalize_pair_fixes": int(leg.pair_fixes),
         "legalize_dot_fixes": int(leg.dot_fixes),
     }
-    return Pattern(
-        xy=xy, diameter=job.diameter, box=box, meta=meta, stats={**timings, "history": res.history}
-    )
+    stats: dict = {**timings, "history": history}
+    if keep_stages:
+        stats["initial_xy"] = xy_init
+        stats["relaxed_xy"] = np.empty_like(relaxed)
+        stats["relaxed_xy"][order] = relaxed
+    return Pattern(xy=xy, diameter=job.diameter, box=box, meta=meta, stats=stats)

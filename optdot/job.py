@@ -18,7 +18,7 @@ import numpy as np
 from .density import HEX_PACKING_LIMIT, DensityMap
 from .errors import JobError
 
-METHODS = ("optdot",)  # "md" (Idé et al. 2003 baseline) is not implemented yet
+METHODS = ("optdot", "md")
 FORMULATIONS = ("paper", "optdot")
 
 
@@ -27,8 +27,8 @@ class OptimizeParams:
     """How the dots are relaxed.
 
     Attributes:
-        method: ``"optdot"`` (L-BFGS on penalty (3), the paper's method); the MD
-            baseline of Idé et al. (2003) is not implemented yet.
+        method: ``"optdot"`` (L-BFGS on penalty (3), the paper's method) or ``"md"``
+            (the molecular-dynamics baseline of Idé et al. 2003, see :mod:`optdot.md`).
         max_iter: iterations of L-BFGS or MD steps (paper: 200).
         seed: seed of the scrambled low-discrepancy sequence.
         formulation: ``"paper"`` reproduces the paper exactly (radius factor 1, panel
@@ -41,6 +41,9 @@ class OptimizeParams:
             iterations; 0 runs all ``max_iter`` iterations.
         gap: manufacturing gap, mm: dot centres keep at least ``diameter + gap``.
         skin: Verlet skin as a fraction of each circle's radius.
+        md_step: MD only: dt / c as a fraction of the collision distance.
+        md_decay: MD only: decay length L of the force tail / hexagonal spacing.
+        md_cutoff: MD only: the tail is cut at D = b + md_cutoff * L.
     """
 
     method: str = "optdot"
@@ -53,6 +56,9 @@ class OptimizeParams:
     ftol: float = 1e-3
     gap: float = 0.0
     skin: float = 0.3
+    md_step: float = 0.02
+    md_decay: float = 0.25
+    md_cutoff: float = 3.0
 
     def __post_init__(self) -> None:
         _check(self.method in METHODS, "optimize.method", self.method, f"one of {METHODS}")
@@ -81,6 +87,9 @@ class OptimizeParams:
         _check(0.0 <= self.ftol < 1.0, "optimize.ftol", self.ftol, "0 <= ftol < 1")
         _check(0.0 <= self.gap < 10.0, "optimize.gap", self.gap, "0 <= gap < 10 mm")
         _check(0.01 <= self.skin <= 2.0, "optimize.skin", self.skin, "0.01..2")
+        _check(0.0 < self.md_step <= 0.5, "optimize.md_step", self.md_step, "0 < md_step <= 0.5")
+        _check(0.01 <= self.md_decay <= 2.0, "optimize.md_decay", self.md_decay, "0.01..2")
+        _check(0.0 <= self.md_cutoff <= 20.0, "optimize.md_cutoff", self.md_cutoff, "0..20")
 
     @property
     def effective_radius_factor(self) -> float:
@@ -230,6 +239,9 @@ _SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
         "ftol": (int, float),
         "gap": (int, float),
         "skin": (int, float),
+        "md_step": (int, float),
+        "md_decay": (int, float),
+        "md_cutoff": (int, float),
     },
     "qa": {
         "collision_distance": (int, float),

@@ -16,6 +16,10 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+#: Dots per block of the parallel pair kernels (penalty, MD forces). Fixed, not the
+#: thread count, so sums are added in the same order on every machine: bit-identical.
+BLOCK = 4096
+
 
 @nb.njit(cache=True)
 def _bin_points(xy, reff, x0, y0, cell, nx, ny):  # pragma: no cover - compiled
@@ -364,3 +368,115 @@ def _spread(v: np.ndarray) -> np.ndarray:
     v = (v | (v << np.uint64(2))) & np.uint64(0x33333333)
     v = (v | (v << np.uint64(1))) & np.uint64(0x55555555)
     return v
+
+
+@nb.njit(parallel=True, cache=True)
+def _split_blocks(ptr, nbr):  # pragma: no cover - compiled
+    """Reorder each dot's partners: same BLOCK first; returns (nbr', mid)."""
+    n = ptr.shape[0] - 1
+    out = np.empty_like(nbr)
+    mid = np.empty(n, np.int64)
+    for i in nb.prange(n):
+        b = i // BLOCK
+        k = ptr[i]
+        for q in range(ptr[i], ptr[i + 1]):
+            if nbr[q] // BLOCK == b:
+                out[k] = nbr[q]
+                k += 1
+        mid[i] = k
+        for q in range(ptr[i], ptr[i + 1]):
+            if nbr[q] // BLOCK != b:
+                out[k] = nbr[q]
+                k += 1
+    return out, mid
+
+
+@dataclass
+class PairList:
+    """A CSR half list prepared for the block-parallel pair kernels, plus movers' pairs.
+
+    Attributes:
+        ptr: ``[n + 1]`` int64; partners of i are ``nbr[ptr[i]:ptr[i + 1]]``.
+        nbr: ``[K]`` int32, each row with same-block partners first.
+        mid: ``[n]`` int64, end of row i's same-block partners.
+        skip: ``[n]`` bool, dots whose pairs come only from the extra list.
+        ei, ej: ``[P]`` int32 extra pairs (each once).
+    """
+
+    ptr: np.ndarray
+    nbr: np.ndarray
+    mid: np.ndarray
+    skip: np.ndarray
+    ei: np.ndarray
+    ej: np.ndarray
+
+    @classmethod
+    def from_csr(cls, ptr: np.ndarray, nbr: np.ndarray) -> PairList:
+        """Wrap a CSR half list from :func:`optdot.neighbors.neighbor_pairs`."""
+        nbr2, mid = _split_blocks(ptr, nbr)
+        none = np.zeros(0, np.int32)
+        return cls(ptr, nbr2, mid, np.zeros(len(ptr) - 1, np.bool_), none, none)
+
+
+@nb.njit(cache=True)
+def _new_movers(xy, ref, limit, is_mover):  # pragma: no cover - compiled
+    """Mark dots that moved more than ``limit`` from ``ref``; returns how many are new."""
+    new = 0
+    for i in range(xy.shape[0]):
+        if is_mover[i]:
+            continue
+        dx = xy[i, 0] - ref[i, 0]
+        dy = xy[i, 1] - ref[i, 1]
+        if dx * dx + dy * dy > limit[i] * limit[i]:
+            is_mover[i] = True
+            new += 1
+    return new
+
+
+class VerletList:
+    """A Verlet list for circles of radii ``reff``, patched for the few dots that move far.
+
+    The list holds every pair closer than ``(re_i + re_j) * (1 + skin)`` at build time. A
+    pair it misses needs one of its dots to have moved more than ``skin * re`` since the
+    build. Such dots (*movers*; typically a few dozen of 10⁵) leave the list: their pairs
+    are searched afresh at every update (:func:`mover_pairs`). The list is rebuilt from
+    scratch only when movers exceed ``rebuild_fraction`` of the dots. After
+    :meth:`update`, :attr:`pairs` holds every pair closer than ``re_i + re_j``, once.
+
+    Args:
+        reff: ``[n]`` interaction radii, mm.
+        skin: relative skin.
+        rebuild_fraction: share of movers that triggers a full rebuild.
+    """
+
+    def __init__(self, reff: np.ndarray, skin: float, rebuild_fraction: float = 0.01) -> None:
+        self.reff = np.ascontiguousarray(reff, dtype=np.float64)
+        self.skin = skin
+        self.limit = skin * self.reff
+        self.cell = cell_side(self.reff, skin) if len(self.reff) else 1.0
+        self.max_movers = max(16, int(rebuild_fraction * len(self.reff)))
+        self.ref: np.ndarray | None = None
+        self.pairs: PairList | None = None
+        self.grid: CellGrid | None = None
+        self.rebuilds = 0
+        self.n_movers = 0
+
+    def _rebuild(self, xy: np.ndarray) -> None:
+        ptr, nbr, self.grid = neighbor_grid(xy, self.reff, self.skin, self.cell)
+        self.pairs = PairList.from_csr(ptr, nbr)
+        self.ref = xy.copy()
+        self.n_movers = 0
+        self.rebuilds += 1
+
+    def update(self, xy: np.ndarray) -> PairList:
+        """The pair list valid at positions ``xy`` (``[n, 2]`` mm)."""
+        if self.pairs is None:
+            self._rebuild(xy)
+        self.n_movers += _new_movers(xy, self.ref, self.limit, self.pairs.skip)
+        if self.n_movers > self.max_movers:
+            self._rebuild(xy)
+        elif self.n_movers:
+            pl = self.pairs
+            movers = np.flatnonzero(pl.skip)
+            pl.ei, pl.ej = mover_pairs(xy, self.reff, movers, pl.skip, self.skin, self.grid)
+        return self.pairs

@@ -26,6 +26,8 @@ from dataclasses import dataclass, field
 import numba as nb
 import numpy as np
 
+from .neighbors import BLOCK, PairList
+
 
 @dataclass(frozen=True, eq=False)
 class PenaltyTerms:
@@ -99,11 +101,6 @@ def _empty_depth(x, y, rp, empty, gx0, gy0, cw, ch):  # pragma: no cover - compi
     if d < 1e-15:
         return rp, 0.0, 0.0
     return rp - d, (bx - x) / d, (by - y) / d
-
-
-#: Dots per block of the parallel kernel. Fixed (not the thread count), so sums are
-#: added in the same order on every machine and results are bit-identical.
-BLOCK = 4096
 
 
 @nb.njit(cache=True, inline="always")
@@ -227,54 +224,6 @@ def _penalty_kernel(
     for k in range(ei.shape[0]):
         f += _pair_term(xy, r, ei[k], ej[k], dmin, w, grad)
     return f
-
-
-@nb.njit(parallel=True, cache=True)
-def _split_blocks(ptr, nbr):  # pragma: no cover - compiled
-    """Reorder each dot's partners: same BLOCK first; returns (nbr', mid)."""
-    n = ptr.shape[0] - 1
-    out = np.empty_like(nbr)
-    mid = np.empty(n, np.int64)
-    for i in nb.prange(n):
-        b = i // BLOCK
-        k = ptr[i]
-        for q in range(ptr[i], ptr[i + 1]):
-            if nbr[q] // BLOCK == b:
-                out[k] = nbr[q]
-                k += 1
-        mid[i] = k
-        for q in range(ptr[i], ptr[i + 1]):
-            if nbr[q] // BLOCK != b:
-                out[k] = nbr[q]
-                k += 1
-    return out, mid
-
-
-@dataclass
-class PairList:
-    """A CSR half list prepared for :func:`penalty_fast`, plus the extra pairs of movers.
-
-    Attributes:
-        ptr: ``[n + 1]`` int64; partners of i are ``nbr[ptr[i]:ptr[i + 1]]``.
-        nbr: ``[K]`` int32, each row with same-block partners first.
-        mid: ``[n]`` int64, end of row i's same-block partners.
-        skip: ``[n]`` bool, dots whose pairs come only from the extra list.
-        ei, ej: ``[P]`` int32 extra pairs (each once).
-    """
-
-    ptr: np.ndarray
-    nbr: np.ndarray
-    mid: np.ndarray
-    skip: np.ndarray
-    ei: np.ndarray
-    ej: np.ndarray
-
-    @classmethod
-    def from_csr(cls, ptr: np.ndarray, nbr: np.ndarray) -> PairList:
-        """Wrap a CSR half list from :func:`optdot.neighbors.neighbor_pairs`."""
-        nbr2, mid = _split_blocks(ptr, nbr)
-        none = np.zeros(0, np.int32)
-        return cls(ptr, nbr2, mid, np.zeros(len(ptr) - 1, np.bool_), none, none)
 
 
 def penalty_fast(xy: np.ndarray, terms: PenaltyTerms, pairs: PairList, grad: np.ndarray) -> float:

@@ -3,8 +3,8 @@ import pytest
 from scipy.optimize import approx_fprime
 
 from optdot.circles import circle_radius, container_half_sides
-from optdot.neighbors import neighbor_pairs, pairs_brute_force
-from optdot.penalty import PairList, PenaltyTerms, penalty_fast, penalty_reference
+from optdot.neighbors import PairList, neighbor_pairs, pairs_brute_force
+from optdot.penalty import PenaltyTerms, penalty_fast, penalty_reference
 
 
 def make_terms(n=120, seed=0, w_hard=10.0, empty=True):
