@@ -12,8 +12,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .circles import circle_radius, container_half_sides, hex_radius
+from .circles import hex_radius
 from .errors import GuaranteeError
+from .formulation import Formulation, formulation_of
 from .initial import initial_dots
 from .job import Job
 from .legalize import check_guarantee, legalize
@@ -21,43 +22,56 @@ from .md import MDForce, md_relax
 from .memory import check_memory
 from .neighbors import spatial_order
 from .pattern import Pattern
-from .penalty import PenaltyTerms
 from .relax import relax
-
-#: Weight of optdot's hard-core and hard-panel terms (0 in the paper formulation).
-W_HARD = 10.0
 
 Progress = Callable[[int, float], None]
 
 
-def build_terms(job: Job, xy0: np.ndarray, rho: np.ndarray) -> PenaltyTerms:
-    """Radii, containers and panel of the penalty for dots starting at ``xy0``.
+def relax_staged(
+    job: Job,
+    form: Formulation,
+    xy0: np.ndarray,
+    rho: np.ndarray,
+    progress: Progress | None = None,
+) -> tuple[np.ndarray, dict, list[float]]:
+    """Relax ``xy0`` (``[n, 2]`` mm, fill ``rho`` ``[n]``) through the formulation's stages.
 
-    Args:
-        job: the job.
-        xy0: ``[n, 2]`` start positions, mm.
-        rho: ``[n]`` fill fraction at each start position.
+    Containers stay centred on ``xy0`` in every stage. Returns positions, run info and
+    the penalty after each iteration.
     """
     opt = job.optimize
-    r0 = 0.5 * job.diameter
-    r = circle_radius(rho, r0, opt.effective_radius_factor)
-    paper = opt.formulation == "paper"
-    panel_r = r if paper else np.maximum(hex_radius(rho, r0), r0)
-    return PenaltyTerms(
-        radius=r,
-        panel_radius=np.ascontiguousarray(panel_r),
-        center=np.ascontiguousarray(xy0),
-        half_side=container_half_sides(r, opt.container_factor),
-        box=(0.0, 0.0, job.width, job.height),
-        dmin=job.min_distance,
-        dot_radius=r0,
-        w_hard=0.0 if paper else W_HARD,
-        empty=np.zeros((1, 1), np.uint8) if paper else (job.density.grid <= 0).astype(np.uint8),
-        grid_box=(job.density.x0, job.density.y0, *job.density.cell_size),
-    )
+    xy = xy0
+    info = {"iterations": 0, "evaluations": 0, "neighbor_builds": 0}
+    history: list[float] = []
+    done = 0
+    for k, (share, multiplier) in enumerate(form.stages):
+        last = k == len(form.stages) - 1
+        iters = opt.max_iter - done if last else round(share * opt.max_iter)
+        res = relax(
+            xy,
+            form.terms(job, xy0, rho, multiplier),
+            max_iter=iters,
+            memory=opt.lbfgs_memory,
+            ftol=opt.ftol,
+            skin=opt.skin,
+            callback=None if progress is None else (lambda i, f, o=done: progress(o + i, f)),
+        )
+        done += iters
+        xy = res.xy
+        info["iterations"] += res.nit
+        info["evaluations"] += res.nfev
+        info["neighbor_builds"] += res.rebuilds
+        info.update(penalty=float(res.penalty), message=res.message)
+        history += res.history
+    return xy, info, history
 
 
-def generate(job: Job, progress: Progress | None = None, keep_stages: bool = False) -> Pattern:
+def generate(
+    job: Job,
+    progress: Progress | None = None,
+    keep_stages: bool = False,
+    formulation: Formulation | None = None,
+) -> Pattern:
     """Generate the dot pattern of ``job``.
 
     Args:
@@ -66,6 +80,7 @@ def generate(job: Job, progress: Progress | None = None, keep_stages: bool = Fal
             largest force for MD).
         keep_stages: also put ``initial_xy`` and ``relaxed_xy`` (``[n, 2]``, generation
             order, before the guarantee pass) in ``pattern.stats``, for comparisons.
+        formulation: overrides the job's (benchmarks try variants this way).
 
     Returns:
         The pattern, dots in generation order, positions rounded to 1 nm.
@@ -113,19 +128,8 @@ def generate(job: Job, progress: Progress | None = None, keep_stages: bool = Fal
         info.update(md_step_mm=md.eta, message=f"ran {md.steps} MD steps")
         history = md.history
     else:
-        res = relax(
-            xy0,
-            build_terms(job, xy0, rho[order]),
-            max_iter=opt.max_iter,
-            memory=opt.lbfgs_memory,
-            ftol=opt.ftol,
-            skin=opt.skin,
-            callback=progress,
-        )
-        relaxed = res.xy
-        info = {"iterations": res.nit, "evaluations": res.nfev, "neighbor_builds": res.rebuilds}
-        info.update(penalty=float(res.penalty), message=res.message)
-        history = res.history
+        form = formulation_of(job) if formulation is None else formulation
+        relaxed, info, history = relax_staged(job, form, xy0, rho[order], progress)
     timings["relax_s"] = time.perf_counter() - t1
 
     t2 = time.perf_counter()

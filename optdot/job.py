@@ -34,7 +34,7 @@ class OptimizeParams:
         formulation: ``"paper"`` reproduces the paper exactly (radius factor 1, panel
             penalty with the circle radius); ``"optdot"`` is our default, see README.
         radius_factor: multiplies the paper's circle radius r = r0 sqrt(pi/(sqrt3 rho));
-            ``None`` takes the formulation's default.
+            ``None`` takes the formulation's (see :mod:`optdot.formulation`).
         container_factor: container side / circle radius (paper: 4).
         lbfgs_memory: L-BFGS history length m (paper: 6).
         ftol: stop when the penalty fell by less than ``ftol`` (relative) over 10
@@ -90,17 +90,6 @@ class OptimizeParams:
         _check(0.0 < self.md_step <= 0.5, "optimize.md_step", self.md_step, "0 < md_step <= 0.5")
         _check(0.01 <= self.md_decay <= 2.0, "optimize.md_decay", self.md_decay, "0.01..2")
         _check(0.0 <= self.md_cutoff <= 20.0, "optimize.md_cutoff", self.md_cutoff, "0..20")
-
-    @property
-    def effective_radius_factor(self) -> float:
-        """The radius factor in force: the explicit one, else the formulation's default."""
-        if self.radius_factor is not None:
-            return self.radius_factor
-        return 1.0 if self.formulation == "paper" else OPTDOT_RADIUS_FACTOR
-
-
-#: Default radius factor of the ``"optdot"`` formulation (see benchmarks/formulations.py).
-OPTDOT_RADIUS_FACTOR = 1.0
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,7 @@ For circles S_i (centre x_i, radius r_i) the objective is
       + sum_i  e_i^2             with e_i = max(rp_i - dist(x_i, Z), 0), Z the union of
                                  the map's zero-density cells (inside Z: rp_i + the
                                  distance to the cell's nearest side)
-      + w_hard * [ sum_{pairs} max(dmin - |x_i - x_j|, 0)^2
+      + w_hard * [ sum_{pairs} max(c_i + c_j - |x_i - x_j|, 0)^2
                    + sum_i max(r0 - x, 0)^2 + max(x + r0 - W, 0)^2 (and y) ]
 
 The last line is optdot's hard-core term (zero in the paper formulation): it only acts on
@@ -40,6 +40,8 @@ class PenaltyTerms:
         half_side: ``[n]`` container half sides, mm.
         box: ``(xmin, ymin, xmax, ymax)`` of the panel, mm.
         dmin: minimum centre distance of the hard-core term, mm.
+        core: optional ``[n]`` per-dot hard-core radii c_i (pair target c_i + c_j), mm;
+            default ``dmin / 2`` for every dot.
         dot_radius: r0, mm (hard panel limit).
         w_hard: weight of the hard terms (0 = paper).
         empty: ``[ny, nx]`` uint8 mask of zero-density cells (all 0 = no term).
@@ -56,6 +58,19 @@ class PenaltyTerms:
     w_hard: float = 0.0
     empty: np.ndarray = field(default_factory=lambda: np.zeros((1, 1), np.uint8))
     grid_box: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0)
+    core: np.ndarray | None = None
+
+    @property
+    def core_radius(self) -> np.ndarray:
+        """``[n]`` hard-core radii c_i, mm."""
+        if self.core is not None:
+            return np.ascontiguousarray(self.core, dtype=np.float64)
+        return np.full(len(self.radius), 0.5 * self.dmin)
+
+    @property
+    def reach(self) -> np.ndarray:
+        """``[n]`` radius within which dot i interacts: pairs closer than reach_i + reach_j."""
+        return np.maximum(self.radius, self.core_radius) if self.w_hard > 0 else self.radius
 
 
 @nb.njit(cache=True)
@@ -104,12 +119,13 @@ def _empty_depth(x, y, rp, empty, gx0, gy0, cw, ch):  # pragma: no cover - compi
 
 
 @nb.njit(cache=True, inline="always")
-def _pair_term(xy, r, i, j, dmin, w, grad):  # pragma: no cover - compiled
+def _pair_term(xy, r, cr, i, j, w, grad):  # pragma: no cover - compiled
     """Add pair (i, j)'s overlap and hard-core gradient to ``grad``; returns its f."""
     dx = xy[i, 0] - xy[j, 0]
     dy = xy[i, 1] - xy[j, 1]
     d2 = dx * dx + dy * dy
     s = r[i] + r[j]
+    dmin = cr[i] + cr[j]
     lim = max(s, dmin) if w > 0.0 else s
     if d2 >= lim * lim:
         return 0.0
@@ -190,7 +206,7 @@ def _single_terms(i, xy, r, rp, c, h, box, r0, w, empty, has_empty, gbox, grad):
 
 @nb.njit(parallel=True, cache=True)
 def _penalty_kernel(
-    xy, r, rp, c, h, box, dmin, r0, w, ptr, mid, nbr, skip, ei, ej, empty, has_empty, gbox, grad
+    xy, r, rp, c, h, box, cr, r0, w, ptr, mid, nbr, skip, ei, ej, empty, has_empty, gbox, grad
 ):  # pragma: no cover - compiled
     """Blocks of BLOCK dots in parallel (single terms, then pairs inside the block), then
     the pairs that cross blocks and the extra pairs, serially, in a fixed order."""
@@ -209,7 +225,7 @@ def _penalty_kernel(
             for k in range(ptr[i], mid[i]):
                 j = nbr[k]
                 if not skip[j]:
-                    f += _pair_term(xy, r, i, j, dmin, w, grad)
+                    f += _pair_term(xy, r, cr, i, j, w, grad)
         part[b] = f
     f = 0.0
     for b in range(nblock):
@@ -220,9 +236,9 @@ def _penalty_kernel(
         for k in range(mid[i], ptr[i + 1]):
             j = nbr[k]
             if not skip[j]:
-                f += _pair_term(xy, r, i, j, dmin, w, grad)
+                f += _pair_term(xy, r, cr, i, j, w, grad)
     for k in range(ei.shape[0]):
-        f += _pair_term(xy, r, ei[k], ej[k], dmin, w, grad)
+        f += _pair_term(xy, r, cr, ei[k], ej[k], w, grad)
     return f
 
 
@@ -232,7 +248,7 @@ def penalty_fast(xy: np.ndarray, terms: PenaltyTerms, pairs: PairList, grad: np.
     Args:
         xy: ``[n, 2]`` positions, mm (C-contiguous float64).
         terms: radii, containers, panel.
-        pairs: holds at least every pair closer than ``max(r_i + r_j, dmin)``, once.
+        pairs: holds at least every pair closer than ``reach_i + reach_j``, once.
         grad: ``[n, 2]`` output, overwritten with df/dxy (mm).
 
     Returns:
@@ -245,7 +261,7 @@ def penalty_fast(xy: np.ndarray, terms: PenaltyTerms, pairs: PairList, grad: np.
         terms.center,
         terms.half_side,
         np.asarray(terms.box, dtype=np.float64),
-        terms.dmin,
+        terms.core_radius,
         terms.dot_radius,
         terms.w_hard,
         pairs.ptr,
@@ -276,7 +292,8 @@ def penalty_reference(
         d = np.sqrt((diff**2).sum(1))
         unit = diff / d[:, None]
         dl = np.maximum(r[i] + r[j] - d, 0.0)
-        dh = np.maximum(terms.dmin - d, 0.0) if w > 0 else np.zeros_like(d)
+        cr = terms.core_radius
+        dh = np.maximum(cr[i] + cr[j] - d, 0.0) if w > 0 else np.zeros_like(d)
         f += float((dl**2).sum() + w * (dh**2).sum())
         coef = (2 * dl + 2 * w * dh)[:, None] * unit
         np.add.at(g, i, -coef)

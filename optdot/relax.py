@@ -15,8 +15,8 @@ from .penalty import PenaltyTerms, penalty_fast
 class VerletPenalty:
     """Penalty + gradient over a :class:`~optdot.neighbors.VerletList`.
 
-    Interaction radii are ``re_i = max(r_i, dmin / 2)`` (the hard-core term reaches
-    ``dmin``), so the list holds every pair the penalty can see; no pair is ever missed.
+    Interaction radii are :attr:`PenaltyTerms.reach` (the circle, or the hard core where
+    it reaches further), so the list holds every pair the penalty can see.
 
     Args:
         terms: the penalty's radii, containers and panel.
@@ -26,8 +26,7 @@ class VerletPenalty:
 
     def __init__(self, terms: PenaltyTerms, skin: float, rebuild_fraction: float = 0.01) -> None:
         self.terms = terms
-        reff = np.maximum(terms.radius, 0.5 * terms.dmin if terms.w_hard > 0 else 0.0)
-        self.verlet = VerletList(reff, skin, rebuild_fraction)
+        self.verlet = VerletList(terms.reach, skin, rebuild_fraction)
 
     @property
     def rebuilds(self) -> int:

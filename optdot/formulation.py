@@ -1,0 +1,106 @@
+"""Formulations: how the map becomes circles, containers and penalty terms.
+
+``paper`` is the paper as written (§3, §3.3). The other presets and every variant in
+``benchmarks/formulations.py`` are points in the same small space (issue 8): the radius
+rule, a density-dependent compression, polydisperse circles, a hard core and a soft gap,
+how the panel edge and the zero-density cells are treated, and staged relaxation.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .circles import circle_radius, container_half_sides, hex_radius
+from .job import Job
+from .penalty import PenaltyTerms
+
+
+@dataclass(frozen=True)
+class Formulation:
+    """One formulation of the relaxation.
+
+    Attributes:
+        radius_factor: multiplies the paper's radius r = r0 sqrt(pi / (sqrt3 rho)).
+        dense_factor: extra factor reached at ``rho >= dense_rho`` (1 at ``rho <=
+            light_rho``, linear in between): compresses only where the map is dense.
+        light_rho, dense_rho: the ramp of ``dense_factor``.
+        polydispersity: circle radii are multiplied by ``1 ± p`` (random sign per dot,
+            normalised to keep the mean circle area): a bidisperse mixture does not
+            crystallise the way equal circles do.
+        w_hard: weight of the hard-core term (pairs closer than c_i + c_j) and of the
+            hard panel term (dots protruding from the panel); 0 = off.
+        gap: soft gap, mm: dots whose hexagonal spacing is at least ``gap / gap_share``
+            get hard-core radius ``gap / 2`` instead of ``dmin / 2``; 0 = off.
+        gap_share: see ``gap``.
+        hex_panel: use the hexagonal radius r' (not r) against the panel edges.
+        empty_term: penalise circles reaching into zero-density cells.
+        stages: ``(share of max_iter, radius multiplier)`` per stage, relaxed in turn.
+    """
+
+    radius_factor: float = 1.0
+    dense_factor: float = 1.0
+    light_rho: float = 0.25
+    dense_rho: float = 0.5
+    polydispersity: float = 0.0
+    w_hard: float = 0.0
+    gap: float = 0.0
+    gap_share: float = 0.85
+    hex_panel: bool = False
+    empty_term: bool = False
+    stages: tuple[tuple[float, float], ...] = ((1.0, 1.0),)
+
+    def radii(self, rho: np.ndarray, r0: float, seed: int, multiplier: float = 1.0) -> np.ndarray:
+        """``[n]`` circle radii, mm, for dots at fill ``rho`` (``[n]``)."""
+        ramp = np.clip((rho - self.light_rho) / (self.dense_rho - self.light_rho), 0.0, 1.0)
+        factor = self.radius_factor * multiplier * (1.0 + (self.dense_factor - 1.0) * ramp)
+        r = circle_radius(rho, r0, 1.0) * factor
+        if self.polydispersity > 0:
+            sign = np.random.default_rng([seed, 0x9D]).integers(0, 2, len(r)) * 2 - 1
+            p = self.polydispersity
+            r = r * (1.0 + p * sign) / math.sqrt(1.0 + p * p)
+        return r
+
+    def terms(
+        self, job: Job, xy0: np.ndarray, rho: np.ndarray, multiplier: float = 1.0
+    ) -> PenaltyTerms:
+        """Penalty terms for dots starting at ``xy0`` (``[n, 2]`` mm) with fill ``rho``."""
+        opt = job.optimize
+        r0 = 0.5 * job.diameter
+        r = self.radii(rho, r0, opt.seed, multiplier)
+        core = np.full(len(r), 0.5 * job.min_distance)
+        if self.gap > 0:
+            wide = 2.0 * hex_radius(rho, r0) * self.gap_share >= self.gap
+            core[wide] = np.maximum(core[wide], 0.5 * self.gap)
+        panel_r = np.maximum(hex_radius(rho, r0), r0) if self.hex_panel else r
+        empty = (job.density.grid <= 0).astype(np.uint8) if self.empty_term else None
+        return PenaltyTerms(
+            radius=r,
+            panel_radius=np.ascontiguousarray(panel_r),
+            center=np.ascontiguousarray(xy0),
+            half_side=container_half_sides(r, opt.container_factor),
+            box=(0.0, 0.0, job.width, job.height),
+            dmin=job.min_distance,
+            dot_radius=r0,
+            w_hard=self.w_hard,
+            empty=np.zeros((1, 1), np.uint8) if empty is None else empty,
+            grid_box=(job.density.x0, job.density.y0, *job.density.cell_size),
+            core=core,
+        )
+
+
+#: Named formulations a job can select with ``optimize.formulation``.
+PRESETS: dict[str, Formulation] = {
+    "paper": Formulation(),
+    "optdot": Formulation(w_hard=10.0, hex_panel=True, empty_term=True),
+}
+
+
+def formulation_of(job: Job) -> Formulation:
+    """The job's formulation, with its explicit ``radius_factor`` if it set one."""
+    form = PRESETS[job.optimize.formulation]
+    if job.optimize.radius_factor is not None:
+        form = replace(form, radius_factor=job.optimize.radius_factor)
+    return form
