@@ -35,9 +35,16 @@ class Formulation:
         gap: soft gap, mm: dots whose hexagonal spacing is at least ``gap / gap_share``
             get hard-core radius ``gap / 2`` instead of ``dmin / 2``; 0 = off.
         gap_share: see ``gap``.
+        core_share: hard-core radius ``core_share * r'`` (a share of the hexagonal
+            half-spacing, never below ``dmin / 2``): with ``w_hard`` it keeps every pair
+            from coming much closer than the local lattice spacing; 0 = off.
+        core_floor: the core applies only where it reaches at least this centre
+            distance, mm (``core_share * 2 r' >= core_floor``): where the lattice itself
+            is too tight to clear the close-pair threshold it would only add order.
         hex_panel: use the hexagonal radius r' (not r) against the panel edges.
         empty_term: penalise circles reaching into zero-density cells.
         stages: ``(share of max_iter, radius multiplier)`` per stage, relaxed in turn.
+        container_factor: container side / circle radius (paper: 4).
     """
 
     radius_factor: float = 1.0
@@ -48,9 +55,12 @@ class Formulation:
     w_hard: float = 0.0
     gap: float = 0.0
     gap_share: float = 0.85
+    core_share: float = 0.0
+    core_floor: float = 0.0
     hex_panel: bool = False
     empty_term: bool = False
     stages: tuple[tuple[float, float], ...] = ((1.0, 1.0),)
+    container_factor: float = 4.0
 
     def radii(self, rho: np.ndarray, r0: float, seed: int, multiplier: float = 1.0) -> np.ndarray:
         """``[n]`` circle radii, mm, for dots at fill ``rho`` (``[n]``)."""
@@ -71,6 +81,9 @@ class Formulation:
         r0 = 0.5 * job.diameter
         r = self.radii(rho, r0, opt.seed, multiplier)
         core = np.full(len(r), 0.5 * job.min_distance)
+        if self.core_share > 0:
+            share = self.core_share * hex_radius(rho, r0)
+            core = np.where(2.0 * share >= self.core_floor, np.maximum(core, share), core)
         if self.gap > 0:
             wide = 2.0 * hex_radius(rho, r0) * self.gap_share >= self.gap
             core[wide] = np.maximum(core[wide], 0.5 * self.gap)
@@ -80,7 +93,7 @@ class Formulation:
             radius=r,
             panel_radius=np.ascontiguousarray(panel_r),
             center=np.ascontiguousarray(xy0),
-            half_side=container_half_sides(r, opt.container_factor),
+            half_side=container_half_sides(r, self.container_factor),
             box=(0.0, 0.0, job.width, job.height),
             dmin=job.min_distance,
             dot_radius=r0,
@@ -91,16 +104,31 @@ class Formulation:
         )
 
 
-#: Named formulations a job can select with ``optimize.formulation``.
+#: Named formulations a job can select with ``optimize.formulation``. ``optdot`` won the
+#: comparison in benchmarks/formulations.py (BENCHMARKS.md): the paper's soft circles,
+#: 5 % larger, keep the pattern irregular while a hard core at 0.93 of the local
+#: hexagonal spacing (weight 15; only where that is at least 59 µm) removes most pairs
+#: under 60 µm, and 3.5 r containers hold the coverage.
 PRESETS: dict[str, Formulation] = {
     "paper": Formulation(),
-    "optdot": Formulation(w_hard=10.0, hex_panel=True, empty_term=True),
+    "optdot": Formulation(
+        radius_factor=1.05,
+        w_hard=15.0,
+        core_share=0.93,
+        core_floor=0.059,
+        hex_panel=True,
+        empty_term=True,
+        container_factor=3.5,
+    ),
 }
 
 
 def formulation_of(job: Job) -> Formulation:
-    """The job's formulation, with its explicit ``radius_factor`` if it set one."""
+    """The job's formulation, with its explicit ``radius_factor`` and
+    ``container_factor`` if it set them."""
     form = PRESETS[job.optimize.formulation]
     if job.optimize.radius_factor is not None:
         form = replace(form, radius_factor=job.optimize.radius_factor)
+    if job.optimize.container_factor is not None:
+        form = replace(form, container_factor=job.optimize.container_factor)
     return form

@@ -35,7 +35,8 @@ class OptimizeParams:
             penalty with the circle radius); ``"optdot"`` is our default, see README.
         radius_factor: multiplies the paper's circle radius r = r0 sqrt(pi/(sqrt3 rho));
             ``None`` takes the formulation's (see :mod:`optdot.formulation`).
-        container_factor: container side / circle radius (paper: 4).
+        container_factor: container side / circle radius (paper: 4); ``None`` takes the
+            formulation's.
         lbfgs_memory: L-BFGS history length m (paper: 6).
         ftol: stop when the penalty fell by less than ``ftol`` (relative) over 10
             iterations; 0 runs all ``max_iter`` iterations.
@@ -51,7 +52,7 @@ class OptimizeParams:
     seed: int = 1
     formulation: str = "optdot"
     radius_factor: float | None = None
-    container_factor: float = 4.0
+    container_factor: float | None = None
     lbfgs_memory: int = 6
     ftol: float = 1e-3
     gap: float = 0.0
@@ -78,7 +79,7 @@ class OptimizeParams:
                 "0.5..3",
             )
         _check(
-            1.0 <= self.container_factor <= 100.0,
+            self.container_factor is None or 1.0 <= self.container_factor <= 100.0,
             "optimize.container_factor",
             self.container_factor,
             "1..100",
