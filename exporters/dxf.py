@@ -44,12 +44,12 @@ def _template(pattern: Pattern, version: str) -> tuple[str, str, str, int]:
     doc.layers.add("DOTS", color=7)
     doc.layers.add("OUTLINE", color=1)
     msp = doc.modelspace()
-    x0, y0, x1, y1 = pattern.box
-    outline = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
-    if version == "R12":
-        msp.add_polyline2d(outline, close=True, dxfattribs={"layer": "OUTLINE"})
-    else:
-        msp.add_lwpolyline(outline, close=True, dxfattribs={"layer": "OUTLINE"})
+    for ring in pattern.outline_rings():  # outline and holes, one closed polyline each
+        pts = [(float(x), float(y)) for x, y in ring]
+        if version == "R12":
+            msp.add_polyline2d(pts, close=True, dxfattribs={"layer": "OUTLINE"})
+        else:
+            msp.add_lwpolyline(pts, close=True, dxfattribs={"layer": "OUTLINE"})
     msp.add_circle((_MARK_X, _MARK_Y), pattern.radius, dxfattribs={"layer": "DOTS"})
     buf = io.StringIO()
     doc.write(buf)

@@ -3,7 +3,8 @@
 Units: user unit 1 µm, database unit 1 nm. The dot is one cell (a circle polygon whose
 vertex count follows the tolerance) placed by one reference per dot, so 10⁶ dots stay
 ~26 MB in GDSII; OASIS stores the same references as one explicit repetition (~8 MB).
-``flatten`` writes plain polygons instead. The panel outline goes on its own layer.
+``flatten`` writes plain polygons instead. The panel outline and each hole or keep-out
+go on their own layer as closed polygons (exteriors counter-clockwise, holes clockwise).
 """
 
 from __future__ import annotations
@@ -58,12 +59,8 @@ def build_library(pattern: Pattern, opts: ExportOptions, oasis: bool = False) ->
         )
     )
     top = gdstk.Cell(opts.top_cell)
-    x0, y0, x1, y1 = (v * 1e3 for v in pattern.box)
-    top.add(
-        gdstk.rectangle(
-            (x0, y0), (x1, y1), layer=opts.outline_layer, datatype=opts.outline_datatype
-        )
-    )
+    for ring in pattern.outline_rings():  # outline and holes, each a closed polygon
+        top.add(gdstk.Polygon(ring * 1e3, layer=opts.outline_layer, datatype=opts.outline_datatype))
     xy = pattern.xy * 1e3
     if oasis and len(xy) > 1:
         xy = xy[spatial_order(xy)]  # small deltas: compact OASIS repetition

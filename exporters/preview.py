@@ -58,6 +58,9 @@ def write_png(pattern: Pattern, path: str | Path, dpi: int = 110) -> None:
     a.set_xlabel("x (mm)")
     a.set_ylabel("y (mm)")
     fig.colorbar(im, ax=a, label="fill fraction")
+    for ring in pattern.outline_rings():
+        closed = np.vstack([ring, ring[:1]])
+        a.plot(closed[:, 0], closed[:, 1], color="white", lw=0.8)
     tx0, ty0, tx1, ty1 = zoom_tile(pattern)
     a.add_patch(plt.Rectangle((tx0, ty0), tx1 - tx0, ty1 - ty0, fill=False, ec="red"))
     sel = _in_window(pattern, (tx0, ty0, tx1, ty1))
@@ -92,9 +95,11 @@ def write_svg(pattern: Pattern, path: str | Path) -> None:
         f'height="{wy1 - wy0:.6f}mm" '
         f'viewBox="{wx0:.6f} {-wy1:.6f} {wx1 - wx0:.6f} {wy1 - wy0:.6f}">\n',
         f"<title>{pattern.n} dots, diameter {pattern.diameter} mm</title>\n",
-        f'<rect x="{x0:.6f}" y="{-y1:.6f}" width="{x1 - x0:.6f}" height="{y1 - y0:.6f}" '
-        'fill="none" stroke="red" stroke-width="0.01"/>\n<g fill="black">\n',
     ]
+    for ring in pattern.outline_rings():
+        d = " ".join(f"{x:.6f},{-y:.6f}" for x, y in ring.tolist())
+        out.append(f'<polygon points="{d}" fill="none" stroke="red" stroke-width="0.01"/>\n')
+    out.append('<g fill="black">\n')
     out += [
         f'<circle cx="{x:.6f}" cy="{-y:.6f}" r="{r:.6f}"/>\n' for x, y in pattern.xy[sel].tolist()
     ]

@@ -11,7 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from optdot.errors import PatternFileError
+from optdot.domain import domain_from_rings
+from optdot.errors import GeometryError, PatternFileError
 from optdot.pattern import Pattern, load_pattern
 
 from .options import ExportOptions
@@ -77,12 +78,9 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
         for p in top.polygons
         if (p.layer, p.datatype) == (opts.outline_layer, opts.outline_datatype)
     ]
-    box = None
-    if outline:
-        b = np.array(outline[0].bounding_box()) * to_mm
-        box = (float(b[0, 0]), float(b[0, 1]), float(b[1, 0]), float(b[1, 1]))
+    rings = [p.points * to_mm for p in outline]
     xy = np.round(np.concatenate(centres), 6)
-    return _pattern(path, xy, diameter, box)
+    return _pattern(path, xy, diameter, rings)
 
 
 def _read_dxf(path: Path) -> Pattern:
@@ -95,28 +93,32 @@ def _read_dxf(path: Path) -> Pattern:
         raise PatternFileError(f"{path}: no CIRCLE entities on layer DOTS")
     xy = np.array([(c.dxf.center.x, c.dxf.center.y) for c in circles])
     radii = np.array([c.dxf.radius for c in circles])
-    box = None
+    rings = []
     for e in msp.query('LWPOLYLINE POLYLINE[layer=="OUTLINE"]'):
-        pts = (
-            np.array([p[:2] for p in e.get_points()])
+        rings.append(
+            np.array([p[:2] for p in e.get_points()], dtype=np.float64)
             if e.dxftype() == "LWPOLYLINE"
-            else np.array([v.dxf.location[:2] for v in e.vertices])
+            else np.array([v.dxf.location[:2] for v in e.vertices], dtype=np.float64)
         )
-        box = (
-            float(pts[:, 0].min()),
-            float(pts[:, 1].min()),
-            float(pts[:, 0].max()),
-            float(pts[:, 1].max()),
-        )
-        break
     if np.ptp(radii) > 1e-9:
         raise PatternFileError(f"{path}: dots of different diameters")
-    return _pattern(path, np.round(xy, 6), 2 * float(radii[0]), box)
+    return _pattern(path, np.round(xy, 6), 2 * float(radii[0]), rings)
 
 
-def _pattern(path: Path, xy: np.ndarray, diameter: float, box) -> Pattern:
-    if box is None:
+def _pattern(path: Path, xy: np.ndarray, diameter: float, rings: list[np.ndarray]) -> Pattern:
+    """A pattern whose panel is the outline read back (its rings), else the dots' extent."""
+    outline = None
+    if rings:
+        try:
+            outline = domain_from_rings(rings, str(path))
+        except GeometryError as e:
+            raise PatternFileError(str(e)) from None
+        pts = np.concatenate(rings)
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+    else:
         lo = xy.min(axis=0) - diameter / 2
         hi = xy.max(axis=0) + diameter / 2
-        box = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
-    return Pattern(xy=xy, diameter=round(diameter, 6), box=box, meta={"source": str(path)})
+    box = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+    return Pattern(
+        xy=xy, diameter=round(diameter, 6), box=box, meta={"source": str(path)}, outline=outline
+    )

@@ -114,8 +114,16 @@ def _load_source(source: Path, job_path, seed, max_iter, method, formulation, qu
     if source.suffix.lower() == ".toml":
         return run_job(source, seed, max_iter, method, formulation, quiet)
     job = load_job(job_path) if job_path else None
-    box = (0.0, 0.0, job.width, job.height) if job else None
-    return job, read_any(source, box=box)
+    return job, _with_job_panel(read_any(source, box=job.box if job else None), job)
+
+
+def _with_job_panel(pattern, job):
+    """The pattern with the job's panel box and outline (the job is the authority)."""
+    if job is None:
+        return pattern
+    from dataclasses import replace
+
+    return replace(pattern, box=job.box, outline=None if job.domain.rectangle else job.domain)
 
 
 def _gate(job, pattern, collision=None, close=None):
@@ -288,8 +296,7 @@ def qa(pattern_file, job_path, html_path, json_path, collision, close, quiet):
     outs = {k: v for k, v in (("html", html_path), ("json", json_path)) if v is not None}
     _check_outputs(outs)
     job = load_job(job_path) if job_path else None
-    box = (0.0, 0.0, job.width, job.height) if job else None
-    pattern = read_any(pattern_file, box=box)
+    pattern = _with_job_panel(read_any(pattern_file, box=job.box if job else None), job)
     result = _gate(job, pattern, collision, close)
     if json_path:
         write_json(result, json_path)

@@ -14,6 +14,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .circles import circle_radius, container_half_sides, hex_radius
+from .domain import EdgeIndex
 from .job import Job
 from .penalty import PenaltyTerms
 
@@ -89,18 +90,25 @@ class Formulation:
             core[wide] = np.maximum(core[wide], 0.5 * self.gap)
         panel_r = np.maximum(hex_radius(rho, r0), r0) if self.hex_panel else r
         empty = (job.density.grid <= 0).astype(np.uint8) if self.empty_term else None
+        dom = job.domain
+        edges = None
+        if not dom.rectangle:
+            reach = max(float(panel_r.max(initial=0.0)), r0) + dom.edge_margin
+            edges = EdgeIndex.build(dom, reach)
         return PenaltyTerms(
             radius=r,
             panel_radius=np.ascontiguousarray(panel_r),
             center=np.ascontiguousarray(xy0),
             half_side=container_half_sides(r, self.container_factor),
-            box=(0.0, 0.0, job.width, job.height),
+            box=job.box,
             dmin=job.min_distance,
             dot_radius=r0,
             w_hard=self.w_hard,
             empty=np.zeros((1, 1), np.uint8) if empty is None else empty,
             grid_box=(job.density.x0, job.density.y0, *job.density.cell_size),
             core=core,
+            margin=dom.edge_margin,
+            edges=edges,
         )
 
 

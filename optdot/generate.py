@@ -13,9 +13,9 @@ from collections.abc import Callable
 import numpy as np
 
 from .circles import hex_radius
-from .errors import GuaranteeError
+from .errors import GeometryError, GuaranteeError
 from .formulation import Formulation, formulation_of
-from .initial import initial_dots
+from .initial import initial_dots, initial_dots_in
 from .job import Job
 from .legalize import check_guarantee, legalize
 from .md import MDForce, md_relax
@@ -96,7 +96,15 @@ def generate(
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
 
-    xy_init = initial_dots(job.density, n, opt.seed)
+    if job.domain.rectangle:
+        xy_init = initial_dots(job.density, n, opt.seed)
+    else:
+        xy_init = initial_dots_in(job.density, n, opt.seed, job.domain.contains)
+        if len(xy_init) < n:
+            raise GeometryError(
+                f"{where}: could only place {len(xy_init)} of {n} dots inside the outline; "
+                "the map is zero over most of it"
+            )
     home = job.density.cell_index(xy_init)
     rho = job.density.grid.ravel()[home]
     order = spatial_order(xy_init)
@@ -104,7 +112,7 @@ def generate(
     timings["initial_s"] = time.perf_counter() - t0
 
     t1 = time.perf_counter()
-    box = (0.0, 0.0, job.width, job.height)
+    box = job.box
     r0 = 0.5 * job.diameter
     if opt.method == "md":
         law = MDForce(
@@ -133,8 +141,8 @@ def generate(
     timings["relax_s"] = time.perf_counter() - t1
 
     t2 = time.perf_counter()
-    leg = legalize(relaxed, job.density, home[order], box, r0, job.min_distance)
-    viol = check_guarantee(leg.xy, job.density, box, r0, job.min_distance)
+    leg = legalize(relaxed, job.density, home[order], job.domain, r0, job.min_distance)
+    viol = check_guarantee(leg.xy, job.density, job.domain, r0, job.min_distance)
     if not viol.ok:
         raise GuaranteeError(
             f"{where}: could not meet the guarantee after {leg.sweeps} sweeps: "
@@ -163,4 +171,5 @@ def generate(
         stats["initial_xy"] = xy_init
         stats["relaxed_xy"] = np.empty_like(relaxed)
         stats["relaxed_xy"][order] = relaxed
-    return Pattern(xy=xy, diameter=job.diameter, box=box, meta=meta, stats=stats)
+    outline = None if job.domain.rectangle else job.domain
+    return Pattern(xy=xy, diameter=job.diameter, box=box, meta=meta, stats=stats, outline=outline)

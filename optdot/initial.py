@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from .density import DensityMap
@@ -41,3 +43,24 @@ def initial_dots(
     xy[:, 0] = density.x0 + (ix + u[:, 1]) * dx
     xy[:, 1] = density.y0 + (iy + u[:, 2]) * dy
     return xy
+
+
+def initial_dots_in(
+    density: DensityMap, n: int, seed: int, inside: Callable[[np.ndarray], np.ndarray]
+) -> np.ndarray:
+    """:func:`initial_dots` restricted to a domain: the first ``n`` darts that land inside.
+
+    Darts are thrown at the whole map (cells picked in proportion to rho) and those
+    outside the domain are dropped, so inside it the dots still follow rho; the sequence
+    is extended until ``n`` have landed.
+
+    Args:
+        inside: ``inside(xy) -> [m] bool`` for ``[m, 2]`` positions.
+    """
+    m = max(n, 16)
+    while True:
+        xy = initial_dots(density, m, seed)
+        keep = xy[inside(xy)]
+        if len(keep) >= n or m > 64 * max(n, 16):
+            return keep[:n]
+        m = int(m * 1.25 * n / max(len(keep), 1)) + 16

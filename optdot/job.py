@@ -10,13 +10,15 @@ import csv
 import math
 import tomllib
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from .density import HEX_PACKING_LIMIT, DensityMap
-from .errors import JobError
+from .domain import DEFAULT_TOLERANCE, Domain, load_outline, orient_all, parse_keep_out
+from .errors import GeometryError, JobError
 
 METHODS = ("optdot", "md")
 FORMULATIONS = ("paper", "optdot")
@@ -149,13 +151,15 @@ class Job:
     """A validated job: panel, fill-fraction map, dot size and optimizer settings.
 
     Attributes:
-        width, height: panel size, mm; the panel is ``[0, width] x [0, height]``.
+        width, height: size of the density grid, mm. Without an outline the panel is
+            ``[0, width] x [0, height]``; with one, the grid covers its bounding box.
         density: the fill-fraction map over the panel.
         diameter: dot diameter, mm.
         optimize: optimizer settings.
         qa: QA gate thresholds.
         name: a label carried into outputs.
         source: the job file this came from, if any.
+        domain: where dots may go (default: the rectangle of the grid).
     """
 
     width: float
@@ -166,9 +170,15 @@ class Job:
     qa: QAParams = field(default_factory=QAParams)
     name: str = "optdot"
     source: Path | None = None
+    domain: Domain | None = None
 
     def __post_init__(self) -> None:
         where = str(self.source) if self.source else "job"
+        if self.domain is None:
+            d = self.density
+            object.__setattr__(
+                self, "domain", Domain.rect(d.x0, d.y0, d.x0 + self.width, d.y0 + self.height)
+            )
         for key, v in (("domain.width", self.width), ("domain.height", self.height)):
             if not (math.isfinite(v) and 0 < v <= 10_000):
                 raise JobError(f"{where}: {key} = {v!r} must be a size in mm, 0 < x <= 10000")
@@ -195,9 +205,22 @@ class Job:
         return math.pi * (0.5 * self.diameter) ** 2
 
     @property
+    def box(self) -> tuple[float, float, float, float]:
+        """Bounding box of the panel ``(xmin, ymin, xmax, ymax)``, mm."""
+        return self.domain.box
+
+    @cached_property
+    def cell_weights(self) -> np.ndarray | None:
+        """``[ny, nx]`` share of each grid cell inside the domain (None: all of it)."""
+        if self.domain.rectangle:
+            return None
+        d = self.density
+        return self.domain.cell_fractions(d.x0, d.y0, *d.cell_size, d.shape[1], d.shape[0])
+
+    @property
     def n_dots(self) -> int:
-        """Number of dots the map asks for (paper §2.1)."""
-        return self.density.dot_count(self.dot_area)
+        """Number of dots the map asks for over the domain (paper §2.1)."""
+        return self.density.dot_count(self.dot_area, self.cell_weights)
 
     def with_overrides(self, **optimize: Any) -> Job:
         """A copy with some :class:`OptimizeParams` fields replaced (None = keep)."""
@@ -215,7 +238,15 @@ class Job:
 
 _SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
     "": {"name": (str,)},
-    "domain": {"width": (int, float), "height": (int, float)},
+    "domain": {
+        "width": (int, float),
+        "height": (int, float),
+        "outline": (str,),
+        "outline_tolerance": (int, float),
+        "keep_out": (list,),
+        "keep_out_layer": (str,),
+        "edge_margin": (int, float),
+    },
     "density": {"grid": (str,)},
     "dots": {"diameter": (int, float)},
     "optimize": {
@@ -245,7 +276,7 @@ _SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
         "smoothing": (int, float),
     },
 }
-_REQUIRED = {"domain": ("width", "height"), "density": ("grid",), "dots": ("diameter",)}
+_REQUIRED = {"density": ("grid",), "dots": ("diameter",)}
 
 
 def load_job(path: str | Path) -> Job:
@@ -295,8 +326,24 @@ def job_from_dict(raw: dict[str, Any], base: Path = Path("."), source: Path | No
             if key not in sections.get(sec, {}):
                 raise JobError(f"{where}: missing required key {sec}.{key}")
 
-    dom = sections["domain"]
-    width, height = float(dom["width"]), float(dom["height"])
+    dom = sections.get("domain", {})
+    domain = _load_domain(dom, base, where)
+    if domain is None:
+        for key in ("width", "height"):
+            if key not in dom:
+                raise JobError(f"{where}: missing required key domain.{key} (or domain.outline)")
+        x0 = y0 = 0.0
+        width, height = float(dom["width"]), float(dom["height"])
+    else:
+        x0, y0, x1, y1 = domain.box
+        width, height = x1 - x0, y1 - y0
+        for key, size in (("width", width), ("height", height)):
+            if key in dom and abs(float(dom[key]) - size) > 1e-6 * max(size, 1.0):
+                raise JobError(
+                    f"{where}: domain.{key} = {dom[key]} differs from the outline's bounding "
+                    f"box ({size:.6g} mm); with an outline the density grid covers that box, "
+                    "so leave width/height out or check the outline's units (mm)"
+                )
     grid_path = base / sections["density"]["grid"]
     grid = load_grid(grid_path)
     try:
@@ -307,8 +354,9 @@ def job_from_dict(raw: dict[str, Any], base: Path = Path("."), source: Path | No
     if not (math.isfinite(width) and math.isfinite(height) and width > 0 and height > 0):
         raise JobError(f"{where}: domain.width/height = {width}, {height} must be > 0 mm")
     _validate_grid(grid, str(grid_path))
-    density = DensityMap(grid, width, height)
+    density = DensityMap(grid, width, height, x0, y0)
     return Job(
+        domain=domain,
         width=width,
         height=height,
         density=density,
@@ -318,6 +366,51 @@ def job_from_dict(raw: dict[str, Any], base: Path = Path("."), source: Path | No
         name=str(sections[""].get("name", source.stem if source else "optdot")),
         source=source,
     )
+
+
+def _load_domain(dom: dict[str, Any], base: Path, where: str) -> Domain | None:
+    """The ``[domain]`` outline, keep-outs and edge margin (None: plain rectangle)."""
+    margin = float(dom.get("edge_margin", 0.0))
+    if not (math.isfinite(margin) and 0.0 <= margin < 100.0):
+        raise JobError(f"{where}: domain.edge_margin = {margin!r} must be in mm, 0 <= x < 100")
+    tol = float(dom.get("outline_tolerance", DEFAULT_TOLERANCE))
+    if not (1e-6 <= tol <= 1.0):
+        raise JobError(f"{where}: domain.outline_tolerance = {tol!r} is out of range (1e-6..1 mm)")
+    if "outline" not in dom:
+        for key in ("keep_out", "keep_out_layer"):
+            if key in dom:
+                raise JobError(f"{where}: domain.{key} needs domain.outline")
+        if margin > 0:
+            w, h = float(dom.get("width", 0)), float(dom.get("height", 0))
+            if w > 0 and h > 0:
+                return Domain.rect(0.0, 0.0, w, h, margin)
+        return None
+    try:
+        panel, keep = load_outline(base / dom["outline"], tol, dom.get("keep_out_layer"))
+        for item in dom.get("keep_out", []):
+            if not isinstance(item, str):
+                raise JobError(f"{where}: domain.keep_out entries must be strings (WKT or file)")
+            keep += parse_keep_out(item, base, tol)
+    except GeometryError as e:
+        raise GeometryError(f"{where}: {e}") from None
+    x0, y0, x1, y1 = panel.bounds
+    size = max(x1 - x0, y1 - y0)
+    if not 0.5 <= size <= 5000:
+        raise GeometryError(
+            f"{where}: the outline spans {size:.4g} units; optdot expects mm (0.5 .. 5000)"
+        )
+    geom = panel
+    for k in keep:
+        if not k.intersects(panel):
+            c = k.representative_point()
+            raise GeometryError(
+                f"{where}: keep-out near ({c.x:.4g}, {c.y:.4g}) mm lies outside the panel"
+            )
+        geom = geom.difference(k)
+    if geom.is_empty or geom.area <= 0:
+        raise GeometryError(f"{where}: nothing of the panel is left after the keep-outs")
+    geom = orient_all(geom)
+    return Domain(geom, margin, False, str(base / dom["outline"]))
 
 
 def load_grid(path: Path) -> np.ndarray:

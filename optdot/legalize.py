@@ -17,6 +17,7 @@ import numba as nb
 import numpy as np
 
 from .density import DensityMap
+from .domain import NO_EDGES, Domain, EdgeIndex, edge_args, signed_distance
 from .neighbors import neighbor_pairs, pairs_within
 
 #: Output resolution, mm (1 nm): positions are rounded to this.
@@ -50,12 +51,37 @@ def _push_pairs(xy, ptr, nbr, target, slack):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True)
-def _fix_dots(xy, lo, hi, grid, x0, y0, cw, ch, home, eps):  # pragma: no cover
+def _fix_dots(xy, lo, hi, grid, x0, y0, cw, ch, home, eps, need, ed):  # pragma: no cover
     ny, nx = grid.shape
     fixed = 0
     for i in range(xy.shape[0]):
         x = min(max(xy[i, 0], lo[0]), hi[0])
         y = min(max(xy[i, 1], lo[1]), hi[1])
+        if ed[0].shape[0] > 0:
+            # outline: move along the edge normal until ``need`` (+ eps) inside
+            seg, prev, nxt, start, items, inside, geo = ed
+            for _ in range(8):
+                sd, ux, uy = signed_distance(
+                    x,
+                    y,
+                    seg,
+                    prev,
+                    nxt,
+                    geo[0],
+                    geo[1],
+                    geo[2],
+                    int(geo[3]),
+                    int(geo[4]),
+                    start,
+                    items,
+                    inside,
+                    np.inf,
+                )
+                if sd >= need + eps:
+                    break
+                step = need + 2.0 * eps - sd
+                x += step * ux
+                y += step * uy
         # the cell of the position as it will be written (rounded to 1 nm)
         xr = np.floor(x * 1e6 + 0.5) / 1e6
         yr = np.floor(y * 1e6 + 0.5) / 1e6
@@ -88,7 +114,7 @@ def legalize(
     xy: np.ndarray,
     density: DensityMap,
     home_cell: np.ndarray,
-    box: tuple[float, float, float, float],
+    domain: Domain,
     dot_radius: float,
     dmin: float,
     max_sweeps: int = 1000,
@@ -99,8 +125,8 @@ def legalize(
         xy: ``[n, 2]`` positions, mm (copied).
         density: the map; dots may not sit in its zero cells.
         home_cell: ``[n]`` flat index of each dot's start cell (a non-zero cell).
-        box: panel ``(xmin, ymin, xmax, ymax)``, mm.
-        dot_radius: r0, mm; centres keep r0 from the panel edges.
+        domain: the panel; centres keep ``r0 + edge_margin`` from its edges.
+        dot_radius: r0, mm.
         dmin: minimum centre distance, mm.
         max_sweeps: give up (the caller raises) after this many sweeps.
 
@@ -108,8 +134,11 @@ def legalize(
         :class:`LegalizeResult`; ``sweeps == max_sweeps`` means it did not settle.
     """
     xy = np.array(xy, dtype=np.float64, order="C")
-    lo = np.array([box[0] + dot_radius + MARGIN, box[1] + dot_radius + MARGIN])
-    hi = np.array([box[2] - dot_radius - MARGIN, box[3] - dot_radius - MARGIN])
+    box = domain.box
+    need = dot_radius + domain.edge_margin
+    lo = np.array([box[0] + need + MARGIN, box[1] + need + MARGIN])
+    hi = np.array([box[2] - need - MARGIN, box[3] - need - MARGIN])
+    ed = NO_EDGES if domain.rectangle else edge_args(EdgeIndex.build(domain, need + 4 * MARGIN))
     cw, ch = density.cell_size
     target = dmin + MARGIN
     pair_fixes = dot_fixes = 0
@@ -117,7 +146,9 @@ def legalize(
     sweeps = 0
     while sweeps < max_sweeps:
         sweeps += 1
-        fixed = _fix_dots(xy, lo, hi, density.grid, density.x0, density.y0, cw, ch, home, MARGIN)
+        fixed = _fix_dots(
+            xy, lo, hi, density.grid, density.x0, density.y0, cw, ch, home, MARGIN, need, ed
+        )
         ptr, nbr = neighbor_pairs(xy, 0.5 * target, 0.02)
         moved = _push_pairs(xy, ptr, nbr, target, 0.5 * MARGIN)
         pair_fixes += moved
@@ -145,7 +176,7 @@ class Violations:
 def check_guarantee(
     xy: np.ndarray,
     density: DensityMap,
-    box: tuple[float, float, float, float],
+    domain: Domain,
     dot_radius: float,
     dmin: float,
 ) -> Violations:
@@ -156,7 +187,10 @@ def check_guarantee(
     ``optdot qa`` run on every pattern before it reaches a mask.
     """
     collisions = len(pairs_within(xy, dmin))
-    out = protruding_mask(xy, box, dot_radius)
+    if domain.rectangle:
+        out = protruding_mask(xy, domain.box, dot_radius + domain.edge_margin)
+    else:
+        out = domain.protruding(xy, dot_radius)
     empty = density.empty_mask(xy)
     return Violations(collisions, int(out.sum()), int(empty.sum()))
 

@@ -12,14 +12,16 @@ from __future__ import annotations
 import io
 import json
 import zipfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numba as nb
 import numpy as np
+import shapely
 
 from .atomic import atomic_path
+from .domain import Domain, orient_all
 from .errors import ExportError, PatternFileError
 
 CSV_HEADER = "x_mm,y_mm,diameter_mm"
@@ -36,6 +38,7 @@ class Pattern:
         meta: provenance (job name, seed, method, iterations, ...). Deterministic values
             only; timings live in :attr:`stats`.
         stats: run statistics that may vary between runs (seconds, memory).
+        outline: the panel outline with holes and keep-outs, when it is not the box.
     """
 
     xy: np.ndarray
@@ -43,6 +46,7 @@ class Pattern:
     box: tuple[float, float, float, float]
     meta: dict[str, Any] = field(default_factory=dict)
     stats: dict[str, Any] = field(default_factory=dict)
+    outline: Domain | None = None
 
     def __post_init__(self) -> None:
         xy = np.ascontiguousarray(self.xy, dtype=np.float64)
@@ -51,6 +55,14 @@ class Pattern:
         xy.setflags(write=False)
         object.__setattr__(self, "xy", xy)
         object.__setattr__(self, "box", tuple(float(v) for v in self.box))
+
+    def outline_rings(self) -> list[np.ndarray]:
+        """The panel's boundary loops as ``[k, 2]`` vertex arrays, mm: the outline and its
+        holes (exteriors counter-clockwise, holes clockwise), or the box."""
+        if self.outline is not None:
+            return self.outline.rings()
+        x0, y0, x1, y1 = self.box
+        return [np.array([(x0, y0), (x1, y0), (x1, y1), (x0, y1)], dtype=np.float64)]
 
     @property
     def n(self) -> int:
@@ -144,6 +156,9 @@ def _write_npz(pattern: Pattern, path: Path) -> None:
         "box": np.array(pattern.box),
         "meta": np.array(json.dumps(pattern.meta, sort_keys=True)),
     }
+    if pattern.outline is not None:
+        arrays["outline_wkt"] = np.array(pattern.outline.to_wkt())
+        arrays["edge_margin"] = np.array(pattern.outline.edge_margin)
     with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as zf:
         for name, arr in arrays.items():
             buf = io.BytesIO()
@@ -202,15 +217,26 @@ def _load_npz(path: Path, box: tuple[float, float, float, float] | None) -> Patt
             diameter = np.asarray(z["diameter"], dtype=np.float64)
             file_box = tuple(np.asarray(z["box"], dtype=np.float64).tolist())
             meta = json.loads(str(z["meta"])) if "meta" in z else {}
+            outline = None
+            if "outline_wkt" in z:
+                geom = orient_all(shapely.from_wkt(str(z["outline_wkt"])))
+                outline = Domain(geom, float(z["edge_margin"]), False, str(path))
     except KeyError as e:
         raise PatternFileError(f"{path}: missing array {e} in pattern .npz") from None
-    except (OSError, ValueError, zipfile.BadZipFile, json.JSONDecodeError) as e:
+    except (
+        OSError,
+        ValueError,
+        zipfile.BadZipFile,
+        json.JSONDecodeError,
+        shapely.errors.GEOSException,
+    ) as e:
         raise PatternFileError(f"{path}: not a readable pattern .npz ({_first_line(e)})") from None
     if xy.ndim != 2 or xy.shape[1] != 2 or len(xy) == 0:
         raise PatternFileError(f"{path}: xy must have shape [n, 2] with n > 0, got {xy.shape}")
     if len(file_box) != 4:
         raise PatternFileError(f"{path}: box must have 4 numbers, got {len(file_box)}")
-    return _validated(path, xy, np.broadcast_to(diameter, (len(xy),)), box or file_box, meta)
+    p = _validated(path, xy, np.broadcast_to(diameter, (len(xy),)), box or file_box, meta)
+    return p if outline is None else replace(p, outline=outline)
 
 
 def _validated(path, xy, diam, box, meta) -> Pattern:

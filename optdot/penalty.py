@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import numba as nb
 import numpy as np
 
+from .domain import EdgeIndex, edge_args, signed_distance
 from .neighbors import BLOCK, PairList
 
 
@@ -42,6 +43,10 @@ class PenaltyTerms:
         dmin: minimum centre distance of the hard-core term, mm.
         core: optional ``[n]`` per-dot hard-core radii c_i (pair target c_i + c_j), mm;
             default ``dmin / 2`` for every dot.
+        margin: edge margin, mm: the panel terms keep ``rp + margin`` (soft) and
+            ``r0 + margin`` (hard) from the edges.
+        edges: a polygon outline's :class:`~optdot.domain.EdgeIndex`; the panel terms
+            then use the signed distance to its edges instead of ``box``.
         dot_radius: r0, mm (hard panel limit).
         w_hard: weight of the hard terms (0 = paper).
         empty: ``[ny, nx]`` uint8 mask of zero-density cells (all 0 = no term).
@@ -59,6 +64,8 @@ class PenaltyTerms:
     empty: np.ndarray = field(default_factory=lambda: np.zeros((1, 1), np.uint8))
     grid_box: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0)
     core: np.ndarray | None = None
+    margin: float = 0.0
+    edges: EdgeIndex | None = None
 
     @property
     def core_radius(self) -> np.ndarray:
@@ -155,7 +162,9 @@ def _pair_term(xy, r, cr, i, j, w, grad):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, inline="always")
-def _single_terms(i, xy, r, rp, c, h, box, r0, w, empty, has_empty, gbox, grad):  # pragma: no cover
+def _single_terms(
+    i, xy, r, rp, c, h, box, r0, w, margin, empty, has_empty, gbox, ed, grad
+):  # pragma: no cover
     """Set ``grad[i]`` to dot i's panel, container and zero-cell terms; returns their f."""
     f = 0.0
     g0 = 0.0
@@ -168,28 +177,57 @@ def _single_terms(i, xy, r, rp, c, h, box, r0, w, empty, has_empty, gbox, grad):
             f += e * e
             g0 += 2.0 * e * ux
             g1 += 2.0 * e * uy
+    if ed[0].shape[0] > 0:
+        seg, prev, nxt, start, items, inside, geo = ed
+        sd, ux, uy = signed_distance(
+            xy[i, 0],
+            xy[i, 1],
+            seg,
+            prev,
+            nxt,
+            geo[0],
+            geo[1],
+            geo[2],
+            int(geo[3]),
+            int(geo[4]),
+            start,
+            items,
+            inside,
+            np.inf,
+        )
+        e = rp[i] + margin - sd  # outline: squared penetration depth, gradient -u
+        if e > 0.0:
+            f += e * e
+            g0 -= 2.0 * e * ux
+            g1 -= 2.0 * e * uy
+        e = r0 + margin - sd
+        if w > 0.0 and e > 0.0:
+            f += w * e * e
+            g0 -= 2.0 * w * e * ux
+            g1 -= 2.0 * w * e * uy
     for a in range(2):
         v = xy[i, a]
-        lo = box[a]
-        hi = box[a + 2]
         g = 0.0
-        p = rp[i] - (v - lo)
-        if p > 0.0:
-            f += p * p
-            g -= 2.0 * p
-        p = v + rp[i] - hi
-        if p > 0.0:
-            f += p * p
-            g += 2.0 * p
-        if w > 0.0:
-            p = r0 - (v - lo)
+        if ed[0].shape[0] == 0:
+            lo = box[a]
+            hi = box[a + 2]
+            p = rp[i] + margin - (v - lo)
             if p > 0.0:
-                f += w * p * p
-                g -= 2.0 * w * p
-            p = v + r0 - hi
+                f += p * p
+                g -= 2.0 * p
+            p = v + rp[i] + margin - hi
             if p > 0.0:
-                f += w * p * p
-                g += 2.0 * w * p
+                f += p * p
+                g += 2.0 * p
+            if w > 0.0:
+                p = r0 + margin - (v - lo)
+                if p > 0.0:
+                    f += w * p * p
+                    g -= 2.0 * w * p
+                p = v + r0 + margin - hi
+                if p > 0.0:
+                    f += w * p * p
+                    g += 2.0 * w * p
         u = v - c[i, a]
         p = abs(u) + r[i] - h[i]
         if p > 0.0:
@@ -206,7 +244,27 @@ def _single_terms(i, xy, r, rp, c, h, box, r0, w, empty, has_empty, gbox, grad):
 
 @nb.njit(parallel=True, cache=True)
 def _penalty_kernel(
-    xy, r, rp, c, h, box, cr, r0, w, ptr, mid, nbr, skip, ei, ej, empty, has_empty, gbox, grad
+    xy,
+    r,
+    rp,
+    c,
+    h,
+    box,
+    cr,
+    r0,
+    w,
+    margin,
+    ptr,
+    mid,
+    nbr,
+    skip,
+    ei,
+    ej,
+    empty,
+    has_empty,
+    gbox,
+    ed,
+    grad,
 ):  # pragma: no cover - compiled
     """Blocks of BLOCK dots in parallel (single terms, then pairs inside the block), then
     the pairs that cross blocks and the extra pairs, serially, in a fixed order."""
@@ -218,7 +276,9 @@ def _penalty_kernel(
         hi = min(lo + BLOCK, n)
         f = 0.0
         for i in range(lo, hi):
-            f += _single_terms(i, xy, r, rp, c, h, box, r0, w, empty, has_empty, gbox, grad)
+            f += _single_terms(
+                i, xy, r, rp, c, h, box, r0, w, margin, empty, has_empty, gbox, ed, grad
+            )
         for i in range(lo, hi):
             if skip[i]:
                 continue
@@ -264,6 +324,7 @@ def penalty_fast(xy: np.ndarray, terms: PenaltyTerms, pairs: PairList, grad: np.
         terms.core_radius,
         terms.dot_radius,
         terms.w_hard,
+        terms.margin,
         pairs.ptr,
         pairs.mid,
         pairs.nbr,
@@ -273,14 +334,19 @@ def penalty_fast(xy: np.ndarray, terms: PenaltyTerms, pairs: PairList, grad: np.
         terms.empty,
         bool(terms.empty.any()),
         np.asarray(terms.grid_box, dtype=np.float64),
+        edge_args(terms.edges),
         grad,
     )
 
 
 def penalty_reference(
-    xy: np.ndarray, terms: PenaltyTerms, pairs: np.ndarray
+    xy: np.ndarray, terms: PenaltyTerms, pairs: np.ndarray, outline=None
 ) -> tuple[float, np.ndarray]:
-    """Slow numpy penalty over explicit pairs (``[K, 2]``, e.g. all i < j); returns (f, grad)."""
+    """Slow numpy penalty over explicit pairs (``[K, 2]``, e.g. all i < j); returns (f, grad).
+
+    With ``terms.edges`` set, ``outline`` is the domain's shapely geometry: the edge
+    terms are then measured by shapely (nearest points), independently of the index.
+    """
     xy = np.asarray(xy, dtype=np.float64)
     r = terms.radius
     w = terms.w_hard
@@ -300,11 +366,19 @@ def penalty_reference(
         np.add.at(g, j, coef)
     lo = np.array(terms.box[:2])
     hi = np.array(terms.box[2:])
+    m = terms.margin
+    if terms.edges is not None:
+        sd, u = _outline_reference(xy, outline)
     for rad, weight in ((terms.panel_radius[:, None], 1.0), (terms.dot_radius, w)):
         if weight == 0:
             continue
-        p_lo = np.maximum(rad - (xy - lo), 0.0)
-        p_hi = np.maximum(xy + rad - hi, 0.0)
+        if terms.edges is not None:
+            e = np.maximum(np.broadcast_to(rad, (len(xy), 1))[:, 0] + m - sd, 0.0)
+            f += weight * float((e**2).sum())
+            g -= weight * 2 * e[:, None] * u
+            continue
+        p_lo = np.maximum(rad + m - (xy - lo), 0.0)
+        p_hi = np.maximum(xy + rad + m - hi, 0.0)
         f += weight * float((p_lo**2).sum() + (p_hi**2).sum())
         g += weight * (-2 * p_lo + 2 * p_hi)
     if terms.empty.any():
@@ -316,6 +390,19 @@ def penalty_reference(
     f += float((p**2).sum())
     g += 2 * p * np.where(u >= 0, 1.0, -1.0)
     return f, g
+
+
+def _outline_reference(xy: np.ndarray, outline) -> tuple[np.ndarray, np.ndarray]:
+    """Signed distance to the outline's edges (> 0 inside) and its gradient, by shapely."""
+    import shapely
+
+    pts = shapely.points(xy)
+    near = shapely.get_coordinates(shapely.shortest_line(pts, outline.boundary))[1::2]
+    diff = xy - near
+    d = np.hypot(diff[:, 0], diff[:, 1])
+    sign = np.where(shapely.contains_xy(outline, xy[:, 0], xy[:, 1]), 1.0, -1.0)
+    u = np.where(d[:, None] > 0, diff / np.maximum(d, 1e-300)[:, None], 0.0) * sign[:, None]
+    return sign * d, u
 
 
 def _empty_reference(xy: np.ndarray, terms: PenaltyTerms) -> tuple[np.ndarray, np.ndarray]:

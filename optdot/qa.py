@@ -17,6 +17,7 @@ from scipy.ndimage import gaussian_filter
 from scipy.spatial import cKDTree
 
 from .density import DensityMap
+from .domain import polygon_cell_fractions
 from .job import QAParams
 from .legalize import protruding_mask
 from .pattern import Pattern
@@ -176,12 +177,20 @@ def run_qa(
         {str(q): float(np.percentile(nn, q)) for q in (1, 5, 50, 95)} if n > 1 else {}
     )
 
-    out = protruding_mask(xy, pattern.box, r0)
+    if pattern.outline is None:
+        out = protruding_mask(xy, pattern.box, r0)
+        what = "dots protruding from the panel"
+    else:
+        out = pattern.outline.protruding(xy, r0, margin=False)
+        m["outside_outline_or_in_holes"] = int((~pattern.outline.contains(xy)).sum())
+        m["edge_margin_mm"] = pattern.outline.edge_margin
+        m["edge_margin_violations"] = int(pattern.outline.protruding(xy, r0).sum())
+        what = "dots protruding from the outline or in holes / keep-outs"
     m["protruding"] = int(out.sum())
     arrays["protruding"] = np.flatnonzero(out)
     checks.append(
         Check(
-            "dots protruding from the panel",
+            what,
             int(out.sum()),
             params.max_protruding,
             int(out.sum()) <= params.max_protruding,
@@ -247,20 +256,25 @@ def _density_checks(pattern, density, params, nn, m, arrays, checks) -> None:
     m["nn_normalized_percentiles"] = (
         {str(q): float(np.percentile(nn_norm, q)) for q in (1, 5, 50, 95)} if len(nn_norm) else {}
     )
-    # coverage per cell
+    # coverage per cell; with an outline each cell counts only its share inside it
     ny, nx = density.shape
     cw, ch = density.cell_size
     cells = density.cell_index(xy[inside])
     got = np.bincount(cells, minlength=nx * ny).reshape(ny, nx) * dot_area / (cw * ch)
-    target = density.grid
-    m["dots_expected"] = density.dot_count(dot_area)
+    if pattern.outline is None:
+        frac = np.ones_like(density.grid)
+    else:
+        frac = pattern.outline.cell_fractions(density.x0, density.y0, cw, ch, nx, ny)
+    target = density.grid * frac
+    m["dots_expected"] = density.dot_count(dot_area, None if pattern.outline is None else frac)
     m["dot_count_error"] = (pattern.n - m["dots_expected"]) / max(m["dots_expected"], 1)
     sig = (params.smoothing / ch, params.smoothing / cw)
     gs = gaussian_filter(got, sig, mode="constant")
     ts = gaussian_filter(target, sig, mode="constant")
-    w = gaussian_filter(np.ones_like(target), sig, mode="constant")
-    gs, ts = gs / w, ts / w
-    valid = ts > 0.02
+    w = gaussian_filter(frac, sig, mode="constant")
+    inner = w > 0.25  # smoothing windows mostly inside the domain
+    gs, ts = gs / np.where(inner, w, 1), ts / np.where(inner, w, 1)
+    valid = (ts > 0.02) & inner & (frac > 0.5)
     rel = np.where(valid, (gs - ts) / np.where(valid, ts, 1), 0.0)
     arrays["coverage_error"] = (
         rel,
@@ -272,8 +286,9 @@ def _density_checks(pattern, density, params, nn, m, arrays, checks) -> None:
     m["coverage_rel_rms_smoothed"] = rms
     m["coverage_rel_worst_smoothed"] = float(rel[iw])
     m["coverage_worst_at_mm"] = worst_xy
+    full = (target > 0) & (frac > 0.99)
     m["coverage_per_cell_rel_rms"] = float(
-        np.sqrt(np.mean(((got - target)[target > 0] / target[target > 0]) ** 2))
+        np.sqrt(np.mean(((got - target)[full] / target[full]) ** 2)) if full.any() else 0.0
     )
     checks.append(
         Check(
@@ -285,6 +300,9 @@ def _density_checks(pattern, density, params, nn, m, arrays, checks) -> None:
         )
     )
     # coverage in a 1 mm band along each edge vs target
+    if pattern.outline is not None:
+        m["edge_band_coverage_ratio"] = _outline_bands(pattern, density, dot_area)
+        return
     band = {}
     x0, y0, x1, y1 = pattern.box
     bands = {
@@ -298,6 +316,32 @@ def _density_checks(pattern, density, params, nn, m, arrays, checks) -> None:
         want = _target_area(density, (bx0, bx1, by0, by1))
         band[name] = float(got * dot_area / want) if want > 0 else None
     m["edge_band_coverage_ratio"] = band
+
+
+def _outline_bands(pattern: Pattern, density: DensityMap, dot_area: float) -> dict:
+    """Dot area / target in the 1 mm band inside each loop of the outline (outline, hole 1,
+    ...), counted on the cells' exact shares of the band."""
+    import shapely
+
+    dom = pattern.outline
+    ny, nx = density.shape
+    cw, ch = density.cell_size
+    out = {}
+    loops = [(p.exterior, p.interiors) for p in dom.polygons]
+    named = []
+    n_holes = 0
+    for k, (ext, holes) in enumerate(loops):
+        named.append((f"outline {k + 1}" if len(loops) > 1 else "outline", ext))
+        for h in holes:
+            n_holes += 1
+            named.append((f"hole {n_holes}", h))
+    for name, ring in named:
+        band = dom.geometry.intersection(shapely.LineString(ring.coords).buffer(1.0))
+        frac = polygon_cell_fractions(band, density.x0, density.y0, cw, ch, nx, ny)
+        want = float((density.grid * frac).sum() * cw * ch)
+        got = int(shapely.contains_xy(band, pattern.xy[:, 0], pattern.xy[:, 1]).sum())
+        out[name] = float(got * dot_area / want) if want > 0 else None
+    return out
 
 
 def _target_area(density: DensityMap, b) -> float:

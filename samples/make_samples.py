@@ -8,6 +8,7 @@ optical simulation: low fill where light is strong (near sources), high fill far
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -71,7 +72,57 @@ SAMPLES = {
 }
 
 
+def outline_sample(folder: Path) -> None:
+    """A real-looking light guide: 24 x 16 mm with a rounded (R 2 mm) top-left corner, a
+    45° chamfer bottom-right, a notch for the flex cable on the right edge, an LED
+    cut-out in the bottom edge, two M1.6 screw holes, and a keep-out band under the
+    frame clip (given in the job as WKT). Outline drawn in a DXF as CAD would: one
+    LWPOLYLINE with a bulge for the arc, CIRCLE entities for the holes."""
+    import ezdxf
+
+    doc = ezdxf.new("R2010")
+    doc.header["$INSUNITS"] = 4  # mm
+    msp = doc.modelspace()
+    bulge = math.tan(math.radians(90) / 4)  # a quarter circle
+    shell = [
+        (0.0, 0.0, 0.0),
+        (9.0, 0.0, 0.0),  # LED cut-out: 6 x 1.2 mm pocket in the bottom edge
+        (9.0, 1.2, 0.0),
+        (15.0, 1.2, 0.0),
+        (15.0, 0.0, 0.0),
+        (22.0, 0.0, 0.0),  # chamfer
+        (24.0, 2.0, 0.0),
+        (24.0, 7.0, 0.0),  # notch for the flex cable
+        (21.5, 7.0, 0.0),
+        (21.5, 10.0, 0.0),
+        (24.0, 10.0, 0.0),
+        (24.0, 16.0, 0.0),
+        (2.0, 16.0, bulge),  # rounded corner, R 2 mm, centre (2, 14)
+        (0.0, 14.0, 0.0),
+    ]
+    msp.add_lwpolyline(shell, format="xyb", close=True, dxfattribs={"layer": "OUTLINE"})
+    for cx, cy in ((3.0, 3.0), (20.0, 13.0)):
+        msp.add_circle((cx, cy), 0.8, dxfattribs={"layer": "OUTLINE"})
+    doc.saveas(folder / "outline.dxf")
+    X, Y = _centers(24.0, 16.0, 0.25)
+    light = np.exp(-((X - 12.0) ** 2 + (Y - 0.6) ** 2) / (2 * 2.0**2))
+    g = np.clip(0.10 + 0.30 * (1 - np.exp(-np.hypot(X - 12.0, Y) / 6.0)) - 0.06 * light, 0.05, 0.45)
+    np.savetxt(folder / "density.csv", g, fmt="%.4f", delimiter=",")
+    (folder / "job.toml").write_text(
+        "# light guide with a CAD outline: rounded and chamfered corners, a notch, an LED\n"
+        "# cut-out, two screw holes (outline.dxf) and a keep-out band (WKT); ~45k dots\n"
+        'name = "outline"\n\n[domain]\noutline = "outline.dxf"\n'
+        'keep_out = ["POLYGON ((5 15.2, 19 15.2, 19 16.5, 5 16.5, 5 15.2))"]\n'
+        "edge_margin = 0.02\n\n"
+        '[density]\ngrid = "density.csv"\n\n[dots]\ndiameter = 0.046\n\n'
+        '[optimize]\nmethod = "optdot"\nmax_iter = 200\nseed = 1\n'
+    )
+
+
 def main() -> None:
+    d = HERE / "outline"
+    d.mkdir(exist_ok=True)
+    outline_sample(d)
     for name, (fn, w, h, what) in SAMPLES.items():
         d = HERE / name
         d.mkdir(exist_ok=True)

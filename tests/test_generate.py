@@ -11,7 +11,7 @@ from .conftest import SAMPLES, write_job
 
 
 def assert_guarantee(job, p):
-    v = check_guarantee(p.xy, job.density, p.box, p.radius, job.min_distance)
+    v = check_guarantee(p.xy, job.density, job.domain, p.radius, job.min_distance)
     assert v.ok, v
     assert len(close_pairs(p.xy, job.diameter)) == 0  # independent engine (GEOS)
     assert abs(p.n - job.n_dots) <= max(1, 0.001 * job.n_dots)
@@ -50,8 +50,8 @@ def test_legalize_fixes_planted_defects(tiny_job, tiny_pattern):
     xy[1] = xy[0] + [0.01, 0.0]  # collision
     xy[2] = [0.001, 1.0]  # protruding and in the empty column
     home = tiny_job.density.cell_index(tiny_pattern.xy)
-    res = legalize(xy, tiny_job.density, home, tiny_pattern.box, 0.023, 0.046)
-    v = check_guarantee(res.xy, tiny_job.density, tiny_pattern.box, 0.023, 0.046)
+    res = legalize(xy, tiny_job.density, home, tiny_job.domain, 0.023, 0.046)
+    v = check_guarantee(res.xy, tiny_job.density, tiny_job.domain, 0.023, 0.046)
     assert v.ok and res.pair_fixes >= 1 and res.dot_fixes >= 1
 
 
