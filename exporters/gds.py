@@ -3,8 +3,8 @@
 Units: user unit 1 µm, database unit 1 nm. The dot is one cell (a circle polygon whose
 vertex count follows the tolerance) placed by one reference per dot, so 10⁶ dots stay
 ~26 MB in GDSII; OASIS stores the same references as one explicit repetition (~8 MB).
-``flatten`` writes plain polygons instead. The panel outline and each hole or keep-out
-go on their own layer as closed polygons (exteriors counter-clockwise, holes clockwise).
+``flatten`` writes plain polygons instead. The panel (outline minus holes and keep-outs)
+goes on its own layer as filled polygons, holes cut open by zero-width keyholes.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ import math
 from pathlib import Path
 
 import gdstk
+import numpy as np
 
 from optdot.atomic import atomic_path
 from optdot.errors import ExportError
@@ -59,8 +60,16 @@ def build_library(pattern: Pattern, opts: ExportOptions, oasis: bool = False) ->
         )
     )
     top = gdstk.Cell(opts.top_cell)
-    for ring in pattern.outline_rings():  # outline and holes, each a closed polygon
-        top.add(gdstk.Polygon(ring * 1e3, layer=opts.outline_layer, datatype=opts.outline_datatype))
+    # the panel as filled polygon(s); GDSII has no holes, so gdstk cuts each hole open
+    # with a zero-width keyhole, which KLayout and mask tools read as a hole
+    rings = pattern.outline_rings()
+    shells = [gdstk.Polygon(r * 1e3) for r in rings if _ccw(r)]
+    holes = [gdstk.Polygon(r * 1e3) for r in rings if not _ccw(r)]
+    lay = {"layer": opts.outline_layer, "datatype": opts.outline_datatype}
+    if holes:
+        top.add(*gdstk.boolean(shells, holes, "not", precision=1e-3, **lay))
+    else:
+        top.add(*(gdstk.Polygon(p.points, **lay) for p in shells))
     xy = pattern.xy * 1e3
     if oasis and len(xy) > 1:
         xy = xy[spatial_order(xy)]  # small deltas: compact OASIS repetition
@@ -75,6 +84,11 @@ def build_library(pattern: Pattern, opts: ExportOptions, oasis: bool = False) ->
     else:
         lib.add(dot, top)
     return lib
+
+
+def _ccw(ring: np.ndarray) -> bool:
+    x, y = ring[:, 0], ring[:, 1]
+    return float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))) > 0
 
 
 def write_gds(pattern: Pattern, path: str | Path, opts: ExportOptions) -> None:

@@ -80,7 +80,7 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
     ]
     rings = [p.points * to_mm for p in outline]
     xy = np.round(np.concatenate(centres), 6)
-    return _pattern(path, xy, diameter, rings)
+    return _pattern(path, xy, diameter, rings, filled=True)
 
 
 def _read_dxf(path: Path) -> Pattern:
@@ -105,12 +105,17 @@ def _read_dxf(path: Path) -> Pattern:
     return _pattern(path, np.round(xy, 6), 2 * float(radii[0]), rings)
 
 
-def _pattern(path: Path, xy: np.ndarray, diameter: float, rings: list[np.ndarray]) -> Pattern:
-    """A pattern whose panel is the outline read back (its rings), else the dots' extent."""
+def _pattern(
+    path: Path, xy: np.ndarray, diameter: float, rings: list[np.ndarray], filled: bool = False
+) -> Pattern:
+    """A pattern whose panel is the outline read back, else the dots' extent.
+
+    ``rings`` are DXF loops (exteriors counter-clockwise, holes clockwise) or, with
+    ``filled``, GDS/OAS polygons whose holes are keyholes."""
     outline = None
     if rings:
         try:
-            outline = domain_from_rings(rings, str(path))
+            outline = domain_from_rings(rings, str(path), filled)
         except GeometryError as e:
             raise PatternFileError(str(e)) from None
         pts = np.concatenate(rings)

@@ -184,11 +184,13 @@ def parse_keep_out(item: str, base: Path, tolerance: float) -> list[Polygon]:
 
 def validate_polygon(poly: Polygon, where: str) -> Polygon:
     """Refuse invalid or empty polygons with shapely's reason and location."""
-    if poly.is_empty or poly.area <= 0:
+    if poly.is_empty or poly.convex_hull.area <= 0:
         raise GeometryError(f"{where}: the outline has zero area")
     if not poly.is_valid:
         reason = shapely.is_valid_reason(poly)
         raise GeometryError(f"{where}: invalid outline: {_reason_mm(reason)}")
+    if poly.area <= 0:
+        raise GeometryError(f"{where}: the outline has zero area")
     return orient(poly, 1.0)
 
 
@@ -340,14 +342,26 @@ def _polygon_from_loops(loops: list[np.ndarray], path: Path) -> Polygon:
     return validate_polygon(poly, str(path))
 
 
-def domain_from_rings(rings: list[np.ndarray], where: str) -> Domain | None:
-    """Rebuild a domain from boundary loops read back from a mask (exteriors
-    counter-clockwise, holes clockwise); None if they are just one axis-aligned box."""
+def domain_from_rings(rings: list[np.ndarray], where: str, filled: bool = False) -> Domain | None:
+    """Rebuild a domain from outline loops read back from a mask; None if they are just
+    one axis-aligned box.
+
+    Args:
+        rings: ``[k, 2]`` vertex arrays, mm.
+        where: file name for messages.
+        filled: the rings are filled polygons whose holes are keyhole cuts (GDSII/OASIS);
+            otherwise exteriors run counter-clockwise and holes clockwise (DXF).
+    """
     if len(rings) == 1 and len(rings[0]) == 4:
         r = rings[0]
         xs, ys = np.unique(r[:, 0]), np.unique(r[:, 1])
         if len(xs) == 2 and len(ys) == 2:
             return None
+    if filled:
+        geom = shapely.union_all([Polygon(r).buffer(0) for r in rings if len(r) >= 3])
+        if geom.is_empty:
+            raise GeometryError(f"{where}: the outline polygons have zero area")
+        return Domain(orient_all(geom), 0.0, False, where)
     polys = [Polygon(r) for r in rings if len(r) >= 3]
     shells = [p for p in polys if p.exterior.is_ccw]
     holes = [p for p in polys if not p.exterior.is_ccw]

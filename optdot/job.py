@@ -397,7 +397,8 @@ def _load_domain(dom: dict[str, Any], base: Path, where: str) -> Domain | None:
     size = max(x1 - x0, y1 - y0)
     if not 0.5 <= size <= 5000:
         raise GeometryError(
-            f"{where}: the outline spans {size:.4g} units; optdot expects mm (0.5 .. 5000)"
+            f"{where}: {dom['outline']}: the outline spans {size:.4g} units; optdot expects mm "
+            "(0.5 .. 5000)"
         )
     geom = panel
     for k in keep:

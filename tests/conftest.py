@@ -10,7 +10,8 @@ SAMPLES = ROOT / "samples"
 
 
 def write_job(tmp: Path, grid: np.ndarray | str, **sections) -> Path:
-    """Write a job + grid into ``tmp``; ``sections`` override/add TOML lines per section."""
+    """Write a job + grid into ``tmp``; ``sections`` override/add TOML lines per section
+    (a value of None removes that key)."""
     if isinstance(grid, str):
         (tmp / "density.csv").write_text(grid)
     else:
@@ -22,7 +23,12 @@ def write_job(tmp: Path, grid: np.ndarray | str, **sections) -> Path:
         "optimize": {"max_iter": 60, "seed": 3},
     }
     for k, v in sections.items():
-        base.setdefault(k, {}).update(v)
+        sec = base.setdefault(k, {})
+        for kk, vv in v.items():
+            if vv is None:  # None removes a default key
+                sec.pop(kk, None)
+            else:
+                sec[kk] = vv
     lines = []
     for sec, kv in base.items():
         lines.append(f"[{sec}]")

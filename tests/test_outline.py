@@ -1,0 +1,226 @@
+"""Real outlines: loading and validation, the edge penalty, generation, mask round trip."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import ezdxf
+import numpy as np
+import pytest
+import shapely
+from click.testing import CliRunner
+from scipy.optimize import approx_fprime
+from shapely.geometry import Polygon
+
+from optdot.cli import main
+from optdot.domain import Domain, EdgeIndex, signed_distances, validate_polygon
+from optdot.formulation import PRESETS
+from optdot.generate import generate
+from optdot.job import load_job
+from optdot.neighbors import PairList, neighbor_pairs, pairs_brute_force, pairs_within
+from optdot.penalty import penalty_fast, penalty_reference
+from tests.conftest import write_job
+
+NOTCHED = [(0, 0), (4, 0), (4, 1.2), (3.2, 1.2), (3.2, 1.8), (4, 1.8), (4, 3), (0.6, 3), (0, 2.4)]
+
+
+def notched_domain(margin: float = 0.0) -> Domain:
+    hole = shapely.Point(1.2, 1.2).buffer(0.35, 24).exterior.coords
+    return Domain(validate_polygon(Polygon(NOTCHED, [hole]), "test"), margin)
+
+
+def write_outline_dxf(path, *, hole_at=(1.2, 1.2), closed=True):
+    doc = ezdxf.new("R2010")
+    msp = doc.modelspace()
+    bulge = math.tan(math.radians(90) / 4)
+    pts = [(0, 0, 0), (4, 0, 0), (4, 3, 0), (1, 3, bulge), (0, 2, 0)]  # rounded corner
+    msp.add_lwpolyline(pts, format="xyb", close=closed)
+    msp.add_circle(hole_at, 0.35)
+    doc.saveas(path)
+
+
+def outline_job(tmp_path, grid=None, **domain):
+    write_outline_dxf(tmp_path / "outline.dxf")
+    grid = np.full((12, 16), 0.3) if grid is None else grid
+    dom = {"outline": '"outline.dxf"', "width": None, "height": None, **domain}
+    return write_job(tmp_path, grid, domain=dom)
+
+
+def test_signed_distance_matches_shapely():
+    dom = notched_domain()
+    idx = EdgeIndex.build(dom, 0.3)
+    xy = np.random.default_rng(0).uniform(-0.5, 4.5, (20000, 2))
+    d, _ = signed_distances(idx, xy)
+    ref = dom.edge_distance(xy) * np.where(dom.contains(xy), 1.0, -1.0)
+    exact = np.isfinite(d)
+    assert np.abs(d[exact] - ref[exact]).max() < 1e-12
+    assert (ref[~exact] >= 0.3).all()  # only points deep inside are left unmeasured
+    assert exact[ref < 0.3].all()
+
+
+@pytest.mark.parametrize("margin", [0.0, 0.05])
+def test_outline_penalty_matches_reference_and_gradient(margin):
+    from optdot.circles import circle_radius, container_half_sides
+
+    dom = notched_domain(margin)
+    rng = np.random.default_rng(1)
+    xy = rng.uniform(-0.1, 4.1, (400, 2))
+    r = circle_radius(rng.uniform(0.1, 0.5, len(xy)), 0.023)
+    from optdot.penalty import PenaltyTerms
+
+    terms = PenaltyTerms(
+        radius=r,
+        panel_radius=0.8 * r,
+        center=xy.copy(),
+        half_side=container_half_sides(r),
+        box=dom.box,
+        dmin=0.046,
+        dot_radius=0.023,
+        w_hard=10.0,
+        margin=margin,
+        edges=EdgeIndex.build(dom, float(r.max()) + margin),
+    )
+
+    def fast(x):
+        x = np.ascontiguousarray(x.reshape(-1, 2))
+        g = np.empty_like(x)
+        pl = PairList.from_csr(*neighbor_pairs(x, terms.reach, 0.0))
+        return penalty_fast(x, terms, pl, g), g
+
+    f, g = fast(xy)
+    f_ref, g_ref = penalty_reference(xy, terms, pairs_brute_force(xy, 10.0), dom.geometry)
+    assert f > 0 and f == pytest.approx(f_ref, rel=1e-10)
+    np.testing.assert_allclose(g, g_ref, rtol=1e-8, atol=1e-10)
+    num = approx_fprime(xy.ravel(), lambda x: fast(x)[0], 1e-8)
+    assert np.abs(g.ravel() - num).max() < 1e-5 * max(1.0, np.abs(g).max())
+
+
+def test_outline_job_generates_inside_with_coverage_to_the_edges(tmp_path):
+    job = load_job(outline_job(tmp_path, edge_margin=0.01))
+    job = dataclasses.replace(job, optimize=dataclasses.replace(job.optimize, max_iter=120))
+    dom = job.domain
+    assert not dom.rectangle and len(dom.rings()) == 2
+    p = generate(job)
+    # count from the map integrated over the domain only
+    area = dom.geometry.area
+    assert p.n == round(0.3 * area / job.dot_area)
+    assert len(pairs_within(p.xy, job.min_distance)) == 0
+    assert dom.contains(p.xy).all()
+    assert dom.edge_distance(p.xy).min() >= 0.023 + 0.01 - 1e-9
+    from optdot.qa import run_qa
+
+    m = run_qa(p, job.density, job.qa, job.collision_distance).metrics
+    assert m["protruding"] == 0 and m["outside_outline_or_in_holes"] == 0
+    for name, ratio in m["edge_band_coverage_ratio"].items():
+        assert ratio == pytest.approx(1.0, abs=0.05), name
+    assert m["coverage_rel_rms_smoothed"] < 0.03
+
+
+def test_outline_exports_read_back_by_klayout_and_ezdxf(tmp_path):
+    import klayout.db as kdb
+
+    job_path = outline_job(tmp_path)
+    gds, dxf = tmp_path / "o.gds", tmp_path / "o.dxf"
+    res = CliRunner().invoke(
+        main,
+        ["export", str(job_path), "--gds", str(gds), "--dxf", str(dxf), "-q", "--max-iter", "40"],
+    )
+    assert res.exit_code == 0, res.output
+    dom = load_job(job_path).domain
+    layout = kdb.Layout()
+    layout.read(str(gds))
+    top = layout.top_cell()
+    region = kdb.Region(top.begin_shapes_rec(layout.layer(2, 0)))
+    polys = [p for p in region.each()]
+    # klayout merges the outline and its hole into one polygon with a hole
+    area_um2 = sum(p.area() for p in region.merged().each()) * layout.dbu**2
+    assert len(polys) >= 1
+    assert area_um2 * 1e-6 == pytest.approx(dom.geometry.area, rel=1e-6)
+    doc = ezdxf.readfile(str(dxf))
+    rings = [
+        np.array([p[:2] for p in e.get_points()])
+        for e in doc.modelspace().query('LWPOLYLINE[layer=="OUTLINE"]')
+    ]
+    assert len(rings) == 2
+    areas = sorted(abs(Polygon(r).area) for r in rings)
+    assert areas[1] - areas[0] == pytest.approx(dom.geometry.area, rel=1e-9)
+    # QA of the mask alone rebuilds the outline from the OUTLINE layer
+    res = CliRunner().invoke(main, ["qa", str(gds), "-q", "--json", str(tmp_path / "q.json")])
+    assert res.exit_code == 0, res.output
+
+
+BAD = {
+    "self-intersection": (
+        "outline.wkt",
+        "POLYGON ((0 0, 4 3, 4 0, 0 3, 0 0))",
+        "self-intersection at",
+    ),
+    "zero area": ("outline.wkt", "POLYGON ((0 0, 4 0, 8 0, 0 0))", "zero area"),
+    "not a polygon": ("outline.wkt", "LINESTRING (0 0, 4 0, 4 3)", "open loop"),
+    "malformed": ("outline.wkt", "POLYGON ((0 0, 4 0", "malformed WKT"),
+    "units": ("outline.wkt", "POLYGON ((0 0, 40000 0, 40000 30000, 0 30000, 0 0))", "expects mm"),
+    "geojson": ("outline.geojson", '{"type": "Point", "coordinates": [1, 2]}', "no polygon"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_invalid_outlines_are_refused(tmp_path, case):
+    name, text, message = BAD[case]
+    (tmp_path / name).write_text(text)
+    dom = {"outline": f'"{name}"', "width": None, "height": None}
+    job = write_job(tmp_path, np.full((4, 4), 0.2), domain=dom)
+    res = CliRunner().invoke(main, ["generate", str(job), "-o", str(tmp_path / "p.csv")])
+    assert res.exit_code == 2, res.output
+    assert message in res.output and name in res.output
+    assert "Traceback" not in res.output
+    assert not (tmp_path / "p.csv").exists()
+
+
+@pytest.mark.parametrize(
+    "kind,message",
+    [
+        ("open", "open loop"),
+        ("hole outside", "lies outside the outer loop"),
+        ("keep-out", "outside the panel"),
+    ],
+)
+def test_invalid_dxf_outlines_are_refused(tmp_path, kind, message):
+    if kind == "open":
+        write_outline_dxf(tmp_path / "outline.dxf", closed=False)
+        dom = {"outline": '"outline.dxf"'}
+    elif kind == "hole outside":
+        write_outline_dxf(tmp_path / "outline.dxf", hole_at=(6.0, 1.0))
+        dom = {"outline": '"outline.dxf"'}
+    else:
+        write_outline_dxf(tmp_path / "outline.dxf")
+        dom = {"outline": '"outline.dxf"', "keep_out": '["POLYGON ((9 9, 10 9, 10 10, 9 9))"]'}
+    dom.update(width=None, height=None)
+    job = write_job(tmp_path, np.full((4, 4), 0.2), domain=dom)
+    res = CliRunner().invoke(main, ["generate", str(job), "-o", str(tmp_path / "p.csv")])
+    assert res.exit_code == 2, res.output
+    assert message in res.output and "Traceback" not in res.output
+
+
+def test_width_must_match_outline(tmp_path):
+    job = outline_job(tmp_path, width=5.0, height=3.0)
+    res = CliRunner().invoke(main, ["generate", str(job), "-o", str(tmp_path / "p.csv")])
+    assert res.exit_code == 2 and "differs from the outline's bounding box" in res.output
+
+
+def test_keep_out_and_margin_are_respected(tmp_path):
+    keep = "POLYGON ((2 0.5, 3 0.5, 3 1.5, 2 1.5, 2 0.5))"
+    job = load_job(outline_job(tmp_path, keep_out=f'["{keep}"]', edge_margin=0.03))
+    job = dataclasses.replace(job, optimize=dataclasses.replace(job.optimize, max_iter=60))
+    p = generate(job)
+    ko = shapely.from_wkt(keep)
+    d = shapely.distance(ko, shapely.points(p.xy))
+    assert d.min() >= 0.023 + 0.03 - 1e-9
+    assert p.outline is not None and len(p.outline.rings()) == 3
+
+
+def test_sample_outline_is_valid():
+    job = load_job(__import__("pathlib").Path(__file__).parents[1] / "samples/outline/job.toml")
+    assert not job.domain.rectangle
+    assert len(job.domain.rings()) >= 3  # outline + two screw holes
+    assert PRESETS["optdot"].terms(job, np.array([[5.0, 5.0]]), np.array([0.3])).edges is not None
