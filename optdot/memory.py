@@ -6,16 +6,18 @@ import os
 
 from .errors import ResourceError
 
-#: Bytes per dot besides the L-BFGS history, measured on benchmarks/scaling.py runs
-#: (positions, gradients, radii, containers, Verlet list, grid bins, temporaries).
-BYTES_PER_DOT = 700
+#: Bytes per dot besides the L-BFGS history (positions, gradients, radii, containers,
+#: Verlet list, grid bins, temporaries). Calibrated on benchmarks/scaling.py: peak RSS
+#: 212 MB at 10⁵ dots, 733 MB at 1.2·10⁶, 4,194 MB at 10⁷ (~400 B/dot at m = 6), plus
+#: a few percent of margin.
+BYTES_PER_DOT = 360
 #: Fixed overhead of the interpreter, numpy/scipy/numba, bytes.
 BASE_BYTES = 250 * 2**20
 
 
 def estimate_bytes(n_dots: int, memory: int = 6) -> int:
     """Peak memory estimate of generating ``n_dots`` with L-BFGS memory ``memory``, bytes."""
-    return BASE_BYTES + n_dots * (BYTES_PER_DOT + 2 * memory * 2 * 8)
+    return BASE_BYTES + n_dots * (BYTES_PER_DOT + 2 * memory * 2 * 4)  # float32 (s, y) pairs
 
 
 def available_bytes() -> int:

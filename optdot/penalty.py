@@ -126,20 +126,20 @@ def _empty_depth(x, y, rp, empty, gx0, gy0, cw, ch):  # pragma: no cover - compi
 
 
 @nb.njit(cache=True, inline="always")
-def _pair_term(xy, r, cr, i, j, w, grad):  # pragma: no cover - compiled
-    """Add pair (i, j)'s overlap and hard-core gradient to ``grad``; returns its f."""
-    dx = xy[i, 0] - xy[j, 0]
-    dy = xy[i, 1] - xy[j, 1]
+def _pair_grad(dx, dy, s, dmin, w, i_first):  # pragma: no cover - compiled
+    """Overlap + hard-core term of a pair at offset (dx, dy) = x_i - x_j.
+
+    Returns ``(f, gx, gy)``: the pair's f and the gradient for x_j (x_i gets minus it);
+    all zero beyond ``max(s, dmin)``.
+    """
     d2 = dx * dx + dy * dy
-    s = r[i] + r[j]
-    dmin = cr[i] + cr[j]
     lim = max(s, dmin) if w > 0.0 else s
     if d2 >= lim * lim:
-        return 0.0
+        return 0.0, 0.0, 0.0
     d = np.sqrt(d2)
     if d < 1e-12:
         # coincident centres: separate along x, deterministically by index
-        dx = 1e-12 if i < j else -1e-12
+        dx = 1e-12 if i_first else -1e-12
         dy = 0.0
         d = 1e-12
     f = 0.0
@@ -152,8 +152,16 @@ def _pair_term(xy, r, cr, i, j, w, grad):  # pragma: no cover - compiled
         dl = dmin - d
         f += w * dl * dl
         coef += 2.0 * w * dl
-    gx = coef * dx / d
-    gy = coef * dy / d
+    q = coef / d
+    return f, q * dx, q * dy
+
+
+@nb.njit(cache=True, inline="always")
+def _pair_term(xy, r, cr, i, j, w, grad):  # pragma: no cover - compiled
+    """Add pair (i, j)'s overlap and hard-core gradient to ``grad``; returns its f."""
+    f, gx, gy = _pair_grad(
+        xy[i, 0] - xy[j, 0], xy[i, 1] - xy[j, 1], r[i] + r[j], cr[i] + cr[j], w, i < j
+    )
     grad[i, 0] -= gx
     grad[i, 1] -= gy
     grad[j, 0] += gx
@@ -282,10 +290,24 @@ def _penalty_kernel(
         for i in range(lo, hi):
             if skip[i]:
                 continue
+            # dot i's values stay in registers over its partners
+            xi, yi, ri, ci = xy[i, 0], xy[i, 1], r[i], cr[i]
+            gxi = 0.0
+            gyi = 0.0
             for k in range(ptr[i], mid[i]):
                 j = nbr[k]
-                if not skip[j]:
-                    f += _pair_term(xy, r, cr, i, j, w, grad)
+                if skip[j]:
+                    continue
+                fp, gx, gy = _pair_grad(
+                    xi - xy[j, 0], yi - xy[j, 1], ri + r[j], ci + cr[j], w, i < j
+                )
+                f += fp
+                gxi -= gx
+                gyi -= gy
+                grad[j, 0] += gx
+                grad[j, 1] += gy
+            grad[i, 0] += gxi
+            grad[i, 1] += gyi
         part[b] = f
     f = 0.0
     for b in range(nblock):
