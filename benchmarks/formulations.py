@@ -41,7 +41,7 @@ ROOT = HERE.parent
 BASE = Formulation(w_hard=10.0, hex_panel=True, empty_term=True)
 VARIANTS: dict[str, Formulation] = {
     "paper": PRESETS["paper"],
-    "optdot (default: x1.05, core 0.93 a >= 59 um w15, containers 3.5r)": PRESETS["optdot"],
+    "optdot (default: x1.05, core 0.93 a in 59..64 um w15, containers 3.5r)": PRESETS["optdot"],
     "paper, radius x0.9": Formulation(radius_factor=0.9),
     "paper + 60 um gap everywhere (w 10)": Formulation(w_hard=10.0, gap=0.060, gap_share=0.0),
     "optdot v0.1 (hard core at 46 um)": BASE,
@@ -75,9 +75,11 @@ VARIANTS: dict[str, Formulation] = {
     "optdot + core 0.93 a (w 15), containers 3.5r, x1.1": replace(
         BASE, core_share=0.93, w_hard=15.0, container_factor=3.5, radius_factor=1.1
     ),
-    "optdot + core 0.93 a (w 15), containers 3.5r, x1.05 (no floor)": replace(
+    "optdot + core 0.93 a (w 15), containers 3.5r, x1.05 (no floor, no cap)": replace(
         BASE, core_share=0.93, w_hard=15.0, container_factor=3.5, radius_factor=1.05
     ),
+    "same, core >= 59 um (floor), no cap": replace(PRESETS["optdot"], core_cap=0.0),
+    "same, core in 59..68 um": replace(PRESETS["optdot"], core_cap=0.068),
 }
 
 

@@ -550,6 +550,28 @@ def edge_args(edges: EdgeIndex | None) -> tuple:
     return (edges.seg, edges.prev, edges.next, edges.start, edges.items, edges.inside, geo)
 
 
+@nb.njit(cache=True, inline="always")
+def edge_signed_distance(x, y, ed):  # pragma: no cover - compiled
+    """:func:`signed_distance` with the index packed by :func:`edge_args`."""
+    seg, prev, nxt, start, items, inside, geo = ed
+    return signed_distance(
+        x,
+        y,
+        seg,
+        prev,
+        nxt,
+        geo[0],
+        geo[1],
+        geo[2],
+        int(geo[3]),
+        int(geo[4]),
+        start,
+        items,
+        inside,
+        np.inf,
+    )
+
+
 def signed_distances(
     index: EdgeIndex, xy: np.ndarray, far: float = math.inf
 ) -> tuple[np.ndarray, np.ndarray]:

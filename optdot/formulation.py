@@ -42,6 +42,9 @@ class Formulation:
         core_floor: the core applies only where it reaches at least this centre
             distance, mm (``core_share * 2 r' >= core_floor``): where the lattice itself
             is too tight to clear the close-pair threshold it would only add order.
+        core_cap: the core's centre distance is at most this, mm (0 = no cap): in sparse
+            regions a core near the lattice spacing would crystallise the pattern, and
+            one just above the close-pair threshold is all that is needed.
         hex_panel: use the hexagonal radius r' (not r) against the panel edges.
         empty_term: penalise circles reaching into zero-density cells.
         stages: ``(share of max_iter, radius multiplier)`` per stage, relaxed in turn.
@@ -58,6 +61,7 @@ class Formulation:
     gap_share: float = 0.85
     core_share: float = 0.0
     core_floor: float = 0.0
+    core_cap: float = 0.0
     hex_panel: bool = False
     empty_term: bool = False
     stages: tuple[tuple[float, float], ...] = ((1.0, 1.0),)
@@ -84,6 +88,8 @@ class Formulation:
         core = np.full(len(r), 0.5 * job.min_distance)
         if self.core_share > 0:
             share = self.core_share * hex_radius(rho, r0)
+            if self.core_cap > 0:
+                share = np.minimum(share, 0.5 * self.core_cap)
             core = np.where(2.0 * share >= self.core_floor, np.maximum(core, share), core)
         if self.gap > 0:
             wide = 2.0 * hex_radius(rho, r0) * self.gap_share >= self.gap
@@ -115,8 +121,8 @@ class Formulation:
 #: Named formulations a job can select with ``optimize.formulation``. ``optdot`` won the
 #: comparison in benchmarks/formulations.py (BENCHMARKS.md): the paper's soft circles,
 #: 5 % larger, keep the pattern irregular while a hard core at 0.93 of the local
-#: hexagonal spacing (weight 15; only where that is at least 59 µm) removes most pairs
-#: under 60 µm, and 3.5 r containers hold the coverage.
+#: hexagonal spacing (weight 15; only where that is at least 59 µm, and at most 64 µm)
+#: removes most pairs under 60 µm, and 3.5 r containers hold the coverage.
 PRESETS: dict[str, Formulation] = {
     "paper": Formulation(),
     "optdot": Formulation(
@@ -124,6 +130,7 @@ PRESETS: dict[str, Formulation] = {
         w_hard=15.0,
         core_share=0.93,
         core_floor=0.059,
+        core_cap=0.064,
         hex_panel=True,
         empty_term=True,
         container_factor=3.5,

@@ -17,7 +17,7 @@ import numba as nb
 import numpy as np
 
 from .density import DensityMap
-from .domain import NO_EDGES, Domain, EdgeIndex, edge_args, signed_distance
+from .domain import NO_EDGES, Domain, EdgeIndex, edge_args, edge_signed_distance
 from .neighbors import neighbor_pairs, pairs_within
 
 #: Output resolution, mm (1 nm): positions are rounded to this.
@@ -59,24 +59,8 @@ def _fix_dots(xy, lo, hi, grid, x0, y0, cw, ch, home, eps, need, ed):  # pragma:
         y = min(max(xy[i, 1], lo[1]), hi[1])
         if ed[0].shape[0] > 0:
             # outline: move along the edge normal until ``need`` (+ eps) inside
-            seg, prev, nxt, start, items, inside, geo = ed
             for _ in range(8):
-                sd, ux, uy = signed_distance(
-                    x,
-                    y,
-                    seg,
-                    prev,
-                    nxt,
-                    geo[0],
-                    geo[1],
-                    geo[2],
-                    int(geo[3]),
-                    int(geo[4]),
-                    start,
-                    items,
-                    inside,
-                    np.inf,
-                )
+                sd, ux, uy = edge_signed_distance(x, y, ed)
                 if sd >= need + eps:
                     break
                 step = need + 2.0 * eps - sd

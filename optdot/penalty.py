@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numba as nb
 import numpy as np
 
-from .domain import EdgeIndex, edge_args, signed_distance
+from .domain import EdgeIndex, edge_args, edge_signed_distance
 from .neighbors import BLOCK, PairList
 
 
@@ -186,23 +186,7 @@ def _single_terms(
             g0 += 2.0 * e * ux
             g1 += 2.0 * e * uy
     if ed[0].shape[0] > 0:
-        seg, prev, nxt, start, items, inside, geo = ed
-        sd, ux, uy = signed_distance(
-            xy[i, 0],
-            xy[i, 1],
-            seg,
-            prev,
-            nxt,
-            geo[0],
-            geo[1],
-            geo[2],
-            int(geo[3]),
-            int(geo[4]),
-            start,
-            items,
-            inside,
-            np.inf,
-        )
+        sd, ux, uy = edge_signed_distance(xy[i, 0], xy[i, 1], ed)
         e = rp[i] + margin - sd  # outline: squared penetration depth, gradient -u
         if e > 0.0:
             f += e * e
