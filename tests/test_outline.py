@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 import shapely
 from click.testing import CliRunner
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.optimize import approx_fprime
 from shapely.geometry import Polygon
 
@@ -224,3 +226,32 @@ def test_sample_outline_is_valid():
     assert not job.domain.rectangle
     assert len(job.domain.rings()) >= 3  # outline + two screw holes
     assert PRESETS["optdot"].terms(job, np.array([[5.0, 5.0]]), np.array([0.3])).edges is not None
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    seed=st.integers(0, 2**31),
+    k=st.integers(3, 40),
+    jag=st.floats(0.0, 0.6),
+    reach=st.floats(0.05, 1.0),
+)
+def test_signed_distance_on_random_star_polygons(seed, k, jag, reach):
+    """Random star-shaped outlines (convex and reflex vertices) with a hole."""
+    rng = np.random.default_rng(seed)
+    ang = np.sort(rng.uniform(0, 2 * np.pi, k))
+    if np.unique(ang).size < 3:
+        return
+    rad = 3.0 * (1.0 - jag * rng.random(k))
+    shell = np.stack([5 + rad * np.cos(ang), 5 + rad * np.sin(ang)], axis=1)
+    poly = Polygon(shell, [shapely.Point(5, 5).buffer(0.4, 8).exterior.coords])
+    if not poly.is_valid or poly.area <= 0:
+        return
+    dom = Domain(validate_polygon(poly, "random"))
+    idx = EdgeIndex.build(dom, reach)
+    xy = rng.uniform(1.5, 8.5, (2000, 2))
+    d, u = signed_distances(idx, xy)
+    ref = dom.edge_distance(xy) * np.where(dom.contains(xy), 1.0, -1.0)
+    exact = np.isfinite(d)
+    assert np.abs(d[exact] - ref[exact]).max() < 1e-9
+    assert (ref[~exact] >= reach - 1e-12).all()
+    assert np.allclose(np.hypot(u[exact, 0], u[exact, 1])[np.abs(d[exact]) > 1e-9], 1.0)
