@@ -81,6 +81,10 @@ def _figures(result: QAResult, pattern: Pattern) -> list[tuple[str, str]]:
     fig, ax = plt.subplots(figsize=(6, 4))
     im = ax.imshow(img, origin="lower", extent=ext, interpolation="nearest")
     fig.colorbar(im, ax=ax, label="fill fraction")
+    if pattern.outline is not None:
+        for ring in pattern.outline_rings():
+            loop = np.vstack([ring, ring[:1]])
+            ax.plot(loop[:, 0], loop[:, 1], color="white", lw=0.7)
     close = a["close"]
     if len(close):
         mid = 0.5 * (xy[close[:, 0]] + xy[close[:, 1]])
