@@ -22,6 +22,7 @@ explicit pair list; ``penalty_fast`` is the compiled kernel over a CSR Verlet li
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numba as nb
 import numpy as np
@@ -67,12 +68,23 @@ class PenaltyTerms:
     margin: float = 0.0
     edges: EdgeIndex | None = None
 
-    @property
+    @cached_property
     def core_radius(self) -> np.ndarray:
         """``[n]`` hard-core radii c_i, mm."""
         if self.core is not None:
             return np.ascontiguousarray(self.core, dtype=np.float64)
         return np.full(len(self.radius), 0.5 * self.dmin)
+
+    @cached_property
+    def kernel_constants(self) -> tuple:
+        """What the kernel needs besides radii and pairs, packed once per terms object:
+        (box array, has zero cells, grid box array, edge-index tuple)."""
+        return (
+            np.asarray(self.box, dtype=np.float64),
+            bool(self.empty.any()),
+            np.asarray(self.grid_box, dtype=np.float64),
+            edge_args(self.edges),
+        )
 
     @property
     def reach(self) -> np.ndarray:
@@ -320,13 +332,14 @@ def penalty_fast(xy: np.ndarray, terms: PenaltyTerms, pairs: PairList, grad: np.
     Returns:
         f, mm².
     """
+    box, has_empty, grid_box, edges = terms.kernel_constants
     return _penalty_kernel(
         xy,
         terms.radius,
         terms.panel_radius,
         terms.center,
         terms.half_side,
-        np.asarray(terms.box, dtype=np.float64),
+        box,
         terms.core_radius,
         terms.dot_radius,
         terms.w_hard,
@@ -338,9 +351,9 @@ def penalty_fast(xy: np.ndarray, terms: PenaltyTerms, pairs: PairList, grad: np.
         pairs.ei,
         pairs.ej,
         terms.empty,
-        bool(terms.empty.any()),
-        np.asarray(terms.grid_box, dtype=np.float64),
-        edge_args(terms.edges),
+        has_empty,
+        grid_box,
+        edges,
         grad,
     )
 
