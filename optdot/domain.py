@@ -94,10 +94,6 @@ class Domain:
         """``[ny, nx]`` share of each grid cell's area inside the domain."""
         return polygon_cell_fractions(self.geometry, x0, y0, cw, ch, nx, ny, self.rectangle)
 
-    def to_wkt(self) -> str:
-        """The geometry as WKT (full precision)."""
-        return shapely.to_wkt(self.geometry, rounding_precision=-1)
-
 
 def polygon_cell_fractions(
     geom, x0: float, y0: float, cw: float, ch: float, nx: int, ny: int, rectangle: bool = False

@@ -157,7 +157,9 @@ def _write_npz(pattern: Pattern, path: Path) -> None:
         "meta": np.array(json.dumps(pattern.meta, sort_keys=True)),
     }
     if pattern.outline is not None:
-        arrays["outline_wkt"] = np.array(pattern.outline.to_wkt())
+        # WKB keeps every coordinate bit-exact (WKT text does not)
+        wkb = shapely.to_wkb(pattern.outline.geometry, byte_order=1)
+        arrays["outline_wkb"] = np.frombuffer(wkb, dtype=np.uint8)
         arrays["edge_margin"] = np.array(pattern.outline.edge_margin)
     with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as zf:
         for name, arr in arrays.items():
@@ -218,8 +220,8 @@ def _load_npz(path: Path, box: tuple[float, float, float, float] | None) -> Patt
             file_box = tuple(np.asarray(z["box"], dtype=np.float64).tolist())
             meta = json.loads(str(z["meta"])) if "meta" in z else {}
             outline = None
-            if "outline_wkt" in z:
-                geom = orient_all(shapely.from_wkt(str(z["outline_wkt"])))
+            if "outline_wkb" in z:
+                geom = orient_all(shapely.from_wkb(np.asarray(z["outline_wkb"]).tobytes()))
                 outline = Domain(geom, float(z["edge_margin"]), False, str(path))
     except KeyError as e:
         raise PatternFileError(f"{path}: missing array {e} in pattern .npz") from None

@@ -255,3 +255,44 @@ def test_signed_distance_on_random_star_polygons(seed, k, jag, reach):
     assert np.abs(d[exact] - ref[exact]).max() < 1e-9
     assert (ref[~exact] >= reach - 1e-12).all()
     assert np.allclose(np.hypot(u[exact, 0], u[exact, 1])[np.abs(d[exact]) > 1e-9], 1.0)
+
+
+def test_rectangle_edge_margin(tmp_path):
+    job = load_job(write_job(tmp_path, np.full((6, 8), 0.3), domain={"edge_margin": 0.05}))
+    p = generate(job)
+    x0, y0, x1, y1 = job.box
+    need = 0.023 + 0.05
+    assert job.domain.rectangle and job.domain.edge_margin == 0.05
+    assert (p.xy[:, 0] - x0 >= need).all() and (x1 - p.xy[:, 0] >= need).all()
+    assert (p.xy[:, 1] - y0 >= need).all() and (y1 - p.xy[:, 1] >= need).all()
+
+
+def test_npz_keeps_the_outline(tmp_path):
+    from optdot.pattern import load_pattern, save_pattern
+
+    job = load_job(outline_job(tmp_path, edge_margin=0.01))
+    job = dataclasses.replace(job, optimize=dataclasses.replace(job.optimize, max_iter=10))
+    p = generate(job)
+    save_pattern(p, tmp_path / "p.npz")
+    q = load_pattern(tmp_path / "p.npz")
+    assert q.outline is not None and q.outline.edge_margin == 0.01
+    assert q.outline.geometry.equals(p.outline.geometry)
+    assert np.array_equal(q.xy, p.xy)
+
+
+@pytest.mark.parametrize(
+    "domain,message",
+    [
+        ({"edge_margin": -1.0}, "domain.edge_margin"),
+        ({"keep_out": '["POLYGON ((0 0, 1 0, 1 1, 0 0))"]'}, "needs domain.outline"),
+        ({"outline": '"missing.dxf"', "width": None, "height": None}, "outline file not found"),
+        ({"outline": '"o.svg"', "width": None, "height": None}, "must be .dxf, .wkt or .geojson"),
+    ],
+)
+def test_bad_domain_keys(tmp_path, domain, message):
+    (tmp_path / "o.svg").write_text("<svg/>")
+    job = write_job(tmp_path, np.full((4, 4), 0.2), domain=domain)
+    res = CliRunner().invoke(main, ["generate", str(job), "-o", str(tmp_path / "p.csv")])
+    assert res.exit_code == 2, res.output
+    assert message in res.output and "Traceback" not in res.output
+    assert not (tmp_path / "p.csv").exists()

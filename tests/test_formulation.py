@@ -1,0 +1,63 @@
+"""Formulation options: radius rule, hard core (share, floor, cap), polydispersity, stages."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from optdot.circles import circle_radius, hex_radius
+from optdot.formulation import PRESETS, Formulation, formulation_of
+from optdot.generate import generate, relax_staged
+from optdot.neighbors import pairs_within
+
+
+def test_core_share_floor_and_cap(tiny_job):
+    rho = np.array([0.05, 0.3, 0.45, 0.55])
+    xy = np.tile([[1.0, 1.0]], (4, 1))
+    form = Formulation(w_hard=15.0, core_share=0.93, core_floor=0.059, core_cap=0.064)
+    core = form.terms(tiny_job, xy, rho).core_radius
+    want = 0.93 * hex_radius(rho, 0.023)
+    # sparse: capped at 64 µm; mid: 0.93 of the spacing; densest: below the floor -> dmin/2
+    assert core[0] == pytest.approx(0.032)
+    assert core[2] == pytest.approx(want[2])
+    assert 2 * want[3] < 0.059 and core[3] == pytest.approx(0.023)
+    assert (core >= 0.023).all()
+
+
+def test_radius_rule_and_polydispersity(tiny_job):
+    rho = np.full(2000, 0.3)
+    base = circle_radius(rho, 0.023)
+    assert np.allclose(Formulation(radius_factor=1.05).radii(rho, 0.023, 1), 1.05 * base)
+    ramp = Formulation(dense_factor=0.8).radii(np.array([0.2, 0.375, 0.6]), 0.023, 1)
+    ref = circle_radius(np.array([0.2, 0.375, 0.6]), 0.023)
+    assert np.allclose(ramp / ref, [1.0, 0.9, 0.8])
+    poly = Formulation(polydispersity=0.1).radii(rho, 0.023, 7)
+    assert set(np.round(poly / base * np.sqrt(1.01), 9)) == {0.9, 1.1}
+    assert np.mean(poly**2) == pytest.approx(np.mean(base**2), rel=0.02)  # mean area kept
+    assert np.array_equal(poly, Formulation(polydispersity=0.1).radii(rho, 0.023, 7))
+
+
+def test_stages_split_the_iterations(tiny_job):
+    job = dataclasses.replace(
+        tiny_job, optimize=dataclasses.replace(tiny_job.optimize, max_iter=30, ftol=0.0)
+    )
+    form = Formulation(stages=((0.5, 1.15), (0.5, 0.9)))
+    p = generate(job, formulation=form)
+    assert p.meta["iterations"] == 30 and len(p.stats["history"]) == 30
+    assert len(pairs_within(p.xy, job.min_distance)) == 0
+    xy0 = np.array([[1.0, 1.0], [1.01, 1.0]])
+    calls = []
+    relax_staged(job, form, xy0, np.array([0.3, 0.3]), lambda i, f: calls.append(i))
+    assert calls == sorted(calls) and calls[-1] <= 30
+
+
+def test_job_overrides_reach_the_formulation(tiny_job):
+    job = dataclasses.replace(
+        tiny_job,
+        optimize=dataclasses.replace(tiny_job.optimize, radius_factor=0.8, container_factor=5.0),
+    )
+    form = formulation_of(job)
+    assert form.radius_factor == 0.8 and form.container_factor == 5.0
+    assert formulation_of(tiny_job) == PRESETS["optdot"]
