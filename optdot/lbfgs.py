@@ -43,17 +43,42 @@ BLOCK = 16384
 
 @nb.njit(parallel=True, cache=True)
 def _update_dot(d, coef, u, scale, v):  # pragma: no cover - compiled
-    """``d <- scale * (d + coef * u)`` in place, then return ``v . d`` (one pass)."""
+    """``d <- scale * (d + coef * u)`` in place, then return ``v . d`` (one pass).
+
+    Four partial sums per block: a single running sum is bound by the latency of its
+    additions (the loop ran at a third of its speed); the order stays fixed.
+    """
     n = d.shape[0]
     nblock = (n + BLOCK - 1) // BLOCK
     part = np.zeros(nblock)
     for b in nb.prange(nblock):
-        s = 0.0
-        for k in range(b * BLOCK, min((b + 1) * BLOCK, n)):
-            t = scale * (d[k] + coef * u[k])
-            d[k] = t
-            s += v[k] * t
-        part[b] = s
+        lo = b * BLOCK
+        hi = min(lo + BLOCK, n)
+        s0 = 0.0
+        s1 = 0.0
+        s2 = 0.0
+        s3 = 0.0
+        k = lo
+        while k + 4 <= hi:
+            t0 = scale * (d[k] + coef * u[k])
+            t1 = scale * (d[k + 1] + coef * u[k + 1])
+            t2 = scale * (d[k + 2] + coef * u[k + 2])
+            t3 = scale * (d[k + 3] + coef * u[k + 3])
+            d[k] = t0
+            d[k + 1] = t1
+            d[k + 2] = t2
+            d[k + 3] = t3
+            s0 += v[k] * t0
+            s1 += v[k + 1] * t1
+            s2 += v[k + 2] * t2
+            s3 += v[k + 3] * t3
+            k += 4
+        while k < hi:
+            t0 = scale * (d[k] + coef * u[k])
+            d[k] = t0
+            s0 += v[k] * t0
+            k += 1
+        part[b] = (s0 + s1) + (s2 + s3)
     s = 0.0
     for b in range(nblock):
         s += part[b]

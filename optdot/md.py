@@ -71,7 +71,9 @@ def _pair_force(xy, a, i, j, b, decay, cutoff, force):  # pragma: no cover - com
 
 
 @nb.njit(parallel=True, cache=True)
-def _md_forces(xy, a, b, decay, cutoff, ptr, mid, nbr, skip, ei, ej, force):  # pragma: no cover
+def _md_forces(
+    xy, a, b, decay, cutoff, ptr, mid, nbr, skip, cross, ei, ej, force
+):  # pragma: no cover - compiled
     """Net force on every dot: blocks in parallel, then cross-block and extra pairs."""
     n = xy.shape[0]
     nblock = (n + BLOCK - 1) // BLOCK
@@ -88,7 +90,8 @@ def _md_forces(xy, a, b, decay, cutoff, ptr, mid, nbr, skip, ei, ej, force):  # 
                 j = nbr[k]
                 if not skip[j]:
                     _pair_force(xy, a, i, j, b, decay, cutoff, force)
-    for i in range(n):
+    for q in range(cross.shape[0]):
+        i = cross[q]
         if skip[i]:
             continue
         for k in range(mid[i], ptr[i + 1]):
@@ -157,6 +160,7 @@ def md_forces(xy: np.ndarray, law: MDForce, pairs: PairList) -> np.ndarray:
         pairs.mid,
         pairs.nbr,
         pairs.skip,
+        pairs.cross,
         pairs.ei,
         pairs.ej,
         force,

@@ -372,10 +372,11 @@ def _spread(v: np.ndarray) -> np.ndarray:
 
 @nb.njit(parallel=True, cache=True)
 def _split_blocks(ptr, nbr):  # pragma: no cover - compiled
-    """Reorder each dot's partners: same BLOCK first; returns (nbr', mid)."""
+    """Reorder each dot's partners: same BLOCK first; returns (nbr', mid, cross)."""
     n = ptr.shape[0] - 1
     out = np.empty_like(nbr)
     mid = np.empty(n, np.int64)
+    has_cross = np.zeros(n, np.bool_)
     for i in nb.prange(n):
         b = i // BLOCK
         k = ptr[i]
@@ -388,7 +389,8 @@ def _split_blocks(ptr, nbr):  # pragma: no cover - compiled
             if nbr[q] // BLOCK != b:
                 out[k] = nbr[q]
                 k += 1
-    return out, mid
+        has_cross[i] = k > mid[i]
+    return out, mid, np.flatnonzero(has_cross)
 
 
 @dataclass
@@ -400,6 +402,7 @@ class PairList:
         nbr: ``[K]`` int32, each row with same-block partners first.
         mid: ``[n]`` int64, end of row i's same-block partners.
         skip: ``[n]`` bool, dots whose pairs come only from the extra list.
+        cross: ``[C]`` int64 ascending, the rows with partners in other blocks.
         ei, ej: ``[P]`` int32 extra pairs (each once).
     """
 
@@ -407,15 +410,16 @@ class PairList:
     nbr: np.ndarray
     mid: np.ndarray
     skip: np.ndarray
+    cross: np.ndarray
     ei: np.ndarray
     ej: np.ndarray
 
     @classmethod
     def from_csr(cls, ptr: np.ndarray, nbr: np.ndarray) -> PairList:
         """Wrap a CSR half list from :func:`optdot.neighbors.neighbor_pairs`."""
-        nbr2, mid = _split_blocks(ptr, nbr)
+        nbr2, mid, cross = _split_blocks(ptr, nbr)
         none = np.zeros(0, np.int32)
-        return cls(ptr, nbr2, mid, np.zeros(len(ptr) - 1, np.bool_), none, none)
+        return cls(ptr, nbr2, mid, np.zeros(len(ptr) - 1, np.bool_), cross, none, none)
 
 
 @nb.njit(cache=True)

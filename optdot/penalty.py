@@ -76,6 +76,12 @@ class PenaltyTerms:
         return np.full(len(self.radius), 0.5 * self.dmin)
 
     @cached_property
+    def scratch(self) -> np.ndarray:
+        """``[n, 4]`` work array the kernel packs positions and radii into (one per terms
+        object, so an evaluation allocates nothing)."""
+        return np.empty((len(self.radius), 4))
+
+    @cached_property
     def kernel_constants(self) -> tuple:
         """What the kernel needs besides radii and pairs, packed once per terms object:
         (box array, has zero cells, grid box array, edge-index tuple)."""
@@ -246,6 +252,25 @@ def _single_terms(
     return f
 
 
+#: Radius given to a mover in the packed array: its listed pairs then contribute exactly 0
+#: (s - d < 0), so the pair loop needs no per-partner test of ``skip``.
+_GONE = -1e300
+
+
+@nb.njit(cache=True, inline="always")
+def _pair_body(dx, dy, s, dm, w):  # pragma: no cover - compiled
+    """Branch-free overlap + hard-core term of a pair with offset (dx, dy) = x_i - x_j.
+
+    Returns ``(f, q)``: the pair's f and the gradient for x_j is ``q * (dx, dy)`` (x_i gets
+    minus it). Both are 0 beyond ``max(s, dm)``: computing the zeros costs less than a
+    mispredicted branch on the ~30 % of listed pairs that do not touch.
+    """
+    d = np.sqrt(dx * dx + dy * dy)
+    dl = max(s - d, 0.0)
+    dh = max(dm - d, 0.0)  # weighted by w: nothing when the hard terms are off
+    return dl * dl + w * dh * dh, (2.0 * dl + 2.0 * w * dh) / d
+
+
 @nb.njit(parallel=True, cache=True)
 def _penalty_kernel(
     xy,
@@ -262,16 +287,20 @@ def _penalty_kernel(
     mid,
     nbr,
     skip,
+    cross,
     ei,
     ej,
     empty,
     has_empty,
     gbox,
     ed,
+    packed,
     grad,
 ):  # pragma: no cover - compiled
-    """Blocks of BLOCK dots in parallel (single terms, then pairs inside the block), then
-    the pairs that cross blocks and the extra pairs, serially, in a fixed order."""
+    """Blocks of BLOCK dots in parallel (pack the block, single terms, then pairs inside
+    the block), then the rows with cross-block partners and the extra pairs, serially,
+    in a fixed order. ``packed`` is ``[n, 4]`` scratch: (x, y, r, c) with movers' radii
+    set to ``_GONE``."""
     n = xy.shape[0]
     nblock = (n + BLOCK - 1) // BLOCK
     part = np.zeros(nblock)
@@ -280,6 +309,10 @@ def _penalty_kernel(
         hi = min(lo + BLOCK, n)
         f = 0.0
         for i in range(lo, hi):
+            packed[i, 0] = xy[i, 0]
+            packed[i, 1] = xy[i, 1]
+            packed[i, 2] = _GONE if skip[i] else r[i]
+            packed[i, 3] = _GONE if skip[i] else cr[i]
             f += _single_terms(
                 i, xy, r, rp, c, h, box, r0, w, margin, empty, has_empty, gbox, ed, grad
             )
@@ -287,16 +320,21 @@ def _penalty_kernel(
             if skip[i]:
                 continue
             # dot i's values stay in registers over its partners
-            xi, yi, ri, ci = xy[i, 0], xy[i, 1], r[i], cr[i]
+            xi, yi, ri, ci = packed[i, 0], packed[i, 1], packed[i, 2], packed[i, 3]
             gxi = 0.0
             gyi = 0.0
             for k in range(ptr[i], mid[i]):
                 j = nbr[k]
-                if skip[j]:
-                    continue
-                fp, gx, gy = _pair_grad(
-                    xi - xy[j, 0], yi - xy[j, 1], ri + r[j], ci + cr[j], w, i < j
-                )
+                dx = xi - packed[j, 0]
+                dy = yi - packed[j, 1]
+                if dx * dx + dy * dy < 1e-24:  # coincident centres: never in practice
+                    fp, gx, gy = _pair_grad(dx, dy, ri + r[j], ci + cr[j], w, i < j)
+                    if skip[j]:
+                        fp, gx, gy = 0.0, 0.0, 0.0
+                else:
+                    fp, q = _pair_body(dx, dy, ri + packed[j, 2], ci + packed[j, 3], w)
+                    gx = q * dx
+                    gy = q * dy
                 f += fp
                 gxi -= gx
                 gyi -= gy
@@ -308,7 +346,8 @@ def _penalty_kernel(
     f = 0.0
     for b in range(nblock):
         f += part[b]
-    for i in range(n):
+    for a in range(cross.shape[0]):
+        i = cross[a]
         if skip[i]:
             continue
         for k in range(mid[i], ptr[i + 1]):
@@ -348,12 +387,14 @@ def penalty_fast(xy: np.ndarray, terms: PenaltyTerms, pairs: PairList, grad: np.
         pairs.mid,
         pairs.nbr,
         pairs.skip,
+        pairs.cross,
         pairs.ei,
         pairs.ej,
         terms.empty,
         has_empty,
         grid_box,
         edges,
+        terms.scratch,
         grad,
     )
 
