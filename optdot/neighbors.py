@@ -63,10 +63,11 @@ def _bin_points(xy, reff, x0, y0, cell, nx, ny):  # pragma: no cover - compiled
 def _scan(
     i, xy, reff, grow, start, order, bx, by, br, x0, y0, cell, nx, ny, buf
 ):  # pragma: no cover
-    """Partners of dot i; counts them, and writes them to ``buf`` when it is not empty.
+    """Partners of dot i: writes them to ``buf`` (as many as fit) and returns how many.
 
-    Branch-free inner loop (a kept partner is written, then the cursor advances by the
-    test's 0/1), so ``buf`` needs one spare slot beyond the count.
+    Branch-free inner loop: a candidate is written at the cursor, which then advances by
+    the test's 0/1 (clamped to the last slot, so ``buf`` is never overrun); the caller
+    knows ``buf`` held them all when the count is below ``len(buf)``.
     """
     xi = xy[i, 0]
     yi = xy[i, 1]
@@ -76,7 +77,7 @@ def _scan(
     ix1 = min(int((xi + reach - x0) / cell), nx - 1)
     iy0 = max(int((yi - reach - y0) / cell), 0)
     iy1 = min(int((yi + reach - y0) / cell), ny - 1)
-    write = buf.shape[0] > 0
+    last = buf.shape[0] - 1
     cnt = 0
     for cy in range(iy0, iy1 + 1):
         row = cy * nx
@@ -87,8 +88,7 @@ def _scan(
             dy = yi - by[k]
             lim = (ri + rj) * grow
             keep = (dx * dx + dy * dy < lim * lim) & ((rj < ri) | ((rj == ri) & (j > i)))
-            if write:
-                buf[cnt] = j
+            buf[min(cnt, last)] = j
             cnt += np.int64(keep)
     return cnt
 
@@ -97,25 +97,40 @@ _CHUNK = 2048
 
 
 @nb.njit(parallel=True, cache=True)
-def _pairs_csr(xy, reff, grow, x0, y0, cell, nx, ny):  # pragma: no cover - compiled
+def _pairs_csr(xy, reff, grow, x0, y0, cell, nx, ny, per_dot):  # pragma: no cover - compiled
+    """One scan per dot into per-chunk segments of ``per_dot * _CHUNK`` slots, then one
+    copy into the CSR arrays; a chunk whose segment overflowed is scanned again."""
     start, order, bx, by, br, cellmax = _bin_points(xy, reff, x0, y0, cell, nx, ny)
     n = xy.shape[0]
+    nchunk = (n + _CHUNK - 1) // _CHUNK
+    cap = per_dot * _CHUNK
+    seg = np.empty(nchunk * cap, np.int32)
     counts = np.zeros(n + 1, np.int64)
-    empty = np.empty(0, np.int32)
-    for i in nb.prange(n):
-        counts[i + 1] = _scan(
-            i, xy, reff, grow, start, order, bx, by, br, x0, y0, cell, nx, ny, empty
-        )
+    over = np.zeros(nchunk, np.bool_)
+    for c in nb.prange(nchunk):
+        row = np.empty(256, np.int32)
+        pos = c * cap
+        end = pos + cap
+        for i in range(c * _CHUNK, min((c + 1) * _CHUNK, n)):
+            m = _scan(i, xy, reff, grow, start, order, bx, by, br, x0, y0, cell, nx, ny, row)
+            counts[i + 1] = m
+            if m >= row.shape[0] or pos + m > end:
+                over[c] = True
+            elif not over[c]:
+                seg[pos : pos + m] = row[:m]
+                pos += m
     ptr = np.cumsum(counts)
     nbr = np.empty(ptr[n], np.int32)
-    nchunk = (n + _CHUNK - 1) // _CHUNK
     for c in nb.prange(nchunk):
         a = c * _CHUNK
         b = min(a + _CHUNK, n)
-        buf = np.empty(counts[a + 1 : b + 1].max() + 1, np.int32)
+        if not over[c]:
+            nbr[ptr[a] : ptr[b]] = seg[c * cap : c * cap + ptr[b] - ptr[a]]
+            continue
+        row = np.empty(counts[a + 1 : b + 1].max() + 1, np.int32)
         for i in range(a, b):
-            m = _scan(i, xy, reff, grow, start, order, bx, by, br, x0, y0, cell, nx, ny, buf)
-            nbr[ptr[i] : ptr[i] + m] = buf[:m]
+            m = _scan(i, xy, reff, grow, start, order, bx, by, br, x0, y0, cell, nx, ny, row)
+            nbr[ptr[i] : ptr[i] + m] = row[:m]
     return ptr, nbr, start, order, cellmax
 
 
@@ -169,11 +184,17 @@ def _grid_shape(xy: np.ndarray, cell: float) -> tuple[float, float, float, int, 
 
 
 def neighbor_grid(
-    xy: np.ndarray, radius: np.ndarray | float, skin: float = 0.0, cell: float | None = None
+    xy: np.ndarray,
+    radius: np.ndarray | float,
+    skin: float = 0.0,
+    cell: float | None = None,
+    per_dot: int = 16,
 ) -> tuple[np.ndarray, np.ndarray, CellGrid]:
     """:func:`neighbor_pairs` that also returns the :class:`CellGrid` it binned into.
 
     ``cell`` (mm) defaults to :func:`cell_side`; callers that build often pass it once.
+    ``per_dot`` is the expected partners per dot (a guess: more costs memory, fewer a
+    second scan of the chunks that overflow; the result is the same).
     """
     xy = np.ascontiguousarray(xy, dtype=np.float64)
     n = xy.shape[0]
@@ -185,7 +206,9 @@ def neighbor_grid(
         return np.zeros(1, np.int64), np.zeros(0, np.int32), empty
     grow = 1.0 + float(skin)
     x0, y0, cell, nx, ny = _grid_shape(xy, cell_side(reff, skin) if cell is None else cell)
-    ptr, nbr, start, order, cellmax = _pairs_csr(xy, reff, grow, x0, y0, cell, nx, ny)
+    ptr, nbr, start, order, cellmax = _pairs_csr(
+        xy, reff, grow, x0, y0, cell, nx, ny, max(int(per_dot), 1)
+    )
     return ptr, nbr, CellGrid(x0, y0, cell, nx, ny, start, order, cellmax)
 
 
@@ -466,7 +489,8 @@ class VerletList:
         self.n_movers = 0
 
     def _rebuild(self, xy: np.ndarray) -> None:
-        ptr, nbr, self.grid = neighbor_grid(xy, self.reff, self.skin, self.cell)
+        per_dot = 16 if self.pairs is None else 4 + 3 * len(self.pairs.nbr) // (2 * len(xy))
+        ptr, nbr, self.grid = neighbor_grid(xy, self.reff, self.skin, self.cell, per_dot)
         self.pairs = PairList.from_csr(ptr, nbr)
         self.ref = xy.copy()
         self.n_movers = 0
