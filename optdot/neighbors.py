@@ -489,7 +489,10 @@ class VerletList:
         self.n_movers = 0
 
     def _rebuild(self, xy: np.ndarray) -> None:
-        per_dot = 16 if self.pairs is None else 4 + 3 * len(self.pairs.nbr) // (2 * len(xy))
+        # guess partners per dot from the last build (+25 %); drop the old list first so
+        # the two never sit in memory together
+        per_dot = 8 if self.pairs is None else 2 + 5 * len(self.pairs.nbr) // (4 * len(xy))
+        self.pairs = self.grid = None
         ptr, nbr, self.grid = neighbor_grid(xy, self.reff, self.skin, self.cell, per_dot)
         self.pairs = PairList.from_csr(ptr, nbr)
         self.ref = xy.copy()
