@@ -188,7 +188,7 @@ def neighbor_grid(
     radius: np.ndarray | float,
     skin: float = 0.0,
     cell: float | None = None,
-    per_dot: int = 16,
+    per_dot: int = 8,
 ) -> tuple[np.ndarray, np.ndarray, CellGrid]:
     """:func:`neighbor_pairs` that also returns the :class:`CellGrid` it binned into.
 
