@@ -47,9 +47,13 @@ from optdot.qa import run_qa  # noqa: E402
 ROOT = HERE.parent
 #: the v0.1 default: paper circles + hard core at the dot diameter, hex panel, empty term
 BASE = Formulation(w_hard=10.0, hex_panel=True, empty_term=True)
+#: the v0.2 default (session 2): as today's but with no 61 µm floor under the core
+V02 = replace(PRESETS["optdot"], gap=0.0)
 VARIANTS: dict[str, Formulation] = {
     "paper": PRESETS["paper"],
-    "optdot (default: x1.05, core 0.93 a in 59..64 um w15, containers 3.5r)": PRESETS["optdot"],
+    "optdot (default: x1.05, core 0.93 a in 61..64 um where a >= 62.2 um, w15, containers 3.5r)": (
+        PRESETS["optdot"]
+    ),
     "paper, radius x0.9": Formulation(radius_factor=0.9),
     "paper + 60 um gap everywhere (w 10)": Formulation(w_hard=10.0, gap=0.060, gap_share=0.0),
     "optdot v0.1 (hard core at 46 um)": BASE,
@@ -86,8 +90,23 @@ VARIANTS: dict[str, Formulation] = {
     "optdot + core 0.93 a (w 15), containers 3.5r, x1.05 (no floor, no cap)": replace(
         BASE, core_share=0.93, w_hard=15.0, container_factor=3.5, radius_factor=1.05
     ),
-    "same, core >= 59 um (floor), no cap": replace(PRESETS["optdot"], core_cap=0.0),
-    "same, core in 59..68 um": replace(PRESETS["optdot"], core_cap=0.068),
+    "v0.2, no cap": replace(V02, core_cap=0.0),
+    "v0.2, core in 59..68 um": replace(V02, core_cap=0.068),
+    "optdot v0.2 (core 0.93 a in 59..64 um, no 61 um floor)": V02,
+    "v0.2, weight 20": replace(V02, w_hard=20.0),
+    "v0.2, weight 30": replace(V02, w_hard=30.0),
+    "v0.2, core floor 60 um": replace(V02, core_floor=0.060),
+    "v0.2, core floor 61 um (off below)": replace(V02, core_floor=0.061),
+    "v0.2, dense-only radius x0.85 (rho 0.42->0.52)": replace(
+        V02, dense_factor=0.85, light_rho=0.42, dense_rho=0.52
+    ),
+    "v0.2 + 60.5 um where a >= 60.5/0.97": replace(V02, gap=0.0605, gap_share=0.97),
+    "v0.2 + 61 um where a >= 61/0.95": replace(V02, gap=0.061, gap_share=0.95),
+    "v0.2 + 61 um where a >= 61/0.97": replace(V02, gap=0.061, gap_share=0.97),
+    "v0.2 + 61.5 um where a >= 61.5 (= default with 61.5, share 1)": replace(
+        V02, gap=0.0615, gap_share=1.0
+    ),
+    "v0.2 + 62 um where a >= 62/0.98": replace(V02, gap=0.062, gap_share=0.98),
 }
 
 

@@ -49,6 +49,9 @@ class Formulation:
         empty_term: penalise circles reaching into zero-density cells.
         stages: ``(share of max_iter, radius multiplier)`` per stage, relaxed in turn.
         container_factor: container side / circle radius (paper: 4).
+        close_ref: the close-pair distance ``core_floor``, ``core_cap`` and ``gap`` are
+            given for, mm: :meth:`terms` scales them by ``job.qa.close_distance /
+            close_ref``, so a job that calls 80 µm "close" gets the same rule around 80 µm.
     """
 
     radius_factor: float = 1.0
@@ -66,6 +69,7 @@ class Formulation:
     empty_term: bool = False
     stages: tuple[tuple[float, float], ...] = ((1.0, 1.0),)
     container_factor: float = 4.0
+    close_ref: float = 0.060
 
     def radii(self, rho: np.ndarray, r0: float, seed: int, multiplier: float = 1.0) -> np.ndarray:
         """``[n]`` circle radii, mm, for dots at fill ``rho`` (``[n]``)."""
@@ -86,14 +90,15 @@ class Formulation:
         r0 = 0.5 * job.diameter
         r = self.radii(rho, r0, opt.seed, multiplier)
         core = np.full(len(r), 0.5 * job.min_distance)
+        k = job.qa.close_distance / self.close_ref
         if self.core_share > 0:
             share = self.core_share * hex_radius(rho, r0)
             if self.core_cap > 0:
-                share = np.minimum(share, 0.5 * self.core_cap)
-            core = np.where(2.0 * share >= self.core_floor, np.maximum(core, share), core)
+                share = np.minimum(share, 0.5 * k * self.core_cap)
+            core = np.where(2.0 * share >= k * self.core_floor, np.maximum(core, share), core)
         if self.gap > 0:
-            wide = 2.0 * hex_radius(rho, r0) * self.gap_share >= self.gap
-            core[wide] = np.maximum(core[wide], 0.5 * self.gap)
+            wide = 2.0 * hex_radius(rho, r0) * self.gap_share >= k * self.gap
+            core[wide] = np.maximum(core[wide], 0.5 * k * self.gap)
         panel_r = np.maximum(hex_radius(rho, r0), r0) if self.hex_panel else r
         empty = (job.density.grid <= 0).astype(np.uint8) if self.empty_term else None
         dom = job.domain
@@ -120,9 +125,11 @@ class Formulation:
 
 #: Named formulations a job can select with ``optimize.formulation``. ``optdot`` won the
 #: comparison in benchmarks/formulations.py (BENCHMARKS.md): the paper's soft circles,
-#: 5 % larger, keep the pattern irregular while a hard core at 0.93 of the local
-#: hexagonal spacing (weight 15; only where that is at least 59 µm, and at most 64 µm)
-#: removes most pairs under 60 µm, and 3.5 r containers hold the coverage.
+#: 5 % larger, keep the pattern irregular, 3.5 r containers hold the coverage, and a hard
+#: core (weight 15) trims the pairs under 60 µm. Its centre distance, with a = the local
+#: hexagonal spacing: 0.93 a clamped to 61..64 µm where a >= 62.2 µm (61 / 0.98); the dot
+#: diameter (+ gap) elsewhere, where a core cannot clear 60 µm and would only add order.
+#: The 61 µm floor matters: a core just under 60 µm pins pairs just under 60 µm.
 PRESETS: dict[str, Formulation] = {
     "paper": Formulation(),
     "optdot": Formulation(
@@ -131,6 +138,8 @@ PRESETS: dict[str, Formulation] = {
         core_share=0.93,
         core_floor=0.059,
         core_cap=0.064,
+        gap=0.061,
+        gap_share=0.98,
         hex_panel=True,
         empty_term=True,
         container_factor=3.5,

@@ -26,6 +26,32 @@ def test_core_share_floor_and_cap(tiny_job):
     assert (core >= 0.023).all()
 
 
+def test_default_core_clears_the_close_distance(tiny_job):
+    """Default: 0.93 a clamped to 61..64 µm where a >= 61 / 0.98 µm, else the diameter;
+    never a core in (46, 61) µm, which would pin pairs just under 60 µm."""
+    rho = np.linspace(0.02, 0.6, 300)
+    xy = np.tile([[1.0, 1.0]], (len(rho), 1))
+    a = 2 * hex_radius(rho, 0.023)
+    dist = 2 * PRESETS["optdot"].terms(tiny_job, xy, rho).core_radius
+    wide = a * 0.98 >= 0.061
+    assert np.allclose(dist[wide], np.clip(0.93 * a[wide], 0.061, 0.064))
+    assert np.allclose(dist[~wide], 0.046)
+    assert wide.any() and (~wide).any()
+
+
+def test_core_lengths_scale_with_the_close_distance(tiny_job):
+    """A job that calls 80 µm close gets floor, cap and gap scaled by 80 / 60."""
+    rho = np.linspace(0.02, 0.6, 300)
+    xy = np.tile([[1.0, 1.0]], (len(rho), 1))
+    job = dataclasses.replace(tiny_job, qa=dataclasses.replace(tiny_job.qa, close_distance=0.080))
+    a = 2 * hex_radius(rho, 0.023)
+    dist = 2 * PRESETS["optdot"].terms(job, xy, rho).core_radius
+    k = 0.080 / 0.060
+    wide = a * 0.98 >= k * 0.061
+    assert np.allclose(dist[wide], np.clip(0.93 * a[wide], k * 0.061, k * 0.064))
+    assert np.allclose(dist[~wide], 0.046)
+
+
 def test_radius_rule_and_polydispersity(tiny_job):
     rho = np.full(2000, 0.3)
     base = circle_radius(rho, 0.023)
