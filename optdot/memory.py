@@ -8,8 +8,8 @@ from .errors import ResourceError
 
 #: Bytes per dot besides the L-BFGS history (positions, gradients, radii, containers,
 #: Verlet list, grid bins, temporaries). Calibrated on benchmarks/scaling.py: peak RSS
-#: 212 MB at 10⁵ dots, 733 MB at 1.2·10⁶, 4,194 MB at 10⁷ (~400 B/dot at m = 6), plus
-#: a few percent of margin.
+#: 210 MB at 10⁵ dots, 680 MB at 1.2·10⁶, 4,355 MB at 10⁷ (session 3; estimates 293 MB,
+#: 772 MB, 4,599 MB; MB = 2²⁰ bytes), so it stays an upper bound, 6 % over at 10⁷.
 BYTES_PER_DOT = 360
 #: Fixed overhead of the interpreter, numpy/scipy/numba, bytes.
 BASE_BYTES = 250 * 2**20
