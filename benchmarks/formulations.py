@@ -48,7 +48,7 @@ ROOT = HERE.parent
 #: the v0.1 default: paper circles + hard core at the dot diameter, hex panel, empty term
 BASE = Formulation(w_hard=10.0, hex_panel=True, empty_term=True)
 #: the v0.2 default (session 2): as today's but with no 61 µm floor under the core
-V02 = replace(PRESETS["optdot"], gap=0.0)
+V02 = replace(PRESETS["optdot"], gap=0.0, core_floor=0.059)
 VARIANTS: dict[str, Formulation] = {
     "paper": PRESETS["paper"],
     "optdot (default: x1.05, core 0.93 a in 61..64 um where a >= 62.2 um, w15, containers 3.5r)": (

@@ -136,7 +136,7 @@ PRESETS: dict[str, Formulation] = {
         radius_factor=1.05,
         w_hard=15.0,
         core_share=0.93,
-        core_floor=0.059,
+        core_floor=0.061,  # = the 61 µm floor below: 0.93 a is only used above it
         core_cap=0.064,
         gap=0.061,
         gap_share=0.98,
