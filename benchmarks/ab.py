@@ -29,8 +29,8 @@ from _common import machine  # noqa: E402
 CHILD = """
 import json, sys, time
 import optdot
-from optdot.job import load_job
-from optdot.generate import generate
+from optdot.config.schema import load_job
+from optdot.pipeline import generate
 job = load_job(sys.argv[1])
 t = time.perf_counter()
 p = generate(job)

@@ -17,7 +17,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import machine  # noqa: E402
 
-import exporters  # noqa: E402
+from optdot import exporters  # noqa: E402
 from optdot.pattern import Pattern  # noqa: E402
 
 

@@ -37,12 +37,12 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 from _common import machine  # noqa: E402
 
-from optdot.density import DensityMap  # noqa: E402
-from optdot.formulation import PRESETS, Formulation  # noqa: E402
-from optdot.generate import generate  # noqa: E402
-from optdot.job import Job, load_job  # noqa: E402
-from optdot.neighbors import pairs_within  # noqa: E402
-from optdot.qa import run_qa  # noqa: E402
+from optdot.config.schema import Job, load_job  # noqa: E402
+from optdot.geometry.density import DensityMap  # noqa: E402
+from optdot.pipeline import generate  # noqa: E402
+from optdot.quality.gate import run_qa  # noqa: E402
+from optdot.relax.formulation import PRESETS, Formulation  # noqa: E402
+from optdot.spatial.cellgrid import pairs_within  # noqa: E402
 
 ROOT = HERE.parent
 #: the v0.1 default: paper circles + hard core at the dot diameter, hex panel, empty term

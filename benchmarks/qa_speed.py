@@ -18,11 +18,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import machine, peak_rss_mb  # noqa: E402
 
-from optdot.density import DensityMap  # noqa: E402
-from optdot.generate import generate  # noqa: E402
-from optdot.job import Job  # noqa: E402
-from optdot.qa import run_qa  # noqa: E402
-from optdot.report import write_html, write_json  # noqa: E402
+from optdot.config.schema import Job  # noqa: E402
+from optdot.geometry.density import DensityMap  # noqa: E402
+from optdot.pipeline import generate  # noqa: E402
+from optdot.quality.gate import run_qa  # noqa: E402
+from optdot.quality.report import write_html, write_json  # noqa: E402
 
 
 def main() -> None:

@@ -14,9 +14,9 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import machine, peak_rss_mb  # noqa: E402
 
-from optdot.generate import generate  # noqa: E402
-from optdot.job import load_job  # noqa: E402
-from optdot.qa import close_pairs  # noqa: E402
+from optdot.config.schema import load_job  # noqa: E402
+from optdot.pipeline import generate  # noqa: E402
+from optdot.quality.gate import close_pairs  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -29,8 +29,8 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 from _common import machine  # noqa: E402
 
-from optdot.neighbors import pairs_within  # noqa: E402
-from optdot.pattern import load_pattern  # noqa: E402
+from optdot.io.patterns import load_pattern  # noqa: E402
+from optdot.spatial.cellgrid import pairs_within  # noqa: E402
 
 DIAMETER = 0.046
 MEAN_FILL = 0.22

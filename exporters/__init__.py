@@ -1,14 +1,14 @@
-"""Mask and preview writers. They read a :class:`optdot.pattern.Pattern` and never reach
-into the optimizer.
+"""Mask and preview writers (installed as ``optdot.exporters``). They read a
+:class:`optdot.pattern.Pattern` and never reach into the optimizer or QA.
 
 =========  ======================================================
 format     writer
 =========  ======================================================
-GDSII      :func:`exporters.gds.write_gds` (gdstk)
-OASIS      :func:`exporters.gds.write_oas` (gdstk)
-DXF        :func:`exporters.dxf.write_dxf` (streamed, ezdxf template)
-CSV        :func:`optdot.pattern.pattern_csv_bytes`
-SVG/PNG    :func:`exporters.preview.write_svg`, :func:`exporters.preview.write_png`
+GDSII      :func:`optdot.exporters.gds.write_gds` (gdstk)
+OASIS      :func:`optdot.exporters.gds.write_oas` (gdstk)
+DXF        :func:`optdot.exporters.dxf.write_dxf` (streamed, ezdxf template)
+CSV        :func:`optdot.io.patterns.pattern_csv_bytes`
+SVG/PNG    :func:`optdot.exporters.preview.write_svg`, :func:`optdot.exporters.preview.write_png`
 =========  ======================================================
 """
 
@@ -16,8 +16,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from optdot.atomic import atomic_path
-from optdot.pattern import Pattern, pattern_csv_bytes
+from optdot.io.atomic import atomic_path
+from optdot.io.patterns import pattern_csv_bytes
+from optdot.pattern import Pattern
 
 from .options import ExportOptions
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import ezdxf
 import numpy as np
 
-from optdot.atomic import atomic_path
+from optdot.io.atomic import atomic_path
 from optdot.pattern import Pattern
 
 from .options import ExportOptions
@@ -33,10 +33,16 @@ _FIXED = {
 }
 _STAMP = re.compile(r"^(\S+) @ \d{4}-\d\d-\d\dT[0-9:.]+[+-]\d\d:\d\d$")
 _MARK_X, _MARK_Y = 123456.654321, 654321.123456  # template circle, found by its coordinates
+_MARK_R = 0.123456  # its radius when the sizes vary (replaced per dot)
 
 
 def _template(pattern: Pattern, version: str) -> tuple[str, str, str, int]:
-    """(head, circle format, tail, first free handle) of a document for ``pattern``."""
+    """(head, circle format, tail, first free handle) of a document for ``pattern``.
+
+    The circle format takes ``(handle, x, y)`` (R12: ``(x, y)``), plus the radius last
+    when the dots' sizes vary; with one size the radius is part of the template."""
+    uniform = pattern.uniform_diameter
+    radius = _MARK_R if uniform is None else 0.5 * uniform
     doc = ezdxf.new(version, setup=False)
     if version != "R12":  # R12 has no $INSUNITS: drawing units are mm by convention
         doc.header["$INSUNITS"] = 4  # millimetres
@@ -50,7 +56,7 @@ def _template(pattern: Pattern, version: str) -> tuple[str, str, str, int]:
             msp.add_polyline2d(pts, close=True, dxfattribs={"layer": "OUTLINE"})
         else:
             msp.add_lwpolyline(pts, close=True, dxfattribs={"layer": "OUTLINE"})
-    msp.add_circle((_MARK_X, _MARK_Y), pattern.radius, dxfattribs={"layer": "DOTS"})
+    msp.add_circle((_MARK_X, _MARK_Y), radius, dxfattribs={"layer": "DOTS"})
     buf = io.StringIO()
     doc.write(buf)
     text = buf.getvalue()
@@ -73,6 +79,8 @@ def _template(pattern: Pattern, version: str) -> tuple[str, str, str, int]:
         elif c == "10":
             value = "%.6f"
         elif c == "20":
+            value = "%.6f"
+        elif c == "40" and uniform is None:
             value = "%.6f"
         else:
             value = value.replace("%", "%%")
@@ -122,6 +130,7 @@ def write_dxf(pattern: Pattern, path: str | Path, opts: ExportOptions) -> None:
     """Write the DXF atomically (R2010 by default, ``opts.dxf_version`` otherwise)."""
     head, fmt, tail, seed = _template(pattern, opts.dxf_version)
     has_handle = "%X" in fmt
+    varying = pattern.uniform_diameter is None
     n = pattern.n
     handles = np.arange(seed, seed + n, dtype=np.int64)
     head = head.replace("{SEED}", f"{seed + n:X}")
@@ -130,10 +139,11 @@ def write_dxf(pattern: Pattern, path: str | Path, opts: ExportOptions) -> None:
         chunk = 100_000
         for a in range(0, n, chunk):
             xy = pattern.xy[a : a + chunk]
+            cols = [xy[:, 0].tolist(), xy[:, 1].tolist()]
             if has_handle:
-                h = handles[a : a + chunk].tolist()
-                rows = zip(h, xy[:, 0].tolist(), xy[:, 1].tolist(), strict=True)
-            else:
-                rows = zip(xy[:, 0].tolist(), xy[:, 1].tolist(), strict=True)
+                cols.insert(0, handles[a : a + chunk].tolist())
+            if varying:
+                cols.append((0.5 * pattern.diameter[a : a + chunk]).tolist())
+            rows = zip(*cols, strict=True)
             fh.write("".join(fmt % row for row in rows))
         fh.write(tail)

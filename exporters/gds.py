@@ -1,7 +1,8 @@
 """GDSII and OASIS masks with gdstk.
 
-Units: user unit 1 µm, database unit 1 nm. The dot is one cell (a circle polygon whose
-vertex count follows the tolerance) placed by one reference per dot, so 10⁶ dots stay
+Units: user unit 1 µm, database unit 1 nm. A dot is a cell (a circle polygon whose
+vertex count follows the tolerance; one cell per diameter, ``DOT`` when all dots have the
+same size, ``DOT_<diameter in nm>`` otherwise) placed by one reference per dot, so 10⁶ dots stay
 ~26 MB in GDSII; OASIS stores the same references as one explicit repetition (~8 MB).
 ``flatten`` writes plain polygons instead. The panel (outline minus holes and keep-outs)
 goes on its own layer as filled polygons, holes cut open by zero-width keyholes.
@@ -16,9 +17,9 @@ from pathlib import Path
 import gdstk
 import numpy as np
 
-from optdot.atomic import atomic_path
 from optdot.errors import ExportError
-from optdot.neighbors import spatial_order
+from optdot.geometry.morton import spatial_order
+from optdot.io.atomic import atomic_path
 from optdot.pattern import Pattern
 
 from .options import ExportOptions
@@ -46,19 +47,8 @@ def build_library(pattern: Pattern, opts: ExportOptions, oasis: bool = False) ->
             f"pattern extent {max(abs(lo), abs(hi)):.1f} mm exceeds the GDSII/OASIS 32-bit "
             f"limit of {MAX_EXTENT_MM:.1f} mm at 1 nm"
         )
-    r_um = pattern.radius * 1e3
-    nv = circle_vertices(r_um, opts.tolerance_um)
-    if nv > MAX_POINTS:
-        raise ExportError(
-            f"--tolerance {opts.tolerance_um} µm needs {nv} vertices per dot (max {MAX_POINTS})"
-        )
     lib = gdstk.Library("OPTDOT", unit=1e-6, precision=1e-9)
-    dot = gdstk.Cell(opts.dot_cell)
-    dot.add(
-        gdstk.ellipse(
-            (0, 0), r_um, tolerance=opts.tolerance_um, layer=opts.layer, datatype=opts.datatype
-        )
-    )
+    groups = _size_groups(pattern, opts)
     top = gdstk.Cell(opts.top_cell)
     # the panel as filled polygon(s); GDSII has no holes, so gdstk cuts each hole open
     # with a zero-width keyhole, which KLayout and mask tools read as a hole
@@ -70,20 +60,47 @@ def build_library(pattern: Pattern, opts: ExportOptions, oasis: bool = False) ->
         top.add(*gdstk.boolean(shells, holes, "not", precision=1e-3, **lay))
     else:
         top.add(*(gdstk.Polygon(p.points, **lay) for p in shells))
-    xy = pattern.xy * 1e3
-    if oasis and len(xy) > 1:
-        xy = xy[spatial_order(xy)]  # small deltas: compact OASIS repetition
-    ref = gdstk.Reference(dot, origin=(float(xy[0, 0]), float(xy[0, 1])))
-    if len(xy) > 1:
-        # the origin itself is always an instance: offsets exclude it
-        ref.repetition = gdstk.Repetition(offsets=xy[1:] - xy[0])
-    top.add(ref)
+    for dot, sel in groups:
+        xy = pattern.xy[sel] * 1e3
+        if oasis and len(xy) > 1:
+            xy = xy[spatial_order(xy)]  # small deltas: compact OASIS repetition
+        ref = gdstk.Reference(dot, origin=(float(xy[0, 0]), float(xy[0, 1])))
+        if len(xy) > 1:
+            # the origin itself is always an instance: offsets exclude it
+            ref.repetition = gdstk.Repetition(offsets=xy[1:] - xy[0])
+        top.add(ref)
     if opts.flatten:
         top.flatten()
         lib.add(top)
     else:
-        lib.add(dot, top)
+        lib.add(*(dot for dot, _ in groups), top)
     return lib
+
+
+def _size_groups(pattern: Pattern, opts: ExportOptions) -> list[tuple[gdstk.Cell, np.ndarray]]:
+    """One dot cell per diameter (rounded to the 1 nm database unit) and the ``[n]`` bool
+    mask of its dots, smallest diameter first."""
+    if pattern.n == 0:
+        raise ExportError("the pattern has no dots")
+    d_nm = np.round(pattern.diameter * 1e6).astype(np.int64)
+    sizes = np.unique(d_nm)
+    groups = []
+    for size in sizes:
+        r_um = 0.5 * float(size) * 1e-3 if len(sizes) > 1 else float(pattern.radius[0]) * 1e3
+        nv = circle_vertices(r_um, opts.tolerance_um)
+        if nv > MAX_POINTS:
+            raise ExportError(
+                f"--tolerance {opts.tolerance_um} µm needs {nv} vertices per dot (max {MAX_POINTS})"
+            )
+        name = opts.dot_cell if len(sizes) == 1 else f"{opts.dot_cell}_{size}"
+        dot = gdstk.Cell(name)
+        dot.add(
+            gdstk.ellipse(
+                (0, 0), r_um, tolerance=opts.tolerance_um, layer=opts.layer, datatype=opts.datatype
+            )
+        )
+        groups.append((dot, d_nm == size if len(sizes) > 1 else np.ones(pattern.n, bool)))
+    return groups
 
 
 def _ccw(ring: np.ndarray) -> bool:

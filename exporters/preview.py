@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from optdot.atomic import atomic_path
-from optdot.pattern import Pattern
+from optdot.io.atomic import atomic_path
+from optdot.pattern import Pattern, coverage_image
 
 SVG_MAX_DOTS = 200_000
 TILE_MM = 1.0
@@ -25,22 +25,6 @@ def zoom_tile(pattern: Pattern, size: float = TILE_MM) -> tuple[float, float, fl
     cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
     h = 0.5 * min(size, x1 - x0, y1 - y0)
     return cx - h, cy - h, cx + h, cy + h
-
-
-def coverage_image(pattern: Pattern, max_px: int = 400) -> tuple[np.ndarray, tuple]:
-    """Covered area share per pixel, ``[ny, nx]``, and its extent (x0, x1, y0, y1) mm."""
-    x0, y0, x1, y1 = pattern.box
-    # pixels of at least 6 dot diameters, so each holds several dots and the map reads
-    # as coverage rather than as dot positions
-    px = max(max((x1 - x0), (y1 - y0)) / max_px, 6.0 * pattern.diameter)
-    nx = max(1, int(round((x1 - x0) / px)))
-    ny = max(1, int(round((y1 - y0) / px)))
-    h, _, _ = np.histogram2d(
-        pattern.xy[:, 1], pattern.xy[:, 0], bins=(ny, nx), range=((y0, y1), (x0, x1))
-    )
-    dot_area = np.pi * pattern.radius**2
-    cell = (x1 - x0) / nx * (y1 - y0) / ny
-    return h * dot_area / cell, (x0, x1, y0, y1)
 
 
 def write_png(pattern: Pattern, path: str | Path, dpi: int = 110) -> None:
@@ -64,7 +48,7 @@ def write_png(pattern: Pattern, path: str | Path, dpi: int = 110) -> None:
     tx0, ty0, tx1, ty1 = zoom_tile(pattern)
     a.add_patch(plt.Rectangle((tx0, ty0), tx1 - tx0, ty1 - ty0, fill=False, ec="red"))
     sel = _in_window(pattern, (tx0, ty0, tx1, ty1))
-    d = pattern.diameter
+    d = pattern.uniform_diameter or pattern.diameter[sel]
     b.add_collection(
         EllipseCollection(
             d, d, 0, units="xy", offsets=pattern.xy[sel], offset_transform=b.transData, fc="k"
@@ -88,24 +72,40 @@ def write_svg(pattern: Pattern, path: str | Path) -> None:
     window = (x0, y0, x1, y1) if pattern.n <= SVG_MAX_DOTS else zoom_tile(pattern)
     wx0, wy0, wx1, wy1 = window
     sel = _in_window(pattern, window)
-    r = pattern.radius
+    u = pattern.uniform_diameter
+    radius = pattern.radius[sel]
     out = [
         '<?xml version="1.0" encoding="UTF-8"?>\n',
         f'<svg xmlns="http://www.w3.org/2000/svg" width="{wx1 - wx0:.6f}mm" '
         f'height="{wy1 - wy0:.6f}mm" '
         f'viewBox="{wx0:.6f} {-wy1:.6f} {wx1 - wx0:.6f} {wy1 - wy0:.6f}">\n',
-        f"<title>{pattern.n} dots, diameter {pattern.diameter} mm</title>\n",
+        f"<title>{pattern.n} dots, diameter {_diameter(pattern)} mm</title>\n",
     ]
     for ring in pattern.outline_rings():
         d = " ".join(f"{x:.6f},{-y:.6f}" for x, y in ring.tolist())
         out.append(f'<polygon points="{d}" fill="none" stroke="red" stroke-width="0.01"/>\n')
     out.append('<g fill="black">\n')
-    out += [
-        f'<circle cx="{x:.6f}" cy="{-y:.6f}" r="{r:.6f}"/>\n' for x, y in pattern.xy[sel].tolist()
-    ]
+    if u is not None:
+        r = 0.5 * u
+        out += [
+            f'<circle cx="{x:.6f}" cy="{-y:.6f}" r="{r:.6f}"/>\n'
+            for x, y in pattern.xy[sel].tolist()
+        ]
+    else:
+        out += [
+            f'<circle cx="{x:.6f}" cy="{-y:.6f}" r="{r:.6f}"/>\n'
+            for (x, y), r in zip(pattern.xy[sel].tolist(), radius.tolist(), strict=True)
+        ]
     out.append("</g>\n</svg>\n")
     with atomic_path(path) as tmp:
         tmp.write_text("".join(out), encoding="utf-8")
+
+
+def _diameter(pattern: Pattern) -> str:
+    u = pattern.uniform_diameter
+    if u is not None:
+        return f"{u}"
+    return f"{pattern.diameter.min()}..{pattern.diameter.max()}"
 
 
 def _in_window(pattern: Pattern, w: tuple[float, float, float, float]) -> np.ndarray:

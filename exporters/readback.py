@@ -11,9 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
-from optdot.domain import domain_from_rings
 from optdot.errors import GeometryError, PatternFileError
-from optdot.pattern import Pattern, load_pattern
+from optdot.geometry.domain import domain_from_rings
+from optdot.io.patterns import load_pattern
+from optdot.pattern import Pattern
 
 from .options import ExportOptions
 
@@ -50,7 +51,7 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
         raise PatternFileError(f"{path}: expected one top cell, found {len(tops)}")
     top = tops[0]
     centres: list[np.ndarray] = []
-    diameter = None
+    diameters: list[np.ndarray] = []
     for ref in top.references:
         cell = ref.cell
         pts = [p for p in cell.polygons if (p.layer, p.datatype) == (opts.layer, opts.datatype)]
@@ -63,6 +64,7 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
         if ref.repetition.size > 1:
             origins = ref.repetition.get_offsets() + np.array(ref.origin)
         centres.append(origins * to_mm)
+        diameters.append(np.full(len(origins), diameter))
     for poly in top.polygons:
         if (poly.layer, poly.datatype) != (opts.layer, opts.datatype):
             continue
@@ -71,7 +73,8 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
         diameter = round(2 * float(np.mean(np.hypot(*(pts - c).T))) * to_mm, 6)
         reps = poly.repetition.get_offsets() if poly.repetition.size > 1 else np.zeros((1, 2))
         centres.append((c + reps) * to_mm)
-    if not centres or diameter is None:
+        diameters.append(np.full(len(reps), diameter))
+    if not centres:
         raise PatternFileError(f"{path}: no dots on layer {opts.layer}/{opts.datatype}")
     outline = [
         p
@@ -80,7 +83,7 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
     ]
     rings = [p.points * to_mm for p in outline]
     xy = np.round(np.concatenate(centres), 6)
-    return _pattern(path, xy, diameter, rings, filled=True)
+    return _pattern(path, xy, np.concatenate(diameters), rings, filled=True)
 
 
 def _read_dxf(path: Path) -> Pattern:
@@ -100,13 +103,11 @@ def _read_dxf(path: Path) -> Pattern:
             if e.dxftype() == "LWPOLYLINE"
             else np.array([v.dxf.location[:2] for v in e.vertices], dtype=np.float64)
         )
-    if np.ptp(radii) > 1e-9:
-        raise PatternFileError(f"{path}: dots of different diameters")
-    return _pattern(path, np.round(xy, 6), 2 * float(radii[0]), rings)
+    return _pattern(path, np.round(xy, 6), 2 * radii, rings)
 
 
 def _pattern(
-    path: Path, xy: np.ndarray, diameter: float, rings: list[np.ndarray], filled: bool = False
+    path: Path, xy: np.ndarray, diameter: np.ndarray, rings: list[np.ndarray], filled: bool = False
 ) -> Pattern:
     """A pattern whose panel is the outline read back, else the dots' extent.
 
@@ -121,9 +122,13 @@ def _pattern(
         pts = np.concatenate(rings)
         lo, hi = pts.min(axis=0), pts.max(axis=0)
     else:
-        lo = xy.min(axis=0) - diameter / 2
-        hi = xy.max(axis=0) + diameter / 2
+        lo = (xy - diameter[:, None] / 2).min(axis=0)
+        hi = (xy + diameter[:, None] / 2).max(axis=0)
     box = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
     return Pattern(
-        xy=xy, diameter=round(diameter, 6), box=box, meta={"source": str(path)}, outline=outline
+        xy=xy,
+        diameter=np.round(diameter, 6),
+        box=box,
+        meta={"source": str(path)},
+        outline=outline,
     )

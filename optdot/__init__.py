@@ -1,0 +1,77 @@
+"""optdot: non-overlapping random dot patterns for light guides and diffuser films, their
+masks, and QA before tooling.
+
+The public API (everything else is internal and may change)::
+
+    from optdot import load_job, generate, qa, export, load_pattern, save_pattern, Pattern
+
+    job = load_job("samples/led/job.toml")      # validated, frozen Job
+    pattern = generate(job)                      # Pattern: xy [n, 2] mm, diameter [n] mm
+    result = qa(pattern, job)                    # QAResult: .passed, .checks, .metrics
+    export(pattern, {"gds": "led.gds"}, job)     # QA gate first; raises QAGateError
+
+The pipeline, as the folders show it: ``config`` (job) → ``geometry`` (panel, map) →
+``sampling`` (initial dots) → ``spatial`` (pair search) → ``relax`` (penalty, L-BFGS,
+MD baseline, guarantee pass) → :class:`Pattern` → ``quality`` (metrics, gate, report) and
+``exporters`` (masks, files); ``pipeline`` ties the stages, ``cli`` parses and prints.
+"""
+
+from __future__ import annotations
+
+from importlib import import_module
+from pathlib import Path
+
+from . import _imports
+from .errors import (
+    ExportError,
+    GeometryError,
+    GuaranteeError,
+    JobError,
+    OptdotError,
+    PatternFileError,
+    QAGateError,
+    ResourceError,
+)
+
+_imports.install(Path(__file__).resolve().parent)
+
+#: Public name -> the module that defines it (imported on first use: ``import optdot``
+#: stays cheap, and the command line loads only what a command needs).
+_API = {
+    "load_job": "optdot.config.schema",
+    "Job": "optdot.config.job",
+    "generate": "optdot.pipeline",
+    "qa": "optdot.pipeline",
+    "export": "optdot.pipeline",
+    "Pattern": "optdot.pattern",
+    "load_pattern": "optdot.io.patterns",
+    "save_pattern": "optdot.io.patterns",
+    "read_pattern": "optdot.exporters.readback",
+    "QAResult": "optdot.quality.gate",
+    "ExportOptions": "optdot.exporters.options",
+}
+_ALIASES = {"read_pattern": "read_any"}
+
+__all__ = [
+    *_API,
+    "OptdotError",
+    "JobError",
+    "GeometryError",
+    "PatternFileError",
+    "ExportError",
+    "ResourceError",
+    "GuaranteeError",
+    "QAGateError",
+]
+
+
+def __getattr__(name: str):
+    if name in _API:
+        value = getattr(import_module(_API[name]), _ALIASES.get(name, name))
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'optdot' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -33,6 +33,22 @@ class ResourceError(OptdotError):
     """The job would need more memory than this machine has."""
 
 
+class QAGateError(OptdotError):
+    """The QA gate failed, so nothing was written (``export`` without ``force``).
+
+    Attributes:
+        result: the :class:`~optdot.quality.gate.QAResult` that failed.
+    """
+
+    exit_code = 1
+
+    def __init__(self, result) -> None:
+        self.result = result
+        super().__init__(
+            f"QA gate failed, nothing written ({result.failures()}); use --force to write anyway"
+        )
+
+
 class GuaranteeError(OptdotError):
     """The optimizer could not deliver the spacing/placement guarantee (never silent)."""
 

@@ -1,39 +1,26 @@
 """The :class:`Pattern`: what the optimizer produces and every exporter and QA check reads.
 
-File formats written by ``optdot generate``:
-
-* CSV: header ``x_mm,y_mm,diameter_mm``, one dot a row, 6 decimals (1 nm).
-* NPZ: arrays ``xy`` ``[n, 2]`` (mm), ``diameter`` (mm), ``box`` ``[4]`` (mm) and
-  ``meta`` (JSON text); a zip with fixed timestamps so equal patterns give equal bytes.
+Reading and writing pattern files (CSV, NPZ) lives in :mod:`optdot.io.patterns`.
 """
 
 from __future__ import annotations
 
-import io
-import json
-import zipfile
-from dataclasses import dataclass, field, replace
-from pathlib import Path
+from dataclasses import dataclass, field
 from typing import Any
 
-import numba as nb
 import numpy as np
-import shapely
 
-from .atomic import atomic_path
-from .domain import Domain, orient_all
-from .errors import ExportError, PatternFileError
-
-CSV_HEADER = "x_mm,y_mm,diameter_mm"
+from .geometry.domain import Domain
 
 
 @dataclass(frozen=True, eq=False)
 class Pattern:
-    """Dot centres on a panel.
+    """Dot centres and sizes on a panel.
 
     Attributes:
         xy: ``[n, 2]`` float64 dot centres, mm, rounded to 1 nm.
-        diameter: dot diameter, mm (all dots equal).
+        diameter: ``[n]`` float64 dot diameters, mm (a number given here is broadcast to
+            every dot; :attr:`uniform_diameter` is the scalar view when all are equal).
         box: panel ``(xmin, ymin, xmax, ymax)``, mm.
         meta: provenance (job name, seed, method, iterations, ...). Deterministic values
             only; timings live in :attr:`stats`.
@@ -42,7 +29,7 @@ class Pattern:
     """
 
     xy: np.ndarray
-    diameter: float
+    diameter: np.ndarray
     box: tuple[float, float, float, float]
     meta: dict[str, Any] = field(default_factory=dict)
     stats: dict[str, Any] = field(default_factory=dict)
@@ -53,7 +40,13 @@ class Pattern:
         if xy.ndim != 2 or xy.shape[1] != 2:
             raise ValueError(f"xy must have shape [n, 2], got {xy.shape}")
         xy.setflags(write=False)
+        d = np.asarray(self.diameter, dtype=np.float64)
+        if d.ndim > 1 or (d.ndim == 1 and len(d) != len(xy)):
+            raise ValueError(f"diameter must be a number or shape [{len(xy)}], got {d.shape}")
+        d = np.ascontiguousarray(np.broadcast_to(d, (len(xy),)))
+        d.setflags(write=False)
         object.__setattr__(self, "xy", xy)
+        object.__setattr__(self, "diameter", d)
         object.__setattr__(self, "box", tuple(float(v) for v in self.box))
 
     def outline_rings(self) -> list[np.ndarray]:
@@ -70,195 +63,70 @@ class Pattern:
         return int(self.xy.shape[0])
 
     @property
-    def radius(self) -> float:
-        """Dot radius, mm."""
+    def uniform_diameter(self) -> float | None:
+        """The one diameter of every dot, mm, or None when sizes vary (or no dots)."""
+        d = self.diameter
+        if len(d) == 0 or d.min() != d.max():
+            return None
+        return float(d[0])
+
+    @property
+    def nominal_diameter(self) -> float:
+        """The uniform diameter, or the median of varying ones, mm."""
+        u = self.uniform_diameter
+        return u if u is not None else float(np.median(self.diameter)) if self.n else 0.0
+
+    @property
+    def radius(self) -> np.ndarray:
+        """``[n]`` dot radii, mm."""
         return 0.5 * self.diameter
 
+    @property
+    def areas(self) -> np.ndarray:
+        """``[n]`` dot areas, mm²."""
+        return np.pi * (0.5 * self.diameter) ** 2
 
-def save_pattern(pattern: Pattern, path: str | Path) -> None:
-    """Write ``pattern`` to ``.csv`` or ``.npz`` atomically (see module doc).
 
-    Raises:
-        ExportError: unknown suffix or unwritable path.
+def coverage_image(
+    pattern: Pattern, max_px: int = 400
+) -> tuple[np.ndarray, tuple[float, float, float, float]]:
+    """Covered area share per pixel, ``[ny, nx]``, and its extent ``(x0, x1, y0, y1)`` mm.
+
+    Pixels are at least 6 nominal dot diameters, so each holds several dots and the map
+    reads as coverage rather than as dot positions; at most ``max_px`` a side.
     """
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in (".csv", ".npz"):
-        raise ExportError(f"{path}: pattern files are .csv or .npz, not {suffix or 'no suffix'!r}")
-    with atomic_path(path) as tmp:
-        if suffix == ".csv":
-            tmp.write_bytes(pattern_csv_bytes(pattern))
-        else:
-            _write_npz(pattern, tmp)
+    x0, y0, x1, y1 = pattern.box
+    px = max(max((x1 - x0), (y1 - y0)) / max_px, 6.0 * pattern.nominal_diameter)
+    nx = max(1, int(round((x1 - x0) / px)))
+    ny = max(1, int(round((y1 - y0) / px)))
+    rng = ((y0, y1), (x0, x1))
+    cell = (x1 - x0) / nx * (y1 - y0) / ny
+    u = pattern.uniform_diameter
+    if u is not None:
+        h, _, _ = np.histogram2d(pattern.xy[:, 1], pattern.xy[:, 0], bins=(ny, nx), range=rng)
+        return h * (np.pi * (0.5 * u) ** 2) / cell, (x0, x1, y0, y1)
+    h, _, _ = np.histogram2d(
+        pattern.xy[:, 1], pattern.xy[:, 0], bins=(ny, nx), range=rng, weights=pattern.areas
+    )
+    return h / cell, (x0, x1, y0, y1)
 
 
-def pattern_csv_bytes(pattern: Pattern) -> bytes:
-    """The CSV text of a pattern, as bytes (``x,y,d`` in mm with 6 decimals = 1 nm)."""
-    data = np.column_stack([pattern.xy, np.full(pattern.n, pattern.diameter)])
-    return (CSV_HEADER + "\n").encode("ascii") + format_fixed6(data)
+#: Names that lived here until 0.2 and moved to :mod:`optdot.io.patterns`.
+_MOVED = ("save_pattern", "load_pattern", "pattern_csv_bytes", "format_fixed6", "CSV_HEADER")
 
 
-def format_fixed6(values: np.ndarray) -> bytes:
-    """Rows of ``values`` (``[n, k]`` float) as comma-separated ``%.6f`` text lines.
+def __getattr__(name: str):
+    if name in _MOVED:
+        import warnings
 
-    Same text as ``np.savetxt(fmt="%.6f", delimiter=",")`` for values that are exact to
-    1e-6 (positions are rounded to 1 nm), ten times faster.
-    """
-    values = np.ascontiguousarray(values, dtype=np.float64)
-    if values.size == 0:
-        return b""
-    micro = np.round(values * 1e6)
-    if not np.all(np.abs(micro) < 9e17):
-        raise ValueError("value too large for fixed-point CSV")
-    return _format_micro(micro.astype(np.int64), np.signbit(values)).tobytes()
+        from ._imports import OptdotDeprecationWarning
+        from .io import patterns
 
-
-@nb.njit(cache=True)
-def _format_micro(micro, negative):  # pragma: no cover - compiled
-    n, k = micro.shape
-    out = np.empty(n * k * 28, np.uint8)
-    pos = 0
-    digits = np.empty(20, np.uint8)
-    for i in range(n):
-        for c in range(k):
-            v = micro[i, c]
-            if negative[i, c]:
-                out[pos] = 45  # '-'
-                pos += 1
-            v = abs(v)
-            whole = v // 1000000
-            frac = v % 1000000
-            m = 0
-            while True:
-                digits[m] = 48 + whole % 10
-                whole //= 10
-                m += 1
-                if whole == 0:
-                    break
-            for q in range(m - 1, -1, -1):
-                out[pos] = digits[q]
-                pos += 1
-            out[pos] = 46  # '.'
-            pos += 1
-            for q in range(5, -1, -1):
-                out[pos + q] = 48 + frac % 10
-                frac //= 10
-            pos += 6
-            out[pos] = 44 if c < k - 1 else 10  # ',' or newline
-            pos += 1
-    return out[:pos]
-
-
-def _write_npz(pattern: Pattern, path: Path) -> None:
-    arrays = {
-        "xy": pattern.xy,
-        "diameter": np.array(pattern.diameter),
-        "box": np.array(pattern.box),
-        "meta": np.array(json.dumps(pattern.meta, sort_keys=True)),
-    }
-    if pattern.outline is not None:
-        # WKB keeps every coordinate bit-exact (WKT text does not)
-        wkb = shapely.to_wkb(pattern.outline.geometry, byte_order=1)
-        arrays["outline_wkb"] = np.frombuffer(wkb, dtype=np.uint8)
-        arrays["edge_margin"] = np.array(pattern.outline.edge_margin)
-    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as zf:
-        for name, arr in arrays.items():
-            buf = io.BytesIO()
-            np.lib.format.write_array(buf, np.asarray(arr), allow_pickle=False)
-            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
-            info.compress_type = zipfile.ZIP_DEFLATED
-            zf.writestr(info, buf.getvalue())
-
-
-def load_pattern(path: str | Path, box: tuple[float, float, float, float] | None = None) -> Pattern:
-    """Read a pattern written by :func:`save_pattern`.
-
-    Args:
-        path: ``.csv`` or ``.npz``.
-        box: panel box to use when the file does not hold one (CSV); default is the
-            dots' bounding box grown by one radius.
-
-    Raises:
-        PatternFileError: missing, unreadable or malformed file (one line, names the file).
-    """
-    path = Path(path)
-    if not path.exists():
-        raise PatternFileError(f"{path}: pattern file not found")
-    suffix = path.suffix.lower()
-    if suffix == ".npz":
-        return _load_npz(path, box)
-    if suffix == ".csv":
-        return _load_csv(path, box)
-    raise PatternFileError(f"{path}: unknown pattern format {suffix!r} (use .csv or .npz)")
-
-
-def _load_csv(path: Path, box: tuple[float, float, float, float] | None) -> Pattern:
-    try:
-        with open(path, encoding="ascii") as fh:
-            header = fh.readline().strip()
-            if header != CSV_HEADER:
-                raise PatternFileError(
-                    f"{path}: line 1: header must be {CSV_HEADER!r}, got {header[:60]!r}"
-                )
-            data = np.loadtxt(fh, delimiter=",", ndmin=2, dtype=np.float64)
-    except (UnicodeDecodeError, ValueError) as e:
-        raise PatternFileError(f"{path}: malformed pattern CSV ({_first_line(e)})") from None
-    except OSError as e:
-        raise PatternFileError(f"{path}: cannot read ({e.strerror})") from None
-    if data.size == 0:
-        raise PatternFileError(f"{path}: no dots in the file")
-    if data.shape[1] != 3:
-        raise PatternFileError(f"{path}: expected 3 columns ({CSV_HEADER}), got {data.shape[1]}")
-    return _validated(path, data[:, :2], data[:, 2], box, {})
-
-
-def _load_npz(path: Path, box: tuple[float, float, float, float] | None) -> Pattern:
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            xy = np.asarray(z["xy"], dtype=np.float64)
-            diameter = np.asarray(z["diameter"], dtype=np.float64)
-            file_box = tuple(np.asarray(z["box"], dtype=np.float64).tolist())
-            meta = json.loads(str(z["meta"])) if "meta" in z else {}
-            outline = None
-            if "outline_wkb" in z:
-                geom = orient_all(shapely.from_wkb(np.asarray(z["outline_wkb"]).tobytes()))
-                outline = Domain(geom, float(z["edge_margin"]), False, str(path))
-    except KeyError as e:
-        raise PatternFileError(f"{path}: missing array {e} in pattern .npz") from None
-    except (
-        OSError,
-        ValueError,
-        zipfile.BadZipFile,
-        json.JSONDecodeError,
-        shapely.errors.GEOSException,
-    ) as e:
-        raise PatternFileError(f"{path}: not a readable pattern .npz ({_first_line(e)})") from None
-    if xy.ndim != 2 or xy.shape[1] != 2 or len(xy) == 0:
-        raise PatternFileError(f"{path}: xy must have shape [n, 2] with n > 0, got {xy.shape}")
-    if len(file_box) != 4:
-        raise PatternFileError(f"{path}: box must have 4 numbers, got {len(file_box)}")
-    p = _validated(path, xy, np.broadcast_to(diameter, (len(xy),)), box or file_box, meta)
-    return p if outline is None else replace(p, outline=outline)
-
-
-def _validated(path, xy, diam, box, meta) -> Pattern:
-    if not np.all(np.isfinite(xy)) or not np.all(np.isfinite(diam)):
-        raise PatternFileError(f"{path}: NaN or infinite coordinate or diameter")
-    if np.any(diam <= 0):
-        raise PatternFileError(f"{path}: diameters must be > 0 mm")
-    if np.ptp(diam) > 1e-9:
-        raise PatternFileError(
-            f"{path}: all dots must have one diameter (found {np.unique(diam)[:3]}...)"
+        warnings.warn(
+            f"optdot.pattern.{name} is deprecated and goes in the next release: use "
+            f"optdot.io.patterns.{name} (or `from optdot import {name}`)",
+            OptdotDeprecationWarning,
+            stacklevel=2,
         )
-    d = float(diam[0])
-    if box is None:
-        lo = xy.min(axis=0) - d / 2
-        hi = xy.max(axis=0) + d / 2
-        box = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
-    if not (box[2] > box[0] and box[3] > box[1]):
-        raise PatternFileError(f"{path}: empty panel box {box}")
-    return Pattern(xy=xy, diameter=d, box=box, meta=meta)
-
-
-def _first_line(e: Exception) -> str:
-    return str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        return getattr(patterns, name)
+    raise AttributeError(f"module 'optdot.pattern' has no attribute {name!r}")

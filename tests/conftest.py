@@ -40,13 +40,13 @@ def write_job(tmp: Path, grid: np.ndarray | str, **sections) -> Path:
 
 @pytest.fixture(scope="session")
 def tiny_job():
-    from optdot.job import load_job
+    from optdot.config.schema import load_job
 
     return load_job(SAMPLES / "tiny" / "job.toml")
 
 
 @pytest.fixture(scope="session")
 def tiny_pattern(tiny_job):
-    from optdot.generate import generate
+    from optdot.pipeline import generate
 
     return generate(tiny_job)

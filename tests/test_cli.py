@@ -6,7 +6,7 @@ import pytest
 from click.testing import CliRunner
 
 from optdot.cli import main
-from optdot.pattern import load_pattern
+from optdot.io.patterns import load_pattern
 
 from .conftest import SAMPLES, write_job
 
@@ -183,8 +183,8 @@ def test_qa_finds_planted_defects(exported, tmp_path):
 
 
 def test_qa_pair_counts_match_brute_force():
-    from optdot.neighbors import pairs_brute_force
-    from optdot.qa import close_pairs
+    from optdot.quality.gate import close_pairs
+    from optdot.spatial.cellgrid import pairs_brute_force
 
     xy = np.random.default_rng(4).random((700, 2)) * 0.6
     for d in (0.046, 0.060):

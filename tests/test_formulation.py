@@ -7,17 +7,18 @@ import dataclasses
 import numpy as np
 import pytest
 
-from optdot.circles import circle_radius, hex_radius
-from optdot.formulation import PRESETS, Formulation, formulation_of
-from optdot.generate import generate, relax_staged
-from optdot.neighbors import pairs_within
+from optdot.pipeline import generate, problem_of
+from optdot.relax.circles import circle_radius, hex_radius
+from optdot.relax.formulation import PRESETS, Formulation, formulation_of
+from optdot.relax.optdot import RelaxSettings, relax_staged
+from optdot.spatial.cellgrid import pairs_within
 
 
 def test_core_share_floor_and_cap(tiny_job):
     rho = np.array([0.05, 0.3, 0.45, 0.55])
     xy = np.tile([[1.0, 1.0]], (4, 1))
     form = Formulation(w_hard=15.0, core_share=0.93, core_floor=0.059, core_cap=0.064)
-    core = form.terms(tiny_job, xy, rho).core_radius
+    core = form.terms(problem_of(tiny_job), xy, rho).core_radius
     want = 0.93 * hex_radius(rho, 0.023)
     # sparse: capped at 64 µm; mid: 0.93 of the spacing; densest: below the floor -> dmin/2
     assert core[0] == pytest.approx(0.032)
@@ -32,7 +33,7 @@ def test_default_core_clears_the_close_distance(tiny_job):
     rho = np.linspace(0.02, 0.6, 300)
     xy = np.tile([[1.0, 1.0]], (len(rho), 1))
     a = 2 * hex_radius(rho, 0.023)
-    dist = 2 * PRESETS["optdot"].terms(tiny_job, xy, rho).core_radius
+    dist = 2 * PRESETS["optdot"].terms(problem_of(tiny_job), xy, rho).core_radius
     wide = a * 0.98 >= 0.061
     assert np.allclose(dist[wide], np.clip(0.93 * a[wide], 0.061, 0.064))
     assert np.allclose(dist[~wide], 0.046)
@@ -45,7 +46,7 @@ def test_core_lengths_scale_with_the_close_distance(tiny_job):
     xy = np.tile([[1.0, 1.0]], (len(rho), 1))
     job = dataclasses.replace(tiny_job, qa=dataclasses.replace(tiny_job.qa, close_distance=0.080))
     a = 2 * hex_radius(rho, 0.023)
-    dist = 2 * PRESETS["optdot"].terms(job, xy, rho).core_radius
+    dist = 2 * PRESETS["optdot"].terms(problem_of(job), xy, rho).core_radius
     k = 0.080 / 0.060
     wide = a * 0.98 >= k * 0.061
     assert np.allclose(dist[wide], np.clip(0.93 * a[wide], k * 0.061, k * 0.064))
@@ -75,7 +76,10 @@ def test_stages_split_the_iterations(tiny_job):
     assert len(pairs_within(p.xy, job.min_distance)) == 0
     xy0 = np.array([[1.0, 1.0], [1.01, 1.0]])
     calls = []
-    relax_staged(job, form, xy0, np.array([0.3, 0.3]), lambda i, f: calls.append(i))
+    settings = RelaxSettings(max_iter=30)
+    relax_staged(
+        problem_of(job), form, xy0, np.array([0.3, 0.3]), settings, lambda i, f: calls.append(i)
+    )
     assert calls == sorted(calls) and calls[-1] <= 30
 
 
@@ -84,6 +88,14 @@ def test_job_overrides_reach_the_formulation(tiny_job):
         tiny_job,
         optimize=dataclasses.replace(tiny_job.optimize, radius_factor=0.8, container_factor=5.0),
     )
-    form = formulation_of(job)
+    opt = job.optimize
+    form = formulation_of(opt.formulation, opt.radius_factor, opt.container_factor)
     assert form.radius_factor == 0.8 and form.container_factor == 5.0
-    assert formulation_of(tiny_job) == PRESETS["optdot"]
+    assert formulation_of(tiny_job.optimize.formulation) == PRESETS["optdot"]
+    # and the pipeline uses them: a smaller radius factor gives smaller circles
+    rho = np.array([0.3])
+    xy = np.array([[1.0, 1.0]])
+    assert (
+        form.terms(problem_of(job), xy, rho).radius[0]
+        < PRESETS["optdot"].terms(problem_of(tiny_job), xy, rho).radius[0]
+    )

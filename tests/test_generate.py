@@ -1,11 +1,11 @@
 import numpy as np
 import pytest
 
-from optdot.generate import generate
-from optdot.job import load_job
-from optdot.legalize import check_guarantee, legalize
-from optdot.pattern import pattern_csv_bytes
-from optdot.qa import close_pairs
+from optdot.config.schema import load_job
+from optdot.io.patterns import pattern_csv_bytes
+from optdot.pipeline import generate
+from optdot.quality.gate import close_pairs
+from optdot.relax.legalize import check_guarantee, legalize
 
 from .conftest import SAMPLES, write_job
 

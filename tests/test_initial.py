@@ -3,10 +3,10 @@ import math
 import numpy as np
 import pytest
 
-from optdot.circles import circle_radius, container_half_sides, hex_radius
-from optdot.density import DensityMap
-from optdot.initial import initial_dots
-from optdot.sobol import sobol_points
+from optdot.geometry.density import DensityMap
+from optdot.relax.circles import circle_radius, container_half_sides, hex_radius
+from optdot.sampling.initial import initial_dots
+from optdot.sampling.sobol import sobol_points
 
 
 def test_counts_per_cell_follow_the_map():

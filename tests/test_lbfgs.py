@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize, rosen, rosen_der
 
-from optdot.lbfgs import minimize_lbfgs
+from optdot.relax.lbfgs import minimize_lbfgs
 
 
 def test_quadratic_converges_to_exact_minimum():
@@ -41,3 +41,23 @@ def test_history_is_monotone_and_callback_called():
     res = minimize_lbfgs(fun, np.ones(10), max_iter=5, callback=lambda i, f: seen.append((i, f)))
     assert all(b <= a for a, b in zip(res.history, res.history[1:], strict=False))
     assert [i for i, _ in seen] == list(range(1, len(seen) + 1))
+
+
+def _bowl(x, g):
+    g[:] = 2 * (x - 1.0)
+    return float(((x - 1.0) ** 2).sum()) + 1.0
+
+
+def test_status_codes_and_messages():
+    from optdot.relax.lbfgs import CONVERGED, HALTED, MAX_ITER
+
+    res = minimize_lbfgs(_bowl, np.zeros(8), max_iter=2)
+    assert res.status == MAX_ITER and res.success and "max_iter" in res.message
+    res = minimize_lbfgs(_bowl, np.zeros(8), max_iter=500, gtol=1e-6)
+    assert res.status == CONVERGED and res.nit < 500 and "gtol" in res.message
+    g = np.empty(8)
+    _bowl(res.x, g)
+    assert np.abs(g).max() <= 1e-6
+    res = minimize_lbfgs(_bowl, np.zeros(8), max_iter=50, callback=lambda i, f: i >= 3)
+    assert res.status == HALTED and res.nit == 3 and not res.success
+    assert len(res.history) == 3

@@ -7,9 +7,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from optdot.generate import generate
-from optdot.md import MDForce, md_forces, md_relax
-from optdot.neighbors import PairList, neighbor_pairs, pairs_within
+from optdot.pipeline import generate
+from optdot.relax.md import MDForce, md_forces, md_relax
+from optdot.spatial.blocks import PairList
+from optdot.spatial.cellgrid import neighbor_pairs, pairs_within
 
 B = 0.046
 

@@ -2,13 +2,14 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from optdot.neighbors import (
+from optdot.geometry.morton import spatial_order
+from optdot.spatial.cellgrid import (
     csr_to_pairs,
     neighbor_grid,
+    neighbor_list,
     neighbor_pairs,
     pairs_brute_force,
     pairs_within,
-    spatial_order,
 )
 
 
@@ -61,3 +62,71 @@ def test_spatial_order_is_permutation():
     xy = np.random.default_rng(2).random((1000, 2))
     o = spatial_order(xy)
     assert np.array_equal(np.sort(o), np.arange(1000))
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    n=st.integers(0, 200),
+    h=st.integers(0, 120),
+    seed=st.integers(0, 2**31),
+    skin=st.floats(0.0, 0.4),
+    per_dot=st.integers(1, 12),
+)
+def test_pure_search_with_a_frozen_halo_matches_brute_force(n, h, seed, skin, per_dot):
+    """Live pairs once each, live-halo pairs apart, no halo-halo pairs: as brute force on
+    the union says."""
+    rng = np.random.default_rng(seed)
+    xy = rng.random((n, 2)) * [1.0, 1.0]
+    halo = rng.random((h, 2)) * [1.4, 1.4] - 0.2  # around and over the live square
+    r = rng.uniform(0.01, 0.05, n)
+    hr = rng.uniform(0.01, 0.05, h)
+    nl = neighbor_list(xy, r, skin, halo, hr, per_dot=per_dot)
+    ref = pairs_brute_force(np.concatenate([xy, halo]), np.concatenate([r, hr]), skin)
+    live = ref[(ref[:, 0] < n) & (ref[:, 1] < n)]
+    cross = ref[(ref[:, 0] < n) & (ref[:, 1] >= n)]  # i < j, so a live i comes first
+    assert np.array_equal(nl.pairs(), live)
+    got = np.stack([nl.halo_i, nl.halo_j + n], axis=1).astype(np.int64)
+    assert np.array_equal(got, cross)
+    assert len(nl.ptr) == n + 1
+
+
+def test_pure_search_reports_overflow_of_its_capacity_guess():
+    rng = np.random.default_rng(5)
+    xy = rng.random((3000, 2)) * 0.5
+    small = neighbor_list(xy, 0.02, per_dot=1)
+    big = neighbor_list(xy, 0.02, per_dot=64)
+    assert small.overflow and not big.overflow
+    assert np.array_equal(small.pairs(), big.pairs())
+    assert np.array_equal(small.pairs(), pairs_brute_force(xy, 0.02))
+
+
+def test_pure_search_does_not_modify_its_inputs():
+    xy = np.random.default_rng(2).random((500, 2))
+    r = np.full(500, 0.03)
+    before = xy.copy(), r.copy()
+    neighbor_list(xy, r, 0.2, xy[:50] + 0.5, r[:50])
+    assert np.array_equal(xy, before[0]) and np.array_equal(r, before[1])
+
+
+def test_verlet_update_never_changes_a_list_it_handed_out():
+    from optdot.spatial.verlet import VerletList
+
+    rng = np.random.default_rng(4)
+    xy = rng.random((2000, 2))
+    reff = np.full(2000, 0.01)
+    v = VerletList(reff, 0.3)
+    first = v.update(xy)
+    snapshot = {k: getattr(first, k).copy() for k in ("ptr", "nbr", "skip", "ei", "ej")}
+    moved = xy.copy()
+    moved[:5] += 0.05  # five movers: patched, not rebuilt
+    second = v.update(moved)
+    assert v.n_movers == 5 and second is not first
+    assert second.skip.sum() == 5 and len(second.ei) > 0
+    for k, arr in snapshot.items():
+        assert np.array_equal(getattr(first, k), arr), k
+    # the patched list holds every pair now closer than re_i + re_j
+    found = {tuple(sorted(p)) for p in csr_to_pairs(second.ptr, second.nbr).tolist()}
+    found = {p for p in found if not (second.skip[p[0]] or second.skip[p[1]])}
+    found |= {tuple(sorted(p)) for p in zip(second.ei.tolist(), second.ej.tolist(), strict=True)}
+    want = {tuple(p) for p in pairs_brute_force(moved, reff).tolist()}
+    assert want <= found

@@ -16,12 +16,14 @@ from scipy.optimize import approx_fprime
 from shapely.geometry import Polygon
 
 from optdot.cli import main
-from optdot.domain import Domain, EdgeIndex, signed_distances, validate_polygon
-from optdot.formulation import PRESETS
-from optdot.generate import generate
-from optdot.job import load_job
-from optdot.neighbors import PairList, neighbor_pairs, pairs_brute_force, pairs_within
-from optdot.penalty import penalty_fast, penalty_reference
+from optdot.config.schema import load_job
+from optdot.geometry.domain import Domain, validate_polygon
+from optdot.geometry.edges import EdgeIndex, signed_distances
+from optdot.pipeline import generate, problem_of
+from optdot.relax.formulation import PRESETS
+from optdot.relax.penalty import penalty_fast, penalty_reference
+from optdot.spatial.blocks import PairList
+from optdot.spatial.cellgrid import neighbor_pairs, pairs_brute_force, pairs_within
 from tests.conftest import write_job
 
 NOTCHED = [(0, 0), (4, 0), (4, 1.2), (3.2, 1.2), (3.2, 1.8), (4, 1.8), (4, 3), (0.6, 3), (0, 2.4)]
@@ -63,13 +65,13 @@ def test_signed_distance_matches_shapely():
 
 @pytest.mark.parametrize("margin", [0.0, 0.05])
 def test_outline_penalty_matches_reference_and_gradient(margin):
-    from optdot.circles import circle_radius, container_half_sides
+    from optdot.relax.circles import circle_radius, container_half_sides
 
     dom = notched_domain(margin)
     rng = np.random.default_rng(1)
     xy = rng.uniform(-0.1, 4.1, (400, 2))
     r = circle_radius(rng.uniform(0.1, 0.5, len(xy)), 0.023)
-    from optdot.penalty import PenaltyTerms
+    from optdot.relax.penalty import PenaltyTerms
 
     terms = PenaltyTerms(
         radius=r,
@@ -110,7 +112,7 @@ def test_outline_job_generates_inside_with_coverage_to_the_edges(tmp_path):
     assert len(pairs_within(p.xy, job.min_distance)) == 0
     assert dom.contains(p.xy).all()
     assert dom.edge_distance(p.xy).min() >= 0.023 + 0.01 - 1e-9
-    from optdot.qa import run_qa
+    from optdot.quality.gate import run_qa
 
     m = run_qa(p, job.density, job.qa, job.collision_distance).metrics
     assert m["protruding"] == 0 and m["outside_outline_or_in_holes"] == 0
@@ -225,7 +227,8 @@ def test_sample_outline_is_valid():
     job = load_job(__import__("pathlib").Path(__file__).parents[1] / "samples/outline/job.toml")
     assert not job.domain.rectangle
     assert len(job.domain.rings()) >= 3  # outline + two screw holes
-    assert PRESETS["optdot"].terms(job, np.array([[5.0, 5.0]]), np.array([0.3])).edges is not None
+    terms = PRESETS["optdot"].terms(problem_of(job), np.array([[5.0, 5.0]]), np.array([0.3]))
+    assert terms.edges is not None
 
 
 @settings(max_examples=30, deadline=None)
@@ -268,7 +271,7 @@ def test_rectangle_edge_margin(tmp_path):
 
 
 def test_npz_keeps_the_outline(tmp_path):
-    from optdot.pattern import load_pattern, save_pattern
+    from optdot.io.patterns import load_pattern, save_pattern
 
     job = load_job(outline_job(tmp_path, edge_margin=0.01))
     job = dataclasses.replace(job, optimize=dataclasses.replace(job.optimize, max_iter=10))

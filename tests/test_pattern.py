@@ -5,7 +5,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from optdot.pattern import format_fixed6
+from optdot.io.patterns import format_fixed6
 
 
 @settings(max_examples=50, deadline=None)

@@ -2,9 +2,10 @@ import numpy as np
 import pytest
 from scipy.optimize import approx_fprime
 
-from optdot.circles import circle_radius, container_half_sides
-from optdot.neighbors import PairList, neighbor_pairs, pairs_brute_force
-from optdot.penalty import PenaltyTerms, penalty_fast, penalty_reference
+from optdot.relax.circles import circle_radius, container_half_sides
+from optdot.relax.penalty import PenaltyTerms, penalty_fast, penalty_reference
+from optdot.spatial.blocks import PairList
+from optdot.spatial.cellgrid import neighbor_pairs, pairs_brute_force
 
 
 def make_terms(n=120, seed=0, w_hard=10.0, empty=True):

@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
 
-from optdot.neighbors import pairs_brute_force
-from optdot.penalty import penalty_reference
 from optdot.relax import VerletPenalty, relax
+from optdot.relax.penalty import penalty_reference
+from optdot.spatial.cellgrid import pairs_brute_force
 from tests.test_penalty import make_terms
 
 

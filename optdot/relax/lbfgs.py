@@ -14,6 +14,12 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+#: :attr:`LbfgsResult.status` codes (scipy's convention: 0 converged, 1 iteration limit).
+CONVERGED = 0
+MAX_ITER = 1
+LINE_SEARCH_FAILED = 2
+HALTED = 3
+
 
 @dataclass
 class LbfgsResult:
@@ -24,7 +30,10 @@ class LbfgsResult:
         fun: final objective value.
         nit: iterations done.
         nfev: objective evaluations.
-        message: why it stopped.
+        status: why it stopped, as a code: :data:`CONVERGED` (penalty zero, ``ftol`` or
+            ``gtol`` met), :data:`MAX_ITER`, :data:`LINE_SEARCH_FAILED` (no decrease
+            at machine precision), :data:`HALTED` (the callback asked to stop).
+        message: the same in words.
         history: objective value after each iteration.
     """
 
@@ -34,6 +43,12 @@ class LbfgsResult:
     nfev: int
     message: str
     history: list[float]
+    status: int = MAX_ITER
+
+    @property
+    def success(self) -> bool:
+        """The run converged (or hit the iteration limit a caller asked for)."""
+        return self.status in (CONVERGED, MAX_ITER)
 
 
 #: Entries per block of the parallel vector kernels. Fixed (not the thread count), so
@@ -164,7 +179,8 @@ def minimize_lbfgs(
     max_iter: int = 200,
     ftol: float = 0.0,
     gamma0: float = 0.25,
-    callback: Callable[[int, float], None] | None = None,
+    callback: Callable[[int, float], bool | None] | None = None,
+    gtol: float = 0.0,
 ) -> LbfgsResult:
     """Minimize ``fun`` from ``x0`` by L-BFGS.
 
@@ -175,7 +191,9 @@ def minimize_lbfgs(
         max_iter: iteration limit.
         ftol: stop when ``f`` fell by less than ``ftol * f`` over the last 10 iterations.
         gamma0: scale of the first step (inverse Hessian guess ``gamma0 * I``).
-        callback: called as ``callback(iteration, f)`` after every iteration.
+        callback: called as ``callback(iteration, f)`` after every iteration; a true
+            return value stops the run (status :data:`HALTED`), e.g. on a time budget.
+        gtol: stop when the largest gradient component is at most ``gtol`` (0 = off).
 
     Returns:
         :class:`LbfgsResult`.
@@ -194,11 +212,13 @@ def minimize_lbfgs(
     newest, count, gamma = memory - 1, 0, gamma0
     history: list[float] = []
     message = f"reached max_iter = {max_iter}"
+    status = MAX_ITER
     nit = 0
     for nit in range(1, max_iter + 1):
         if f <= 0.0:
             nit -= 1
             message = "penalty is zero"
+            status = CONVERGED
             break
         gd = _two_loop(g, S, Y, rho, newest, count, gamma, d)
         if not gd < 0.0:  # not a descent direction: restart from steepest descent
@@ -219,6 +239,7 @@ def minimize_lbfgs(
             step = min(max(t, 0.1 * step), 0.5 * step)
         if not ok:
             message = "line search failed (penalty at machine precision)"
+            status = LINE_SEARCH_FAILED
             nit -= 1
             break
         slot = (newest + 1) % memory
@@ -232,9 +253,18 @@ def minimize_lbfgs(
         g, g_new = g_new, g
         f = f_new
         history.append(f)
-        if callback is not None:
-            callback(nit, f)
+        if callback is not None and callback(nit, f):
+            message = f"stopped by the callback after {nit} iterations"
+            status = HALTED
+            break
         if ftol > 0.0 and len(history) > 10 and history[-11] - f <= ftol * history[-11]:
             message = f"penalty changed by less than ftol = {ftol} over 10 iterations"
+            status = CONVERGED
             break
-    return LbfgsResult(x=x, fun=f, nit=nit, nfev=nfev, message=message, history=history)
+        if gtol > 0.0 and float(np.abs(g).max(initial=0.0)) <= gtol:
+            message = f"largest gradient component at most gtol = {gtol}"
+            status = CONVERGED
+            break
+    return LbfgsResult(
+        x=x, fun=f, nit=nit, nfev=nfev, message=message, history=history, status=status
+    )

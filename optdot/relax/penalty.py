@@ -15,8 +15,9 @@ For circles S_i (centre x_i, radius r_i) the objective is
 
 The last line is optdot's hard-core term (zero in the paper formulation): it only acts on
 dots closer than the minimum distance or protruding from the panel. All lengths in mm,
-f in mm². ``penalty_reference`` is the slow, obviously-correct numpy version over an
-explicit pair list; ``penalty_fast`` is the compiled kernel over a CSR Verlet list.
+f in mm². Each term is a small compiled function in :mod:`optdot.relax.terms`; this
+module composes them. ``penalty_reference`` is the slow, obviously-correct numpy version
+over an explicit pair list; ``penalty_fast`` is the compiled kernel over a CSR Verlet list.
 """
 
 from __future__ import annotations
@@ -27,8 +28,9 @@ from functools import cached_property
 import numba as nb
 import numpy as np
 
-from .domain import EdgeIndex, edge_args, edge_signed_distance
-from .neighbors import BLOCK, PairList
+from ..geometry.edges import EdgeIndex, edge_args, edge_signed_distance
+from ..spatial.blocks import BLOCK, PairList
+from .terms import box_axis_term, container_axis_term, edge_term, empty_term, pair_grad
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,75 +100,10 @@ class PenaltyTerms:
         return np.maximum(self.radius, self.core_radius) if self.w_hard > 0 else self.radius
 
 
-@nb.njit(cache=True)
-def _empty_depth(x, y, rp, empty, gx0, gy0, cw, ch):  # pragma: no cover - compiled
-    """Penetration of a circle (x, y, rp) into the zero cells: (depth, dir_x, dir_y).
-
-    dir is the unit direction that *increases* the depth (gradient of depth wrt x).
-    """
-    ny, nx = empty.shape
-    ix = int(np.floor((x - gx0) / cw))
-    iy = int(np.floor((y - gy0) / ch))
-    if 0 <= ix < nx and 0 <= iy < ny and empty[iy, ix]:
-        # inside a zero cell: leave through the nearest side
-        lo_x = x - (gx0 + ix * cw)
-        hi_x = gx0 + (ix + 1) * cw - x
-        lo_y = y - (gy0 + iy * ch)
-        hi_y = gy0 + (iy + 1) * ch - y
-        best = lo_x
-        ux, uy = 1.0, 0.0
-        if hi_x < best:
-            best, ux, uy = hi_x, -1.0, 0.0
-        if lo_y < best:
-            best, ux, uy = lo_y, 0.0, 1.0
-        if hi_y < best:
-            best, ux, uy = hi_y, 0.0, -1.0
-        return rp + best, ux, uy
-    best2 = rp * rp
-    bx = 0.0
-    by = 0.0
-    found = False
-    for cy in range(max(int(np.floor((y - rp - gy0) / ch)), 0), min(iy + int(rp / ch) + 2, ny)):
-        for cx in range(max(int(np.floor((x - rp - gx0) / cw)), 0), min(ix + int(rp / cw) + 2, nx)):
-            if not empty[cy, cx]:
-                continue
-            px = min(max(x, gx0 + cx * cw), gx0 + (cx + 1) * cw)
-            py = min(max(y, gy0 + cy * ch), gy0 + (cy + 1) * ch)
-            d2 = (x - px) ** 2 + (y - py) ** 2
-            if d2 < best2:
-                best2, bx, by, found = d2, px, py, True
-    if not found:
-        return 0.0, 0.0, 0.0
-    d = np.sqrt(best2)
-    if d < 1e-15:
-        return rp, 0.0, 0.0
-    return rp - d, (bx - x) / d, (by - y) / d
-
-
-@nb.njit(cache=True, inline="always")
-def _pair_grad(dx, dy, s, dmin, w, i_first):  # pragma: no cover - compiled
-    """Overlap + hard-core term of a pair at offset (dx, dy) = x_i - x_j.
-
-    Returns ``(f, gx, gy)``: the pair's f and the gradient for x_j (x_i gets minus it);
-    all zero beyond ``max(s, dmin)``. Branch-free but for coincident centres (never in
-    practice): computing the zeros costs less than a mispredicted branch on the ~30 % of
-    listed pairs that do not touch.
-    """
-    if dx * dx + dy * dy < 1e-24:
-        # coincident centres: separate along x, deterministically by index
-        dx = 1e-12 if i_first else -1e-12
-        dy = 0.0
-    d = np.sqrt(dx * dx + dy * dy)
-    dl = max(s - d, 0.0)
-    dh = max(dmin - d, 0.0)  # weighted by w: nothing when the hard terms are off
-    q = (2.0 * dl + 2.0 * w * dh) / d
-    return dl * dl + w * dh * dh, q * dx, q * dy
-
-
 @nb.njit(cache=True, inline="always")
 def _pair_term(xy, r, cr, i, j, w, grad):  # pragma: no cover - compiled
     """Add pair (i, j)'s overlap and hard-core gradient to ``grad``; returns its f."""
-    f, gx, gy = _pair_grad(
+    f, gx, gy = pair_grad(
         xy[i, 0] - xy[j, 0], xy[i, 1] - xy[j, 1], r[i] + r[j], cr[i] + cr[j], w, i < j
     )
     grad[i, 0] -= gx
@@ -180,58 +117,27 @@ def _pair_term(xy, r, cr, i, j, w, grad):  # pragma: no cover - compiled
 def _single_terms(
     i, xy, r, rp, c, h, box, r0, w, margin, empty, has_empty, gbox, ed, grad
 ):  # pragma: no cover
-    """Set ``grad[i]`` to dot i's panel, container and zero-cell terms; returns their f."""
+    """Set ``grad[i]`` to dot i's zero-cell, outline or panel, and container terms;
+    returns their f. The terms are added in this fixed order."""
     f = 0.0
     g0 = 0.0
     g1 = 0.0
     if has_empty:
-        e, ux, uy = _empty_depth(
-            xy[i, 0], xy[i, 1], rp[i], empty, gbox[0], gbox[1], gbox[2], gbox[3]
-        )
-        if e > 0.0:
-            f += e * e
-            g0 += 2.0 * e * ux
-            g1 += 2.0 * e * uy
-    if ed[0].shape[0] > 0:
+        f, g0, g1 = empty_term(xy[i, 0], xy[i, 1], rp[i], empty, gbox, f, g0, g1)
+    outline = ed[0].shape[0] > 0
+    if outline:
         sd, ux, uy = edge_signed_distance(xy[i, 0], xy[i, 1], ed)
-        e = rp[i] + margin - sd  # outline: squared penetration depth, gradient -u
-        if e > 0.0:
-            f += e * e
-            g0 -= 2.0 * e * ux
-            g1 -= 2.0 * e * uy
-        e = r0 + margin - sd
-        if w > 0.0 and e > 0.0:
-            f += w * e * e
-            g0 -= 2.0 * w * e * ux
-            g1 -= 2.0 * w * e * uy
+        f, g0, g1 = edge_term(sd, ux, uy, rp[i], margin, 1.0, f, g0, g1)
+        if w > 0.0:
+            f, g0, g1 = edge_term(sd, ux, uy, r0, margin, w, f, g0, g1)
     for a in range(2):
         v = xy[i, a]
         g = 0.0
-        if ed[0].shape[0] == 0:
-            lo = box[a]
-            hi = box[a + 2]
-            p = rp[i] + margin - (v - lo)
-            if p > 0.0:
-                f += p * p
-                g -= 2.0 * p
-            p = v + rp[i] + margin - hi
-            if p > 0.0:
-                f += p * p
-                g += 2.0 * p
+        if not outline:
+            f, g = box_axis_term(v, box[a], box[a + 2], rp[i], margin, 1.0, f, g)
             if w > 0.0:
-                p = r0 + margin - (v - lo)
-                if p > 0.0:
-                    f += w * p * p
-                    g -= 2.0 * w * p
-                p = v + r0 + margin - hi
-                if p > 0.0:
-                    f += w * p * p
-                    g += 2.0 * w * p
-        u = v - c[i, a]
-        p = abs(u) + r[i] - h[i]
-        if p > 0.0:
-            f += p * p
-            g += 2.0 * p * (1.0 if u >= 0.0 else -1.0)
+                f, g = box_axis_term(v, box[a], box[a + 2], r0, margin, w, f, g)
+        f, g = container_axis_term(v - c[i, a], r[i], h[i], f, g)
         if a == 0:
             g0 += g
         else:
@@ -302,7 +208,7 @@ def _penalty_kernel(
                 j = nbr[k]
                 dx = xi - packed[j, 0]
                 dy = yi - packed[j, 1]
-                fp, gx, gy = _pair_grad(dx, dy, ri + packed[j, 2], ci + packed[j, 3], w, i < j)
+                fp, gx, gy = pair_grad(dx, dy, ri + packed[j, 2], ci + packed[j, 3], w, i < j)
                 f += fp
                 gxi -= gx
                 gyi -= gy

@@ -16,9 +16,10 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from .density import DensityMap
-from .domain import NO_EDGES, Domain, EdgeIndex, edge_args, edge_signed_distance
-from .neighbors import neighbor_pairs, pairs_within
+from ..geometry.density import DensityMap
+from ..geometry.domain import Domain, box_protruding
+from ..geometry.edges import NO_EDGES, EdgeIndex, edge_args, edge_signed_distance
+from ..spatial.cellgrid import neighbor_pairs, pairs_within
 
 #: Output resolution, mm (1 nm): positions are rounded to this.
 RESOLUTION = 1e-6
@@ -172,20 +173,8 @@ def check_guarantee(
     """
     collisions = len(pairs_within(xy, dmin))
     if domain.rectangle:
-        out = protruding_mask(xy, domain.box, dot_radius + domain.edge_margin)
+        out = box_protruding(xy, domain.box, dot_radius + domain.edge_margin)
     else:
         out = domain.protruding(xy, dot_radius)
     empty = density.empty_mask(xy)
     return Violations(collisions, int(out.sum()), int(empty.sum()))
-
-
-def protruding_mask(
-    xy: np.ndarray, box: tuple[float, float, float, float], dot_radius: float
-) -> np.ndarray:
-    """``[n]`` bool: the dot of radius ``dot_radius`` (mm) reaches outside ``box``."""
-    return (
-        (xy[:, 0] - dot_radius < box[0])
-        | (xy[:, 0] + dot_radius > box[2])
-        | (xy[:, 1] - dot_radius < box[1])
-        | (xy[:, 1] + dot_radius > box[3])
-    )

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import click
 
-from .errors import OptdotError
+from ..errors import OptdotError, QAGateError
 
 
 def _user_errors(fn):
@@ -23,6 +23,9 @@ def _user_errors(fn):
     def wrapper(*args, **kwargs):
         try:
             return fn(*args, **kwargs)
+        except QAGateError as e:
+            click.echo(f"optdot: {e}", err=True)
+            sys.exit(e.exit_code)
         except OptdotError as e:
             click.echo(f"optdot: error: {e}", err=True)
             sys.exit(e.exit_code)
@@ -60,8 +63,8 @@ def _job_options(fn):
 
 def run_job(job_path: Path, seed, max_iter, method, formulation, quiet):
     """Load a job, apply CLI overrides and generate its pattern with a progress bar."""
-    from .generate import generate
-    from .job import load_job
+    from ..config.schema import load_job
+    from ..pipeline import generate
     from .progress import ProgressBar
 
     job = load_job(job_path).with_overrides(
@@ -90,7 +93,7 @@ def run_job(job_path: Path, seed, max_iter, method, formulation, quiet):
 @_user_errors
 def generate(job_file, output, seed, max_iter, method, formulation, quiet):
     """Generate the dot pattern of JOB_FILE and write it to OUTPUT."""
-    from .pattern import save_pattern
+    from ..io.patterns import save_pattern
 
     if output.suffix.lower() not in (".csv", ".npz"):
         raise click.BadParameter("must end in .csv or .npz", param_hint="'-o' / '--output'")
@@ -107,41 +110,23 @@ def generate(job_file, output, seed, max_iter, method, formulation, quiet):
 
 def _load_source(source: Path, job_path, seed, max_iter, method, formulation, quiet):
     """(job or None, pattern) from a job file (generated now) or a pattern/mask file."""
-    from exporters.readback import read_any
-
-    from .job import load_job
-
     if source.suffix.lower() == ".toml":
         return run_job(source, seed, max_iter, method, formulation, quiet)
+    return _read_with_job(source, job_path)
+
+
+def _read_with_job(path: Path, job_path):
+    """(job or None, pattern read from ``path`` with the job's panel)."""
+    from ..config.schema import load_job
+    from ..exporters.readback import read_any
+    from ..pipeline import with_job_panel
+
     job = load_job(job_path) if job_path else None
-    return job, _with_job_panel(read_any(source, box=job.box if job else None), job)
-
-
-def _with_job_panel(pattern, job):
-    """The pattern with the job's panel box and outline (the job is the authority)."""
-    if job is None:
-        return pattern
-    from dataclasses import replace
-
-    return replace(pattern, box=job.box, outline=None if job.domain.rectangle else job.domain)
-
-
-def _gate(job, pattern, collision=None, close=None):
-    from .job import QAParams
-    from .qa import run_qa
-
-    params = job.qa if job else QAParams()
-    if close is not None:
-        from dataclasses import replace
-
-        params = replace(params, close_distance=close)
-    if collision is None:
-        collision = job.collision_distance if job else pattern.diameter
-    return run_qa(pattern, job.density if job else None, params, collision)
+    return job, with_job_panel(read_any(path, box=job.box if job else None), job)
 
 
 def _check_outputs(outputs: dict[str, Path]) -> None:
-    from .errors import ExportError
+    from ..errors import ExportError
 
     seen: dict[Path, str] = {}
     for fmt, p in outputs.items():
@@ -219,8 +204,8 @@ def export(
     Existing output files are replaced (atomically: a failed run leaves them as they were).
     Masks are written only if the QA gate passes, unless --force.
     """
-    import exporters
-    from exporters.options import ExportOptions
+    from ..exporters.options import ExportOptions
+    from ..pipeline import export as export_pattern
 
     outputs = {
         k: v
@@ -247,23 +232,14 @@ def export(
     )
     _check_outputs(outputs)
     job, pattern = _load_source(source, job_path, seed, max_iter, method, formulation, quiet)
-    qa = _gate(job, pattern)
-    if not qa.passed:
-        failed = "; ".join(
-            f"{c.name}: {_num(c.value)} > {_num(c.limit)}" for c in qa.checks if not c.passed
-        )
-        if not force:
-            click.echo(
-                f"optdot: QA gate failed, nothing written ({failed}); use --force to write anyway",
-                err=True,
-            )
-            sys.exit(1)
+    result = export_pattern(pattern, outputs, job, opts, force=force)
+    if not result.passed:
         click.echo(
-            f"optdot: warning: QA gate failed ({failed}); writing anyway (--force)", err=True
+            f"optdot: warning: QA gate failed ({result.failures()}); writing anyway (--force)",
+            err=True,
         )
-    for fmt, path in outputs.items():
-        exporters.write(pattern, fmt, path, opts)
-        if not quiet:
+    if not quiet:
+        for fmt, path in outputs.items():
             click.echo(f"{path}: {fmt.upper()}, {pattern.n} dots", err=True)
 
 
@@ -285,19 +261,16 @@ def export(
 @_user_errors
 def qa(pattern_file, job_path, html_path, json_path, collision, close, quiet):
     """Check PATTERN_FILE (csv, npz, gds, oas, dxf) before tooling: exit 0 pass, 1 fail."""
-    from exporters.readback import read_any
-
-    from .job import load_job
-    from .report import write_html, write_json
+    from ..pipeline import qa as run_gate
+    from ..quality.report import write_html, write_json
 
     for v, name in ((collision, "--collision"), (close, "--close")):
         if v is not None and not v > 0:
             raise click.BadParameter("must be > 0 mm", param_hint=name)
     outs = {k: v for k, v in (("html", html_path), ("json", json_path)) if v is not None}
     _check_outputs(outs)
-    job = load_job(job_path) if job_path else None
-    pattern = _with_job_panel(read_any(pattern_file, box=job.box if job else None), job)
-    result = _gate(job, pattern, collision, close)
+    job, pattern = _read_with_job(pattern_file, job_path)
+    result = run_gate(pattern, job, collision, close)
     if json_path:
         write_json(result, json_path)
     if html_path:

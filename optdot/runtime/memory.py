@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 
-from .errors import ResourceError
+from ..errors import ResourceError
 
 #: Bytes per dot besides the L-BFGS history (positions, gradients, radii, containers,
 #: Verlet list, grid bins, temporaries). Calibrated on benchmarks/scaling.py: peak RSS

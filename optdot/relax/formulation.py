@@ -13,10 +13,33 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..geometry.density import DensityMap
+from ..geometry.domain import Domain
+from ..geometry.edges import EdgeIndex
 from .circles import circle_radius, container_half_sides, hex_radius
-from .domain import EdgeIndex
-from .job import Job
 from .penalty import PenaltyTerms
+
+
+@dataclass(frozen=True, eq=False)
+class Problem:
+    """What a formulation needs to know of a job: the panel, the map and the lengths.
+
+    Attributes:
+        domain: where dots may go.
+        density: the fill-fraction map (its zero cells feed the empty-cell term).
+        dot_radius: r0, mm.
+        min_distance: smallest allowed centre distance (diameter + gap), mm.
+        close_target: the centre distance the hard core aims to clear, mm (the job's
+            ``optimize.close_target``, by default its ``qa.close_distance``).
+        seed: seed of any random choice (polydispersity).
+    """
+
+    domain: Domain
+    density: DensityMap
+    dot_radius: float
+    min_distance: float
+    close_target: float = 0.060
+    seed: int = 1
 
 
 @dataclass(frozen=True)
@@ -50,8 +73,8 @@ class Formulation:
         stages: ``(share of max_iter, radius multiplier)`` per stage, relaxed in turn.
         container_factor: container side / circle radius (paper: 4).
         close_ref: the close-pair distance ``core_floor``, ``core_cap`` and ``gap`` are
-            given for, mm: :meth:`terms` scales them by ``job.qa.close_distance /
-            close_ref``, so a job that calls 80 µm "close" gets the same rule around 80 µm.
+            given for, mm: :meth:`terms` scales them by ``problem.close_target /
+            close_ref``, so a job that aims to clear 80 µm gets the same rule around 80 µm.
     """
 
     radius_factor: float = 1.0
@@ -83,14 +106,14 @@ class Formulation:
         return r
 
     def terms(
-        self, job: Job, xy0: np.ndarray, rho: np.ndarray, multiplier: float = 1.0
+        self, problem: Problem, xy0: np.ndarray, rho: np.ndarray, multiplier: float = 1.0
     ) -> PenaltyTerms:
-        """Penalty terms for dots starting at ``xy0`` (``[n, 2]`` mm) with fill ``rho``."""
-        opt = job.optimize
-        r0 = 0.5 * job.diameter
-        r = self.radii(rho, r0, opt.seed, multiplier)
-        core = np.full(len(r), 0.5 * job.min_distance)
-        k = job.qa.close_distance / self.close_ref
+        """Penalty terms for dots starting at ``xy0`` (``[n, 2]`` mm) with fill ``rho``
+        (``[n]``); ``multiplier`` scales the circle radii (staged relaxation)."""
+        r0 = problem.dot_radius
+        r = self.radii(rho, r0, problem.seed, multiplier)
+        core = np.full(len(r), 0.5 * problem.min_distance)
+        k = problem.close_target / self.close_ref
         if self.core_share > 0:
             share = self.core_share * hex_radius(rho, r0)
             if self.core_cap > 0:
@@ -100,8 +123,9 @@ class Formulation:
             wide = 2.0 * hex_radius(rho, r0) * self.gap_share >= k * self.gap
             core[wide] = np.maximum(core[wide], 0.5 * k * self.gap)
         panel_r = np.maximum(hex_radius(rho, r0), r0) if self.hex_panel else r
-        empty = (job.density.grid <= 0).astype(np.uint8) if self.empty_term else None
-        dom = job.domain
+        density = problem.density
+        empty = (density.grid <= 0).astype(np.uint8) if self.empty_term else None
+        dom = problem.domain
         edges = None
         if not dom.rectangle:
             reach = max(float(panel_r.max(initial=0.0)), r0) + dom.edge_margin
@@ -111,12 +135,12 @@ class Formulation:
             panel_radius=np.ascontiguousarray(panel_r),
             center=np.ascontiguousarray(xy0),
             half_side=container_half_sides(r, self.container_factor),
-            box=job.box,
-            dmin=job.min_distance,
+            box=dom.box,
+            dmin=problem.min_distance,
             dot_radius=r0,
             w_hard=self.w_hard,
             empty=np.zeros((1, 1), np.uint8) if empty is None else empty,
-            grid_box=(job.density.x0, job.density.y0, *job.density.cell_size),
+            grid_box=(density.x0, density.y0, *density.cell_size),
             core=core,
             margin=dom.edge_margin,
             edges=edges,
@@ -147,12 +171,14 @@ PRESETS: dict[str, Formulation] = {
 }
 
 
-def formulation_of(job: Job) -> Formulation:
-    """The job's formulation, with its explicit ``radius_factor`` and
-    ``container_factor`` if it set them."""
-    form = PRESETS[job.optimize.formulation]
-    if job.optimize.radius_factor is not None:
-        form = replace(form, radius_factor=job.optimize.radius_factor)
-    if job.optimize.container_factor is not None:
-        form = replace(form, container_factor=job.optimize.container_factor)
+def formulation_of(
+    name: str, radius_factor: float | None = None, container_factor: float | None = None
+) -> Formulation:
+    """The preset ``name`` with an explicit ``radius_factor`` and ``container_factor``
+    where given (None keeps the preset's)."""
+    form = PRESETS[name]
+    if radius_factor is not None:
+        form = replace(form, radius_factor=radius_factor)
+    if container_factor is not None:
+        form = replace(form, container_factor=container_factor)
     return form

@@ -6,7 +6,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .density import DensityMap
+from ..geometry.density import DensityMap
 from .sobol import sobol_points
 
 

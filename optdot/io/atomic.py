@@ -8,7 +8,7 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-from .errors import ExportError
+from ..errors import ExportError
 
 
 @contextlib.contextmanager

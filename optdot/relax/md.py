@@ -29,7 +29,7 @@ reading, stated so that it can be argued with:
   zero-density cells: only the panel is enforced, by clamping each centre to
   ``[r0, W - r0] x [r0, H - r0]`` after every step, so no dot leaves the panel.
 
-Pairs come from the same :class:`~optdot.neighbors.VerletList` OptDot uses, with the
+Pairs come from the same :class:`~optdot.spatial.verlet.VerletList` OptDot uses, with the
 per-dot interaction radius ``R_i = b / 2 + cutoff * decay * a_i / 2`` so that
 ``R_i + R_j = D_ij``.
 """
@@ -42,7 +42,8 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from .neighbors import BLOCK, PairList, VerletList
+from ..spatial.blocks import BLOCK, PairList
+from ..spatial.verlet import VerletList
 
 
 @nb.njit(cache=True, inline="always")

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import atomic_path
-from .pattern import Pattern
-from .qa import QAResult
+from ..io.atomic import atomic_path
+from ..pattern import Pattern, coverage_image
+from .gate import QAResult
 
 
 def write_json(result: QAResult, path: str | Path) -> None:
@@ -48,7 +48,7 @@ def write_html(
 table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:.2em .5em}}
 figure{{display:inline-block;margin:.5em}}img{{max-width:560px}}</style></head><body>
 <h1>{html.escape(title)}</h1><div class="verdict" id="verdict">{verdict}</div>
-<p>{pattern.n:,} dots, diameter {pattern.diameter * 1e3:.1f} µm, panel {pattern.box[2] - pattern.box[0]:.3f} × {pattern.box[3] - pattern.box[1]:.3f} mm</p>
+<p>{pattern.n:,} dots, diameter {_diameter_text(pattern)}, panel {pattern.box[2] - pattern.box[0]:.3f} × {pattern.box[3] - pattern.box[1]:.3f} mm</p>
 <h2>Gate</h2><table><tr><th></th><th>check</th><th>value</th><th>limit</th><th>where (mm, first 5)</th></tr>{rows}</table>
 <h2>Plots</h2>{imgs}<h2>All numbers</h2><pre>{metrics}</pre></body></html>
 """
@@ -74,8 +74,6 @@ def _figures(result: QAResult, pattern: Pattern) -> list[tuple[str, str]]:
         fig.savefig(buf, format="png", dpi=90, metadata={"Software": None})
         plt.close(fig)
         out.append((caption, base64.b64encode(buf.getvalue()).decode("ascii")))
-
-    from exporters.preview import coverage_image
 
     img, ext = coverage_image(pattern, 300)
     fig, ax = plt.subplots(figsize=(6, 4))
@@ -107,7 +105,7 @@ def _figures(result: QAResult, pattern: Pattern) -> list[tuple[str, str]]:
     s = min(1.0, tx1 - tx0)
     fig, ax = plt.subplots(figsize=(5, 5))
     sel = (xy[:, 0] > tx0) & (xy[:, 0] < tx0 + s) & (xy[:, 1] > ty0) & (xy[:, 1] < ty0 + s)
-    d = pattern.diameter
+    d = pattern.uniform_diameter or pattern.diameter[sel]
     ax.add_collection(
         EllipseCollection(
             d, d, 0, units="xy", offsets=xy[sel], offset_transform=ax.transData, fc="k"
@@ -162,6 +160,13 @@ def _figures(result: QAResult, pattern: Pattern) -> list[tuple[str, str]]:
         )
         save(fig, "spectrum")
     return out
+
+
+def _diameter_text(pattern: Pattern) -> str:
+    u = pattern.uniform_diameter
+    if u is not None:
+        return f"{u * 1e3:.1f} µm"
+    return f"{pattern.diameter.min() * 1e3:.1f}–{pattern.diameter.max() * 1e3:.1f} µm"
 
 
 def _fmt(v) -> str:

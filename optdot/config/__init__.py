@@ -1,0 +1,1 @@
+"""Stage 0, the job: TOML schema and reader, density-grid files, the validated :class:`Job`."""

@@ -1,0 +1,80 @@
+"""Density grids from files: CSV (row 0 = bottom) or ``.npy``, and their range checks."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import JobError
+from ..geometry.density import HEX_PACKING_LIMIT
+
+
+def load_grid(path: Path) -> np.ndarray:
+    """Read a fill-fraction grid from CSV (comma-separated, row 0 = bottom) or ``.npy``.
+
+    Returns:
+        ``[ny, nx]`` float64 (not yet range-checked; see :func:`validate_grid`).
+    """
+    if not path.exists():
+        raise JobError(f"{path}: density grid file not found")
+    if path.suffix.lower() == ".npy":
+        try:
+            g = np.load(path, allow_pickle=False)
+        except (OSError, ValueError) as e:
+            raise JobError(f"{path}: not a readable .npy array ({e})") from None
+        if g.ndim != 2 or g.size == 0:
+            raise JobError(f"{path}: grid must be a non-empty 2-D array, got shape {g.shape}")
+        if not np.issubdtype(g.dtype, np.number) or np.iscomplexobj(g):
+            raise JobError(f"{path}: grid must hold real numbers, got dtype {g.dtype}")
+        return np.asarray(g, dtype=np.float64)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as e:
+        raise JobError(f"{path}: cannot read density grid ({e})") from None
+    rows: list[list[float]] = []
+    for lineno, row in enumerate(csv.reader(text.splitlines()), start=1):
+        if not row or all(not c.strip() for c in row):
+            continue
+        if row[0].lstrip().startswith("#"):
+            continue
+        try:
+            rows.append([float(c) for c in row])
+        except ValueError:
+            bad = next(c for c in row if not _is_float(c))
+            raise JobError(f"{path}: line {lineno}: {bad.strip()!r} is not a number") from None
+        if len(rows[-1]) != len(rows[0]):
+            raise JobError(
+                f"{path}: line {lineno}: wrong grid shape, {len(rows[-1])} columns where "
+                f"line 1 has {len(rows[0])}"
+            )
+    if not rows:
+        raise JobError(f"{path}: density grid is empty")
+    return np.array(rows, dtype=np.float64)
+
+
+def validate_grid(g: np.ndarray, where: str) -> None:
+    """Refuse NaN, negative, at-or-above-packing-limit or all-zero fill fractions."""
+    if not np.all(np.isfinite(g)):
+        iy, ix = np.argwhere(~np.isfinite(g))[0]
+        raise JobError(f"{where}: NaN or infinite fill fraction at row {iy}, column {ix}")
+    if np.any(g < 0):
+        iy, ix = np.argwhere(g < 0)[0]
+        raise JobError(f"{where}: negative fill fraction {g[iy, ix]} at row {iy}, column {ix}")
+    if np.any(g >= HEX_PACKING_LIMIT):
+        iy, ix = np.argwhere(g >= HEX_PACKING_LIMIT)[0]
+        raise JobError(
+            f"{where}: fill fraction {g[iy, ix]} at row {iy}, column {ix} is at or above the "
+            f"hexagonal packing limit {HEX_PACKING_LIMIT:.4f}"
+        )
+    if not np.any(g > 0):
+        raise JobError(f"{where}: the map is all zero, there is nothing to place")
+
+
+def _is_float(s: str) -> bool:
+    try:
+        float(s)
+    except ValueError:
+        return False
+    return True

@@ -1,0 +1,255 @@
+"""The job as a value: :class:`Job` with its :class:`OptimizeParams` and :class:`QAParams`.
+
+Frozen dataclasses validated in ``__post_init__`` (messages name the field, the value and
+the allowed range). Reading TOML lives in :mod:`optdot.config.schema`, grids in
+:mod:`optdot.config.grids`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import JobError
+from ..geometry.density import DensityMap
+from ..geometry.domain import Domain
+from .grids import validate_grid
+
+METHODS = ("optdot", "md")
+FORMULATIONS = ("paper", "optdot")
+
+
+@dataclass(frozen=True)
+class OptimizeParams:
+    """How the dots are relaxed.
+
+    Attributes:
+        method: ``"optdot"`` (L-BFGS on penalty (3), the paper's method) or ``"md"``
+            (the molecular-dynamics baseline of Idé et al. 2003, see :mod:`optdot.md`).
+        max_iter: iterations of L-BFGS or MD steps (paper: 200).
+        seed: seed of the scrambled low-discrepancy sequence.
+        formulation: ``"paper"`` reproduces the paper exactly (radius factor 1, panel
+            penalty with the circle radius); ``"optdot"`` is our default, see README.
+        radius_factor: multiplies the paper's circle radius r = r0 sqrt(pi/(sqrt3 rho));
+            ``None`` takes the formulation's (see :mod:`optdot.formulation`).
+        container_factor: container side / circle radius (paper: 4); ``None`` takes the
+            formulation's.
+        lbfgs_memory: L-BFGS history length m (paper: 6).
+        ftol: stop when the penalty fell by less than ``ftol`` (relative) over 10
+            iterations; 0 runs all ``max_iter`` iterations.
+        gap: manufacturing gap, mm: dot centres keep at least ``diameter + gap``.
+        skin: Verlet skin as a fraction of each circle's radius.
+        md_step: MD only: dt / c as a fraction of the collision distance.
+        md_decay: MD only: decay length L of the force tail / hexagonal spacing.
+        md_cutoff: MD only: the tail is cut at D = b + md_cutoff * L.
+        close_target: centre distance the hard core of the ``optdot`` formulation aims
+            to clear, mm; ``None`` (default) follows ``qa.close_distance``.
+    """
+
+    method: str = "optdot"
+    max_iter: int = 200
+    seed: int = 1
+    formulation: str = "optdot"
+    radius_factor: float | None = None
+    container_factor: float | None = None
+    lbfgs_memory: int = 6
+    ftol: float = 1e-3
+    gap: float = 0.0
+    skin: float = 0.3
+    md_step: float = 0.02
+    md_decay: float = 0.25
+    md_cutoff: float = 3.0
+    close_target: float | None = None
+
+    def __post_init__(self) -> None:
+        _check(self.method in METHODS, "optimize.method", self.method, f"one of {METHODS}")
+        _check(
+            self.formulation in FORMULATIONS,
+            "optimize.formulation",
+            self.formulation,
+            f"one of {FORMULATIONS}",
+        )
+        _check(0 <= self.max_iter <= 100_000, "optimize.max_iter", self.max_iter, "0..100000")
+        _check(0 <= self.seed < 2**63, "optimize.seed", self.seed, "0..2^63-1")
+        if self.radius_factor is not None:
+            _check(
+                0.5 <= self.radius_factor <= 3.0,
+                "optimize.radius_factor",
+                self.radius_factor,
+                "0.5..3",
+            )
+        _check(
+            self.container_factor is None or 1.0 <= self.container_factor <= 100.0,
+            "optimize.container_factor",
+            self.container_factor,
+            "1..100",
+        )
+        _check(1 <= self.lbfgs_memory <= 50, "optimize.lbfgs_memory", self.lbfgs_memory, "1..50")
+        _check(0.0 <= self.ftol < 1.0, "optimize.ftol", self.ftol, "0 <= ftol < 1")
+        _check(0.0 <= self.gap < 10.0, "optimize.gap", self.gap, "0 <= gap < 10 mm")
+        _check(0.01 <= self.skin <= 2.0, "optimize.skin", self.skin, "0.01..2")
+        _check(0.0 < self.md_step <= 0.5, "optimize.md_step", self.md_step, "0 < md_step <= 0.5")
+        _check(0.01 <= self.md_decay <= 2.0, "optimize.md_decay", self.md_decay, "0.01..2")
+        _check(0.0 <= self.md_cutoff <= 20.0, "optimize.md_cutoff", self.md_cutoff, "0..20")
+        if self.close_target is not None:
+            _check(
+                0.0 < self.close_target < 10.0,
+                "optimize.close_target",
+                self.close_target,
+                "0 < x < 10 mm",
+            )
+
+
+@dataclass(frozen=True)
+class QAParams:
+    """Pass/fail thresholds of the QA gate (all distances in mm; None = from the job).
+
+    Attributes:
+        collision_distance: centres closer than this collide (default: dot diameter + gap).
+        close_distance: centres closer than this are "too close" (default 0.060).
+        max_collisions: allowed pairs below ``collision_distance`` (default 0).
+        max_close_fraction: allowed share of dots in a too-close pair (default 1.0 = off).
+        max_protruding: allowed dots protruding from the panel (default 0).
+        max_in_empty: allowed dots in zero-density cells (default 0).
+        max_coverage_rms: allowed RMS relative coverage error after 1 mm smoothing.
+        max_psi6_coherence: allowed |mean psi6| over 2 mm patches (moire risk).
+        smoothing: Gaussian sigma for the visible-coverage check, mm.
+    """
+
+    collision_distance: float | None = None
+    close_distance: float = 0.060
+    max_collisions: int = 0
+    max_close_fraction: float = 1.0
+    max_protruding: int = 0
+    max_in_empty: int = 0
+    max_coverage_rms: float = 0.05
+    max_psi6_coherence: float = 0.10
+    smoothing: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.collision_distance is not None:
+            _check(
+                self.collision_distance > 0, "qa.collision_distance", self.collision_distance, "> 0"
+            )
+        _check(self.close_distance > 0, "qa.close_distance", self.close_distance, "> 0")
+        _check(self.max_collisions >= 0, "qa.max_collisions", self.max_collisions, ">= 0")
+        _check(
+            0 <= self.max_close_fraction <= 1,
+            "qa.max_close_fraction",
+            self.max_close_fraction,
+            "0..1",
+        )
+        _check(self.max_protruding >= 0, "qa.max_protruding", self.max_protruding, ">= 0")
+        _check(self.max_in_empty >= 0, "qa.max_in_empty", self.max_in_empty, ">= 0")
+        _check(self.max_coverage_rms > 0, "qa.max_coverage_rms", self.max_coverage_rms, "> 0")
+        _check(
+            0 < self.max_psi6_coherence <= 1,
+            "qa.max_psi6_coherence",
+            self.max_psi6_coherence,
+            "0 < x <= 1",
+        )
+        _check(self.smoothing > 0, "qa.smoothing", self.smoothing, "> 0")
+
+
+@dataclass(frozen=True, eq=False)
+class Job:
+    """A validated job: panel, fill-fraction map, dot size and optimizer settings.
+
+    Attributes:
+        width, height: size of the density grid, mm. Without an outline the panel is
+            ``[0, width] x [0, height]``; with one, the grid covers its bounding box.
+        density: the fill-fraction map over the panel.
+        diameter: dot diameter, mm.
+        optimize: optimizer settings.
+        qa: QA gate thresholds.
+        name: a label carried into outputs.
+        source: the job file this came from, if any.
+        domain: where dots may go (default: the rectangle of the grid).
+    """
+
+    width: float
+    height: float
+    density: DensityMap
+    diameter: float
+    optimize: OptimizeParams = field(default_factory=OptimizeParams)
+    qa: QAParams = field(default_factory=QAParams)
+    name: str = "optdot"
+    source: Path | None = None
+    domain: Domain | None = None
+
+    def __post_init__(self) -> None:
+        where = str(self.source) if self.source else "job"
+        if self.domain is None:
+            d = self.density
+            object.__setattr__(
+                self, "domain", Domain.rect(d.x0, d.y0, d.x0 + self.width, d.y0 + self.height)
+            )
+        for key, v in (("domain.width", self.width), ("domain.height", self.height)):
+            if not (math.isfinite(v) and 0 < v <= 10_000):
+                raise JobError(f"{where}: {key} = {v!r} must be a size in mm, 0 < x <= 10000")
+        if not (math.isfinite(self.diameter) and 0 < self.diameter <= 10):
+            raise JobError(f"{where}: dots.diameter = {self.diameter!r} must be in mm, 0 < d <= 10")
+        if self.diameter >= min(self.width, self.height):
+            raise JobError(f"{where}: dots.diameter = {self.diameter} does not fit the panel")
+        validate_grid(self.density.grid, f"{where}: density.grid")
+
+    @property
+    def min_distance(self) -> float:
+        """Smallest allowed centre distance, mm (diameter + gap)."""
+        return self.diameter + self.optimize.gap
+
+    @property
+    def collision_distance(self) -> float:
+        """QA collision threshold, mm."""
+        c = self.qa.collision_distance
+        return self.min_distance if c is None else c
+
+    @property
+    def close_target(self) -> float:
+        """Centre distance the optimizer's hard core aims to clear, mm."""
+        c = self.optimize.close_target
+        return self.qa.close_distance if c is None else c
+
+    @property
+    def dot_area(self) -> float:
+        """Area of one dot, mm²."""
+        return math.pi * (0.5 * self.diameter) ** 2
+
+    @property
+    def box(self) -> tuple[float, float, float, float]:
+        """Bounding box of the panel ``(xmin, ymin, xmax, ymax)``, mm."""
+        return self.domain.box
+
+    @cached_property
+    def cell_weights(self) -> np.ndarray | None:
+        """``[ny, nx]`` share of each grid cell inside the domain (None: all of it)."""
+        if self.domain.rectangle:
+            return None
+        d = self.density
+        return self.domain.cell_fractions(d.x0, d.y0, *d.cell_size, d.shape[1], d.shape[0])
+
+    @property
+    def n_dots(self) -> int:
+        """Number of dots the map asks for over the domain (paper §2.1)."""
+        return self.density.dot_count(self.dot_area, self.cell_weights)
+
+    def with_overrides(self, **optimize: Any) -> Job:
+        """A copy with some :class:`OptimizeParams` fields replaced (None = keep)."""
+        kw = {k: v for k, v in optimize.items() if v is not None}
+        if not kw:
+            return self
+        try:
+            opt = replace(self.optimize, **kw)
+        except JobError:
+            raise
+        return replace(self, optimize=opt)
+
+
+def _check(ok: bool, name: str, value: Any, allowed: str) -> None:
+    if not ok:
+        raise JobError(f"{name} = {value!r} is out of range ({allowed})")

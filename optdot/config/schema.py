@@ -1,0 +1,207 @@
+"""The TOML job format: its schema, and the reader that turns a file into a :class:`Job`.
+
+The job format is a public contract documented in the README. Unknown sections or keys
+are errors, so a typo is never silently ignored. Adding an option: one line in
+:data:`SCHEMA` and one field in :mod:`optdot.config.job`.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from ..errors import GeometryError, JobError
+from ..geometry.density import DensityMap
+from ..geometry.domain import DEFAULT_TOLERANCE, Domain, orient_all
+from ..geometry.outline_io import load_outline, parse_keep_out
+from .grids import load_grid, validate_grid
+from .job import Job, OptimizeParams, QAParams
+
+SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
+    "": {"name": (str,)},
+    "domain": {
+        "width": (int, float),
+        "height": (int, float),
+        "outline": (str,),
+        "outline_tolerance": (int, float),
+        "keep_out": (list,),
+        "keep_out_layer": (str,),
+        "edge_margin": (int, float),
+    },
+    "density": {"grid": (str,)},
+    "dots": {"diameter": (int, float)},
+    "optimize": {
+        "method": (str,),
+        "max_iter": (int,),
+        "seed": (int,),
+        "formulation": (str,),
+        "radius_factor": (int, float),
+        "container_factor": (int, float),
+        "lbfgs_memory": (int,),
+        "ftol": (int, float),
+        "gap": (int, float),
+        "skin": (int, float),
+        "md_step": (int, float),
+        "md_decay": (int, float),
+        "md_cutoff": (int, float),
+        "close_target": (int, float),
+    },
+    "qa": {
+        "collision_distance": (int, float),
+        "close_distance": (int, float),
+        "max_collisions": (int,),
+        "max_close_fraction": (int, float),
+        "max_protruding": (int,),
+        "max_in_empty": (int,),
+        "max_coverage_rms": (int, float),
+        "max_psi6_coherence": (int, float),
+        "smoothing": (int, float),
+    },
+}
+_REQUIRED = {"density": ("grid",), "dots": ("diameter",)}
+
+
+def load_job(path: str | Path) -> Job:
+    """Read and validate a TOML job file.
+
+    Raises:
+        JobError: one-line message naming the file, the field and the problem.
+    """
+    path = Path(path)
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise JobError(f"{path}: job file not found") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise JobError(f"{path}: cannot read job file ({e})") from None
+    except tomllib.TOMLDecodeError as e:
+        raise JobError(f"{path}: malformed TOML ({e})") from None
+    return job_from_dict(raw, base=path.parent, source=path)
+
+
+def job_from_dict(raw: dict[str, Any], base: Path = Path("."), source: Path | None = None) -> Job:
+    """Build a :class:`Job` from the parsed TOML tree (see :func:`load_job`)."""
+    where = str(source) if source else "job"
+    sections: dict[str, dict[str, Any]] = {"": {}}
+    for key, value in raw.items():
+        if isinstance(value, dict):
+            if key not in SCHEMA or key == "":
+                raise JobError(f"{where}: unknown section [{key}] (allowed: {_sections()})")
+            sections[key] = value
+        else:
+            sections[""][key] = value
+    for sec, values in sections.items():
+        allowed = SCHEMA[sec]
+        for key, value in values.items():
+            label = f"{sec}.{key}" if sec else key
+            if key not in allowed:
+                raise JobError(
+                    f"{where}: unknown key {label!r} (allowed in [{sec or 'top level'}]: "
+                    f"{', '.join(allowed)})"
+                )
+            types = allowed[key]
+            if isinstance(value, bool) or not isinstance(value, types):
+                names = " or ".join(t.__name__ for t in types)
+                raise JobError(f"{where}: {label} = {value!r} must be {names}")
+    for sec, keys in _REQUIRED.items():
+        for key in keys:
+            if key not in sections.get(sec, {}):
+                raise JobError(f"{where}: missing required key {sec}.{key}")
+
+    dom = sections.get("domain", {})
+    domain = _load_domain(dom, base, where)
+    if domain is None:
+        for key in ("width", "height"):
+            if key not in dom:
+                raise JobError(f"{where}: missing required key domain.{key} (or domain.outline)")
+        x0 = y0 = 0.0
+        width, height = float(dom["width"]), float(dom["height"])
+    else:
+        x0, y0, x1, y1 = domain.box
+        width, height = x1 - x0, y1 - y0
+        for key, size in (("width", width), ("height", height)):
+            if key in dom and abs(float(dom[key]) - size) > 1e-6 * max(size, 1.0):
+                raise JobError(
+                    f"{where}: domain.{key} = {dom[key]} differs from the outline's bounding "
+                    f"box ({size:.6g} mm); with an outline the density grid covers that box, "
+                    "so leave width/height out or check the outline's units (mm)"
+                )
+    grid_path = base / sections["density"]["grid"]
+    grid = load_grid(grid_path)
+    try:
+        opt = OptimizeParams(**_floats(sections.get("optimize", {})))
+        qa = QAParams(**_floats(sections.get("qa", {})))
+    except JobError as e:
+        raise JobError(f"{where}: {e}") from None
+    if not (math.isfinite(width) and math.isfinite(height) and width > 0 and height > 0):
+        raise JobError(f"{where}: domain.width/height = {width}, {height} must be > 0 mm")
+    validate_grid(grid, str(grid_path))
+    density = DensityMap(grid, width, height, x0, y0)
+    return Job(
+        domain=domain,
+        width=width,
+        height=height,
+        density=density,
+        diameter=float(sections["dots"]["diameter"]),
+        optimize=opt,
+        qa=qa,
+        name=str(sections[""].get("name", source.stem if source else "optdot")),
+        source=source,
+    )
+
+
+def _load_domain(dom: dict[str, Any], base: Path, where: str) -> Domain | None:
+    """The ``[domain]`` outline, keep-outs and edge margin (None: plain rectangle)."""
+    margin = float(dom.get("edge_margin", 0.0))
+    if not (math.isfinite(margin) and 0.0 <= margin < 100.0):
+        raise JobError(f"{where}: domain.edge_margin = {margin!r} must be in mm, 0 <= x < 100")
+    tol = float(dom.get("outline_tolerance", DEFAULT_TOLERANCE))
+    if not (1e-6 <= tol <= 1.0):
+        raise JobError(f"{where}: domain.outline_tolerance = {tol!r} is out of range (1e-6..1 mm)")
+    if "outline" not in dom:
+        for key in ("keep_out", "keep_out_layer"):
+            if key in dom:
+                raise JobError(f"{where}: domain.{key} needs domain.outline")
+        if margin > 0:
+            w, h = float(dom.get("width", 0)), float(dom.get("height", 0))
+            if w > 0 and h > 0:
+                return Domain.rect(0.0, 0.0, w, h, margin)
+        return None
+    try:
+        panel, keep = load_outline(base / dom["outline"], tol, dom.get("keep_out_layer"))
+        for item in dom.get("keep_out", []):
+            if not isinstance(item, str):
+                raise JobError(f"{where}: domain.keep_out entries must be strings (WKT or file)")
+            keep += parse_keep_out(item, base, tol)
+    except GeometryError as e:
+        raise GeometryError(f"{where}: {e}") from None
+    x0, y0, x1, y1 = panel.bounds
+    size = max(x1 - x0, y1 - y0)
+    if not 0.5 <= size <= 5000:
+        raise GeometryError(
+            f"{where}: {dom['outline']}: the outline spans {size:.4g} units; optdot expects mm "
+            "(0.5 .. 5000)"
+        )
+    geom = panel
+    for k in keep:
+        if not k.intersects(panel):
+            c = k.representative_point()
+            raise GeometryError(
+                f"{where}: keep-out near ({c.x:.4g}, {c.y:.4g}) mm lies outside the panel"
+            )
+        geom = geom.difference(k)
+    if geom.is_empty or geom.area <= 0:
+        raise GeometryError(f"{where}: nothing of the panel is left after the keep-outs")
+    geom = orient_all(geom)
+    return Domain(geom, margin, False, str(base / dom["outline"]))
+
+
+def _floats(d: dict[str, Any]) -> dict[str, Any]:
+    ints = {"max_iter", "seed", "lbfgs_memory", "max_collisions", "max_protruding", "max_in_empty"}
+    return {k: (v if k in ints or isinstance(v, str) else float(v)) for k, v in d.items()}
+
+
+def _sections() -> str:
+    return ", ".join(s for s in SCHEMA if s)

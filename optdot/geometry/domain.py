@@ -1,0 +1,184 @@
+"""Panel domains: the rectangle, or a polygon with holes and keep-outs (issue 7).
+
+A :class:`Domain` is a shapely (Multi)Polygon in mm plus an ``edge_margin``: every dot
+keeps ``r0 + edge_margin`` between its centre and every edge (outline, holes, keep-outs).
+Reading outlines from CAD files lives in :mod:`optdot.geometry.outline_io`; the compiled
+edge index the optimizer measures distances with in :mod:`optdot.geometry.edges`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+from shapely.geometry import MultiPolygon, Polygon
+from shapely.geometry.polygon import orient
+
+from ..errors import GeometryError
+
+#: Default flattening tolerance of arcs and curves, mm (1 µm).
+DEFAULT_TOLERANCE = 0.001
+
+
+@dataclass(frozen=True, eq=False)
+class Domain:
+    """Where dots may go.
+
+    Attributes:
+        geometry: polygonal region, mm; exteriors counter-clockwise, holes clockwise.
+        edge_margin: extra clearance of every dot from every edge, mm.
+        rectangle: True for the plain ``[x0, x1] x [y0, y1]`` panel.
+        source: where the outline came from (for messages).
+    """
+
+    geometry: Polygon | MultiPolygon
+    edge_margin: float = 0.0
+    rectangle: bool = False
+    source: str = "panel"
+
+    @classmethod
+    def rect(cls, x0: float, y0: float, x1: float, y1: float, edge_margin: float = 0.0) -> Domain:
+        """The rectangular panel."""
+        return cls(orient(shapely.box(x0, y0, x1, y1)), edge_margin, True)
+
+    @property
+    def box(self) -> tuple[float, float, float, float]:
+        """Bounding box ``(xmin, ymin, xmax, ymax)``, mm."""
+        return tuple(float(v) for v in self.geometry.bounds)  # type: ignore[return-value]
+
+    @property
+    def polygons(self) -> list[Polygon]:
+        """The polygons of the domain (one, unless keep-outs cut it apart)."""
+        g = self.geometry
+        return list(g.geoms) if isinstance(g, MultiPolygon) else [g]
+
+    def rings(self) -> list[np.ndarray]:
+        """Every boundary loop as ``[k, 2]`` vertices (not repeating the first), mm;
+        exteriors counter-clockwise, holes clockwise (interior on the left)."""
+        out = []
+        for p in self.polygons:
+            for ring in (p.exterior, *p.interiors):
+                out.append(np.asarray(ring.coords, dtype=np.float64)[:-1, :2])
+        return out
+
+    def contains(self, xy: np.ndarray) -> np.ndarray:
+        """``[n]`` bool: the centre lies inside the domain (not in a hole)."""
+        return shapely.contains_xy(self.geometry, xy[:, 0], xy[:, 1])
+
+    def edge_distance(self, xy: np.ndarray) -> np.ndarray:
+        """``[n]`` distance of each centre to the nearest edge, mm (unsigned)."""
+        return shapely.distance(self.geometry.boundary, shapely.points(xy))
+
+    def protruding(
+        self, xy: np.ndarray, dot_radius: float, margin: bool = True, tol: float = 1e-9
+    ) -> np.ndarray:
+        """``[n]`` bool: the dot (with the edge margin, if ``margin``) is not wholly
+        inside the domain."""
+        need = dot_radius + (self.edge_margin if margin else 0.0) - tol
+        return ~self.contains(xy) | (self.edge_distance(xy) < need)
+
+    def cell_fractions(
+        self, x0: float, y0: float, cw: float, ch: float, nx: int, ny: int
+    ) -> np.ndarray:
+        """``[ny, nx]`` share of each grid cell's area inside the domain."""
+        return polygon_cell_fractions(self.geometry, x0, y0, cw, ch, nx, ny, self.rectangle)
+
+
+def polygon_cell_fractions(
+    geom, x0: float, y0: float, cw: float, ch: float, nx: int, ny: int, rectangle: bool = False
+) -> np.ndarray:
+    """``[ny, nx]`` share of each cell of a grid inside the shapely polygon ``geom``."""
+    if rectangle:
+        bx0, by0, bx1, by1 = geom.bounds
+        xs = x0 + np.arange(nx + 1) * cw
+        ys = y0 + np.arange(ny + 1) * ch
+        fx = np.clip(np.minimum(xs[1:], bx1) - np.maximum(xs[:-1], bx0), 0, None) / cw
+        fy = np.clip(np.minimum(ys[1:], by1) - np.maximum(ys[:-1], by0), 0, None) / ch
+        return fy[:, None] * fx[None, :]
+    iy, ix = np.mgrid[0:ny, 0:nx]
+    cells = shapely.box(x0 + ix * cw, y0 + iy * ch, x0 + (ix + 1) * cw, y0 + (iy + 1) * ch)
+    shapely.prepare(geom)
+    inside = shapely.contains(geom, cells)
+    frac = inside.astype(np.float64)
+    edge = ~inside & shapely.intersects(geom, cells)
+    frac[edge] = shapely.area(shapely.intersection(cells[edge], geom)) / (cw * ch)
+    return frac
+
+
+def orient_all(geom: Polygon | MultiPolygon) -> Polygon | MultiPolygon:
+    """Exteriors counter-clockwise and holes clockwise, for (multi)polygons."""
+    if isinstance(geom, MultiPolygon):
+        return MultiPolygon([orient(p, 1.0) for p in geom.geoms])
+    if isinstance(geom, Polygon):
+        return orient(geom, 1.0)
+    polys = [g for g in getattr(geom, "geoms", []) if isinstance(g, Polygon) and g.area > 0]
+    return MultiPolygon([orient(p, 1.0) for p in polys])
+
+
+def validate_polygon(poly: Polygon, where: str) -> Polygon:
+    """Refuse invalid or empty polygons with shapely's reason and location."""
+    if poly.is_empty or poly.convex_hull.area <= 0:
+        raise GeometryError(f"{where}: the outline has zero area")
+    if not poly.is_valid:
+        reason = shapely.is_valid_reason(poly)
+        raise GeometryError(f"{where}: invalid outline: {_reason_mm(reason)}")
+    if poly.area <= 0:
+        raise GeometryError(f"{where}: the outline has zero area")
+    return orient(poly, 1.0)
+
+
+def _reason_mm(reason: str) -> str:
+    # shapely: "Self-intersection[12.5 3.25]" -> "self-intersection at (12.5, 3.25) mm"
+    if "[" in reason and reason.endswith("]"):
+        what, at = reason[:-1].split("[", 1)
+        xy = at.split()
+        if len(xy) >= 2:
+            return f"{what.strip().lower()} at ({float(xy[0]):.4g}, {float(xy[1]):.4g}) mm"
+    return reason
+
+
+def domain_from_rings(rings: list[np.ndarray], where: str, filled: bool = False) -> Domain | None:
+    """Rebuild a domain from outline loops read back from a mask; None if they are just
+    one axis-aligned box.
+
+    Args:
+        rings: ``[k, 2]`` vertex arrays, mm.
+        where: file name for messages.
+        filled: the rings are filled polygons whose holes are keyhole cuts (GDSII/OASIS);
+            otherwise exteriors run counter-clockwise and holes clockwise (DXF).
+    """
+    if len(rings) == 1 and len(rings[0]) == 4:
+        r = rings[0]
+        xs, ys = np.unique(r[:, 0]), np.unique(r[:, 1])
+        if len(xs) == 2 and len(ys) == 2:
+            return None
+    if filled:
+        geom = shapely.union_all([Polygon(r).buffer(0) for r in rings if len(r) >= 3])
+        if geom.is_empty:
+            raise GeometryError(f"{where}: the outline polygons have zero area")
+        return Domain(orient_all(geom), 0.0, False, where)
+    polys = [Polygon(r) for r in rings if len(r) >= 3]
+    shells = [p for p in polys if p.exterior.is_ccw]
+    holes = [p for p in polys if not p.exterior.is_ccw]
+    parts = []
+    for sh in shells:
+        inner = [h.exterior.coords for h in holes if sh.contains(h.representative_point())]
+        parts.append(validate_polygon(Polygon(sh.exterior.coords, inner), where))
+    if not parts:
+        raise GeometryError(f"{where}: no counter-clockwise outer loop among the outline rings")
+    geom = parts[0] if len(parts) == 1 else MultiPolygon(parts)
+    return Domain(orient_all(geom), 0.0, False, where)
+
+
+def box_protruding(
+    xy: np.ndarray, box: tuple[float, float, float, float], dot_radius: float | np.ndarray
+) -> np.ndarray:
+    """``[n]`` bool: the dot of radius ``dot_radius`` (mm, scalar or ``[n]``) reaches
+    outside ``box`` ``(xmin, ymin, xmax, ymax)``."""
+    return (
+        (xy[:, 0] - dot_radius < box[0])
+        | (xy[:, 0] + dot_radius > box[2])
+        | (xy[:, 1] - dot_radius < box[1])
+        | (xy[:, 1] + dot_radius > box[3])
+    )

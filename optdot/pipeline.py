@@ -1,0 +1,226 @@
+"""The pipeline: a :class:`~optdot.config.job.Job` becomes a :class:`~optdot.pattern.Pattern`,
+which is checked and written.
+
+* :func:`generate`: initial dots (§2.1) → circles and containers (§3.3, §3) → relaxation
+  (OptDot, or the MD baseline of §2.2 on the same initial dots) → guarantee pass →
+  Pattern.
+* :func:`qa`: the QA gate of a pattern against the job's map and thresholds.
+* :func:`export`: the gate, then the masks and files; nothing is written when the gate
+  fails (unless ``force``).
+
+This is the only module that sees every stage; it never prints (progress goes to a
+callback) and the command line only parses options and prints what it returns.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from .config.job import Job, QAParams
+from .errors import GeometryError, GuaranteeError, QAGateError
+from .geometry.morton import spatial_order
+from .pattern import Pattern
+from .quality.gate import QAResult, run_qa
+from .relax.circles import hex_radius
+from .relax.formulation import Formulation, Problem, formulation_of
+from .relax.legalize import check_guarantee, legalize
+from .relax.md import MDForce, md_relax
+from .relax.optdot import Progress, RelaxSettings, relax_staged
+from .runtime.memory import check_memory
+from .sampling.initial import initial_dots, initial_dots_in
+
+
+def problem_of(job: Job) -> Problem:
+    """The fields of ``job`` a formulation builds its penalty terms from."""
+    return Problem(
+        domain=job.domain,
+        density=job.density,
+        dot_radius=0.5 * job.diameter,
+        min_distance=job.min_distance,
+        close_target=job.close_target,
+        seed=job.optimize.seed,
+    )
+
+
+def generate(
+    job: Job,
+    progress: Progress | None = None,
+    keep_stages: bool = False,
+    formulation: Formulation | None = None,
+) -> Pattern:
+    """Generate the dot pattern of ``job``.
+
+    Args:
+        job: a validated job.
+        progress: optional ``progress(iteration, value)`` callback (penalty for OptDot,
+            largest force for MD).
+        keep_stages: also put ``initial_xy`` and ``relaxed_xy`` (``[n, 2]``, generation
+            order, before the guarantee pass) in ``pattern.stats``, for comparisons.
+        formulation: overrides the job's (benchmarks try variants this way).
+
+    Returns:
+        The pattern, dots in generation order, positions rounded to 1 nm.
+
+    Raises:
+        ResourceError: the job would not fit in memory.
+        GuaranteeError: the spacing/placement guarantee could not be met.
+    """
+    where = str(job.source) if job.source else job.name
+    opt = job.optimize
+    n = job.n_dots
+    check_memory(n, opt.lbfgs_memory, where)
+    t0 = time.perf_counter()
+    timings: dict[str, float] = {}
+
+    if job.domain.rectangle:
+        xy_init = initial_dots(job.density, n, opt.seed)
+    else:
+        xy_init = initial_dots_in(job.density, n, opt.seed, job.domain.contains)
+        if len(xy_init) < n:
+            raise GeometryError(
+                f"{where}: could only place {len(xy_init)} of {n} dots inside the outline; "
+                "the map is zero over most of it"
+            )
+    home = job.density.cell_index(xy_init)
+    rho = job.density.grid.ravel()[home]
+    order = spatial_order(xy_init)
+    xy0 = np.ascontiguousarray(xy_init[order])
+    timings["initial_s"] = time.perf_counter() - t0
+
+    t1 = time.perf_counter()
+    box = job.box
+    r0 = 0.5 * job.diameter
+    if opt.method == "md":
+        law = MDForce(
+            core=job.min_distance,
+            spacing=2.0 * hex_radius(rho[order], r0),
+            decay=opt.md_decay,
+            cutoff=opt.md_cutoff,
+        )
+        md = md_relax(
+            xy0,
+            law,
+            box,
+            r0,
+            steps=opt.max_iter,
+            step=opt.md_step,
+            skin=opt.skin,
+            callback=progress,
+        )
+        relaxed = md.xy
+        info = {"iterations": md.steps, "evaluations": md.steps, "neighbor_builds": md.rebuilds}
+        info.update(md_step_mm=md.eta, message=f"ran {md.steps} MD steps")
+        history = md.history
+    else:
+        form = (
+            formulation_of(opt.formulation, opt.radius_factor, opt.container_factor)
+            if formulation is None
+            else formulation
+        )
+        settings = RelaxSettings(opt.max_iter, opt.lbfgs_memory, opt.ftol, opt.skin)
+        relaxed, info, history = relax_staged(
+            problem_of(job), form, xy0, rho[order], settings, progress
+        )
+    timings["relax_s"] = time.perf_counter() - t1
+
+    t2 = time.perf_counter()
+    leg = legalize(relaxed, job.density, home[order], job.domain, r0, job.min_distance)
+    viol = check_guarantee(leg.xy, job.density, job.domain, r0, job.min_distance)
+    if not viol.ok:
+        raise GuaranteeError(
+            f"{where}: could not meet the guarantee after {leg.sweeps} sweeps: "
+            f"{viol.collisions} pairs closer than {job.min_distance * 1e3:.1f} um, "
+            f"{viol.protruding} dots protruding, {viol.in_empty} dots in zero-density cells"
+        )
+    timings["legalize_s"] = time.perf_counter() - t2
+
+    xy = np.empty_like(leg.xy)
+    xy[order] = leg.xy
+    timings["total_s"] = time.perf_counter() - t0
+    meta = {
+        "job": job.name,
+        "method": opt.method,
+        "formulation": opt.formulation,
+        "seed": opt.seed,
+        "max_iter": opt.max_iter,
+        "n": int(n),
+        **info,
+        "legalize_sweeps": int(leg.sweeps),
+        "legalize_pair_fixes": int(leg.pair_fixes),
+        "legalize_dot_fixes": int(leg.dot_fixes),
+    }
+    stats: dict = {**timings, "history": history}
+    if keep_stages:
+        stats["initial_xy"] = xy_init
+        stats["relaxed_xy"] = np.empty_like(relaxed)
+        stats["relaxed_xy"][order] = relaxed
+    outline = None if job.domain.rectangle else job.domain
+    return Pattern(xy=xy, diameter=job.diameter, box=box, meta=meta, stats=stats, outline=outline)
+
+
+def with_job_panel(pattern: Pattern, job: Job | None) -> Pattern:
+    """The pattern with the job's panel box and outline (the job is the authority)."""
+    if job is None:
+        return pattern
+    return replace(pattern, box=job.box, outline=None if job.domain.rectangle else job.domain)
+
+
+def qa(
+    pattern: Pattern,
+    job: Job | None = None,
+    collision: float | None = None,
+    close: float | None = None,
+) -> QAResult:
+    """Measure ``pattern`` and judge it (see :func:`optdot.quality.gate.run_qa`).
+
+    Args:
+        pattern: the dots.
+        job: the target map and thresholds (None: defaults, no map checks).
+        collision: collision distance, mm (default: the job's diameter + gap, else the
+            pattern's nominal diameter).
+        close: too-close distance, mm (default: the job's ``qa.close_distance``).
+    """
+    params = job.qa if job else QAParams()
+    if close is not None:
+        params = replace(params, close_distance=close)
+    if collision is None:
+        collision = job.collision_distance if job else pattern.nominal_diameter
+    return run_qa(pattern, job.density if job else None, params, collision)
+
+
+def export(
+    pattern: Pattern,
+    outputs: Mapping[str, str | Path],
+    job: Job | None = None,
+    options=None,
+    force: bool = False,
+) -> QAResult:
+    """Run the QA gate, then write ``pattern`` in each format of ``outputs``.
+
+    Args:
+        pattern: the dots.
+        outputs: ``{format: path}``, formats of :data:`optdot.exporters.FORMATS`.
+        job: thresholds and map of the gate (None: default thresholds).
+        options: :class:`optdot.exporters.ExportOptions` (None: defaults).
+        force: write even if the gate fails.
+
+    Returns:
+        The gate's result (check ``passed``: with ``force`` it may have failed).
+
+    Raises:
+        QAGateError: the gate failed and ``force`` is off; nothing was written.
+        ExportError: an output cannot be written.
+    """
+    from . import exporters
+
+    result = qa(pattern, job)
+    if not result.passed and not force:
+        raise QAGateError(result)
+    for fmt, path in outputs.items():
+        exporters.write(pattern, fmt, path, options)
+    return result

@@ -1,0 +1,6 @@
+"""Stage 2, relaxation: circles and containers (§3.3, §3), penalty terms (3), L-BFGS,
+formulations, the MD baseline (§2.2) and the guarantee pass."""
+
+from .optdot import RelaxResult, VerletPenalty, relax
+
+__all__ = ["RelaxResult", "VerletPenalty", "relax"]

@@ -1,0 +1,159 @@
+"""Overlap removal (paper §3.1–3.2): penalty (3) minimized by L-BFGS over a Verlet list,
+through a formulation's stages."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..spatial.verlet import VerletList
+from .formulation import Formulation, Problem
+from .lbfgs import HALTED, MAX_ITER, minimize_lbfgs
+from .penalty import PenaltyTerms, penalty_fast
+
+#: ``progress(iteration, value)``; a true return value halts the run.
+Progress = Callable[[int, float], bool | None]
+
+
+class VerletPenalty:
+    """Penalty + gradient over a :class:`~optdot.spatial.verlet.VerletList`.
+
+    Interaction radii are :attr:`PenaltyTerms.reach` (the circle, or the hard core where
+    it reaches further), so the list holds every pair the penalty can see.
+
+    Args:
+        terms: the penalty's radii, containers and panel.
+        skin: relative skin of the list.
+        rebuild_fraction: share of movers that triggers a full rebuild.
+    """
+
+    def __init__(self, terms: PenaltyTerms, skin: float, rebuild_fraction: float = 0.01) -> None:
+        self.terms = terms
+        self.verlet = VerletList(terms.reach, skin, rebuild_fraction)
+
+    @property
+    def rebuilds(self) -> int:
+        """Full neighbour-list builds so far."""
+        return self.verlet.rebuilds
+
+    @property
+    def n_movers(self) -> int:
+        """Dots currently handled outside the list."""
+        return self.verlet.n_movers
+
+    def __call__(self, x: np.ndarray, grad: np.ndarray) -> float:
+        """``x`` and ``grad`` are flat ``[2n]`` views of ``[n, 2]`` positions, mm."""
+        xy = x.reshape(-1, 2)
+        return penalty_fast(xy, self.terms, self.verlet.update(xy), grad.reshape(-1, 2))
+
+
+@dataclass
+class RelaxResult:
+    """Outcome of :func:`relax`.
+
+    Attributes:
+        xy: ``[n, 2]`` relaxed positions, mm.
+        penalty: final penalty, mm².
+        nit, nfev: iterations and evaluations.
+        rebuilds: neighbour-list builds.
+        message: why it stopped.
+        history: penalty after each iteration.
+        status: L-BFGS status code (:data:`optdot.relax.lbfgs.CONVERGED`, ...).
+    """
+
+    xy: np.ndarray
+    penalty: float
+    nit: int
+    nfev: int
+    rebuilds: int
+    message: str
+    history: list[float]
+    status: int = MAX_ITER
+
+
+def relax(
+    xy0: np.ndarray,
+    terms: PenaltyTerms,
+    max_iter: int = 200,
+    memory: int = 6,
+    ftol: float = 0.0,
+    skin: float = 0.3,
+    callback: Progress | None = None,
+    gtol: float = 0.0,
+) -> RelaxResult:
+    """Minimize the penalty from ``xy0`` (``[n, 2]`` mm) by L-BFGS with memory ``memory``."""
+    fun = VerletPenalty(terms, skin)
+    res = minimize_lbfgs(
+        fun,
+        xy0.ravel(),
+        memory=memory,
+        max_iter=max_iter,
+        ftol=ftol,
+        callback=callback,
+        gtol=gtol,
+    )
+    return RelaxResult(
+        xy=res.x.reshape(-1, 2),
+        penalty=res.fun,
+        nit=res.nit,
+        nfev=res.nfev,
+        rebuilds=fun.rebuilds,
+        message=res.message,
+        history=res.history,
+        status=res.status,
+    )
+
+
+@dataclass(frozen=True)
+class RelaxSettings:
+    """How long and how the L-BFGS stages run (the job's ``[optimize]`` fields)."""
+
+    max_iter: int = 200
+    memory: int = 6
+    ftol: float = 0.0
+    skin: float = 0.3
+    gtol: float = 0.0
+
+
+def relax_staged(
+    problem: Problem,
+    form: Formulation,
+    xy0: np.ndarray,
+    rho: np.ndarray,
+    settings: RelaxSettings,
+    progress: Progress | None = None,
+) -> tuple[np.ndarray, dict, list[float]]:
+    """Relax ``xy0`` (``[n, 2]`` mm, fill ``rho`` ``[n]``) through the formulation's stages.
+
+    Containers stay centred on ``xy0`` in every stage. Returns positions, run info and
+    the penalty after each iteration. A stage halted by ``progress`` ends the run.
+    """
+    xy = xy0
+    info = {"iterations": 0, "evaluations": 0, "neighbor_builds": 0}
+    history: list[float] = []
+    done = 0
+    for k, (share, multiplier) in enumerate(form.stages):
+        last = k == len(form.stages) - 1
+        iters = settings.max_iter - done if last else round(share * settings.max_iter)
+        res = relax(
+            xy,
+            form.terms(problem, xy0, rho, multiplier),
+            max_iter=iters,
+            memory=settings.memory,
+            ftol=settings.ftol,
+            skin=settings.skin,
+            callback=None if progress is None else (lambda i, f, o=done: progress(o + i, f)),
+            gtol=settings.gtol,
+        )
+        done += iters
+        xy = res.xy
+        info["iterations"] += res.nit
+        info["evaluations"] += res.nfev
+        info["neighbor_builds"] += res.rebuilds
+        info.update(penalty=float(res.penalty), message=res.message)
+        history += res.history
+        if res.status == HALTED:
+            break
+    return xy, info, history

@@ -1,0 +1,71 @@
+"""The block layout of the parallel pair kernels (penalty, MD forces).
+
+Dots are split into fixed blocks of :data:`BLOCK` (in the Morton order the pipeline
+sorts them into); each block's in-block pairs are summed in parallel, the pairs that
+cross blocks serially in a fixed order, so sums come out bit-identical on any thread
+count. :class:`PairList` is a CSR half list rearranged for that, plus the extra pairs of
+dots handled outside the list.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+#: Dots per block of the parallel pair kernels (penalty, MD forces). Fixed, not the
+#: thread count, so sums are added in the same order on every machine: bit-identical.
+BLOCK = 4096
+
+
+@nb.njit(parallel=True, cache=True)
+def _split_blocks(ptr, nbr):  # pragma: no cover - compiled
+    """Reorder each dot's partners: same BLOCK first; returns (nbr', mid, cross)."""
+    n = ptr.shape[0] - 1
+    out = np.empty_like(nbr)
+    mid = np.empty(n, np.int64)
+    has_cross = np.zeros(n, np.bool_)
+    for i in nb.prange(n):
+        b = i // BLOCK
+        k = ptr[i]
+        for q in range(ptr[i], ptr[i + 1]):
+            if nbr[q] // BLOCK == b:
+                out[k] = nbr[q]
+                k += 1
+        mid[i] = k
+        for q in range(ptr[i], ptr[i + 1]):
+            if nbr[q] // BLOCK != b:
+                out[k] = nbr[q]
+                k += 1
+        has_cross[i] = k > mid[i]
+    return out, mid, np.flatnonzero(has_cross)
+
+
+@dataclass
+class PairList:
+    """A CSR half list prepared for the block-parallel pair kernels, plus movers' pairs.
+
+    Attributes:
+        ptr: ``[n + 1]`` int64; partners of i are ``nbr[ptr[i]:ptr[i + 1]]``.
+        nbr: ``[K]`` int32, each row with same-block partners first.
+        mid: ``[n]`` int64, end of row i's same-block partners.
+        skip: ``[n]`` bool, dots whose pairs come only from the extra list.
+        cross: ``[C]`` int64 ascending, the rows with partners in other blocks.
+        ei, ej: ``[P]`` int32 extra pairs (each once).
+    """
+
+    ptr: np.ndarray
+    nbr: np.ndarray
+    mid: np.ndarray
+    skip: np.ndarray
+    cross: np.ndarray
+    ei: np.ndarray
+    ej: np.ndarray
+
+    @classmethod
+    def from_csr(cls, ptr: np.ndarray, nbr: np.ndarray) -> PairList:
+        """Wrap a CSR half list from :func:`optdot.neighbors.neighbor_pairs`."""
+        nbr2, mid, cross = _split_blocks(ptr, nbr)
+        none = np.zeros(0, np.int32)
+        return cls(ptr, nbr2, mid, np.zeros(len(ptr) - 1, np.bool_), cross, none, none)

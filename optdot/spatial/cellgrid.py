@@ -1,0 +1,359 @@
+"""Pair search in O(n log n + K): a uniform cell grid for circles of varying radius.
+
+A pure function of positions and radii (and an optional frozen halo): :func:`neighbor_list`
+returns every pair closer than ``(r_i + r_j) * (1 + skin)``, once, found from its larger
+circle: dot i scans the cells within ``2 * r_i * (1 + skin)`` and keeps j when
+``r_j < r_i`` (ties broken by index), so a grid sized for the typical radius stays
+efficient when radii vary 5x across a map. The result is a CSR half list: the partners
+of dot i are ``nbr[ptr[i]:ptr[i + 1]]``. :func:`pairs_brute_force` is the O(n²)
+reference the tests compare against. What to do with the list over an optimisation (the
+Verlet policy) lives in :mod:`optdot.spatial.verlet`; the block layout of the parallel
+kernels in :mod:`optdot.spatial.blocks`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+
+@nb.njit(cache=True)
+def _bin_points(xy, reff, x0, y0, cell, nx, ny):  # pragma: no cover - compiled
+    """Counting sort of the dots into cells; returns cell starts and sorted copies.
+
+    The copies (index, x, y, radius in cell order) make every cell scan read contiguous
+    memory, which is what the scan's speed depends on.
+    """
+    n = xy.shape[0]
+    cid = np.empty(n, np.int64)
+    for i in range(n):
+        ix = int((xy[i, 0] - x0) / cell)
+        iy = int((xy[i, 1] - y0) / cell)
+        ix = min(max(ix, 0), nx - 1)
+        iy = min(max(iy, 0), ny - 1)
+        cid[i] = iy * nx + ix
+    start = np.zeros(nx * ny + 1, np.int64)
+    for i in range(n):
+        start[cid[i] + 1] += 1
+    for c in range(nx * ny):
+        start[c + 1] += start[c]
+    fill = start[:-1].copy()
+    order = np.empty(n, np.int32)
+    cellmax = np.zeros(nx * ny)
+    bx = np.empty(n)
+    by = np.empty(n)
+    br = np.empty(n)
+    for i in range(n):
+        c = cid[i]
+        k = fill[c]
+        order[k] = i
+        bx[k] = xy[i, 0]
+        by[k] = xy[i, 1]
+        br[k] = reff[i]
+        cellmax[c] = max(cellmax[c], reff[i])
+        fill[c] += 1
+    return start, order, bx, by, br, cellmax
+
+
+@nb.njit(cache=True)
+def _scan(
+    i, xy, reff, grow, start, order, bx, by, br, x0, y0, cell, nx, ny, buf
+):  # pragma: no cover
+    """Partners of dot i: writes them to ``buf`` (as many as fit) and returns how many.
+
+    Branch-free inner loop: a candidate is written at the cursor, which then advances by
+    the test's 0/1 (clamped to the last slot, so ``buf`` is never overrun); the caller
+    knows ``buf`` held them all when the count is below ``len(buf)``.
+    """
+    xi = xy[i, 0]
+    yi = xy[i, 1]
+    ri = reff[i]
+    reach = 2.0 * ri * grow
+    ix0 = max(int((xi - reach - x0) / cell), 0)
+    ix1 = min(int((xi + reach - x0) / cell), nx - 1)
+    iy0 = max(int((yi - reach - y0) / cell), 0)
+    iy1 = min(int((yi + reach - y0) / cell), ny - 1)
+    last = buf.shape[0] - 1
+    cnt = 0
+    for cy in range(iy0, iy1 + 1):
+        row = cy * nx
+        for k in range(start[row + ix0], start[row + ix1 + 1]):
+            rj = br[k]
+            j = order[k]
+            dx = xi - bx[k]
+            dy = yi - by[k]
+            lim = (ri + rj) * grow
+            keep = (dx * dx + dy * dy < lim * lim) & ((rj < ri) | ((rj == ri) & (j > i)))
+            buf[min(cnt, last)] = j
+            cnt += np.int64(keep)
+    return cnt
+
+
+_CHUNK = 2048
+
+
+@nb.njit(parallel=True, cache=True)
+def _pairs_csr(xy, reff, grow, x0, y0, cell, nx, ny, per_dot):  # pragma: no cover - compiled
+    """One scan per dot into per-chunk segments of ``per_dot * _CHUNK`` slots, then one
+    copy into the CSR arrays; a chunk whose segment overflowed is scanned again."""
+    start, order, bx, by, br, cellmax = _bin_points(xy, reff, x0, y0, cell, nx, ny)
+    n = xy.shape[0]
+    nchunk = (n + _CHUNK - 1) // _CHUNK
+    cap = per_dot * _CHUNK
+    seg = np.empty(nchunk * cap, np.int32)
+    counts = np.zeros(n + 1, np.int64)
+    over = np.zeros(nchunk, np.bool_)
+    for c in nb.prange(nchunk):
+        row = np.empty(256, np.int32)
+        pos = c * cap
+        end = pos + cap
+        for i in range(c * _CHUNK, min((c + 1) * _CHUNK, n)):
+            m = _scan(i, xy, reff, grow, start, order, bx, by, br, x0, y0, cell, nx, ny, row)
+            counts[i + 1] = m
+            if m >= row.shape[0] or pos + m > end:
+                over[c] = True
+            elif not over[c]:
+                seg[pos : pos + m] = row[:m]
+                pos += m
+    ptr = np.cumsum(counts)
+    nbr = np.empty(ptr[n], np.int32)
+    for c in nb.prange(nchunk):
+        a = c * _CHUNK
+        b = min(a + _CHUNK, n)
+        if not over[c]:
+            nbr[ptr[a] : ptr[b]] = seg[c * cap : c * cap + ptr[b] - ptr[a]]
+            continue
+        row = np.empty(counts[a + 1 : b + 1].max() + 1, np.int32)
+        for i in range(a, b):
+            m = _scan(i, xy, reff, grow, start, order, bx, by, br, x0, y0, cell, nx, ny, row)
+            nbr[ptr[i] : ptr[i] + m] = row[:m]
+    return ptr, nbr, start, order, cellmax, over.any()
+
+
+@dataclass
+class CellGrid:
+    """Dots binned into square cells at build time (cell order = counting sort).
+
+    Attributes:
+        x0, y0: lower-left corner of cell (0, 0), mm.
+        cell: cell side, mm.
+        nx, ny: cells per row and per column.
+        start: ``[nx * ny + 1]`` int64, dots of cell c are ``order[start[c]:start[c + 1]]``.
+        order: ``[n]`` int32 dot indices in cell order.
+        cellmax: ``[nx * ny]`` largest radius binned in each cell, mm.
+    """
+
+    x0: float
+    y0: float
+    cell: float
+    nx: int
+    ny: int
+    start: np.ndarray
+    order: np.ndarray
+    cellmax: np.ndarray
+
+
+@nb.njit(cache=True)
+def _bounds(xy):  # pragma: no cover - compiled
+    x0 = x1 = xy[0, 0]
+    y0 = y1 = xy[0, 1]
+    for i in range(1, xy.shape[0]):
+        x0 = min(x0, xy[i, 0])
+        x1 = max(x1, xy[i, 0])
+        y0 = min(y0, xy[i, 1])
+        y1 = max(y1, xy[i, 1])
+    return x0, y0, x1, y1
+
+
+def cell_side(reff: np.ndarray, skin: float) -> float:
+    """Default grid cell: twice the median reach ``2 * median(reff) * (1 + skin)``, mm."""
+    return 2.0 * float(np.median(reff)) * (1.0 + skin)
+
+
+def _grid_shape(xy: np.ndarray, cell: float) -> tuple[float, float, float, int, int]:
+    x0, y0, x1, y1 = _bounds(xy)
+    # never so small a cell that the grid explodes
+    cell = max(cell, max(x1 - x0, y1 - y0) / 8192.0, np.finfo(float).tiny)
+    nx = int((x1 - x0) / cell) + 1
+    ny = int((y1 - y0) / cell) + 1
+    return x0, y0, cell, nx, ny
+
+
+def _search(
+    xy: np.ndarray, radius: np.ndarray | float, skin: float, cell: float | None, per_dot: int
+) -> tuple[np.ndarray, np.ndarray, CellGrid, bool]:
+    """(ptr, nbr, grid, overflow) of the cell-grid search (see :func:`neighbor_list`)."""
+    xy = np.ascontiguousarray(xy, dtype=np.float64)
+    n = xy.shape[0]
+    reff = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, np.float64), (n,)))
+    if n == 0:
+        empty = CellGrid(
+            0.0, 0.0, 1.0, 1, 1, np.zeros(2, np.int64), np.zeros(0, np.int32), np.zeros(1)
+        )
+        return np.zeros(1, np.int64), np.zeros(0, np.int32), empty, False
+    grow = 1.0 + float(skin)
+    x0, y0, cell, nx, ny = _grid_shape(xy, cell_side(reff, skin) if cell is None else cell)
+    ptr, nbr, start, order, cellmax, over = _pairs_csr(
+        xy, reff, grow, x0, y0, cell, nx, ny, max(int(per_dot), 1)
+    )
+    return ptr, nbr, CellGrid(x0, y0, cell, nx, ny, start, order, cellmax), bool(over)
+
+
+@dataclass(frozen=True, eq=False)
+class NeighborList:
+    """The result of :func:`neighbor_list`.
+
+    Attributes:
+        ptr: ``[n + 1]`` int64; the live partners of live dot i are ``nbr[ptr[i]:ptr[i + 1]]``.
+        nbr: ``[K]`` int32 live dot indices; every unordered live pair appears once.
+        halo_i: ``[H]`` int32 live dot of each live–halo pair.
+        halo_j: ``[H]`` int32 halo dot (index into the halo arrays) of the same pairs.
+        overflow: the per-dot capacity guess was too small somewhere, and those chunks
+            were scanned a second time (as jax-md's ``did_buffer_overflow``, but here the
+            list is complete either way: the flag says a larger ``per_dot`` would save
+            the second scan).
+        grid: the cell grid the dots (live and halo) were binned into.
+    """
+
+    ptr: np.ndarray
+    nbr: np.ndarray
+    halo_i: np.ndarray
+    halo_j: np.ndarray
+    overflow: bool
+    grid: CellGrid
+
+    def pairs(self) -> np.ndarray:
+        """The live pairs as sorted ``[K, 2]`` int64, i < j."""
+        return csr_to_pairs(self.ptr, self.nbr)
+
+
+def neighbor_list(
+    xy: np.ndarray,
+    radius: np.ndarray | float,
+    skin: float = 0.0,
+    halo_xy: np.ndarray | None = None,
+    halo_radius: np.ndarray | float | None = None,
+    cell: float | None = None,
+    per_dot: int = 8,
+) -> NeighborList:
+    """Every pair of circles closer than ``(r_i + r_j) * (1 + skin)``: a pure function.
+
+    Args:
+        xy: ``[n, 2]`` live centres, mm.
+        radius: ``[n]`` radii (or one radius), mm, > 0.
+        skin: relative margin; pairs up to ``(1 + skin)`` times touching are listed.
+        halo_xy: optional ``[h, 2]`` frozen centres, mm (e.g. the dots beyond a tile):
+            pairs of a live and a halo dot are listed apart; halo–halo pairs are not.
+        halo_radius: ``[h]`` radii of the halo (or one radius), mm; default ``radius``
+            when that is a scalar.
+        cell: grid cell side, mm (default :func:`cell_side`).
+        per_dot: expected partners per dot (a capacity guess; the result never depends
+            on it, see :attr:`NeighborList.overflow`).
+
+    Returns:
+        :class:`NeighborList`.
+    """
+    xy = np.ascontiguousarray(xy, dtype=np.float64).reshape(-1, 2)
+    n = len(xy)
+    r = np.broadcast_to(np.asarray(radius, np.float64), (n,))
+    none = np.zeros(0, np.int32)
+    if halo_xy is None or len(halo_xy) == 0:
+        ptr, nbr, grid, over = _search(xy, r, skin, cell, per_dot)
+        return NeighborList(ptr, nbr, none, none, over, grid)
+    halo_xy = np.ascontiguousarray(halo_xy, dtype=np.float64).reshape(-1, 2)
+    if halo_radius is None:
+        if np.ndim(radius) != 0:
+            raise ValueError("halo_radius is required when radius is per dot")
+        halo_radius = radius
+    hr = np.broadcast_to(np.asarray(halo_radius, np.float64), (len(halo_xy),))
+    ptr, nbr, grid, over = _search(
+        np.concatenate([xy, halo_xy]), np.concatenate([r, hr]), skin, cell, per_dot
+    )
+    row = np.repeat(np.arange(len(ptr) - 1, dtype=np.int64), np.diff(ptr))
+    col = nbr.astype(np.int64)
+    live = (row < n) & (col < n)
+    cross = (row < n) != (col < n)
+    keep = np.flatnonzero(live)
+    counts = np.bincount(row[keep], minlength=n)
+    live_ptr = np.zeros(n + 1, np.int64)
+    np.cumsum(counts, out=live_ptr[1:])
+    hi = np.where(row[cross] < n, row[cross], col[cross])
+    hj = np.where(row[cross] < n, col[cross], row[cross]) - n
+    order = np.lexsort((hj, hi))
+    return NeighborList(
+        live_ptr,
+        nbr[keep].astype(np.int32),
+        hi[order].astype(np.int32),
+        hj[order].astype(np.int32),
+        over,
+        grid,
+    )
+
+
+def neighbor_grid(
+    xy: np.ndarray,
+    radius: np.ndarray | float,
+    skin: float = 0.0,
+    cell: float | None = None,
+    per_dot: int = 8,
+) -> tuple[np.ndarray, np.ndarray, CellGrid]:
+    """:func:`neighbor_pairs` that also returns the :class:`CellGrid` it binned into.
+
+    ``cell`` (mm) defaults to :func:`cell_side`; callers that build often pass it once.
+    ``per_dot`` is the expected partners per dot (a guess: more costs memory, fewer a
+    second scan of the chunks that overflow; the result is the same).
+    """
+    ptr, nbr, grid, _ = _search(xy, radius, skin, cell, per_dot)
+    return ptr, nbr, grid
+
+
+def neighbor_pairs(
+    xy: np.ndarray, radius: np.ndarray | float, skin: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """All pairs of circles whose distance is below ``(r_i + r_j) * (1 + skin)``.
+
+    Args:
+        xy: ``[n, 2]`` float64 centres, mm.
+        radius: ``[n]`` radii (or one radius), mm, > 0.
+        skin: relative margin; pairs up to ``(1 + skin)`` times touching are listed.
+
+    Returns:
+        ``(ptr, nbr)``: CSR half list, ``ptr`` ``[n + 1]`` int64, ``nbr`` ``[K]`` int32;
+        every unordered pair appears once.
+    """
+    ptr, nbr, _, _ = _search(xy, radius, skin, None, 8)
+    return ptr, nbr
+
+
+def pairs_within(xy: np.ndarray, distance: float) -> np.ndarray:
+    """All pairs of centres closer than ``distance`` (strictly), as ``[K, 2]`` int64 with i < j.
+
+    Args:
+        xy: ``[n, 2]`` centres, mm.
+        distance: mm.
+    """
+    ptr, nbr = neighbor_pairs(xy, 0.5 * distance)
+    return csr_to_pairs(ptr, nbr)
+
+
+def csr_to_pairs(ptr: np.ndarray, nbr: np.ndarray) -> np.ndarray:
+    """Turn a CSR half list into sorted ``[K, 2]`` int64 pairs with ``i < j``."""
+    i = np.repeat(np.arange(len(ptr) - 1, dtype=np.int64), np.diff(ptr))
+    j = nbr.astype(np.int64)
+    p = np.stack([np.minimum(i, j), np.maximum(i, j)], axis=1)
+    if len(p):
+        p = p[np.lexsort((p[:, 1], p[:, 0]))]
+    return p
+
+
+def pairs_brute_force(xy: np.ndarray, radius: np.ndarray | float, skin: float = 0.0) -> np.ndarray:
+    """O(n²) reference of :func:`neighbor_pairs`, as sorted ``[K, 2]`` int64 pairs, i < j."""
+    xy = np.asarray(xy, dtype=np.float64)
+    n = len(xy)
+    r = np.broadcast_to(np.asarray(radius, np.float64), (n,))
+    d2 = ((xy[:, None, :] - xy[None, :, :]) ** 2).sum(-1)
+    lim = (r[:, None] + r[None, :]) * (1.0 + skin)
+    i, j = np.nonzero(np.triu(d2 < lim * lim, k=1))
+    return np.stack([i, j], axis=1).astype(np.int64)
