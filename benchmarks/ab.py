@@ -29,8 +29,11 @@ from _common import machine  # noqa: E402
 CHILD = """
 import json, sys, time
 import optdot
-from optdot.config.schema import load_job
-from optdot.pipeline import generate
+if hasattr(optdot, "__all__"):  # the public API (0.2 on)
+    from optdot import generate, load_job
+else:  # a commit from before it
+    from optdot.generate import generate
+    from optdot.job import load_job
 job = load_job(sys.argv[1])
 t = time.perf_counter()
 p = generate(job)
