@@ -30,13 +30,13 @@ class OptimizeParams:
 
     Attributes:
         method: ``"optdot"`` (L-BFGS on penalty (3), the paper's method) or ``"md"``
-            (the molecular-dynamics baseline of Idé et al. 2003, see :mod:`optdot.md`).
+            (the molecular-dynamics baseline of Idé et al. 2003, see :mod:`optdot.relax.md`).
         max_iter: iterations of L-BFGS or MD steps (paper: 200).
         seed: seed of the scrambled low-discrepancy sequence.
         formulation: ``"paper"`` reproduces the paper exactly (radius factor 1, panel
             penalty with the circle radius); ``"optdot"`` is our default, see README.
         radius_factor: multiplies the paper's circle radius r = r0 sqrt(pi/(sqrt3 rho));
-            ``None`` takes the formulation's (see :mod:`optdot.formulation`).
+            ``None`` takes the formulation's (see :mod:`optdot.relax.formulation`).
         container_factor: container side / circle radius (paper: 4); ``None`` takes the
             formulation's.
         lbfgs_memory: L-BFGS history length m (paper: 6).

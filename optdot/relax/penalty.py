@@ -48,7 +48,7 @@ class PenaltyTerms:
             default ``dmin / 2`` for every dot.
         margin: edge margin, mm: the panel terms keep ``rp + margin`` (soft) and
             ``r0 + margin`` (hard) from the edges.
-        edges: a polygon outline's :class:`~optdot.domain.EdgeIndex`; the panel terms
+        edges: a polygon outline's :class:`~optdot.geometry.edges.EdgeIndex`; the panel terms
             then use the signed distance to its edges instead of ``box``.
         dot_radius: r0, mm (hard panel limit).
         w_hard: weight of the hard terms (0 = paper).
@@ -234,7 +234,7 @@ def _penalty_kernel(
 
 
 def penalty_fast(xy: np.ndarray, terms: PenaltyTerms, pairs: PairList, grad: np.ndarray) -> float:
-    """Penalty and gradient over a prepared pair list (see :mod:`optdot.neighbors`).
+    """Penalty and gradient over a prepared pair list (see :mod:`optdot.spatial`).
 
     Args:
         xy: ``[n, 2]`` positions, mm (C-contiguous float64).

@@ -65,7 +65,7 @@ class PairList:
 
     @classmethod
     def from_csr(cls, ptr: np.ndarray, nbr: np.ndarray) -> PairList:
-        """Wrap a CSR half list from :func:`optdot.neighbors.neighbor_pairs`."""
+        """Wrap a CSR half list from :func:`optdot.spatial.cellgrid.neighbor_pairs`."""
         nbr2, mid, cross = _split_blocks(ptr, nbr)
         none = np.zeros(0, np.int32)
         return cls(ptr, nbr2, mid, np.zeros(len(ptr) - 1, np.bool_), cross, none, none)
