@@ -61,3 +61,36 @@ def test_status_codes_and_messages():
     res = minimize_lbfgs(_bowl, np.zeros(8), max_iter=50, callback=lambda i, f: i >= 3)
     assert res.status == HALTED and res.nit == 3 and not res.success
     assert len(res.history) == 3
+
+
+def test_a_rejected_pair_never_overwrites_the_history_in_use(monkeypatch):
+    """Issue 14: with the history full, a pair failing the curvature test was written over
+    the oldest pair, which the next two-loop still used."""
+    from optdot.relax import lbfgs
+
+    real_store, real_two_loop = lbfgs._store, lbfgs._two_loop
+    calls = {"store": 0}
+    seen = []
+
+    def store(s_out, y_out, *args):
+        calls["store"] += 1
+        sy, yy = real_store(s_out, y_out, *args)
+        return (-1.0, yy) if calls["store"] == 6 else (sy, yy)  # reject the 6th pair
+
+    def two_loop(g, S, Y, rho, slots, gamma, d):
+        seen.append(sorted((S[i].tobytes(), Y[i].tobytes(), rho[i]) for i in slots))
+        return real_two_loop(g, S, Y, rho, slots, gamma, d)
+
+    monkeypatch.setattr(lbfgs, "_store", store)
+    monkeypatch.setattr(lbfgs, "_two_loop", two_loop)
+    a = np.linspace(1.0, 30.0, 40)
+    res = lbfgs.minimize_lbfgs(
+        lambda x, g: (g.__setitem__(slice(None), a * x), float(0.5 * (a * x * x).sum()))[1],
+        np.ones(40),
+        memory=3,
+        max_iter=8,
+    )
+    assert res.nit == 8
+    # the 6th iteration's pair was rejected: the next direction uses exactly the 3 pairs
+    # the 6th used, untouched
+    assert len(seen[5]) == 3 and seen[6] == seen[5]

@@ -139,19 +139,20 @@ def _two_loop(
     S: np.ndarray,
     Y: np.ndarray,
     rho: np.ndarray,
-    newest: int,
-    count: int,
+    slots: list[int],
     gamma: float,
     d: np.ndarray,
 ) -> float:
-    """``d <- -H g`` by the two-loop recursion over the ``count`` newest (s, y) pairs.
+    """``d <- -H g`` by the two-loop recursion over the (s, y) pairs in rows ``slots`` of
+    ``S`` and ``Y`` (oldest first).
 
     Each vector update is fused with the dot product the next step needs, so the
     recursion reads the history once per loop. Returns ``g . d``.
     """
     m = S.shape[0]
-    newest_first = [(newest - t) % m for t in range(count)]
-    oldest_first = newest_first[::-1]
+    count = len(slots)
+    oldest_first = list(slots)
+    newest_first = oldest_first[::-1]
     d[:] = 0.0
     # d = -g, then the first loop: a_i = rho_i s_i.d ; d -= a_i y_i (newest to oldest)
     nxt = S[newest_first[0]] if count else g
@@ -203,13 +204,16 @@ def minimize_lbfgs(
     g = np.empty(N)
     f = fun(x, g)
     nfev = 1
-    S = np.zeros((memory, N), np.float32)  # history in single precision: half the memory traffic
-    Y = np.zeros((memory, N), np.float32)
-    rho = np.zeros(memory)
+    # history in single precision (half the memory traffic), one row more than the memory:
+    # a new pair is written to a free row, so a rejected one never overwrites a pair in use
+    S = np.zeros((memory + 1, N), np.float32)
+    Y = np.zeros((memory + 1, N), np.float32)
+    rho = np.zeros(memory + 1)
+    slots: list[int] = []  # rows of the pairs in use, oldest first
     d = np.empty(N)
     x_new = np.empty(N)
     g_new = np.empty(N)
-    newest, count, gamma = memory - 1, 0, gamma0
+    gamma = gamma0
     history: list[float] = []
     message = f"reached max_iter = {max_iter}"
     status = MAX_ITER
@@ -220,10 +224,10 @@ def minimize_lbfgs(
             message = "penalty is zero"
             status = CONVERGED
             break
-        gd = _two_loop(g, S, Y, rho, newest, count, gamma, d)
+        gd = _two_loop(g, S, Y, rho, slots, gamma, d)
         if not gd < 0.0:  # not a descent direction: restart from steepest descent
-            count, gamma = 0, gamma0
-            gd = _two_loop(g, S, Y, rho, newest, count, gamma, d)
+            slots, gamma = [], gamma0
+            gd = _two_loop(g, S, Y, rho, slots, gamma, d)
         step = 1.0
         ok = False
         for _ in range(40):
@@ -242,12 +246,11 @@ def minimize_lbfgs(
             status = LINE_SEARCH_FAILED
             nit -= 1
             break
-        slot = (newest + 1) % memory
+        slot = next(r for r in range(memory + 1) if r not in slots)
         sy, yy = _store(S[slot], Y[slot], x_new, x, g_new, g)
-        if sy > 1e-12 * yy and yy > 0.0:
-            newest = slot
+        if sy > 1e-12 * yy and yy > 0.0:  # curvature condition: keep the pair
+            slots = [*slots, slot][-memory:]
             rho[slot] = 1.0 / sy
-            count = min(count + 1, memory)
             gamma = sy / yy
         x, x_new = x_new, x
         g, g_new = g_new, g

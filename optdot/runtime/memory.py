@@ -17,7 +17,8 @@ BASE_BYTES = 250 * 2**20
 
 def estimate_bytes(n_dots: int, memory: int = 6) -> int:
     """Peak memory estimate of generating ``n_dots`` with L-BFGS memory ``memory``, bytes."""
-    return BASE_BYTES + n_dots * (BYTES_PER_DOT + 2 * memory * 2 * 4)  # float32 (s, y) pairs
+    # float32 (s, y) pairs: memory + 1 rows of 2 coordinates
+    return BASE_BYTES + n_dots * (BYTES_PER_DOT + 2 * (memory + 1) * 2 * 4)
 
 
 def available_bytes() -> int:
