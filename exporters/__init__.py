@@ -7,7 +7,7 @@ format     writer
 GDSII      :func:`optdot.exporters.gds.write_gds` (gdstk)
 OASIS      :func:`optdot.exporters.gds.write_oas` (gdstk)
 DXF        :func:`optdot.exporters.dxf.write_dxf` (streamed, ezdxf template)
-CSV        :func:`optdot.io.patterns.pattern_csv_bytes`
+CSV        :func:`optdot.io.patterns.write_csv`
 SVG/PNG    :func:`optdot.exporters.preview.write_svg`, :func:`optdot.exporters.preview.write_png`
 =========  ======================================================
 """
@@ -16,8 +16,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from optdot.io.atomic import atomic_path
-from optdot.io.patterns import pattern_csv_bytes
+from optdot.io.patterns import write_csv
 from optdot.pattern import Pattern
 
 from .options import ExportOptions
@@ -41,8 +40,7 @@ def write(pattern: Pattern, fmt: str, path: str | Path, opts: ExportOptions | No
 
         write_dxf(pattern, path, opts)
     elif fmt == "csv":
-        with atomic_path(path) as tmp:
-            tmp.write_bytes(pattern_csv_bytes(pattern))
+        write_csv(pattern, path)
     elif fmt == "svg":
         from .preview import write_svg
 

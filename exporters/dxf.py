@@ -16,7 +16,7 @@ from pathlib import Path
 import ezdxf
 import numpy as np
 
-from optdot.io.atomic import atomic_path
+from optdot.io.atomic import atomic_path, expect_tail
 from optdot.pattern import Pattern
 
 from .options import ExportOptions
@@ -134,7 +134,8 @@ def write_dxf(pattern: Pattern, path: str | Path, opts: ExportOptions) -> None:
     n = pattern.n
     handles = np.arange(seed, seed + n, dtype=np.int64)
     head = head.replace("{SEED}", f"{seed + n:X}")
-    with atomic_path(path) as tmp, open(tmp, "w", encoding="ascii", newline="\n") as fh:
+    verify = expect_tail(tail[-8:].encode("ascii"), str(path))  # "  0\nEOF\n"
+    with atomic_path(path, verify) as tmp, open(tmp, "w", encoding="ascii", newline="\n") as fh:
         fh.write(head)
         chunk = 100_000
         for a in range(0, n, chunk):

@@ -10,8 +10,11 @@ goes on its own layer as filled polygons, holes cut open by zero-width keyholes.
 
 from __future__ import annotations
 
+import contextlib
 import datetime
 import math
+import os
+import tempfile
 from pathlib import Path
 
 import gdstk
@@ -19,7 +22,7 @@ import numpy as np
 
 from optdot.errors import ExportError
 from optdot.geometry.morton import spatial_order
-from optdot.io.atomic import atomic_path
+from optdot.io.atomic import atomic_path, expect_tail
 from optdot.pattern import Pattern
 
 from .options import ExportOptions
@@ -109,14 +112,81 @@ def _ccw(ring: np.ndarray) -> bool:
 
 
 def write_gds(pattern: Pattern, path: str | Path, opts: ExportOptions) -> None:
-    """Write a GDSII file atomically."""
+    """Write a GDSII file atomically, verified before it replaces anything."""
     lib = build_library(pattern, opts)
-    with atomic_path(path) as tmp:
+    with atomic_path(path, _verify_gds(path, lib, opts)) as tmp:
         lib.write_gds(tmp, max_points=MAX_POINTS, timestamp=TIMESTAMP)
 
 
 def write_oas(pattern: Pattern, path: str | Path, opts: ExportOptions) -> None:
-    """Write an OASIS file atomically (cells compressed; circles detected as CIRCLE records)."""
+    """Write an OASIS file atomically (cells compressed; circles detected as CIRCLE
+    records) with a CRC32 in its END record, checked before it replaces anything."""
     lib = build_library(pattern, opts, oasis=True)
-    with atomic_path(path) as tmp:
-        lib.write_oas(tmp, compression_level=6, circle_tolerance=opts.tolerance_um)
+    with atomic_path(path, _verify_oas(path)) as tmp:
+        lib.write_oas(
+            tmp, compression_level=6, circle_tolerance=opts.tolerance_um, validation="crc32"
+        )
+
+
+#: The GDSII ENDLIB record: length 4, type 0x04, no data.
+ENDLIB = b"\x00\x04\x04\x00"
+
+
+def _verify_gds(path, lib: gdstk.Library, opts: ExportOptions):
+    """Check a written GDSII file: it ends with ENDLIB, gdstk reads its whole record
+    stream, and it holds the references and polygons the library had.
+
+    gdstk's writer ignores write errors (a full disk gave a truncated file and no error),
+    so this is what stands between a full disk and a mask that looks finished."""
+    # GDSII has no repetitions: each repeated instance is written as its own record
+    refs = sum(max(r.repetition.size, 1) for c in lib.cells for r in c.references)
+    polys = sum(max(q.repetition.size, 1) for c in lib.cells for q in c.polygons)
+    tail = expect_tail(ENDLIB, str(path))
+
+    def check(tmp: Path) -> None:
+        tail(tmp)
+        info, err = quietly(gdstk.gds_info, str(tmp))
+        if info is None:
+            raise ExportError(f"{path}: the written file does not read back ({err})")
+        if info["num_references"] != refs or info["num_polygons"] != polys:
+            raise ExportError(
+                f"{path}: the written file holds {info['num_references']} references and "
+                f"{info['num_polygons']} polygons, not {refs} and {polys}"
+            )
+
+    return check
+
+
+def _verify_oas(path):
+    """Check a written OASIS file against the CRC32 of its END record (every byte)."""
+
+    def check(tmp: Path) -> None:
+        res, err = quietly(gdstk.oas_validate, str(tmp))
+        if res is None or res[0] is not True:
+            raise ExportError(f"{path}: the written file fails its CRC32 check {err}".rstrip())
+
+    return check
+
+
+def quietly(fn, *args):
+    """Call a gdstk function with the C library's stderr captured: ``(result, text)``;
+    ``result`` is None when it raised ``OSError`` (what gdstk raises on bad files).
+
+    gdstk prints ``[GDSTK] ...`` lines to the process's stderr; a command-line tool
+    should print one line of its own instead."""
+    with tempfile.TemporaryFile() as buf:
+        saved = os.dup(2)
+        try:
+            os.dup2(buf.fileno(), 2)
+            try:
+                result = fn(*args)
+            except OSError:
+                result = None
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        buf.seek(0)
+        text = buf.read().decode("utf-8", "replace").strip()
+    with contextlib.suppress(Exception):
+        text = text.splitlines()[0].removeprefix("[GDSTK] ")
+    return result, text

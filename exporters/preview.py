@@ -12,10 +12,12 @@ from pathlib import Path
 
 import numpy as np
 
-from optdot.io.atomic import atomic_path
+from optdot.io.atomic import atomic_path, expect_tail
 from optdot.pattern import Pattern, coverage_image
 
 SVG_MAX_DOTS = 200_000
+#: A PNG file's last chunk (IEND with its CRC).
+PNG_END = b"IEND\xaeB`\x82"
 TILE_MM = 1.0
 
 
@@ -61,7 +63,7 @@ def write_png(pattern: Pattern, path: str | Path, dpi: int = 110) -> None:
     b.set_xlabel("x (mm)")
     b.set_ylabel("y (mm)")
     fig.tight_layout()
-    with atomic_path(path) as tmp:
+    with atomic_path(path, expect_tail(PNG_END, str(path))) as tmp:
         fig.savefig(tmp, format="png", dpi=dpi, metadata={"Software": None})
     plt.close(fig)
 
@@ -97,7 +99,7 @@ def write_svg(pattern: Pattern, path: str | Path) -> None:
             for (x, y), r in zip(pattern.xy[sel].tolist(), radius.tolist(), strict=True)
         ]
     out.append("</g>\n</svg>\n")
-    with atomic_path(path) as tmp:
+    with atomic_path(path, expect_tail(b"</svg>\n", str(path))) as tmp:
         tmp.write_text("".join(out), encoding="utf-8")
 
 

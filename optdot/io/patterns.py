@@ -22,7 +22,7 @@ import shapely
 from ..errors import ExportError, PatternFileError
 from ..geometry.domain import Domain, orient_all
 from ..pattern import Pattern
-from .atomic import atomic_path
+from .atomic import atomic_path, expect_size
 
 CSV_HEADER = "x_mm,y_mm,diameter_mm"
 
@@ -37,11 +37,33 @@ def save_pattern(pattern: Pattern, path: str | Path) -> None:
     suffix = path.suffix.lower()
     if suffix not in (".csv", ".npz"):
         raise ExportError(f"{path}: pattern files are .csv or .npz, not {suffix or 'no suffix'!r}")
-    with atomic_path(path) as tmp:
-        if suffix == ".csv":
-            tmp.write_bytes(pattern_csv_bytes(pattern))
-        else:
-            _write_npz(pattern, tmp)
+    if suffix == ".csv":
+        write_csv(pattern, path)
+        return
+    with atomic_path(path, _verify_npz(path)) as tmp:
+        _write_npz(pattern, tmp)
+
+
+def write_csv(pattern: Pattern, path: str | Path) -> None:
+    """Write the pattern's CSV atomically, its size checked before it replaces anything."""
+    data = pattern_csv_bytes(pattern)
+    with atomic_path(path, expect_size(len(data), str(path))) as tmp:
+        tmp.write_bytes(data)
+
+
+def _verify_npz(path: Path):
+    """Check a written NPZ: every member's CRC (the zip reads back whole)."""
+
+    def check(tmp: Path) -> None:
+        try:
+            with zipfile.ZipFile(tmp) as zf:
+                bad = zf.testzip()
+        except (zipfile.BadZipFile, EOFError) as e:
+            raise ExportError(f"{path}: the written file does not read back ({e})") from None
+        if bad is not None:
+            raise ExportError(f"{path}: member {bad} of the written file is corrupt")
+
+    return check
 
 
 def pattern_csv_bytes(pattern: Pattern) -> bytes:

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.atomic import atomic_path
+from ..io.atomic import atomic_path, expect_tail
 from ..pattern import Pattern, coverage_image
 from .gate import QAResult
 
@@ -18,7 +18,7 @@ from .gate import QAResult
 def write_json(result: QAResult, path: str | Path) -> None:
     """Write the JSON report atomically (every number, for scripts)."""
     text = json.dumps(result.to_json(), indent=2, sort_keys=True, default=_jsonable)
-    with atomic_path(path) as tmp:
+    with atomic_path(path, expect_tail(b"}\n", str(path))) as tmp:
         tmp.write_text(text + "\n", encoding="utf-8")
 
 
@@ -52,7 +52,7 @@ figure{{display:inline-block;margin:.5em}}img{{max-width:560px}}</style></head><
 <h2>Gate</h2><table><tr><th></th><th>check</th><th>value</th><th>limit</th><th>where (mm, first 5)</th></tr>{rows}</table>
 <h2>Plots</h2>{imgs}<h2>All numbers</h2><pre>{metrics}</pre></body></html>
 """
-    with atomic_path(path) as tmp:
+    with atomic_path(path, expect_tail(b"</html>\n", str(path))) as tmp:
         tmp.write_text(doc, encoding="utf-8")
 
 

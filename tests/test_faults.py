@@ -1,0 +1,80 @@
+"""Faults while writing: a full disk or a file-size limit never leaves a wrong file.
+
+Each case runs the real command in a child process under ``RLIMIT_FSIZE`` (Python ignores
+SIGXFSZ, so a write past the limit fails with EFBIG, as on a full disk; gdstk's C writer
+ignored such failures and left a truncated mask with exit 0)."""
+
+from __future__ import annotations
+
+import os
+import stat
+import subprocess
+import sys
+
+import pytest
+
+from optdot import exporters
+from optdot.io.patterns import load_pattern
+
+from .conftest import SAMPLES
+
+TINY = SAMPLES / "tiny" / "job.toml"
+FORMATS = ["gds", "oas", "dxf", "csv", "svg", "png"]
+
+
+def optdot_limited(limit: int, *args) -> subprocess.CompletedProcess:
+    code = (
+        "import resource, sys\n"
+        f"resource.setrlimit(resource.RLIMIT_FSIZE, ({limit}, {limit}))\n"
+        "from optdot.cli import main\n"
+        "sys.argv = ['optdot', *sys.argv[1:]]\n"
+        "main()\n"
+    )
+    return subprocess.run(
+        [sys.executable, "-c", code, *map(str, args)], capture_output=True, text=True
+    )
+
+
+@pytest.fixture(scope="module")
+def tiny_csv(tmp_path_factory, tiny_pattern):
+    d = tmp_path_factory.mktemp("faults")
+    path = d / "dots.csv"
+    exporters.write(tiny_pattern, "csv", path)
+    return path
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_a_write_past_the_file_size_limit_keeps_the_old_file(tmp_path, tiny_csv, fmt):
+    full = tmp_path / f"full.{fmt}"
+    exporters.write(load_pattern(tiny_csv), fmt, full)
+    size = full.stat().st_size
+    out = tmp_path / f"v.{fmt}"
+    out.write_bytes(b"OLD")
+    os.chmod(out, 0o640)
+    r = optdot_limited(size // 2, "export", tiny_csv, f"--{fmt}", out, "--job", TINY, "-q")
+    assert r.returncode == 2, (r.returncode, r.stderr)
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"optdot: error: {out}:"), r.stderr
+    assert "Traceback" not in r.stderr and "[GDSTK]" not in r.stderr
+    assert out.read_bytes() == b"OLD"
+    assert stat.S_IMODE(out.stat().st_mode) == 0o640
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f"full.{fmt}", f"v.{fmt}"]
+
+
+def test_generate_under_a_file_size_limit_keeps_the_old_pattern(tmp_path):
+    out = tmp_path / "dots.npz"
+    out.write_bytes(b"OLD")
+    r = optdot_limited(2000, "generate", TINY, "-o", out, "-q")
+    assert r.returncode == 2 and "cannot write" in r.stderr, r.stderr
+    assert out.read_bytes() == b"OLD" and len(list(tmp_path.iterdir())) == 1
+
+
+def test_a_replaced_file_keeps_its_permissions(tmp_path, tiny_csv):
+    out = tmp_path / "m.gds"
+    out.write_bytes(b"OLD")
+    os.chmod(out, 0o600)
+    exporters.write(load_pattern(tiny_csv), "gds", out)
+    assert out.read_bytes()[:4] != b"OLD" and stat.S_IMODE(out.stat().st_mode) == 0o600
+    new = tmp_path / "new.gds"
+    exporters.write(load_pattern(tiny_csv), "gds", new)
+    assert stat.S_IMODE(new.stat().st_mode) == 0o644
