@@ -24,6 +24,7 @@ import numpy as np
 from .config.job import Job, QAParams
 from .errors import GeometryError, GuaranteeError, QAGateError
 from .geometry.morton import spatial_order
+from .io.atomic import transaction
 from .pattern import Pattern
 from .quality.gate import QAResult, run_qa
 from .relax.circles import hex_radius
@@ -214,13 +215,14 @@ def export(
 
     Raises:
         QAGateError: the gate failed and ``force`` is off; nothing was written.
-        ExportError: an output cannot be written.
+        ExportError: an output cannot be written; none was replaced (one transaction).
     """
     from . import exporters
 
     result = qa(pattern, job)
     if not result.passed and not force:
         raise QAGateError(result)
-    for fmt, path in outputs.items():
-        exporters.write(pattern, fmt, path, options)
+    with transaction():  # all outputs replaced together, or none
+        for fmt, path in outputs.items():
+            exporters.write(pattern, fmt, path, options)
     return result

@@ -20,6 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 ALLOWED = {
     "errors": set(),
     "_imports": set(),
+    "__main__": {"cli"},
     "runtime": {"errors"},
     "io": {"errors", "pattern", "geometry"},
     "geometry": {"errors"},
@@ -31,6 +32,7 @@ ALLOWED = {
     "quality": {"config", "geometry", "pattern", "io"},
     "exporters": {"errors", "geometry", "io", "pattern"},
     "pipeline": {
+        "io",
         "config",
         "errors",
         "geometry",

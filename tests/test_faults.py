@@ -78,3 +78,72 @@ def test_a_replaced_file_keeps_its_permissions(tmp_path, tiny_csv):
     new = tmp_path / "new.gds"
     exporters.write(load_pattern(tiny_csv), "gds", new)
     assert stat.S_IMODE(new.stat().st_mode) == 0o644
+
+
+def test_a_failed_output_replaces_none_of_the_set(tmp_path, tiny_csv):
+    """--oas (small, written first) succeeds, --dxf (large) hits the limit: the OAS file
+    must not be replaced either."""
+    sizes = {}
+    for fmt in ("oas", "dxf"):
+        exporters.write(load_pattern(tiny_csv), fmt, tmp_path / f"full.{fmt}")
+        sizes[fmt] = (tmp_path / f"full.{fmt}").stat().st_size
+    assert sizes["oas"] * 2 < sizes["dxf"]
+    outs = {f: tmp_path / f"v.{f}" for f in ("oas", "dxf")}
+    for p in outs.values():
+        p.write_bytes(b"OLD")
+    limit = (sizes["oas"] + sizes["dxf"]) // 2
+    r = optdot_limited(limit, "export", tiny_csv, "--oas", outs["oas"], "--dxf", outs["dxf"], "-q")
+    assert r.returncode == 2 and str(outs["dxf"]) in r.stderr, r.stderr
+    assert all(p.read_bytes() == b"OLD" for p in outs.values())
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["full.dxf", "full.oas", "v.dxf", "v.oas"]
+
+
+def test_an_interrupt_in_the_middle_of_a_set_replaces_nothing(tmp_path, tiny_pattern, monkeypatch):
+    from optdot.io.atomic import transaction
+
+    outs = {f: tmp_path / f"v.{f}" for f in ("gds", "csv", "svg")}
+    for p in outs.values():
+        p.write_bytes(b"OLD")
+    real = exporters.write
+    calls = []
+
+    def write(pattern, fmt, path, opts=None):
+        calls.append(fmt)
+        if fmt == "svg":
+            raise KeyboardInterrupt
+        real(pattern, fmt, path, opts)
+
+    monkeypatch.setattr(exporters, "write", write)
+    with pytest.raises(KeyboardInterrupt), transaction():
+        for fmt, path in outs.items():
+            exporters.write(tiny_pattern, fmt, path)
+    assert calls == ["gds", "csv", "svg"]
+    assert all(p.read_bytes() == b"OLD" for p in outs.values())
+    assert len(list(tmp_path.iterdir())) == 3
+    with transaction():  # and a set that completes replaces all of them
+        for fmt, path in outs.items():
+            real(tiny_pattern, fmt, path)
+    assert all(p.read_bytes() != b"OLD" for p in outs.values())
+
+
+@pytest.mark.parametrize("signame,delay", [("SIGTERM", 0.6), ("SIGTERM", 1.2), ("SIGINT", 0.9)])
+def test_a_signal_during_export_leaves_the_old_files(tmp_path, signame, delay):
+    """At any point of the run (imports, numba's cache load, relaxation, writing): exit 130,
+    one line, old files byte-identical, no temporary file left."""
+    import signal
+    import time
+
+    outs = {f: tmp_path / f"v.{f}" for f in ("gds", "oas", "dxf", "csv")}
+    for p in outs.values():
+        p.write_bytes(b"OLD")
+    args = [sys.executable, "-m", "optdot", "export", SAMPLES / "led" / "job.toml", "-q"]
+    for f, p in outs.items():
+        args += [f"--{f}", p]
+    proc = subprocess.Popen(list(map(str, args)), stderr=subprocess.PIPE, text=True)
+    time.sleep(delay)
+    proc.send_signal(getattr(signal, signame))
+    err = proc.communicate(timeout=120)[1]
+    assert proc.returncode == 130, err
+    assert err.strip() == "optdot: interrupted"
+    assert all(p.read_bytes() == b"OLD" for p in outs.values())
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(p.name for p in outs.values())

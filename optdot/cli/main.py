@@ -8,6 +8,7 @@ not meet the spacing guarantee; 130 interrupted.
 from __future__ import annotations
 
 import functools
+import signal
 import sys
 from pathlib import Path
 
@@ -21,8 +22,14 @@ def _user_errors(fn):
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
+        from ..io.atomic import interrupted
+
+        previous = {s: signal.signal(s, _terminate) for s in (signal.SIGTERM, signal.SIGINT)}
         try:
-            return fn(*args, **kwargs)
+            out = fn(*args, **kwargs)
+            if interrupted():  # the interrupt was swallowed inside compiled code
+                raise KeyboardInterrupt
+            return out
         except QAGateError as e:
             click.echo(f"optdot: {e}", err=True)
             sys.exit(e.exit_code)
@@ -32,8 +39,38 @@ def _user_errors(fn):
         except KeyboardInterrupt:
             click.echo("optdot: interrupted", err=True)
             sys.exit(130)
+        except Exception as e:
+            if not _caused_by_interrupt(e):
+                raise
+            # numba turns an interrupt raised while it calls back into Python (cache
+            # loading) into SystemError "returned a result with an exception set"
+            click.echo("optdot: interrupted", err=True)
+            sys.exit(130)
+        finally:
+            for s, handler in previous.items():
+                signal.signal(s, handler)
 
     return wrapper
+
+
+def _terminate(signum, frame):
+    """SIGTERM and SIGINT: no output is replaced from now on; stop as Ctrl-C does."""
+    from ..io.atomic import mark_interrupted
+
+    mark_interrupted()
+    raise KeyboardInterrupt
+
+
+def _caused_by_interrupt(e: BaseException) -> bool:
+    from ..io.atomic import interrupted
+
+    seen = set()
+    while e is not None and id(e) not in seen:
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return interrupted()
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -261,6 +298,7 @@ def export(
 @_user_errors
 def qa(pattern_file, job_path, html_path, json_path, collision, close, quiet):
     """Check PATTERN_FILE (csv, npz, gds, oas, dxf) before tooling: exit 0 pass, 1 fail."""
+    from ..io.atomic import transaction
     from ..pipeline import qa as run_gate
     from ..quality.report import write_html, write_json
 
@@ -271,10 +309,11 @@ def qa(pattern_file, job_path, html_path, json_path, collision, close, quiet):
     _check_outputs(outs)
     job, pattern = _read_with_job(pattern_file, job_path)
     result = run_gate(pattern, job, collision, close)
-    if json_path:
-        write_json(result, json_path)
-    if html_path:
-        write_html(result, pattern, html_path, title=f"optdot QA: {pattern_file.name}")
+    with transaction():  # both reports replaced together, or neither
+        if json_path:
+            write_json(result, json_path)
+        if html_path:
+            write_html(result, pattern, html_path, title=f"optdot QA: {pattern_file.name}")
     if not quiet:
         for c in result.checks:
             mark = "PASS" if c.passed else "FAIL"

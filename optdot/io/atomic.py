@@ -6,11 +6,16 @@ record count), given the permissions of the file it replaces, and only then rena
 the target. A write error (full disk, file-size limit, read-only place) or a failed check
 removes the temporary file, leaves the target as it was and raises
 :class:`~optdot.errors.ExportError` naming the file and the reason.
+
+Several outputs of one command form one :func:`transaction`: each is written and verified
+to its temporary file, and only when all are ready are they renamed, together; a failure or
+an interrupt before that replaces none of them and leaves no temporary file.
 """
 
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import os
 import stat
 import tempfile
@@ -21,6 +26,26 @@ from ..errors import ExportError
 
 #: ``verify(tmp_path)``: raise :class:`ExportError` (or ``OSError``) if the file is wrong.
 Verifier = Callable[[Path], None]
+
+_interrupted = False
+
+
+def mark_interrupted() -> None:
+    """Record that the process was asked to stop (a signal handler calls this): from now
+    on no output replaces its target, even where compiled code swallowed the exception
+    the handler raised."""
+    global _interrupted
+    _interrupted = True
+
+
+def interrupted() -> bool:
+    """A stop was requested (see :func:`mark_interrupted`)."""
+    return _interrupted
+
+
+def _check_interrupt() -> None:
+    if _interrupted:
+        raise KeyboardInterrupt
 
 
 @contextlib.contextmanager
@@ -44,12 +69,17 @@ def atomic_path(target: str | Path, verify: Verifier | None = None) -> Iterator[
         raise ExportError(f"{target}: cannot write here ({e.strerror})") from None
     os.close(fd)
     tmp_path = Path(tmp)
+    pending = _PENDING.get()
     try:
         yield tmp_path
         _fsync(tmp_path)
         if verify is not None:
             verify(tmp_path)
         os.chmod(tmp_path, _mode_of(target))
+        _check_interrupt()
+        if pending is not None:
+            pending.append((tmp_path, target))  # renamed when the transaction commits
+            return
         os.replace(tmp_path, target)
         _fsync_dir(directory)
     except OSError as e:
@@ -61,6 +91,53 @@ def atomic_path(target: str | Path, verify: Verifier | None = None) -> Iterator[
         with contextlib.suppress(OSError):
             tmp_path.unlink()
         raise
+
+
+#: The outputs of the open :func:`transaction`: (temporary file, target), in write order.
+_PENDING: contextvars.ContextVar[list[tuple[Path, Path]] | None] = contextvars.ContextVar(
+    "optdot_pending_outputs", default=None
+)
+
+
+@contextlib.contextmanager
+def transaction() -> Iterator[None]:
+    """Make every :func:`atomic_path` inside the block one all-or-nothing set of outputs.
+
+    Each file is written and verified as usual, but renamed onto its target only when the
+    block ends without an exception; on any exception (``KeyboardInterrupt`` included)
+    every temporary file is removed and no target changes. Nested blocks join the outer one.
+    """
+    if _PENDING.get() is not None:
+        yield
+        return
+    pending: list[tuple[Path, Path]] = []
+    token = _PENDING.set(pending)
+    try:
+        yield
+    except BaseException:
+        for tmp, _ in pending:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+        raise
+    finally:
+        _PENDING.reset(token)
+    if _interrupted:
+        for tmp, _ in pending:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+        raise KeyboardInterrupt
+    done = 0
+    try:
+        for tmp, target in pending:
+            os.replace(tmp, target)
+            done += 1
+    except OSError as e:  # pragma: no cover - a rename in its own directory
+        for later, _ in pending[done:]:
+            with contextlib.suppress(OSError):
+                later.unlink()
+        raise ExportError(f"{target}: cannot replace ({e.strerror})") from None
+    for directory in {target.parent for _, target in pending}:
+        _fsync_dir(directory)
 
 
 def expect_size(size: int, what: str) -> Verifier:
