@@ -54,11 +54,15 @@ def _user_errors(fn):
 
 
 def _terminate(signum, frame):
-    """SIGTERM and SIGINT: no output is replaced from now on; stop as Ctrl-C does."""
-    from ..io.atomic import mark_interrupted
+    """SIGTERM and SIGINT: from now on no output replaces anything, and the run stops at
+    its next safe point (the next iteration, or before any file is replaced). An exception
+    raised at an arbitrary point can land inside numba's compiler or cache loader, which
+    then crashes the process (SIGSEGV seen in testing); a second signal stops at once."""
+    from ..io.atomic import interrupted, mark_interrupted
 
+    if interrupted():
+        raise KeyboardInterrupt
     mark_interrupted()
-    raise KeyboardInterrupt
 
 
 def _caused_by_interrupt(e: BaseException) -> bool:
@@ -101,6 +105,7 @@ def _job_options(fn):
 def run_job(job_path: Path, seed, max_iter, method, formulation, quiet):
     """Load a job, apply CLI overrides and generate its pattern with a progress bar."""
     from ..config.schema import load_job
+    from ..io.atomic import interrupted
     from ..pipeline import generate
     from .progress import ProgressBar
 
@@ -110,8 +115,14 @@ def run_job(job_path: Path, seed, max_iter, method, formulation, quiet):
     bar = ProgressBar(
         job.optimize.max_iter, label=job.optimize.method, enabled=False if quiet else None
     )
+
+    def progress(iteration: int, value: float) -> None:
+        bar(iteration, value)
+        if interrupted():  # a signal came: stop here, in plain Python
+            raise KeyboardInterrupt
+
     try:
-        pattern = generate(job, progress=bar)
+        pattern = generate(job, progress=progress)
     finally:
         bar.close()
     return job, pattern
