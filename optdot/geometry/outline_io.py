@@ -1,7 +1,10 @@
 """Outline files: DXF, WKT and GeoJSON panels with holes, and keep-out zones.
 
 DXF: closed LWPOLYLINE/POLYLINE/CIRCLE/ELLIPSE/SPLINE, or LINE/ARC pieces that chain into
-loops; curves are flattened to a stated tolerance. The outermost loop is the panel and
+loops. Circles, arcs, bulges and ellipses are kept exact until it is known on which side
+of them the panel lies, then flattened to the stated tolerance *on that side*
+(:mod:`optdot.geometry.curves`): the polygon lies inside the drawn panel, so the spacing
+guarantee against it holds against the drawing. The outermost loop is the panel and
 loops inside it are holes. shapely validates the result before any work; a bad outline
 is refused with shapely's reason and where (:class:`~optdot.errors.GeometryError`).
 """
@@ -9,6 +12,7 @@ is refused with shapely's reason and where (:class:`~optdot.errors.GeometryError
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -16,11 +20,24 @@ import shapely
 from shapely.geometry import MultiPolygon, Polygon
 
 from ..errors import GeometryError
+from .curves import (
+    Conic,
+    Line,
+    Sampled,
+    Segment,
+    bulge_arc,
+    chain_points,
+    reverse_chain,
+    rough_points,
+)
 from .domain import DEFAULT_TOLERANCE, validate_polygon
 
 
 def load_outline(
-    path: Path, tolerance: float = DEFAULT_TOLERANCE, keep_out_layer: str | None = None
+    path: Path,
+    tolerance: float = DEFAULT_TOLERANCE,
+    keep_out_layer: str | None = None,
+    region_inside: bool = True,
 ) -> tuple[Polygon, list[Polygon]]:
     """Read a panel outline (and, from a DXF, the keep-outs on ``keep_out_layer``).
 
@@ -28,6 +45,8 @@ def load_outline(
         path: ``.dxf``, ``.wkt`` or ``.geojson``/``.json`` file, mm.
         tolerance: flattening tolerance of arcs and curves, mm.
         keep_out_layer: DXF layer whose loops are keep-out zones.
+        region_inside: the dots go inside the outline (a panel); False for a keep-out
+            file, whose curves are then flattened on their outer side.
 
     Returns:
         ``(panel, keep_outs)``: the validated panel polygon (with its holes) and the
@@ -41,8 +60,8 @@ def load_outline(
     suffix = path.suffix.lower()
     if suffix == ".dxf":
         loops, keep = _dxf_loops(path, tolerance, keep_out_layer)
-        panel = _polygon_from_loops(loops, path)
-        return panel, [_polygon_from_loops([k], path) for k in keep]
+        panel = _polygon_from_loops(loops, path, tolerance, region_inside)
+        return panel, [_polygon_from_loops([k], path, tolerance, not region_inside) for k in keep]
     if suffix in (".wkt", ".txt"):
         geom = _parse(lambda: shapely.from_wkt(path.read_text(encoding="utf-8")), path, "WKT")
     elif suffix in (".geojson", ".json"):
@@ -58,31 +77,77 @@ def load_outline(
 def parse_keep_out(item: str, base: Path, tolerance: float) -> list[Polygon]:
     """A keep-out given in the job: a WKT polygon string or an outline file path."""
     text = item.strip()
-    if text.split("(")[0].strip().upper() in ("POLYGON", "MULTIPOLYGON"):
+    kind = text.split("(")[0].strip().upper()
+    if kind in ("POLYGON", "MULTIPOLYGON"):
         geom = _parse(lambda: shapely.from_wkt(text), Path("domain.keep_out"), "WKT")
         return [
             validate_polygon(p, "domain.keep_out")
             for p in _polygonal_parts(geom, Path("domain.keep_out"))
         ]
-    panel, extra = load_outline(base / text, tolerance)
+    if kind in _WKT_KINDS:
+        raise GeometryError(f"domain.keep_out: {kind} is not an area; a keep-out is a POLYGON")
+    panel, extra = load_outline(base / text, tolerance, region_inside=False)
     return [panel, *extra]
+
+
+_WKT_KINDS = (
+    "POINT",
+    "MULTIPOINT",
+    "LINESTRING",
+    "MULTILINESTRING",
+    "LINEARRING",
+    "GEOMETRYCOLLECTION",
+    "CIRCULARSTRING",
+    "TRIANGLE",
+)
 
 
 def _parse(fn, path: Path, kind: str):
     try:
         return fn()
-    except (shapely.errors.GEOSException, ValueError, TypeError, KeyError) as e:
-        raise GeometryError(f"{path}: malformed {kind} ({str(e).splitlines()[0]})") from None
+    except UnicodeDecodeError:
+        raise GeometryError(f"{path}: not UTF-8 text") from None
+    except OSError as e:
+        raise GeometryError(f"{path}: cannot read ({e.strerror or e})") from None
+    except (
+        shapely.errors.GEOSException,
+        ValueError,
+        TypeError,
+        KeyError,
+        AttributeError,
+        IndexError,
+        RecursionError,
+    ) as e:
+        raise GeometryError(f"{path}: malformed {kind} ({_why(e)})") from None
 
 
 def _from_geojson(text: str):
     data = json.loads(text)
+    if not isinstance(data, dict):
+        raise ValueError(f"top level is a {_json_kind(data)}, not a GeoJSON object")
     if data.get("type") == "FeatureCollection":
-        geoms = [shapely.geometry.shape(f["geometry"]) for f in data["features"]]
-        return shapely.GeometryCollection(geoms)
+        features = data.get("features")
+        if not isinstance(features, list):
+            raise ValueError("FeatureCollection without a features list")
+        return shapely.GeometryCollection([_feature_geometry(f) for f in features])
     if data.get("type") == "Feature":
-        return shapely.geometry.shape(data["geometry"])
+        return _feature_geometry(data)
     return shapely.geometry.shape(data)
+
+
+def _feature_geometry(f):
+    if not isinstance(f, dict):
+        raise ValueError(f"a feature is a {_json_kind(f)}, not an object")
+    g = f.get("geometry")
+    if not isinstance(g, dict):
+        raise ValueError(f"a feature's geometry is {_json_kind(g)}, not a geometry object")
+    return shapely.geometry.shape(g)
+
+
+def _json_kind(v) -> str:
+    return {list: "list", str: "string", bool: "boolean", type(None): "null"}.get(
+        type(v), "number" if isinstance(v, int | float) else type(v).__name__
+    )
 
 
 def _polygonal_parts(geom, path: Path) -> list[Polygon]:
@@ -105,40 +170,44 @@ def _polygonal_parts(geom, path: Path) -> list[Polygon]:
 
 
 def _dxf_loops(path: Path, tolerance: float, keep_layer: str | None):
+    """``(loops, keep_loops, splines)``: closed chains of exact segments from the DXF's
+    modelspace, the keep-out layer's apart, and the sampled splines among them."""
     import ezdxf
-    from ezdxf import path as dxfpath
 
     try:
         doc = ezdxf.readfile(str(path))
-    except (OSError, ezdxf.DXFError) as e:
-        raise GeometryError(f"{path}: cannot read DXF ({e})") from None
-    closed: list[np.ndarray] = []
-    keep: list[np.ndarray] = []
-    pieces: list[np.ndarray] = []
+    except OSError as e:
+        raise GeometryError(f"{path}: cannot read DXF ({e.strerror or e})") from None
+    except Exception as e:  # noqa: BLE001 - ezdxf's parser raises anything on a damaged file
+        raise GeometryError(f"{path}: not a readable DXF file ({_why(e)})") from None
+    closed: list[list[Segment]] = []
+    keep: list[list[Segment]] = []
+    pieces: list[list[Segment]] = []
     kinds = ("LWPOLYLINE", "POLYLINE", "CIRCLE", "ARC", "LINE", "ELLIPSE", "SPLINE")
     for e in doc.modelspace():
         if e.dxftype() not in kinds:
             continue
         try:
-            p = dxfpath.make_path(e)
-        except (TypeError, ValueError) as err:
+            segs, is_closed = _entity_segments(e, tolerance)
+        except GeometryError as err:
+            raise GeometryError(f"{path}: {e.dxftype()} {e.dxf.handle}: {err}") from None
+        except (TypeError, ValueError, ArithmeticError, IndexError, AttributeError) as err:
             raise GeometryError(
-                f"{path}: cannot read {e.dxftype()} {e.dxf.handle} ({err})"
+                f"{path}: cannot read {e.dxftype()} {e.dxf.handle} ({_why(err)})"
             ) from None
-        pts = np.array([(v.x, v.y) for v in p.flattening(tolerance)], dtype=np.float64)
-        if len(pts) < 2:
+        if not segs:
             continue
-        is_loop = p.is_closed or np.hypot(*(pts[0] - pts[-1])) <= tolerance
+        is_loop = is_closed or np.hypot(*(segs[0].start - segs[-1].end)) <= tolerance
         target = keep if keep_layer is not None and e.dxf.layer == keep_layer else closed
         if is_loop:
-            target.append(pts)
+            target.append(segs)
         elif target is keep:
+            p = segs[0].start
             raise GeometryError(
-                f"{path}: open keep-out loop on layer {keep_layer!r} at "
-                f"({pts[0, 0]:.4g}, {pts[0, 1]:.4g}) mm"
+                f"{path}: open keep-out loop on layer {keep_layer!r} at ({p[0]:.4g}, {p[1]:.4g}) mm"
             )
         else:
-            pieces.append(pts)
+            pieces.append(segs)
     closed += _chain(pieces, max(tolerance, 1e-6), path)
     if not closed:
         raise GeometryError(
@@ -147,18 +216,120 @@ def _dxf_loops(path: Path, tolerance: float, keep_layer: str | None):
     return closed, keep
 
 
-def _chain(pieces: list[np.ndarray], tol: float, path: Path) -> list[np.ndarray]:
+def _entity_segments(e, tolerance: float) -> tuple[list[Segment], bool]:
+    """The exact segments of one DXF entity (x-y of its world coordinates) and whether
+    the entity is a closed loop by itself."""
+    kind = e.dxftype()
+    if kind == "LINE":
+        return [Line(_xy(e.dxf.start), _xy(e.dxf.end))], False
+    if kind in ("CIRCLE", "ARC"):
+        r = float(e.dxf.radius)
+        if not (math.isfinite(r) and r > 0):
+            raise GeometryError(f"radius {r!r} must be > 0 mm")
+        c = e.dxf.center
+        t0, t1 = 0.0, 2 * math.pi
+        if kind == "ARC":
+            t0 = math.radians(e.dxf.start_angle)
+            t1 = math.radians(e.dxf.end_angle)
+            while t1 <= t0:
+                t1 += 2 * math.pi
+        arc = Conic(np.array([c.x, c.y]), np.array([r, 0.0]), np.array([0.0, r]), t0, t1)
+        return [_to_wcs(arc, e.ocs(), c.z)], kind == "CIRCLE"
+    if kind == "ELLIPSE":
+        ce = e.construction_tool()
+        t0, t1 = float(ce.start_param), float(ce.end_param)
+        while t1 <= t0:
+            t1 += 2 * math.pi
+        full = t1 - t0 >= 2 * math.pi * (1 - 1e-12)
+        if abs(ce.major_axis.cross(ce.minor_axis).z) <= 0:
+            raise GeometryError("degenerate ellipse (zero axis)")
+        arc = Conic(_xy(ce.center), _xy(ce.major_axis), _xy(ce.minor_axis), t0, t1)
+        return [arc], full
+    if kind == "LWPOLYLINE":
+        pts = [(float(x), float(y), float(b)) for x, y, b in e.get_points("xyb")]
+        return _bulged(pts, bool(e.closed), e.ocs(), float(e.dxf.elevation))
+    if kind == "POLYLINE":
+        if e.is_2d_polyline:
+            pts = [(v.dxf.location.x, v.dxf.location.y, float(v.dxf.bulge)) for v in e.vertices]
+            return _bulged(pts, bool(e.is_closed), e.ocs(), float(e.dxf.elevation.z))
+        if e.is_3d_polyline:
+            w = [_xy(v.dxf.location) for v in e.vertices]
+            if e.is_closed and w:
+                w.append(w[0])
+            return [Line(a, b) for a, b in zip(w[:-1], w[1:], strict=False)], bool(e.is_closed)
+        raise GeometryError("polygon meshes and polyface meshes cannot be outlines")
+    # SPLINE: sampled, the caller keeps a band of 2 tol clear of it
+    from ezdxf import path as dxfpath
+
+    p = dxfpath.make_path(e)
+    pts = np.array([(v.x, v.y) for v in p.flattening(tolerance)], dtype=np.float64)
+    if len(pts) < 2:
+        return [], False
+    return [Sampled(pts)], bool(p.is_closed)
+
+
+def _bulged(pts, closed: bool, ocs, elevation: float) -> tuple[list[Segment], bool]:
+    """Segments of a 2-D polyline: ``pts`` are ``(x, y, bulge)`` in its object
+    coordinate system at ``elevation``."""
+    if len(pts) < 2:
+        return [], False
+    xy = [np.array([x, y]) for x, y, _ in pts]
+    n = len(xy)
+    segs = []
+    for i in range(n if closed else n - 1):
+        a, b = xy[i], xy[(i + 1) % n]
+        if np.array_equal(a, b):
+            continue
+        seg = bulge_arc(a, b, pts[i][2])
+        segs.append(_to_wcs(seg, ocs, elevation))
+    return segs, closed
+
+
+def _to_wcs(seg: Segment, ocs, z: float) -> Segment:
+    """A segment given in an entity's object coordinate system, in world x-y (an affine
+    map, so circles under a tilted extrusion become the ellipses they project to)."""
+    if not ocs.transform:
+        return seg
+
+    def f(v: np.ndarray) -> np.ndarray:
+        return _xy(ocs.to_wcs((float(v[0]), float(v[1]), z)))
+
+    if isinstance(seg, Line):
+        return Line(f(seg.p), f(seg.q))
+    c = f(seg.c)
+    return Conic(
+        c,
+        f(seg.c + seg.M) - c,
+        f(seg.c + seg.m) - c,
+        seg.t0,
+        seg.t1,
+        None if seg.p is None else f(seg.p),
+        None if seg.q is None else f(seg.q),
+    )
+
+
+def _xy(v) -> np.ndarray:
+    return np.array([float(v[0]), float(v[1])], dtype=np.float64)
+
+
+def _why(e: BaseException) -> str:
+    text = str(e).strip().splitlines()
+    return f"{type(e).__name__}: {text[0]}" if text else type(e).__name__
+
+
+def _chain(pieces: list[list[Segment]], tol: float, path: Path) -> list[list[Segment]]:
     """Join open pieces end to end into closed loops (endpoints within ``tol``)."""
     loops = []
     todo = list(pieces)
     while todo:
         cur = todo.pop(0)
-        while np.hypot(*(cur[0] - cur[-1])) > tol:
+        while np.hypot(*(cur[0].start - cur[-1].end)) > tol:
+            end = cur[-1].end
             for k, q in enumerate(todo):
-                if np.hypot(*(cur[-1] - q[0])) <= tol:
-                    cur = np.vstack([cur, q[1:]])
-                elif np.hypot(*(cur[-1] - q[-1])) <= tol:
-                    cur = np.vstack([cur, q[::-1][1:]])
+                if np.hypot(*(end - q[0].start)) <= tol:
+                    cur = cur + q
+                elif np.hypot(*(end - q[-1].end)) <= tol:
+                    cur = cur + reverse_chain(q)
                 else:
                     continue
                 todo.pop(k)
@@ -166,27 +337,32 @@ def _chain(pieces: list[np.ndarray], tol: float, path: Path) -> list[np.ndarray]
             else:
                 raise GeometryError(
                     f"{path}: open loop: the outline is not closed near "
-                    f"({cur[-1, 0]:.4g}, {cur[-1, 1]:.4g}) mm"
+                    f"({end[0]:.4g}, {end[1]:.4g}) mm"
                 )
         loops.append(cur)
     return loops
 
 
-def _polygon_from_loops(loops: list[np.ndarray], path: Path) -> Polygon:
-    """Outermost loop = panel, loops inside it = holes."""
-    rings = []
-    for pts in loops:
+def _polygon_from_loops(
+    loops: list[list[Segment]], path: Path, tolerance: float, region_inside: bool = True
+) -> Polygon:
+    """Outermost loop = panel, loops inside it = holes; every curve flattened on the
+    region's side (``region_inside``: the region is the polygon, else its outside, as for
+    a keep-out)."""
+    rough = []
+    for segs in loops:
+        pts = rough_points(segs, tolerance)
         if len(pts) < 4:
             raise GeometryError(
                 f"{path}: a loop at ({pts[0, 0]:.4g}, {pts[0, 1]:.4g}) mm has fewer than 3 vertices"
             )
-        rings.append(Polygon(pts))
-    rings.sort(key=lambda p: -abs(p.area))
-    shell = rings[0]
+        rough.append((Polygon(pts), segs))
+    rough.sort(key=lambda item: -abs(item[0].area))
+    shell = rough[0][0]
     if not shell.is_valid:
         validate_polygon(shell, str(path))
-    holes = []
-    for h in rings[1:]:
+    holes: list[Polygon] = []
+    for h, _ in rough[1:]:
         if not h.is_valid:
             validate_polygon(h, str(path))
         if not shell.contains(h):
@@ -202,5 +378,20 @@ def _polygon_from_loops(loops: list[np.ndarray], path: Path) -> Polygon:
                     f"{path}: holes near ({c.x:.4g}, {c.y:.4g}) mm overlap or are nested"
                 )
         holes.append(h)
-    poly = Polygon(shell.exterior.coords, [h.exterior.coords for h in holes])
+    rings = []
+    for i, (poly, segs) in enumerate(rough):
+        # travel each loop with the region on its left: the panel's outer loop
+        # counter-clockwise and its holes clockwise (the other way for a keep-out)
+        want_ccw = (i == 0) == region_inside
+        if poly.exterior.is_ccw != want_ccw:
+            segs = reverse_chain(segs)
+        rings.append(chain_points(segs, tolerance, region_left=True))
+    poly = Polygon(rings[0], rings[1:])
+    splines = [s for segs in loops for s in segs if isinstance(s, Sampled)]
+    if splines:
+        # ezdxf's spline flattening has no one-sided bound: keep 2 tol clear of it
+        band = shapely.union_all([shapely.LineString(s.pts).buffer(2 * tolerance) for s in splines])
+        poly = poly.difference(band) if region_inside else poly.union(band)
+        if not isinstance(poly, Polygon):
+            raise GeometryError(f"{path}: the outline falls apart along its splines")
     return validate_polygon(poly, str(path))
