@@ -31,6 +31,8 @@ from .options import ExportOptions
 TIMESTAMP = datetime.datetime(2000, 1, 1, 0, 0, 0)
 #: Largest coordinate a 32-bit GDSII integer holds at 1 nm, mm.
 MAX_EXTENT_MM = (2**31 - 1) * 1e-6
+#: Fewest vertices of a dot polygon (what ``optdot qa`` reads back as a circle).
+MIN_DOT_VERTICES = 8
 #: Most vertices one GDSII boundary can hold.
 MAX_POINTS = 8190
 
@@ -97,11 +99,16 @@ def _size_groups(pattern: Pattern, opts: ExportOptions) -> list[tuple[gdstk.Cell
             )
         name = opts.dot_cell if len(sizes) == 1 else f"{opts.dot_cell}_{size}"
         dot = gdstk.Cell(name)
-        dot.add(
-            gdstk.ellipse(
-                (0, 0), r_um, tolerance=opts.tolerance_um, layer=opts.layer, datatype=opts.datatype
-            )
+        circle = gdstk.ellipse(
+            (0, 0), r_um, tolerance=opts.tolerance_um, layer=opts.layer, datatype=opts.datatype
         )
+        if len(circle.points) < MIN_DOT_VERTICES:
+            most = r_um * (1 - math.cos(math.pi / MIN_DOT_VERTICES))
+            raise ExportError(
+                f"--tolerance {opts.tolerance_um} µm draws {2 * r_um:.4g} µm dots as "
+                f"{len(circle.points)}-gons; at most {most:.3g} µm keeps them round"
+            )
+        dot.add(circle)
         groups.append((dot, d_nm == size if len(sizes) > 1 else np.ones(pattern.n, bool)))
     return groups
 

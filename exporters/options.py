@@ -44,6 +44,11 @@ class ExportOptions:
             v = getattr(self, name)
             if not v or not v.isascii() or not all(c.isalnum() or c in "_-$?" for c in v):
                 raise ExportError(f"--{name.replace('_', '-')} {v!r}: use letters, digits, _ - $ ?")
+        if (self.layer, self.datatype) == (self.outline_layer, self.outline_datatype):
+            raise ExportError(
+                f"--layer {self.layer}/{self.datatype} is also the outline's layer "
+                "(--outline-layer): dots and outline need different layers"
+            )
         if self.top_cell == self.dot_cell:
             raise ExportError("--top-cell and the dot cell must differ")
         if self.dxf_version not in DXF_VERSIONS:

@@ -1,8 +1,10 @@
 """Read masks written by the exporters back into a :class:`~optdot.pattern.Pattern`.
 
 Used by ``optdot qa`` on GDSII/OASIS/DXF files. Dots are the references to the dot cell
-(or, in flattened files, the polygons on the dot layer, centred at their vertex mean);
-the panel box is the outline's bounding box.
+(or, in flattened files, the polygons on the dot layer). A dot must be a circle: a polygon
+of at least ``MIN_DOT_VERTICES`` (8) vertices all at one distance from their mean (to
+:data:`RADIUS_SPREAD`); anything else on the dot layer (a square, a slot) is refused, as
+qa's distances would be wrong for it. The panel box is the outline's bounding box.
 """
 
 from __future__ import annotations
@@ -13,10 +15,16 @@ import numpy as np
 
 from optdot.errors import GeometryError, PatternFileError
 from optdot.geometry.domain import domain_from_rings
-from optdot.io.patterns import load_pattern
+from optdot.io.patterns import load_pattern, validate_dots
 from optdot.pattern import Pattern
 
+from .gds import MIN_DOT_VERTICES as MIN_VERTICES
+from .gds import quietly
 from .options import ExportOptions
+
+#: Largest spread of a dot polygon's vertex radii: 2 nm plus this share of the radius
+#: (vertices are snapped to the 1 nm grid).
+RADIUS_SPREAD = 1e-3
 
 
 def read_any(path: str | Path, opts: ExportOptions | None = None, box=None) -> Pattern:
@@ -43,7 +51,10 @@ def read_any(path: str | Path, opts: ExportOptions | None = None, box=None) -> P
 def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
     import gdstk
 
-    lib = gdstk.read_oas(str(path)) if path.suffix.lower() == ".oas" else gdstk.read_gds(str(path))
+    reader = gdstk.read_oas if path.suffix.lower() == ".oas" else gdstk.read_gds
+    lib, why = quietly(reader, str(path))
+    if lib is None:
+        raise PatternFileError(f"{path}: not a readable {path.suffix[1:].upper()} file ({why})")
     lib_unit = lib.unit  # metres per user unit
     to_mm = lib_unit * 1e3
     tops = lib.top_level()
@@ -52,14 +63,27 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
     top = tops[0]
     centres: list[np.ndarray] = []
     diameters: list[np.ndarray] = []
+    on_layer = (opts.layer, opts.datatype)
     for ref in top.references:
         cell = ref.cell
-        pts = [p for p in cell.polygons if (p.layer, p.datatype) == (opts.layer, opts.datatype)]
+        if isinstance(cell, str):
+            raise PatternFileError(f"{path}: reference to a missing cell {cell!r}")
+        pts = [p for p in cell.polygons if (p.layer, p.datatype) == on_layer]
         if not pts:
             continue
+        if len(pts) > 1:
+            raise PatternFileError(
+                f"{path}: cell {cell.name} holds {len(pts)} shapes on layer "
+                f"{opts.layer}/{opts.datatype}; a dot cell holds one circle"
+            )
+        centre, radius = _circle(path, pts[0].points, f"cell {cell.name}", to_mm)
+        if np.hypot(*centre) * to_mm > 1e-6:
+            raise PatternFileError(
+                f"{path}: the circle of cell {cell.name} is not centred on the cell origin"
+            )
         # vertices sit on the circle, snapped to the database grid: their mean radius
         # recovers the diameter to well under 1 nm
-        diameter = round(2 * float(np.mean(np.hypot(*pts[0].points.T))) * to_mm, 6)
+        diameter = round(2 * radius, 6)
         origins = np.array([ref.origin])
         if ref.repetition.size > 1:
             origins = ref.repetition.get_offsets() + np.array(ref.origin)
@@ -68,9 +92,8 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
     for poly in top.polygons:
         if (poly.layer, poly.datatype) != (opts.layer, opts.datatype):
             continue
-        pts = poly.points
-        c = pts.mean(axis=0)
-        diameter = round(2 * float(np.mean(np.hypot(*(pts - c).T))) * to_mm, 6)
+        c, radius = _circle(path, poly.points, "a polygon", to_mm)
+        diameter = round(2 * radius, 6)
         reps = poly.repetition.get_offsets() if poly.repetition.size > 1 else np.zeros((1, 2))
         centres.append((c + reps) * to_mm)
         diameters.append(np.full(len(reps), diameter))
@@ -86,6 +109,23 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
     return _pattern(path, xy, np.concatenate(diameters), rings, filled=True)
 
 
+def _circle(path: Path, pts: np.ndarray, what: str, to_mm: float) -> tuple[np.ndarray, float]:
+    """``(centre [2] in the file's units, radius mm)`` of a dot polygon, or refuse it as
+    not a circle."""
+    c = pts.mean(axis=0)
+    rad = np.hypot(*(pts - c).T)
+    r = float(rad.mean())
+    spread = float(rad.max() - rad.min()) * to_mm
+    if len(pts) < MIN_VERTICES or spread > 2e-6 + RADIUS_SPREAD * r * to_mm:
+        at = c * to_mm
+        lo, hi = rad.min() * to_mm * 1e3, rad.max() * to_mm * 1e3
+        raise PatternFileError(
+            f"{path}: {what} at ({at[0]:.6g}, {at[1]:.6g}) mm on the dot layer is not a circle "
+            f"({len(pts)} vertices, radii {lo:.4g}..{hi:.4g} µm); qa checks round dots only"
+        )
+    return c, r * to_mm
+
+
 def _read_dxf(path: Path) -> Pattern:
     import ezdxf
 
@@ -94,8 +134,15 @@ def _read_dxf(path: Path) -> Pattern:
     circles = msp.query('CIRCLE[layer=="DOTS"]')
     if not len(circles):
         raise PatternFileError(f"{path}: no CIRCLE entities on layer DOTS")
-    xy = np.array([(c.dxf.center.x, c.dxf.center.y) for c in circles])
-    radii = np.array([c.dxf.radius for c in circles])
+    xy = np.array([(c.dxf.center.x, c.dxf.center.y) for c in circles], dtype=np.float64)
+    radii = np.array([c.dxf.radius for c in circles], dtype=np.float64)
+    bad = ~(np.isfinite(radii) & (radii > 0))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise PatternFileError(
+            f"{path}: CIRCLE {circles[i].dxf.handle} on layer DOTS has radius {float(radii[i])!r}; "
+            "dots need a radius > 0"
+        )
     rings = []
     for e in msp.query('LWPOLYLINE POLYLINE[layer=="OUTLINE"]'):
         rings.append(
@@ -125,6 +172,7 @@ def _pattern(
         lo = (xy - diameter[:, None] / 2).min(axis=0)
         hi = (xy + diameter[:, None] / 2).max(axis=0)
     box = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+    validate_dots(path, xy, diameter, box)
     return Pattern(
         xy=xy,
         diameter=np.round(diameter, 6),

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from .config.job import Job, QAParams
-from .errors import GeometryError, GuaranteeError, QAGateError
+from .errors import GeometryError, GuaranteeError, JobError, QAGateError
 from .geometry.morton import spatial_order
 from .io.atomic import transaction
 from .pattern import Pattern
@@ -46,6 +46,25 @@ def problem_of(job: Job) -> Problem:
         close_target=job.close_target,
         seed=job.optimize.seed,
     )
+
+
+def _check_room(job: Job, n: int, where: str) -> None:
+    """Refuse, before any work, a job whose dots cannot be placed at all."""
+    if n == 0:
+        raise JobError(
+            f"{where}: the map asks for 0 dots (mean fill fraction x panel area is under half "
+            f"a dot of {job.diameter:g} mm)"
+        )
+    if job.domain.rectangle and job.domain.edge_margin == 0:
+        return  # fill fractions below the packing limit always fit
+    room = job.domain.max_dots(0.5 * job.diameter, job.min_distance)
+    if n > room:
+        margin = job.domain.edge_margin
+        what = f"domain.edge_margin = {margin:g} mm leaves" if margin > 0 else "the panel has"
+        raise JobError(
+            f"{where}: {what} room for at most {room:,} dots {job.diameter * 1e3:.4g} µm "
+            f"across (centres {job.min_distance * 1e3:.4g} µm apart), the map asks for {n:,}"
+        )
 
 
 def generate(
@@ -74,6 +93,7 @@ def generate(
     where = str(job.source) if job.source else job.name
     opt = job.optimize
     n = job.n_dots
+    _check_room(job, n, where)
     check_memory(n, opt.lbfgs_memory, where)
     t0 = time.perf_counter()
     timings: dict[str, float] = {}

@@ -2,19 +2,29 @@
 
 Exit codes (README, "Exit codes"): 0 success; 1 the QA gate failed; 2 bad input (job,
 grid, pattern file, option, unwritable output, too big for memory); 3 the optimizer could
-not meet the spacing guarantee; 130 interrupted.
+not meet the spacing guarantee; 70 internal error (a bug: traceback in a log file);
+130 interrupted. Every failure is one line on stderr.
 """
 
 from __future__ import annotations
 
 import functools
+import os
+import platform
 import signal
 import sys
+import tempfile
+import time
+import traceback
+import warnings
 from pathlib import Path
 
 import click
 
 from ..errors import OptdotError, QAGateError
+
+#: Exit code of an unexpected internal error (sysexits' EX_SOFTWARE).
+EXIT_INTERNAL = 70
 
 
 def _user_errors(fn):
@@ -77,7 +87,79 @@ def _caused_by_interrupt(e: BaseException) -> bool:
     return interrupted()
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class _Command(click.Group):
+    """The ``optdot`` group: one top-level handler, so that every failure, a usage error
+    or a bug, ends as one line and a documented exit code (never a traceback)."""
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, False, **extra)
+        try:
+            with warnings.catch_warnings():
+                # numeric warnings are not a user's business: results are checked
+                warnings.simplefilter("ignore", RuntimeWarning)
+                code = super().main(args, prog_name, complete_var, False, **extra)
+        except click.exceptions.NoArgsIsHelpError as e:
+            click.echo(e.ctx.get_help() if e.ctx else str(e), err=True)
+            sys.exit(e.exit_code)
+        except click.ClickException as e:
+            click.echo(f"optdot: error: {_usage_line(e)}", err=True)
+            sys.exit(e.exit_code)
+        except (click.Abort, KeyboardInterrupt):
+            click.echo("optdot: interrupted", err=True)
+            sys.exit(130)
+        except MemoryError:
+            click.echo(
+                "optdot: error: out of memory; the input is larger than this machine", err=True
+            )
+            sys.exit(2)
+        except OSError as e:
+            name = f"{e.filename}: " if e.filename else ""
+            click.echo(f"optdot: error: {name}{e.strerror or e}", err=True)
+            sys.exit(2)
+        except Exception as e:  # noqa: BLE001 - the last line of defence, logged in full
+            log = _write_crash_log(e, args)
+            click.echo(
+                f"optdot: internal error: {type(e).__name__}: {_first_line(e)} "
+                f"(a bug; traceback in {log})",
+                err=True,
+            )
+            sys.exit(EXIT_INTERNAL)
+        sys.exit(code if isinstance(code, int) else 0)
+
+
+def _usage_line(e: click.ClickException) -> str:
+    """click's usage error as one line, naming the command and where help is."""
+    msg = " ".join(e.format_message().split())
+    ctx = getattr(e, "ctx", None)
+    if isinstance(e, click.UsageError) and ctx is not None:
+        return f"{ctx.command_path}: {msg} (see '{ctx.command_path} --help')"
+    return msg
+
+
+def _first_line(e: BaseException) -> str:
+    text = str(e).strip().splitlines()
+    return text[0][:200] if text else ""
+
+
+def _write_crash_log(e: BaseException, args) -> str:
+    """Write the traceback of an internal error to a log file; its path (or why not)."""
+    from importlib.metadata import version
+
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    try:
+        fd, path = tempfile.mkstemp(prefix=f"optdot-error-{stamp}-", suffix=".log")
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(f"optdot {version('optdot')}, Python {platform.python_version()}, ")
+            fh.write(f"{platform.platform()}\n")
+            fh.write(f"command: optdot {' '.join(sys.argv[1:] if args is None else args)}\n\n")
+            fh.write("".join(traceback.format_exception(e)))
+    except OSError as err:
+        return f"<not written: {err.strerror}>"
+    return path
+
+
+@click.group(cls=_Command, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="optdot")
 def main() -> None:
     """Non-overlapping random dot patterns for light guides, their masks, and QA."""
@@ -102,16 +184,21 @@ def _job_options(fn):
     return fn
 
 
-def run_job(job_path: Path, seed, max_iter, method, formulation, quiet):
-    """Load a job, apply CLI overrides and generate its pattern with a progress bar."""
+def load_job_with(job_path: Path, seed, max_iter, method, formulation):
+    """The job with the command line's optimizer overrides."""
     from ..config.schema import load_job
+
+    return load_job(job_path).with_overrides(
+        seed=seed, max_iter=max_iter, method=method, formulation=formulation
+    )
+
+
+def run_job(job, quiet: bool):
+    """Generate the job's pattern with a progress bar."""
     from ..io.atomic import interrupted
     from ..pipeline import generate
     from .progress import ProgressBar
 
-    job = load_job(job_path).with_overrides(
-        seed=seed, max_iter=max_iter, method=method, formulation=formulation
-    )
     bar = ProgressBar(
         job.optimize.max_iter, label=job.optimize.method, enabled=False if quiet else None
     )
@@ -125,7 +212,7 @@ def run_job(job_path: Path, seed, max_iter, method, formulation, quiet):
         pattern = generate(job, progress=progress)
     finally:
         bar.close()
-    return job, pattern
+    return pattern
 
 
 @main.command()
@@ -145,7 +232,9 @@ def generate(job_file, output, seed, max_iter, method, formulation, quiet):
 
     if output.suffix.lower() not in (".csv", ".npz"):
         raise click.BadParameter("must end in .csv or .npz", param_hint="'-o' / '--output'")
-    _, pattern = run_job(job_file, seed, max_iter, method, formulation, quiet)
+    job = load_job_with(job_file, seed, max_iter, method, formulation)
+    _check_outputs({"output": output}, job.inputs)  # before the run, not after it
+    pattern = run_job(job, quiet)
     save_pattern(pattern, output)
     m = pattern.meta
     if not quiet:
@@ -156,25 +245,28 @@ def generate(job_file, output, seed, max_iter, method, formulation, quiet):
         )
 
 
-def _load_source(source: Path, job_path, seed, max_iter, method, formulation, quiet):
-    """(job or None, pattern) from a job file (generated now) or a pattern/mask file."""
-    if source.suffix.lower() == ".toml":
-        return run_job(source, seed, max_iter, method, formulation, quiet)
-    return _read_with_job(source, job_path)
-
-
-def _read_with_job(path: Path, job_path):
-    """(job or None, pattern read from ``path`` with the job's panel)."""
+def _inputs(source: Path, job_path) -> tuple:
+    """(job or None, every input file): the job is ``source`` when it is a .toml file."""
     from ..config.schema import load_job
+
+    if job_path is None and source.suffix.lower() == ".toml":
+        job_path = source
+    job = load_job(job_path) if job_path else None
+    return job, (source, *(job.inputs if job else ()))
+
+
+def _read_with_job(path: Path, job, opts=None):
+    """The pattern read from ``path``, on the job's panel when there is a job."""
     from ..exporters.readback import read_any
     from ..pipeline import with_job_panel
 
-    job = load_job(job_path) if job_path else None
-    return job, with_job_panel(read_any(path, box=job.box if job else None), job)
+    return with_job_panel(read_any(path, opts, box=job.box if job else None), job)
 
 
-def _check_outputs(outputs: dict[str, Path]) -> None:
+def _check_outputs(outputs: dict[str, Path], inputs: tuple = ()) -> None:
+    """Refuse, before any work, outputs given twice, unwritable, or aliasing an input."""
     from ..errors import ExportError
+    from ..io.atomic import check_target
 
     seen: dict[Path, str] = {}
     for fmt, p in outputs.items():
@@ -182,10 +274,7 @@ def _check_outputs(outputs: dict[str, Path]) -> None:
         if rp in seen:
             raise ExportError(f"{p}: given for both --{seen[rp]} and --{fmt}")
         seen[rp] = fmt
-        if not p.parent.resolve().is_dir():
-            raise ExportError(f"{p}: output directory {p.parent} does not exist")
-        if p.exists() and p.is_dir():
-            raise ExportError(f"{p}: is a directory")
+        check_target(p, inputs)
 
 
 @main.command()
@@ -278,8 +367,16 @@ def export(
         top_cell=top_cell,
         dxf_version=dxf_version,
     )
-    _check_outputs(outputs)
-    job, pattern = _load_source(source, job_path, seed, max_iter, method, formulation, quiet)
+    if source.suffix.lower() == ".toml":
+        job = load_job_with(source, seed, max_iter, method, formulation)
+        inputs = (source, *job.inputs)
+    else:
+        job, inputs = _inputs(source, job_path)
+    _check_outputs(outputs, inputs)
+    if source.suffix.lower() == ".toml":
+        pattern = run_job(job, quiet)
+    else:
+        pattern = _read_with_job(source, job)
     result = export_pattern(pattern, outputs, job, opts, force=force)
     if not result.passed:
         click.echo(
@@ -305,9 +402,27 @@ def export(
     "--collision", type=float, help="Collision distance, mm (default: dot diameter + gap)."
 )
 @click.option("--close", type=float, help="Too-close distance, mm (default 0.060).")
+@click.option("--layer", type=int, default=1, show_default=True, help="GDS/OAS layer of the dots.")
+@click.option(
+    "--datatype", type=int, default=0, show_default=True, help="GDS/OAS datatype of the dots."
+)
+@click.option(
+    "--outline-layer", type=int, default=2, show_default=True, help="GDS/OAS layer of the outline."
+)
 @click.option("--quiet", "-q", is_flag=True, help="Only the exit code.")
 @_user_errors
-def qa(pattern_file, job_path, html_path, json_path, collision, close, quiet):
+def qa(
+    pattern_file,
+    job_path,
+    html_path,
+    json_path,
+    collision,
+    close,
+    layer,
+    datatype,
+    outline_layer,
+    quiet,
+):
     """Check PATTERN_FILE (csv, npz, gds, oas, dxf) before tooling: exit 0 pass, 1 fail."""
     from ..io.atomic import transaction
     from ..pipeline import qa as run_gate
@@ -316,9 +431,13 @@ def qa(pattern_file, job_path, html_path, json_path, collision, close, quiet):
     for v, name in ((collision, "--collision"), (close, "--close")):
         if v is not None and not v > 0:
             raise click.BadParameter("must be > 0 mm", param_hint=name)
+    from ..exporters.options import ExportOptions
+
+    opts = ExportOptions(layer=layer, datatype=datatype, outline_layer=outline_layer)
     outs = {k: v for k, v in (("html", html_path), ("json", json_path)) if v is not None}
-    _check_outputs(outs)
-    job, pattern = _read_with_job(pattern_file, job_path)
+    job, inputs = _inputs(pattern_file, job_path)
+    _check_outputs(outs, inputs)
+    pattern = _read_with_job(pattern_file, job, opts)
     result = run_gate(pattern, job, collision, close)
     with transaction():  # both reports replaced together, or neither
         if json_path:

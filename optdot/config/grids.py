@@ -20,17 +20,9 @@ def load_grid(path: Path) -> np.ndarray:
     if not path.exists():
         raise JobError(f"{path}: density grid file not found")
     if path.suffix.lower() == ".npy":
-        try:
-            g = np.load(path, allow_pickle=False)
-        except (OSError, ValueError) as e:
-            raise JobError(f"{path}: not a readable .npy array ({e})") from None
-        if g.ndim != 2 or g.size == 0:
-            raise JobError(f"{path}: grid must be a non-empty 2-D array, got shape {g.shape}")
-        if not np.issubdtype(g.dtype, np.number) or np.iscomplexobj(g):
-            raise JobError(f"{path}: grid must hold real numbers, got dtype {g.dtype}")
-        return np.asarray(g, dtype=np.float64)
+        return _load_npy(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as e:
         raise JobError(f"{path}: cannot read density grid ({e})") from None
     rows: list[list[float]] = []
@@ -52,6 +44,47 @@ def load_grid(path: Path) -> np.ndarray:
     if not rows:
         raise JobError(f"{path}: density grid is empty")
     return np.array(rows, dtype=np.float64)
+
+
+def _load_npy(path: Path) -> np.ndarray:
+    """A 2-D real ``.npy`` grid; the header is checked against the file before any
+    memory is taken (a header may claim any size)."""
+    fmt = np.lib.format
+    try:
+        with open(path, "rb") as fh:
+            if fh.read(4) == b"PK\x03\x04":
+                raise JobError(f"{path}: is a .npz archive, not a .npy array (save with np.save)")
+            fh.seek(0)
+            try:
+                version = fmt.read_magic(fh)
+                if version == (1, 0):
+                    shape, fortran, dtype = fmt.read_array_header_1_0(fh)
+                else:
+                    shape, fortran, dtype = fmt.read_array_header_2_0(fh)
+            except (ValueError, SyntaxError, TypeError, EOFError) as e:
+                raise JobError(f"{path}: not a .npy array ({_first_line(e)})") from None
+            if len(shape) != 2 or 0 in shape:
+                raise JobError(f"{path}: grid must be a non-empty 2-D array, got shape {shape}")
+            if dtype.hasobject or dtype.kind not in "biuf":
+                raise JobError(f"{path}: grid must hold real numbers, got dtype {dtype}")
+            need = int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
+            have = path.stat().st_size - fh.tell()
+            if need > have:
+                raise JobError(
+                    f"{path}: the header claims a {shape[0]} x {shape[1]} {dtype} array "
+                    f"({need:,} bytes) but the file holds {have:,}: truncated or corrupt"
+                )
+        g = np.load(path, allow_pickle=False)
+    except OSError as e:
+        raise JobError(f"{path}: cannot read density grid ({e.strerror or e})") from None
+    except ValueError as e:
+        raise JobError(f"{path}: not a readable .npy array ({_first_line(e)})") from None
+    return np.asarray(g, dtype=np.float64)
+
+
+def _first_line(e: Exception) -> str:
+    text = str(e).strip().splitlines()
+    return text[0] if text else type(e).__name__
 
 
 def validate_grid(g: np.ndarray, where: str) -> None:

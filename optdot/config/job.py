@@ -18,6 +18,7 @@ import numpy as np
 from ..errors import JobError
 from ..geometry.density import DensityMap
 from ..geometry.domain import Domain
+from ..geometry.limits import DIAMETER_RANGE_MM, MAX_EXTENT_MM
 from .grids import validate_grid
 
 METHODS = ("optdot", "md")
@@ -170,6 +171,8 @@ class Job:
         name: a label carried into outputs.
         source: the job file this came from, if any.
         domain: where dots may go (default: the rectangle of the grid).
+        inputs: every file the job reads (job, grid, outline, keep-out files); outputs
+            may not overwrite them.
     """
 
     width: float
@@ -181,6 +184,7 @@ class Job:
     name: str = "optdot"
     source: Path | None = None
     domain: Domain | None = None
+    inputs: tuple[Path, ...] = ()
 
     def __post_init__(self) -> None:
         where = str(self.source) if self.source else "job"
@@ -190,10 +194,15 @@ class Job:
                 self, "domain", Domain.rect(d.x0, d.y0, d.x0 + self.width, d.y0 + self.height)
             )
         for key, v in (("domain.width", self.width), ("domain.height", self.height)):
-            if not (math.isfinite(v) and 0 < v <= 10_000):
-                raise JobError(f"{where}: {key} = {v!r} must be a size in mm, 0 < x <= 10000")
-        if not (math.isfinite(self.diameter) and 0 < self.diameter <= 10):
-            raise JobError(f"{where}: dots.diameter = {self.diameter!r} must be in mm, 0 < d <= 10")
+            if not (math.isfinite(v) and 0 < v <= MAX_EXTENT_MM):
+                raise JobError(
+                    f"{where}: {key} = {v!r} must be a size in mm, 0 < x <= {MAX_EXTENT_MM:g}"
+                )
+        lo, hi = DIAMETER_RANGE_MM
+        if not (math.isfinite(self.diameter) and lo <= self.diameter <= hi):
+            raise JobError(
+                f"{where}: dots.diameter = {self.diameter!r} must be in mm, {lo:g} <= d <= {hi:g}"
+            )
         if self.diameter >= min(self.width, self.height):
             raise JobError(f"{where}: dots.diameter = {self.diameter} does not fit the panel")
         validate_grid(self.density.grid, f"{where}: density.grid")

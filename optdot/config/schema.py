@@ -71,7 +71,7 @@ def load_job(path: str | Path) -> Job:
     """
     path = Path(path)
     try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+        raw = tomllib.loads(path.read_text(encoding="utf-8-sig"))
     except FileNotFoundError:
         raise JobError(f"{path}: job file not found") from None
     except (OSError, UnicodeDecodeError) as e:
@@ -149,7 +149,17 @@ def job_from_dict(raw: dict[str, Any], base: Path = Path("."), source: Path | No
         qa=qa,
         name=str(sections[""].get("name", source.stem if source else "optdot")),
         source=source,
+        inputs=tuple(p for p in (source, grid_path, *_outline_files(dom, base)) if p is not None),
     )
+
+
+def _outline_files(dom: dict[str, Any], base: Path) -> list[Path]:
+    """The outline and keep-out files a ``[domain]`` section names."""
+    files = [base / dom["outline"]] if "outline" in dom else []
+    for item in dom.get("keep_out", []):
+        if isinstance(item, str) and "(" not in item:  # not WKT: a file
+            files.append(base / item.strip())
+    return files
 
 
 def _load_domain(dom: dict[str, Any], base: Path, where: str) -> Domain | None:

@@ -78,6 +78,17 @@ class Domain:
         need = dot_radius + (self.edge_margin if margin else 0.0) - tol
         return ~self.contains(xy) | (self.edge_distance(xy) < need)
 
+    def max_dots(self, dot_radius: float, min_distance: float) -> int:
+        """An upper bound on how many dots fit: their centres lie in the domain shrunk by
+        ``dot_radius + edge_margin``, and discs of radius ``min_distance / 2`` about them
+        are disjoint inside that region grown by ``min_distance / 2`` (so the count is at
+        most its area over one disc's; exact bound, no packing-density assumption)."""
+        h = 0.5 * min_distance
+        room = self.geometry.buffer(-(dot_radius + self.edge_margin), quad_segs=16)
+        if room.is_empty:
+            return 0
+        return int(room.buffer(h, quad_segs=16).area / (np.pi * h * h)) + 1
+
     def cell_fractions(
         self, x0: float, y0: float, cw: float, ch: float, nx: int, ny: int
     ) -> np.ndarray:

@@ -63,9 +63,11 @@ def load_outline(
         panel = _polygon_from_loops(loops, path, tolerance, region_inside)
         return panel, [_polygon_from_loops([k], path, tolerance, not region_inside) for k in keep]
     if suffix in (".wkt", ".txt"):
-        geom = _parse(lambda: shapely.from_wkt(path.read_text(encoding="utf-8")), path, "WKT")
+        geom = _parse(lambda: shapely.from_wkt(path.read_text(encoding="utf-8-sig")), path, "WKT")
     elif suffix in (".geojson", ".json"):
-        geom = _parse(lambda: _from_geojson(path.read_text(encoding="utf-8")), path, "GeoJSON")
+        geom = _parse(
+            lambda: _from_geojson(path.read_text(encoding="utf-8-sig"), path), path, "GeoJSON"
+        )
     else:
         raise GeometryError(f"{path}: outline must be .dxf, .wkt or .geojson, not {suffix!r}")
     polys = _polygonal_parts(geom, path)
@@ -121,26 +123,26 @@ def _parse(fn, path: Path, kind: str):
         raise GeometryError(f"{path}: malformed {kind} ({_why(e)})") from None
 
 
-def _from_geojson(text: str):
+def _from_geojson(text: str, path: Path):
     data = json.loads(text)
     if not isinstance(data, dict):
-        raise ValueError(f"top level is a {_json_kind(data)}, not a GeoJSON object")
+        raise GeometryError(f"{path}: the top level is a {_json_kind(data)}, not a GeoJSON object")
     if data.get("type") == "FeatureCollection":
         features = data.get("features")
         if not isinstance(features, list):
-            raise ValueError("FeatureCollection without a features list")
-        return shapely.GeometryCollection([_feature_geometry(f) for f in features])
+            raise GeometryError(f"{path}: a FeatureCollection needs a features list")
+        return shapely.GeometryCollection([_feature_geometry(f, path) for f in features])
     if data.get("type") == "Feature":
-        return _feature_geometry(data)
+        return _feature_geometry(data, path)
     return shapely.geometry.shape(data)
 
 
-def _feature_geometry(f):
+def _feature_geometry(f, path: Path):
     if not isinstance(f, dict):
-        raise ValueError(f"a feature is a {_json_kind(f)}, not an object")
+        raise GeometryError(f"{path}: a feature is a {_json_kind(f)}, not an object")
     g = f.get("geometry")
     if not isinstance(g, dict):
-        raise ValueError(f"a feature's geometry is {_json_kind(g)}, not a geometry object")
+        raise GeometryError(f"{path}: a feature's geometry is {_json_kind(g)}, not an object")
     return shapely.geometry.shape(g)
 
 

@@ -48,6 +48,51 @@ def _check_interrupt() -> None:
         raise KeyboardInterrupt
 
 
+def check_target(target: str | Path, inputs: tuple[Path, ...] = ()) -> None:
+    """Refuse, before any work, an output that cannot be written or would overwrite an
+    input: a missing or unwritable directory, a directory in the way, a name longer than
+    the file system allows, or the same file as one of ``inputs``.
+
+    Raises:
+        ExportError: one line naming the file and the problem.
+    """
+    target = Path(target)
+    directory = target.parent if str(target.parent) else Path(".")
+    if not directory.is_dir():
+        raise ExportError(f"{target}: output directory {directory} does not exist")
+    try:
+        name_max = os.pathconf(directory, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        name_max = 255
+    if len(os.fsencode(target.name)) > name_max:
+        raise ExportError(
+            f"{target.name[:40]}...: file name is {len(os.fsencode(target.name))} bytes, "
+            f"longer than the {name_max} this file system allows"
+        )
+    if target.is_dir():
+        raise ExportError(f"{target}: is a directory")
+    if not os.access(directory, os.W_OK | os.X_OK):
+        raise ExportError(f"{target}: cannot write in {directory} (permission denied)")
+    for src in inputs:
+        if _same_file(target, Path(src)):
+            raise ExportError(f"{target}: is an input of this run ({src}); choose another name")
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+    except OSError:
+        pass
+    return a.resolve() == b.resolve()
+
+
+def _short(name: str, limit: int = 120) -> str:
+    """At most ``limit`` bytes of a file name, for temporaries beside long-named files."""
+    raw = os.fsencode(name)[:limit]
+    return os.fsdecode(raw.decode("utf-8", "ignore").encode("utf-8"))
+
+
 @contextlib.contextmanager
 def atomic_path(target: str | Path, verify: Verifier | None = None) -> Iterator[Path]:
     """Yield a temporary path in the target's directory; on success, flush it to disk,
@@ -64,7 +109,7 @@ def atomic_path(target: str | Path, verify: Verifier | None = None) -> Iterator[
     if not directory.is_dir():
         raise ExportError(f"{target}: output directory {directory} does not exist")
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=directory)
+        fd, tmp = tempfile.mkstemp(prefix=f".{_short(target.name)}.", suffix=".tmp", dir=directory)
     except OSError as e:
         raise ExportError(f"{target}: cannot write here ({e.strerror})") from None
     os.close(fd)

@@ -21,6 +21,7 @@ import shapely
 
 from ..errors import ExportError, PatternFileError
 from ..geometry.domain import Domain, orient_all
+from ..geometry.limits import DIAMETER_RANGE_MM, MAX_EXTENT_MM
 from ..pattern import Pattern
 from .atomic import atomic_path, expect_size
 
@@ -170,7 +171,8 @@ def load_pattern(path: str | Path, box: tuple[float, float, float, float] | None
 
 def _load_csv(path: Path, box: tuple[float, float, float, float] | None) -> Pattern:
     try:
-        with open(path, encoding="ascii") as fh:
+        # utf-8-sig: a byte-order mark (spreadsheets write one) is read over
+        with open(path, encoding="utf-8-sig") as fh:
             header = fh.readline().strip()
             if header != CSV_HEADER:
                 raise PatternFileError(
@@ -222,11 +224,44 @@ def _load_npz(path: Path, box: tuple[float, float, float, float] | None) -> Patt
     return p if outline is None else replace(p, outline=outline)
 
 
-def _validated(path, xy, diam, box, meta) -> Pattern:
+def validate_dots(path, xy: np.ndarray, diam: np.ndarray, box) -> None:
+    """Refuse dots a mask cannot hold before any work is sized from them: NaN, diameters
+    outside :data:`DIAMETER_RANGE_MM`, a panel box or dot extent beyond
+    :data:`MAX_EXTENT_MM` (QA's rasters would need terabytes).
+
+    Args:
+        path: the file, for messages.
+        xy: ``[n, 2]`` centres, mm. diam: ``[n]`` diameters, mm.
+        box: ``(xmin, ymin, xmax, ymax)`` panel box, mm, or None.
+
+    Raises:
+        PatternFileError: one line naming the file and the problem.
+    """
     if not np.all(np.isfinite(xy)) or not np.all(np.isfinite(diam)):
         raise PatternFileError(f"{path}: NaN or infinite coordinate or diameter")
-    if np.any(diam <= 0):
-        raise PatternFileError(f"{path}: diameters must be > 0 mm")
+    lo_d, hi_d = DIAMETER_RANGE_MM
+    if len(diam) and not (lo_d <= diam.min() and diam.max() <= hi_d):
+        bad = diam.min() if diam.min() < lo_d else diam.max()
+        raise PatternFileError(
+            f"{path}: dot diameter {bad:.6g} mm is out of range ({lo_d:g}..{hi_d:g} mm)"
+        )
+    spans = []
+    if len(xy):
+        spans += [float(np.ptp(xy[:, 0])), float(np.ptp(xy[:, 1]))]
+    if box is not None:
+        b = np.asarray(box, dtype=np.float64)
+        if not np.all(np.isfinite(b)):
+            raise PatternFileError(f"{path}: the panel box {tuple(box)} is not finite")
+        spans += [float(b[2] - b[0]), float(b[3] - b[1])]
+    if spans and max(spans) > MAX_EXTENT_MM:
+        raise PatternFileError(
+            f"{path}: the dots or the panel span {max(spans):.4g} mm; optdot handles panels up "
+            f"to {MAX_EXTENT_MM:.0f} mm (are the units mm?)"
+        )
+
+
+def _validated(path, xy, diam, box, meta) -> Pattern:
+    validate_dots(path, xy, diam, box)
     if box is None:
         lo = (xy - diam[:, None] / 2).min(axis=0)
         hi = (xy + diam[:, None] / 2).max(axis=0)

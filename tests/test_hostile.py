@@ -1,0 +1,341 @@
+"""Hostile inputs and wrong answers (issue 14, cases 4-6): each ends in one line on stderr,
+a documented exit code and no traceback, and writes nothing.
+
+Every case here ended in a traceback, an exit 0 with a wrong or overwritten file, or the
+wrong exit code before the fix.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import ezdxf
+import gdstk
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from optdot.cli import main
+from optdot.cli.main import EXIT_INTERNAL
+from optdot.io.patterns import save_pattern
+
+from .conftest import SAMPLES
+
+TINY_DIR = SAMPLES / "tiny"
+
+
+def cli(*args):
+    """``(exit code, stderr lines, stdout)`` of the command, as a user sees them."""
+    r = CliRunner().invoke(main, [str(a) for a in args])
+    # an exception escaping the top-level handler would show up here
+    assert r.exception is None or isinstance(r.exception, SystemExit), r.exception
+    return r.exit_code, r.stderr.strip().splitlines(), r.stdout
+
+
+def one_error(args, code: int, *words: str) -> str:
+    rc, err, _ = cli(*args)
+    assert rc == code, (rc, err)
+    assert len(err) == 1, err
+    assert err[0].startswith("optdot: error: "), err
+    assert "Traceback" not in err[0]
+    for w in words:
+        assert w in err[0], (w, err[0])
+    return err[0]
+
+
+@pytest.fixture()
+def tiny(tmp_path):
+    for f in TINY_DIR.iterdir():
+        shutil.copy(f, tmp_path / f.name)
+    return tmp_path
+
+
+def with_domain(tiny, line: str) -> str:
+    text = (tiny / "job.toml").read_text().replace("[domain]", f"[domain]\n{line}")
+    (tiny / "j.toml").write_text(text)
+    return str(tiny / "j.toml")
+
+
+# --- case 4: files that ended in tracebacks -------------------------------------------
+
+
+def test_npz_saved_as_npy_grid(tiny, tiny_pattern):
+    save_pattern(tiny_pattern, tiny / "p.npz")
+    shutil.copy(tiny / "p.npz", tiny / "grid.npy")
+    job = (tiny / "job.toml").read_text().replace("density.csv", "grid.npy")
+    (tiny / "j.toml").write_text(job)
+    one_error(["generate", tiny / "j.toml", "-o", tiny / "x.csv"], 2, "grid.npy", ".npz archive")
+    assert not (tiny / "x.csv").exists()
+
+
+def test_npy_header_claiming_80_gb(tiny):
+    hdr = "{'descr': '<f8', 'fortran_order': False, 'shape': (100000, 100000), }"
+    hdr = hdr + " " * (118 - len(hdr)) + "\n"
+    (tiny / "grid.npy").write_bytes(
+        b"\x93NUMPY\x01\x00" + len(hdr).to_bytes(2, "little") + hdr.encode() + bytes(64)
+    )
+    job = (tiny / "job.toml").read_text().replace("density.csv", "grid.npy")
+    (tiny / "j.toml").write_text(job)
+    one_error(["generate", tiny / "j.toml", "-o", tiny / "x.csv"], 2, "grid.npy", "80,000,000,000")
+
+
+@pytest.mark.parametrize(
+    "content, words",
+    [
+        ([1, 2], "top level is a list"),
+        (5, "top level is a number"),
+        ({"type": "Feature", "geometry": None, "properties": {}}, "geometry is null"),
+        ({"type": "FeatureCollection", "features": [3]}, "feature is a number"),
+        ({"type": "FeatureCollection"}, "features list"),
+    ],
+)
+def test_geojson_that_is_not_an_object(tiny, content, words):
+    (tiny / "o.geojson").write_text(json.dumps(content))
+    job = with_domain(tiny, 'outline = "o.geojson"')
+    one_error(["generate", job, "-o", tiny / "x.csv"], 2, "o.geojson", words)
+
+
+def test_truncated_dxf_outline(tiny):
+    doc = ezdxf.new()
+    doc.modelspace().add_lwpolyline([(0, 0), (3, 0), (3, 2), (0, 2)], close=True)
+    doc.saveas(tiny / "o.dxf")
+    data = (tiny / "o.dxf").read_bytes()
+    (tiny / "o.dxf").write_bytes(data[: len(data) // 3])
+    job = with_domain(tiny, 'outline = "o.dxf"').replace("width", "#").replace("height", "#")
+    one_error(["generate", job, "-o", tiny / "x.csv"], 2, "o.dxf", "not a readable DXF")
+
+
+@pytest.mark.parametrize("diameter", ["1e-160", "0.0001", "-1", "11"])
+def test_absurd_diameter(tiny, diameter):
+    text = (tiny / "job.toml").read_text().replace("diameter = 0.046", f"diameter = {diameter}")
+    (tiny / "j.toml").write_text(text)
+    one_error(["generate", tiny / "j.toml", "-o", tiny / "x.csv"], 2, "dots.diameter")
+
+
+def test_dot_count_rounding_to_zero(tiny):
+    np.savetxt(tiny / "density.csv", np.full((2, 3), 1e-6), delimiter=",")
+    for args in (
+        ["generate", tiny / "job.toml", "-o", tiny / "x.csv"],
+        ["export", tiny / "job.toml", "--csv", tiny / "x.csv"],
+    ):
+        one_error(args, 2, "0 dots")
+    assert not (tiny / "x.csv").exists()
+
+
+def test_qa_dxf_circles_of_radius_zero(tmp_path):
+    doc = ezdxf.new()
+    for i in range(5):
+        doc.modelspace().add_circle((0.5 + 0.1 * i, 0.5), 0, dxfattribs={"layer": "DOTS"})
+    doc.saveas(tmp_path / "r0.dxf")
+    one_error(["qa", tmp_path / "r0.dxf"], 2, "r0.dxf", "radius 0.0")
+
+
+@pytest.mark.parametrize("far", [1e7, 1e12])
+def test_qa_dots_absurdly_far_apart(tmp_path, far):
+    np.savez(
+        tmp_path / "far.npz",
+        xy=np.array([[0.0, 0.0], [far, far]]),
+        diameter=np.float64(0.046),
+        box=np.array([-1.0, -1.0, far + 1, far + 1]),
+    )
+    one_error(["qa", tmp_path / "far.npz"], 2, "far.npz", "10000 mm")
+
+
+def test_qa_npz_with_a_two_element_diameter(tmp_path):
+    np.savez(
+        tmp_path / "d.npz",
+        xy=np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]]),
+        diameter=np.array([0.046, 0.05]),
+        box=np.array([-1.0, -1.0, 3.0, 3.0]),
+    )
+    one_error(["qa", tmp_path / "d.npz"], 2, "d.npz", "diameter")
+
+
+def test_path_component_over_255_bytes(tiny):
+    long = tiny / ("a" * 300 + ".csv")
+    one_error(["generate", tiny / "job.toml", "-o", long], 2, "file name is 304 bytes")
+
+
+def test_temporary_beside_a_long_name(tiny):
+    """A 254-byte name is legal; its temporary file must be too."""
+    long = tiny / ("b" * 250 + ".csv")
+    rc, err, _ = cli("generate", tiny / "job.toml", "-o", long, "-q")
+    assert rc == 0, err
+    assert long.exists()
+
+
+def test_generate_onto_a_directory_fails_before_the_run(tiny, monkeypatch):
+    (tiny / "out.csv").mkdir()
+    import optdot.pipeline
+
+    def never(*a, **k):
+        raise AssertionError("the optimisation ran before the output was checked")
+
+    monkeypatch.setattr(optdot.pipeline, "generate", never)
+    one_error(["generate", tiny / "job.toml", "-o", tiny / "out.csv"], 2, "is a directory")
+    one_error(["generate", tiny / "job.toml", "-o", tiny / "nodir" / "x.csv"], 2, "does not exist")
+
+
+# --- case 5: wrong answers ---------------------------------------------------------------
+
+
+def _mask_of_squares(path, side_um=46.0, layer=1):
+    lib = gdstk.Library(unit=1e-6, precision=1e-9)
+    top = lib.new_cell("TOP")
+    for i in range(20):
+        for j in range(20):
+            x, y = 100.0 * i, 100.0 * j
+            top.add(gdstk.rectangle((x, y), (x + side_um, y + side_um), layer=layer))
+    lib.write_gds(str(path)) if path.suffix == ".gds" else lib.write_oas(str(path))
+
+
+@pytest.mark.parametrize("suffix", [".gds", ".oas"])
+def test_qa_refuses_squares_as_dots(tmp_path, suffix):
+    path = tmp_path / f"sq{suffix}"
+    _mask_of_squares(path)
+    one_error(["qa", path], 2, "not a circle", "4 vertices")
+
+
+def test_qa_refuses_a_dot_cell_that_is_not_round(tmp_path):
+    lib = gdstk.Library(unit=1e-6, precision=1e-9)
+    dot = lib.new_cell("DOT")
+    dot.add(gdstk.regular_polygon((0, 0), 23, 6, layer=1))  # a hexagon
+    top = lib.new_cell("TOP")
+    top.add(gdstk.Reference(dot, (0, 0), columns=5, rows=5, spacing=(100, 100)))
+    lib.write_gds(str(tmp_path / "hex.gds"))
+    one_error(["qa", tmp_path / "hex.gds"], 2, "not a circle", "6 vertices")
+
+
+def test_qa_reads_the_layer_it_is_told(tmp_path, tiny_pattern):
+    out = tmp_path / "l5.gds"
+    rc, err, _ = cli("export", TINY_DIR / "job.toml", "--gds", out, "--layer", "5", "-q")
+    assert rc == 0, err
+    one_error(["qa", out, "--job", TINY_DIR / "job.toml"], 2, "no dots on layer 1/0")
+    rc, err, out_text = cli("qa", out, "--job", TINY_DIR / "job.toml", "--layer", "5")
+    assert rc == 0, err
+    assert f"{tiny_pattern.n}" in out_text or "verdict: PASS" in out_text
+
+
+def test_dots_and_outline_on_the_same_layer_are_refused(tmp_path):
+    one_error(
+        ["export", TINY_DIR / "job.toml", "--gds", tmp_path / "a.gds", "--layer", "2"],
+        2,
+        "outline's layer",
+    )
+    assert not (tmp_path / "a.gds").exists()
+
+
+def test_too_coarse_a_tolerance_is_refused(tmp_path):
+    one_error(
+        ["export", TINY_DIR / "job.toml", "--gds", tmp_path / "a.gds", "--tolerance", "5"],
+        2,
+        "6-gons",
+    )
+
+
+def test_outputs_may_not_overwrite_inputs(tiny):
+    before = (tiny / "density.csv").read_bytes()
+    one_error(["generate", tiny / "job.toml", "-o", tiny / "density.csv"], 2, "is an input")
+    assert (tiny / "density.csv").read_bytes() == before
+    rc, _, _ = cli("generate", tiny / "job.toml", "-o", tiny / "p.csv", "-q")
+    assert rc == 0
+    pattern = (tiny / "p.csv").read_bytes()
+    one_error(["qa", tiny / "p.csv", "--json", tiny / "p.csv"], 2, "is an input")
+    one_error(
+        ["qa", tiny / "p.csv", "--job", tiny / "job.toml", "--html", tiny / "job.toml"],
+        2,
+        "is an input",
+    )
+    one_error(["export", tiny / "p.csv", "--csv", tiny / "./p.csv"], 2, "is an input")
+    one_error(["export", tiny / "job.toml", "--csv", tiny / "density.csv"], 2, "is an input")
+    assert (tiny / "p.csv").read_bytes() == pattern
+    assert (tiny / "density.csv").read_bytes() == before
+
+
+# --- case 6: rough edges -----------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["generate"], "Missing argument 'JOB_FILE'"),
+        (["frobnicate"], "No such command"),
+        (["qa", "x.csv", "--close", "-1"], "--close"),
+        (["export", "x.csv"], "give at least one of"),
+        (["generate", "job.toml", "-o", "x.csv", "--seed", "-5"], "--seed"),
+    ],
+)
+def test_usage_errors_are_one_line(args, words):
+    one_error(args, 2, words)
+
+
+def test_bom_in_job_grid_and_pattern_is_read_over(tiny, tiny_pattern):
+    bom = b"\xef\xbb\xbf"
+    for name in ("job.toml", "density.csv"):
+        (tiny / name).write_bytes(bom + (tiny / name).read_bytes())
+    rc, err, _ = cli("generate", tiny / "job.toml", "-o", tiny / "p.csv", "-q")
+    assert rc == 0, err
+    plain = tiny / "plain"
+    plain.mkdir()
+    for f in TINY_DIR.iterdir():
+        shutil.copy(f, plain / f.name)
+    cli("generate", plain / "job.toml", "-o", plain / "p.csv", "-q")
+    assert (tiny / "p.csv").read_bytes() == (plain / "p.csv").read_bytes()
+    (tiny / "q.csv").write_bytes(bom + (tiny / "p.csv").read_bytes())
+    rc, err, _ = cli("qa", tiny / "q.csv", "--job", plain / "job.toml", "-q")
+    assert rc == 0, err
+
+
+def test_keep_out_linestring_is_named_as_such(tiny):
+    doc = ezdxf.new()
+    doc.modelspace().add_lwpolyline([(0, 0), (3, 0), (3, 2), (0, 2)], close=True)
+    doc.saveas(tiny / "o.dxf")
+    text = (tiny / "job.toml").read_text()
+    text = text.replace("width = 3.0\n", "").replace("height = 2.0\n", "")
+    text = text.replace(
+        "[domain]", '[domain]\noutline = "o.dxf"\nkeep_out = ["LINESTRING (0 0, 1 1)"]'
+    )
+    (tiny / "j.toml").write_text(text)
+    one_error(["generate", tiny / "j.toml", "-o", tiny / "x.csv"], 2, "LINESTRING is not an area")
+
+
+def test_impossible_edge_margin_is_bad_input(tiny):
+    job = with_domain(tiny, "edge_margin = 0.9")
+    one_error(["generate", job, "-o", tiny / "x.csv"], 2, "domain.edge_margin = 0.9", "room for")
+
+
+def test_no_gdstk_lines_or_warnings_on_stderr(tmp_path):
+    """gdstk warns (on stderr and as a Python warning) about a reference to a cell the
+    file does not define; qa then crashed on it."""
+    lib = gdstk.Library(unit=1e-6, precision=1e-9)
+    top = lib.new_cell("TOP")
+    top.add(gdstk.Reference("MISSING", (0, 0)), gdstk.ellipse((100, 100), 23, layer=1))
+    lib.write_gds(str(tmp_path / "miss.gds"))
+    one_error(["qa", tmp_path / "miss.gds"], 2, "missing cell 'MISSING'")
+    (tmp_path / "bad.gds").write_bytes(b"\x00\x06\x00\x02\x00\x07" + bytes(100))
+    (tmp_path / "bad.oas").write_bytes(b"%SEMI-OASIS\r\n" + bytes(50))
+    for f in ("bad.gds", "bad.oas"):
+        msg = one_error(["qa", tmp_path / f], 2, f)
+        assert "[GDSTK]" not in msg
+
+
+def test_an_internal_error_is_one_line_with_a_log(tiny, monkeypatch, tmp_path):
+    import optdot.pipeline
+
+    def bug(*a, **k):
+        raise ZeroDivisionError("a planted bug")
+
+    monkeypatch.setattr(optdot.pipeline, "generate", bug)
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", None)
+    rc, err, _ = cli("generate", tiny / "job.toml", "-o", tiny / "x.csv")
+    assert rc == EXIT_INTERNAL
+    assert len(err) == 1 and err[0].startswith("optdot: internal error: ZeroDivisionError")
+    log = err[0].split("traceback in ")[1].rstrip(")")
+    text = open(log).read()
+    assert "Traceback" in text and "a planted bug" in text and "generate" in text
+    assert log.startswith(str(tmp_path))
+    assert not (tiny / "x.csv").exists()
