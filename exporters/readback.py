@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from optdot.errors import GeometryError, PatternFileError
+from optdot.errors import GeometryError, PatternFileError, one_line
 from optdot.geometry.domain import domain_from_rings
 from optdot.io.patterns import load_pattern, validate_dots
 from optdot.pattern import Pattern
@@ -44,7 +44,7 @@ def read_any(path: str | Path, opts: ExportOptions | None = None, box=None) -> P
     except PatternFileError:
         raise
     except Exception as e:  # reader libraries raise many types on corrupt files
-        raise PatternFileError(f"{path}: cannot read ({type(e).__name__}: {e})") from None
+        raise PatternFileError(f"{path}: cannot read ({one_line(e, True)})") from None
     raise PatternFileError(f"{path}: unknown format {suffix!r} (csv, npz, gds, oas, dxf)")
 
 

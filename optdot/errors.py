@@ -7,6 +7,16 @@ line on stderr and the exit code stored on the class (see README, "Exit codes").
 from __future__ import annotations
 
 
+def one_line(e: BaseException, with_type: bool = False) -> str:
+    """A third-party exception as one line for a message: its text with every run of
+    whitespace (newlines included) made one space, at most 200 characters, optionally
+    after its type name; the type name alone when it has no text."""
+    text = " ".join(str(e).split())[:200]
+    if not text:
+        return type(e).__name__
+    return f"{type(e).__name__}: {text}" if with_type else text
+
+
 class OptdotError(Exception):
     """Base class of every error optdot raises on purpose."""
 

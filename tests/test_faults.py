@@ -14,6 +14,7 @@ import sys
 import pytest
 
 from optdot import exporters
+from optdot.errors import ExportError
 from optdot.io.patterns import load_pattern
 
 from .conftest import SAMPLES
@@ -78,6 +79,29 @@ def test_a_replaced_file_keeps_its_permissions(tmp_path, tiny_csv):
     new = tmp_path / "new.gds"
     exporters.write(load_pattern(tiny_csv), "gds", new)
     assert stat.S_IMODE(new.stat().st_mode) == 0o644
+
+
+def test_a_read_only_target_is_never_replaced(tmp_path, tiny_csv):
+    """A mask whose write bits are off was protected on purpose (also for root, which
+    os.access would let through): refused before the run, old bytes kept."""
+    outs = {f: tmp_path / f"v.{f}" for f in ("gds", "dxf")}
+    for p in outs.values():
+        p.write_bytes(b"OLD")
+    os.chmod(outs["dxf"], 0o444)
+    r = optdot_limited(10**9, "export", tiny_csv, "--gds", outs["gds"], "--dxf", outs["dxf"])
+    assert r.returncode == 2 and "is read-only (mode 0444)" in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    assert all(p.read_bytes() == b"OLD" for p in outs.values())
+    with pytest.raises(ExportError, match="read-only"):
+        exporters.write(load_pattern(tiny_csv), "dxf", outs["dxf"])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["v.dxf", "v.gds"]
+
+
+@pytest.mark.parametrize("where", ["/sys/optdot-test.gds", "/proc/optdot-test.gds"])
+def test_an_unwritable_place_is_one_line(tiny_csv, where):
+    r = optdot_limited(10**9, "export", tiny_csv, "--gds", where)
+    assert r.returncode == 2 and r.stderr.startswith(f"optdot: error: {where}"), r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
 
 
 def test_a_failed_output_replaces_none_of_the_set(tmp_path, tiny_csv):

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import click
 
-from ..errors import OptdotError, QAGateError
+from ..errors import OptdotError, QAGateError, one_line
 
 #: Exit code of an unexpected internal error (sysexits' EX_SOFTWARE).
 EXIT_INTERNAL = 70
@@ -41,10 +41,10 @@ def _user_errors(fn):
                 raise KeyboardInterrupt
             return out
         except QAGateError as e:
-            click.echo(f"optdot: {e}", err=True)
+            click.echo(f"optdot: {one_line(e)}", err=True)
             sys.exit(e.exit_code)
         except OptdotError as e:
-            click.echo(f"optdot: error: {e}", err=True)
+            click.echo(f"optdot: error: {' '.join(str(e).split())}", err=True)
             sys.exit(e.exit_code)
         except KeyboardInterrupt:
             click.echo("optdot: interrupted", err=True)
@@ -120,8 +120,7 @@ class _Command(click.Group):
         except Exception as e:  # noqa: BLE001 - the last line of defence, logged in full
             log = _write_crash_log(e, args)
             click.echo(
-                f"optdot: internal error: {type(e).__name__}: {_first_line(e)} "
-                f"(a bug; traceback in {log})",
+                f"optdot: internal error: {one_line(e, True)} (a bug; traceback in {log})",
                 err=True,
             )
             sys.exit(EXIT_INTERNAL)
@@ -135,11 +134,6 @@ def _usage_line(e: click.ClickException) -> str:
     if isinstance(e, click.UsageError) and ctx is not None:
         return f"{ctx.command_path}: {msg} (see '{ctx.command_path} --help')"
     return msg
-
-
-def _first_line(e: BaseException) -> str:
-    text = str(e).strip().splitlines()
-    return text[0][:200] if text else ""
 
 
 def _write_crash_log(e: BaseException, args) -> str:

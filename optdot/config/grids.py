@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import JobError
+from ..errors import JobError, one_line
 from ..geometry.density import HEX_PACKING_LIMIT
 
 
@@ -61,8 +61,8 @@ def _load_npy(path: Path) -> np.ndarray:
                     shape, fortran, dtype = fmt.read_array_header_1_0(fh)
                 else:
                     shape, fortran, dtype = fmt.read_array_header_2_0(fh)
-            except (ValueError, SyntaxError, TypeError, EOFError) as e:
-                raise JobError(f"{path}: not a .npy array ({_first_line(e)})") from None
+            except Exception as e:  # noqa: BLE001 - numpy's header parser raises many kinds
+                raise JobError(f"{path}: not a .npy array ({one_line(e)})") from None
             if len(shape) != 2 or 0 in shape:
                 raise JobError(f"{path}: grid must be a non-empty 2-D array, got shape {shape}")
             if dtype.hasobject or dtype.kind not in "biuf":
@@ -78,13 +78,8 @@ def _load_npy(path: Path) -> np.ndarray:
     except OSError as e:
         raise JobError(f"{path}: cannot read density grid ({e.strerror or e})") from None
     except ValueError as e:
-        raise JobError(f"{path}: not a readable .npy array ({_first_line(e)})") from None
+        raise JobError(f"{path}: not a readable .npy array ({one_line(e)})") from None
     return np.asarray(g, dtype=np.float64)
-
-
-def _first_line(e: Exception) -> str:
-    text = str(e).strip().splitlines()
-    return text[0] if text else type(e).__name__
 
 
 def validate_grid(g: np.ndarray, where: str) -> None:

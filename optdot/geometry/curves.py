@@ -22,6 +22,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import GeometryError
+
+#: Most vertices one flattened curve may take.
+MAX_VERTICES = 1_000_000
+
 
 @dataclass(frozen=True)
 class Line:
@@ -86,6 +91,24 @@ class Conic:
         return Conic(self.c, self.M, self.m, self.t1, self.t0, self.q, self.p)
 
     @property
+    def semi_major(self) -> float:
+        """Largest stretch of a unit vector by ``[M m]``: the semi-major axis, mm."""
+        return float(np.linalg.norm(np.column_stack([self.M, self.m]), 2))
+
+    def check(self, smallest: float, largest: float) -> None:
+        """Refuse a curve whose numbers are not finite or whose axes are outside
+        ``[smallest, largest]`` mm (degenerate, or beyond any panel)."""
+        nums = np.concatenate([self.c, self.M, self.m, [self.t0, self.t1]])
+        if not np.all(np.isfinite(nums)):
+            raise GeometryError("a curve with non-finite centre, axes or angles")
+        axes = np.linalg.svd(np.column_stack([self.M, self.m]), compute_uv=False)
+        if not (smallest <= axes.min() and axes.max() <= largest):
+            raise GeometryError(
+                f"a curve with axes {axes.max():.4g}, {axes.min():.4g} mm (allowed "
+                f"{smallest:g}..{largest:g})"
+            )
+
+    @property
     def counter_clockwise(self) -> bool:
         """Runs counter-clockwise about its centre (in x-y, whatever the parameter sense)."""
         cross = self.M[0] * self.m[1] - self.M[1] * self.m[0]
@@ -104,11 +127,15 @@ class Conic:
             first and last vertex are the curve's end points.
         """
         sweep = self.t1 - self.t0
-        # largest stretch of a unit vector by [M m]: the ellipse's semi-major axis
-        a = float(np.linalg.norm(np.column_stack([self.M, self.m]), 2))
+        a = self.semi_major
         # circumscribed deviation a (1/cos(d/2) - 1) <= tol (chords deviate less)
         step = 2.0 * math.acos(1.0 / (1.0 + tol / a))
         k = max(int(math.ceil(abs(sweep) / step)), 1, int(math.ceil(abs(sweep) / (0.5 * math.pi))))
+        if k > MAX_VERTICES:
+            raise GeometryError(
+                f"a curve of radius {a:.4g} mm needs {k:,} vertices at tolerance {tol:g} mm "
+                f"(at most {MAX_VERTICES:,})"
+            )
         d = sweep / k
         inscribed = self.counter_clockwise == region_left
         if inscribed:
@@ -149,7 +176,8 @@ def bulge_arc(p: np.ndarray, q: np.ndarray, bulge: float) -> Segment:
     (``tan(angle / 4)``, positive counter-clockwise); a line when the bulge is 0."""
     chord = q - p
     length = float(np.hypot(*chord))
-    if bulge == 0.0 or length == 0.0:
+    # the arc's sagitta is length / 2 * |bulge|: below 0.1 nm it is a straight line
+    if length == 0.0 or 0.5 * length * abs(bulge) < 1e-7:
         return Line(p, q)
     theta = 4.0 * math.atan(bulge)
     radius = length / (2.0 * abs(math.sin(0.5 * theta)))

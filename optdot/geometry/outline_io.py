@@ -19,7 +19,7 @@ import numpy as np
 import shapely
 from shapely.geometry import MultiPolygon, Polygon
 
-from ..errors import GeometryError
+from ..errors import GeometryError, one_line
 from .curves import (
     Conic,
     Line,
@@ -112,7 +112,7 @@ def _parse(fn, path: Path, kind: str):
     except OSError as e:
         raise GeometryError(f"{path}: cannot read ({e.strerror or e})") from None
     except (
-        shapely.errors.GEOSException,
+        shapely.errors.ShapelyError,
         ValueError,
         TypeError,
         KeyError,
@@ -120,7 +120,7 @@ def _parse(fn, path: Path, kind: str):
         IndexError,
         RecursionError,
     ) as e:
-        raise GeometryError(f"{path}: malformed {kind} ({_why(e)})") from None
+        raise GeometryError(f"{path}: malformed {kind} ({one_line(e, True)})") from None
 
 
 def _from_geojson(text: str, path: Path):
@@ -160,7 +160,7 @@ def _polygonal_parts(geom, path: Path) -> list[Polygon]:
             polys.append(g)
         elif isinstance(g, MultiPolygon):
             polys += list(g.geoms)
-        elif g.geom_type in ("LineString", "LinearRing"):
+        elif g.geom_type in ("LineString", "LinearRing") and not g.is_empty:
             c = np.asarray(g.coords)
             raise GeometryError(
                 f"{path}: open loop: a {g.geom_type} from ({c[0, 0]:.4g}, {c[0, 1]:.4g}) to "
@@ -171,9 +171,13 @@ def _polygonal_parts(geom, path: Path) -> list[Polygon]:
     return polys
 
 
+#: Radii of outline curves, mm: from the 1 nm database unit to 100 m.
+MIN_RADIUS, MAX_RADIUS = 1e-6, 1e5
+
+
 def _dxf_loops(path: Path, tolerance: float, keep_layer: str | None):
-    """``(loops, keep_loops, splines)``: closed chains of exact segments from the DXF's
-    modelspace, the keep-out layer's apart, and the sampled splines among them."""
+    """``(loops, keep_loops)``: closed chains of exact segments from the DXF's
+    modelspace, the keep-out layer's apart."""
     import ezdxf
 
     try:
@@ -181,7 +185,7 @@ def _dxf_loops(path: Path, tolerance: float, keep_layer: str | None):
     except OSError as e:
         raise GeometryError(f"{path}: cannot read DXF ({e.strerror or e})") from None
     except Exception as e:  # noqa: BLE001 - ezdxf's parser raises anything on a damaged file
-        raise GeometryError(f"{path}: not a readable DXF file ({_why(e)})") from None
+        raise GeometryError(f"{path}: not a readable DXF file ({one_line(e, True)})") from None
     closed: list[list[Segment]] = []
     keep: list[list[Segment]] = []
     pieces: list[list[Segment]] = []
@@ -195,10 +199,16 @@ def _dxf_loops(path: Path, tolerance: float, keep_layer: str | None):
             raise GeometryError(f"{path}: {e.dxftype()} {e.dxf.handle}: {err}") from None
         except (TypeError, ValueError, ArithmeticError, IndexError, AttributeError) as err:
             raise GeometryError(
-                f"{path}: cannot read {e.dxftype()} {e.dxf.handle} ({_why(err)})"
+                f"{path}: cannot read {e.dxftype()} {e.dxf.handle} ({one_line(err, True)})"
             ) from None
         if not segs:
             continue
+        try:
+            for seg in segs:
+                if isinstance(seg, Conic):
+                    seg.check(MIN_RADIUS, MAX_RADIUS)
+        except GeometryError as err:
+            raise GeometryError(f"{path}: {e.dxftype()} {e.dxf.handle}: {err}") from None
         is_loop = is_closed or np.hypot(*(segs[0].start - segs[-1].end)) <= tolerance
         target = keep if keep_layer is not None and e.dxf.layer == keep_layer else closed
         if is_loop:
@@ -226,25 +236,24 @@ def _entity_segments(e, tolerance: float) -> tuple[list[Segment], bool]:
         return [Line(_xy(e.dxf.start), _xy(e.dxf.end))], False
     if kind in ("CIRCLE", "ARC"):
         r = float(e.dxf.radius)
-        if not (math.isfinite(r) and r > 0):
-            raise GeometryError(f"radius {r!r} must be > 0 mm")
+        if not (math.isfinite(r) and MIN_RADIUS <= r <= MAX_RADIUS):
+            raise GeometryError(f"radius {r!r} mm is out of range ({MIN_RADIUS:g}..{MAX_RADIUS:g})")
         c = e.dxf.center
         t0, t1 = 0.0, 2 * math.pi
         if kind == "ARC":
-            t0 = math.radians(e.dxf.start_angle)
-            t1 = math.radians(e.dxf.end_angle)
-            while t1 <= t0:
-                t1 += 2 * math.pi
+            t0, t1 = _sweep(math.radians(e.dxf.start_angle), math.radians(e.dxf.end_angle))
         arc = Conic(np.array([c.x, c.y]), np.array([r, 0.0]), np.array([0.0, r]), t0, t1)
         return [_to_wcs(arc, e.ocs(), c.z)], kind == "CIRCLE"
     if kind == "ELLIPSE":
         ce = e.construction_tool()
-        t0, t1 = float(ce.start_param), float(ce.end_param)
-        while t1 <= t0:
-            t1 += 2 * math.pi
+        t0, t1 = _sweep(float(ce.start_param), float(ce.end_param))
         full = t1 - t0 >= 2 * math.pi * (1 - 1e-12)
-        if abs(ce.major_axis.cross(ce.minor_axis).z) <= 0:
-            raise GeometryError("degenerate ellipse (zero axis)")
+        axes = (ce.major_axis.magnitude, ce.minor_axis.magnitude)
+        if not all(math.isfinite(a) and MIN_RADIUS <= a <= MAX_RADIUS for a in axes):
+            raise GeometryError(
+                f"ellipse axes {axes[0]:.4g}, {axes[1]:.4g} mm are out of range "
+                f"({MIN_RADIUS:g}..{MAX_RADIUS:g})"
+            )
         arc = Conic(_xy(ce.center), _xy(ce.major_axis), _xy(ce.minor_axis), t0, t1)
         return [arc], full
     if kind == "LWPOLYLINE":
@@ -268,6 +277,16 @@ def _entity_segments(e, tolerance: float) -> tuple[list[Segment], bool]:
     if len(pts) < 2:
         return [], False
     return [Sampled(pts)], bool(p.is_closed)
+
+
+def _sweep(start: float, end: float) -> tuple[float, float]:
+    """Counter-clockwise angles from ``start`` to ``end`` (rad) as ``(t0, t1)`` with
+    ``t0`` in ``[0, 2 pi)`` and ``0 < t1 - t0 <= 2 pi`` (equal angles: a full turn)."""
+    if not (math.isfinite(start) and math.isfinite(end)):
+        raise GeometryError(f"angles {start!r}, {end!r} are not finite")
+    t0 = math.fmod(start, 2 * math.pi) % (2 * math.pi)
+    span = math.fmod(end - start, 2 * math.pi) % (2 * math.pi)
+    return t0, t0 + (span if span > 0 else 2 * math.pi)
 
 
 def _bulged(pts, closed: bool, ocs, elevation: float) -> tuple[list[Segment], bool]:
@@ -312,11 +331,6 @@ def _to_wcs(seg: Segment, ocs, z: float) -> Segment:
 
 def _xy(v) -> np.ndarray:
     return np.array([float(v[0]), float(v[1])], dtype=np.float64)
-
-
-def _why(e: BaseException) -> str:
-    text = str(e).strip().splitlines()
-    return f"{type(e).__name__}: {text[0]}" if text else type(e).__name__
 
 
 def _chain(pieces: list[list[Segment]], tol: float, path: Path) -> list[list[Segment]]:

@@ -71,11 +71,26 @@ def check_target(target: str | Path, inputs: tuple[Path, ...] = ()) -> None:
         )
     if target.is_dir():
         raise ExportError(f"{target}: is a directory")
+    _refuse_read_only(target)
     if not os.access(directory, os.W_OK | os.X_OK):
         raise ExportError(f"{target}: cannot write in {directory} (permission denied)")
     for src in inputs:
         if _same_file(target, Path(src)):
             raise ExportError(f"{target}: is an input of this run ({src}); choose another name")
+
+
+def _refuse_read_only(target: Path) -> None:
+    """A file whose write bits are all off was protected on purpose: never replace it
+    (checked on the mode, so that it holds for root too)."""
+    try:
+        mode = target.stat().st_mode
+    except OSError:
+        return
+    if stat.S_ISREG(mode) and not mode & 0o222:
+        raise ExportError(
+            f"{target}: is read-only (mode {stat.S_IMODE(mode):04o}); "
+            "make it writable to replace it"
+        )
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -108,6 +123,7 @@ def atomic_path(target: str | Path, verify: Verifier | None = None) -> Iterator[
     directory = target.parent if str(target.parent) else Path(".")
     if not directory.is_dir():
         raise ExportError(f"{target}: output directory {directory} does not exist")
+    _refuse_read_only(target)
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{_short(target.name)}.", suffix=".tmp", dir=directory)
     except OSError as e:

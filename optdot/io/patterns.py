@@ -19,7 +19,7 @@ import numba as nb
 import numpy as np
 import shapely
 
-from ..errors import ExportError, PatternFileError
+from ..errors import ExportError, PatternFileError, one_line
 from ..geometry.domain import Domain, orient_all
 from ..geometry.limits import DIAMETER_RANGE_MM, MAX_EXTENT_MM
 from ..pattern import Pattern
@@ -180,7 +180,7 @@ def _load_csv(path: Path, box: tuple[float, float, float, float] | None) -> Patt
                 )
             data = np.loadtxt(fh, delimiter=",", ndmin=2, dtype=np.float64)
     except (UnicodeDecodeError, ValueError) as e:
-        raise PatternFileError(f"{path}: malformed pattern CSV ({_first_line(e)})") from None
+        raise PatternFileError(f"{path}: malformed pattern CSV ({one_line(e)})") from None
     except OSError as e:
         raise PatternFileError(f"{path}: cannot read ({e.strerror})") from None
     if data.size == 0:
@@ -193,35 +193,56 @@ def _load_csv(path: Path, box: tuple[float, float, float, float] | None) -> Patt
 def _load_npz(path: Path, box: tuple[float, float, float, float] | None) -> Pattern:
     try:
         with np.load(path, allow_pickle=False) as z:
-            xy = np.asarray(z["xy"], dtype=np.float64)
-            diameter = np.asarray(z["diameter"], dtype=np.float64)
-            file_box = tuple(np.asarray(z["box"], dtype=np.float64).tolist())
+            if not isinstance(z, np.lib.npyio.NpzFile):
+                raise PatternFileError(f"{path}: a .npy array, not a pattern .npz archive")
+            xy = _real(path, z, "xy")
+            diameter = _real(path, z, "diameter")
+            file_box = _real(path, z, "box")
             meta = json.loads(str(z["meta"])) if "meta" in z else {}
+            if not isinstance(meta, dict):
+                raise PatternFileError(f"{path}: meta must be a JSON object")
             outline = None
             if "outline_wkb" in z:
-                geom = orient_all(shapely.from_wkb(np.asarray(z["outline_wkb"]).tobytes()))
-                outline = Domain(geom, float(z["edge_margin"]), False, str(path))
+                margin = _real(path, z, "edge_margin")
+                if margin.shape != () or not (np.isfinite(margin) and 0 <= margin < 100):
+                    raise PatternFileError(f"{path}: edge_margin must be one number in 0..100 mm")
+                wkb = np.asarray(z["outline_wkb"])
+                if wkb.dtype != np.uint8 or wkb.ndim != 1:
+                    raise PatternFileError(f"{path}: outline_wkb must be a 1-D uint8 array")
+                geom = orient_all(shapely.from_wkb(wkb.tobytes()))
+                outline = Domain(geom, float(margin), False, str(path))
     except KeyError as e:
         raise PatternFileError(f"{path}: missing array {e} in pattern .npz") from None
     except (
         OSError,
         ValueError,
+        TypeError,
+        EOFError,
         zipfile.BadZipFile,
         json.JSONDecodeError,
-        shapely.errors.GEOSException,
+        shapely.errors.ShapelyError,
     ) as e:
-        raise PatternFileError(f"{path}: not a readable pattern .npz ({_first_line(e)})") from None
+        raise PatternFileError(f"{path}: not a readable pattern .npz ({one_line(e)})") from None
     if xy.ndim != 2 or xy.shape[1] != 2 or len(xy) == 0:
         raise PatternFileError(f"{path}: xy must have shape [n, 2] with n > 0, got {xy.shape}")
-    if len(file_box) != 4:
-        raise PatternFileError(f"{path}: box must have 4 numbers, got {len(file_box)}")
+    if file_box.shape != (4,):
+        raise PatternFileError(f"{path}: box must be 4 numbers, got shape {file_box.shape}")
     if diameter.ndim > 1 or (diameter.ndim == 1 and diameter.shape != (len(xy),)):
         raise PatternFileError(
             f"{path}: diameter must be one number or one per dot ({len(xy)}), "
             f"got shape {diameter.shape}"
         )
-    p = _validated(path, xy, np.broadcast_to(diameter, (len(xy),)), box or file_box, meta)
+    the_box = box or tuple(file_box.tolist())
+    p = _validated(path, xy, np.broadcast_to(diameter, (len(xy),)), the_box, meta)
     return p if outline is None else replace(p, outline=outline)
+
+
+def _real(path: Path, z, name: str) -> np.ndarray:
+    """Array ``name`` of the archive as float64, refusing non-numeric or complex ones."""
+    a = np.asarray(z[name])
+    if a.dtype.kind not in "biuf":
+        raise PatternFileError(f"{path}: {name} must hold real numbers, got dtype {a.dtype}")
+    return a.astype(np.float64)
 
 
 def validate_dots(path, xy: np.ndarray, diam: np.ndarray, box) -> None:
@@ -269,7 +290,3 @@ def _validated(path, xy, diam, box, meta) -> Pattern:
     if not (box[2] > box[0] and box[3] > box[1]):
         raise PatternFileError(f"{path}: empty panel box {box}")
     return Pattern(xy=xy, diameter=diam, box=box, meta=meta)
-
-
-def _first_line(e: Exception) -> str:
-    return str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
