@@ -17,6 +17,7 @@ from optdot.errors import GeometryError, PatternFileError, one_line
 from optdot.geometry.domain import domain_from_rings
 from optdot.io.patterns import load_pattern, validate_dots
 from optdot.pattern import Pattern
+from optdot.runtime.isolate import ChildCrashed, in_child
 
 from .gds import MIN_DOT_VERTICES as MIN_VERTICES
 from .gds import quietly
@@ -38,11 +39,14 @@ def read_any(path: str | Path, opts: ExportOptions | None = None, box=None) -> P
         return load_pattern(path, box)
     try:
         if suffix in (".gds", ".gds2", ".oas"):
-            return _read_layout(path, opts)
+            # gdstk's C++ readers can crash on a damaged file: read in a child process
+            return in_child(_read_layout, path, opts)
         if suffix == ".dxf":
             return _read_dxf(path)
     except PatternFileError:
         raise
+    except ChildCrashed as e:
+        raise PatternFileError(f"{path}: damaged {suffix[1:].upper()} file ({e})") from None
     except Exception as e:  # reader libraries raise many types on corrupt files
         raise PatternFileError(f"{path}: cannot read ({one_line(e, True)})") from None
     raise PatternFileError(f"{path}: unknown format {suffix!r} (csv, npz, gds, oas, dxf)")

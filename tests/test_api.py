@@ -30,7 +30,7 @@ ALLOWED = {
     "relax": {"errors", "geometry", "spatial"},
     "pattern": {"geometry", "io", "_imports"},
     "quality": {"config", "geometry", "pattern", "io"},
-    "exporters": {"errors", "geometry", "io", "pattern"},
+    "exporters": {"errors", "geometry", "io", "pattern", "runtime"},
     "pipeline": {
         "io",
         "config",

@@ -339,3 +339,27 @@ def test_an_internal_error_is_one_line_with_a_log(tiny, monkeypatch, tmp_path):
     assert "Traceback" in text and "a planted bug" in text and "generate" in text
     assert log.startswith(str(tmp_path))
     assert not (tiny / "x.csv").exists()
+
+
+def test_a_reader_crash_is_one_line(tmp_path, monkeypatch, tiny_pattern):
+    """gdstk's C++ readers segfault or abort on some damaged files (found by the property
+    tests): masks are read in a child process, and its death is a bad-input line."""
+    import os
+    import signal
+
+    from optdot.exporters import readback, write
+
+    from optdot.runtime.isolate import ChildCrashed, in_child
+
+    with pytest.raises(ChildCrashed, match="SIGABRT"):
+        in_child(os.abort)
+    with pytest.raises(ZeroDivisionError):
+        in_child(divmod, 1, 0)
+    assert in_child(sum, [1, 2, 3]) == 6
+    write(tiny_pattern, "gds", tmp_path / "m.gds")
+
+    def crash(path, opts):
+        os.kill(os.getpid(), signal.SIGSEGV)
+
+    monkeypatch.setattr(readback, "_read_layout", crash)
+    one_error(["qa", tmp_path / "m.gds"], 2, "m.gds: damaged GDS file", "SIGSEGV")
