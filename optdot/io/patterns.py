@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import io
 import json
+import warnings
 import zipfile
 from dataclasses import replace
 from pathlib import Path
@@ -178,7 +179,9 @@ def _load_csv(path: Path, box: tuple[float, float, float, float] | None) -> Patt
                 raise PatternFileError(
                     f"{path}: line 1: header must be {CSV_HEADER!r}, got {header[:60]!r}"
                 )
-            data = np.loadtxt(fh, delimiter=",", ndmin=2, dtype=np.float64)
+            with warnings.catch_warnings():  # "no data" is reported below, in one line
+                warnings.simplefilter("ignore", UserWarning)
+                data = np.loadtxt(fh, delimiter=",", ndmin=2, dtype=np.float64)
     except (UnicodeDecodeError, ValueError) as e:
         raise PatternFileError(f"{path}: malformed pattern CSV ({one_line(e)})") from None
     except OSError as e:
