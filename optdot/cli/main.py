@@ -187,6 +187,24 @@ def load_job_with(job_path: Path, seed, max_iter, method, formulation):
     )
 
 
+def _layer_options(fn):
+    """``--layer``, ``--datatype``, ``--outline-layer``: where dots and outline are in a
+    GDSII/OASIS file (written by ``export``, read by ``qa``)."""
+    fn = click.option(
+        "--outline-layer",
+        type=int,
+        default=2,
+        show_default=True,
+        help="GDS/OAS layer of the outline.",
+    )(fn)
+    fn = click.option(
+        "--datatype", type=int, default=0, show_default=True, help="GDS/OAS datatype of the dots."
+    )(fn)
+    return click.option(
+        "--layer", type=int, default=1, show_default=True, help="GDS/OAS layer of the dots."
+    )(fn)
+
+
 def run_job(job, quiet: bool):
     """Generate the job's pattern with a progress bar."""
     from ..io.atomic import interrupted
@@ -293,13 +311,7 @@ def _check_outputs(outputs: dict[str, Path], inputs: tuple = ()) -> None:
     help="Circle polygon tolerance, µm (GDS/OAS).",
 )
 @click.option("--flatten", is_flag=True, help="Plain polygons instead of a dot cell + references.")
-@click.option("--layer", type=int, default=1, show_default=True, help="GDS/OAS layer of the dots.")
-@click.option(
-    "--datatype", type=int, default=0, show_default=True, help="GDS/OAS datatype of the dots."
-)
-@click.option(
-    "--outline-layer", type=int, default=2, show_default=True, help="GDS/OAS layer of the outline."
-)
+@_layer_options
 @click.option("--top-cell", default="TOP", show_default=True, help="Name of the top cell.")
 @click.option(
     "--dxf-version", default="R2010", show_default=True, help="DXF release: R2010, R2000, R12, ..."
@@ -396,13 +408,7 @@ def export(
     "--collision", type=float, help="Collision distance, mm (default: dot diameter + gap)."
 )
 @click.option("--close", type=float, help="Too-close distance, mm (default 0.060).")
-@click.option("--layer", type=int, default=1, show_default=True, help="GDS/OAS layer of the dots.")
-@click.option(
-    "--datatype", type=int, default=0, show_default=True, help="GDS/OAS datatype of the dots."
-)
-@click.option(
-    "--outline-layer", type=int, default=2, show_default=True, help="GDS/OAS layer of the outline."
-)
+@_layer_options
 @click.option("--quiet", "-q", is_flag=True, help="Only the exit code.")
 @_user_errors
 def qa(

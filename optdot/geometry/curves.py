@@ -83,10 +83,6 @@ class Conic:
     def end(self) -> np.ndarray:
         return self.q if self.q is not None else self.at([self.t1])[0]
 
-    @property
-    def closed(self) -> bool:
-        return abs(self.t1 - self.t0) >= 2 * math.pi * (1 - 1e-12)
-
     def reversed(self) -> Conic:
         return Conic(self.c, self.M, self.m, self.t1, self.t0, self.q, self.p)
 
