@@ -35,7 +35,7 @@ def read_any(path: str | Path, opts: ExportOptions | None = None, box=None) -> P
     suffix = path.suffix.lower()
     if not path.exists():
         raise PatternFileError(f"{path}: file not found")
-    if suffix in (".csv", ".npz"):
+    if suffix in (".csv", ".npz", ".parquet"):
         return load_pattern(path, box)
     try:
         if suffix in (".gds", ".gds2", ".oas"):
@@ -49,7 +49,7 @@ def read_any(path: str | Path, opts: ExportOptions | None = None, box=None) -> P
         raise PatternFileError(f"{path}: damaged {suffix[1:].upper()} file ({e})") from None
     except Exception as e:  # reader libraries raise many types on corrupt files
         raise PatternFileError(f"{path}: cannot read ({one_line(e, True)})") from None
-    raise PatternFileError(f"{path}: unknown format {suffix!r} (csv, npz, gds, oas, dxf)")
+    raise PatternFileError(f"{path}: unknown format {suffix!r} (csv, npz, parquet, gds, oas, dxf)")
 
 
 def _read_layout(path: Path, opts: ExportOptions) -> Pattern:

@@ -43,6 +43,12 @@ class ResourceError(OptdotError):
     """The job would need more memory than this machine has."""
 
 
+class ClusterError(OptdotError):
+    """The Dask cluster cannot be reached or started, or lost the job (exit 4)."""
+
+    exit_code = 4
+
+
 class QAGateError(OptdotError):
     """The QA gate failed, so nothing was written (``export`` without ``force``).
 

@@ -15,37 +15,30 @@ callback) and the command line only parses options and prints what it returns.
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from .config.job import Job, QAParams
-from .errors import GeometryError, GuaranteeError, JobError, QAGateError
+from .errors import GeometryError, GuaranteeError, JobError, QAGateError, ResourceError
 from .geometry.morton import spatial_order
 from .io.atomic import transaction
+from .io.dataset import outline_hex, write_dataset
 from .pattern import Pattern
 from .quality.gate import QAResult, run_qa
 from .relax.circles import hex_radius
-from .relax.formulation import Formulation, Problem, formulation_of
+from .relax.formulation import Formulation
 from .relax.legalize import check_guarantee, legalize
 from .relax.md import MDForce, md_relax
-from .relax.optdot import Progress, RelaxSettings, relax_staged
-from .runtime.memory import check_memory
+from .relax.optdot import Progress, relax_staged
+from .runtime.cluster import connect, scheduler_address
+from .runtime.memory import available_bytes, check_memory, estimate_bytes
 from .sampling.initial import initial_dots, initial_dots_in
-
-
-def problem_of(job: Job) -> Problem:
-    """The fields of ``job`` a formulation builds its penalty terms from."""
-    return Problem(
-        domain=job.domain,
-        density=job.density,
-        dot_radius=0.5 * job.diameter,
-        min_distance=job.min_distance,
-        close_target=job.close_target,
-        seed=job.optimize.seed,
-    )
+from .tiling.plan import TilePlan, plan_tiles
+from .tiling.run import InProcess, OnDask, TiledRun, TileProgress, run_tiles, warm_up
+from .tiling.steps import formulation_for, problem_of, settings_for
 
 
 def _check_room(job: Job, n: int, where: str) -> None:
@@ -138,14 +131,9 @@ def generate(
         info.update(md_step_mm=md.eta, message=f"ran {md.steps} MD steps")
         history = md.history
     else:
-        form = (
-            formulation_of(opt.formulation, opt.radius_factor, opt.container_factor)
-            if formulation is None
-            else formulation
-        )
-        settings = RelaxSettings(opt.max_iter, opt.lbfgs_memory, opt.ftol, opt.skin)
+        form = formulation_for(job) if formulation is None else formulation
         relaxed, info, history = relax_staged(
-            problem_of(job), form, xy0, rho[order], settings, progress
+            problem_of(job), form, xy0, rho[order], settings_for(job), progress
         )
     timings["relax_s"] = time.perf_counter() - t1
 
@@ -182,6 +170,136 @@ def generate(
         stats["relaxed_xy"][order] = relaxed
     outline = None if job.domain.rectangle else job.domain
     return Pattern(xy=xy, diameter=job.diameter, box=box, meta=meta, stats=stats, outline=outline)
+
+
+#: ``tiles="auto"`` tiles a job of at least this many dots even when one process would
+#: hold it: above it the tiled run on this 2-core machine is faster (BENCHMARKS.md,
+#: ``benchmarks/panels.py --break-even``).
+TILE_BREAK_EVEN = 2_000_000
+#: ``announce(line)``: what a tiled run tells the user before it starts (cluster, tiles).
+Announce = Callable[[str], None]
+
+
+def use_tiles(job: Job, mode: str = "auto") -> bool:
+    """Whether ``job`` runs tiled: ``on``, ``off``, or ``auto`` (when one process would
+    not fit, or from :data:`TILE_BREAK_EVEN` dots; the MD baseline never tiles)."""
+    if mode == "on":
+        if job.optimize.method != "optdot":
+            raise JobError(f"{job.name}: tiles need optimize.method = 'optdot' (MD is a baseline)")
+        return True
+    if mode == "off" or job.optimize.method != "optdot":
+        return False
+    n = job.n_dots
+    return n >= TILE_BREAK_EVEN or estimate_bytes(n, job.optimize.lbfgs_memory) > 0.9 * (
+        available_bytes()
+    )
+
+
+def _tiled_meta(job: Job, plan: TilePlan) -> dict:
+    opt = job.optimize
+    return {
+        "job": job.name,
+        "method": opt.method,
+        "formulation": opt.formulation,
+        "seed": opt.seed,
+        "max_iter": opt.max_iter,
+        "n": int(plan.quotas.sum()),
+        "tiles": f"{plan.nx}x{plan.ny}",
+    }
+
+
+def _check_tile_memory(job: Job, plan: TilePlan, per_worker: int) -> None:
+    """Refuse tiles that cannot fit a worker's memory limit (0 = no limit)."""
+    biggest = int(plan.quotas.max())
+    need = estimate_bytes(biggest, job.optimize.lbfgs_memory)
+    if per_worker and need > 0.8 * per_worker:
+        raise ResourceError(
+            f"{job.name}: a tile of {biggest:,} dots needs about {need / 2**30:.2f} GiB but "
+            f"each worker has {per_worker / 2**30:.2f} GiB; choose smaller tiles (--tile-size)"
+        )
+
+
+def generate_tiled(
+    job: Job,
+    output: str | Path | None = None,
+    *,
+    plan: TilePlan | None = None,
+    tile_size: float | None = None,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    executor: InProcess | OnDask | None = None,
+    announce: Announce | None = None,
+    progress: TileProgress | None = None,
+) -> Pattern | TiledRun:
+    """Generate ``job`` in tiles (:mod:`optdot.tiling.tasks`) on a Dask cluster.
+
+    Args:
+        output: a ``.parquet`` dataset to stream the tiles into (the result is then the
+            :class:`TiledRun`); None gathers them into a :class:`Pattern` (tile order).
+        plan: the tiling (default: :func:`plan_tiles` with ``tile_size``).
+        tile_size: tile side, mm (default: about 150k dots per tile).
+        scheduler: an existing Dask scheduler's address (default: a LocalCluster).
+        workers: LocalCluster worker processes (default: the cores).
+        executor: run on this instead of a cluster (tests: :class:`InProcess`).
+        announce: told the cluster's dashboard and the tiling before the run.
+        progress: ``progress(fraction, line)`` as tiles finish.
+
+    Raises:
+        ClusterError: the scheduler cannot be reached or the cluster cannot start.
+        ResourceError: a tile would not fit a worker.
+        GuaranteeError: a tile could not be made legal.
+        ExportError: the dataset cannot be written (the previous one is left as it was).
+    """
+    where = str(job.source) if job.source else job.name
+    _check_room(job, job.n_dots, where)
+    plan = plan or plan_tiles(job, tile_size)
+    if executor is not None:
+        return _run_tiled(job, plan, executor, output, progress)
+    with connect(scheduler_address(scheduler), workers) as cluster:
+        _check_tile_memory(job, plan, cluster.memory_per_worker)
+        if announce is not None:
+            kind = "local cluster" if cluster.embedded else "cluster"
+            announce(
+                f"{kind}: {cluster.workers} workers, dashboard {cluster.dashboard or 'n/a'}; "
+                f"{plan.count} tiles ({plan.nx} x {plan.ny}) of ~{int(plan.quotas.mean()):,} dots"
+            )
+        cluster.client.submit(_warm, pure=False).result()  # compile once, not per worker
+        return _run_tiled(job, plan, OnDask(cluster.client), output, progress)
+
+
+def _warm() -> int:
+    from .runtime.cluster import single_threaded
+
+    single_threaded()
+    return warm_up()
+
+
+def _run_tiled(job, plan, executor, output, progress) -> Pattern | TiledRun:
+    meta = _tiled_meta(job, plan)
+    if output is not None:
+        manifest = {
+            "job": job.name,
+            "seed": job.optimize.seed,
+            "diameter_mm": job.diameter,
+            "box": list(job.box),
+            "meta": meta,
+            "tiles": plan.to_json(),
+            **outline_hex(None if job.domain.rectangle else job.domain),
+        }
+        with write_dataset(output, manifest) as w:
+
+            def to_part(tile, xy):
+                w.write_part(plan.index(*tile), tile, xy, job.diameter)
+
+            return run_tiles(job, plan, executor, to_part, progress)
+    got: dict = {}
+    run = run_tiles(job, plan, executor, got.__setitem__, progress)
+    xy = np.concatenate([got[t] for t in plan.tiles()])
+    outline = None if job.domain.rectangle else job.domain
+    stats = {"total_s": run.seconds, "history": []}
+    return Pattern(
+        xy=xy, diameter=job.diameter, box=job.box, meta=meta, stats=stats, outline=outline
+    )
 
 
 def with_job_panel(pattern: Pattern, job: Job | None) -> Pattern:

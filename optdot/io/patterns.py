@@ -37,8 +37,15 @@ def save_pattern(pattern: Pattern, path: str | Path) -> None:
     """
     path = Path(path)
     suffix = path.suffix.lower()
+    if suffix == ".parquet":
+        from .dataset import save_dataset
+
+        save_dataset(pattern, path)
+        return
     if suffix not in (".csv", ".npz"):
-        raise ExportError(f"{path}: pattern files are .csv or .npz, not {suffix or 'no suffix'!r}")
+        raise ExportError(
+            f"{path}: pattern files are .csv, .npz or .parquet, not {suffix or 'no suffix'!r}"
+        )
     if suffix == ".csv":
         write_csv(pattern, path)
         return
@@ -163,11 +170,17 @@ def load_pattern(path: str | Path, box: tuple[float, float, float, float] | None
     if not path.exists():
         raise PatternFileError(f"{path}: pattern file not found")
     suffix = path.suffix.lower()
+    if suffix == ".parquet":
+        from .dataset import load_dataset
+
+        return load_dataset(path, box)
     if suffix == ".npz":
         return _load_npz(path, box)
     if suffix == ".csv":
         return _load_csv(path, box)
-    raise PatternFileError(f"{path}: unknown pattern format {suffix!r} (use .csv or .npz)")
+    raise PatternFileError(
+        f"{path}: unknown pattern format {suffix!r} (use .csv, .npz or .parquet)"
+    )
 
 
 def _load_csv(path: Path, box: tuple[float, float, float, float] | None) -> Pattern:

@@ -28,7 +28,7 @@ MARGIN = 3e-6
 
 
 @nb.njit(cache=True)
-def _push_pairs(xy, ptr, nbr, target, slack):  # pragma: no cover - compiled
+def _push_pairs(xy, ptr, nbr, target, slack, still):  # pragma: no cover - compiled
     moved = 0
     t2 = target * target
     for i in range(xy.shape[0]):
@@ -37,25 +37,30 @@ def _push_pairs(xy, ptr, nbr, target, slack):  # pragma: no cover - compiled
             dx = xy[i, 0] - xy[j, 0]
             dy = xy[i, 1] - xy[j, 1]
             d2 = dx * dx + dy * dy
-            if d2 >= t2:
+            if d2 >= t2 or (still[i] and still[j]):
                 continue
             d = np.sqrt(d2)
             if d < 1e-12:
                 dx, dy, d = (1.0, 0.0, 1.0) if i < j else (-1.0, 0.0, 1.0)
             p = 0.5 * (target + slack - d) / d
-            xy[i, 0] += p * dx
-            xy[i, 1] += p * dy
-            xy[j, 0] -= p * dx
-            xy[j, 1] -= p * dy
+            # a dot held still (a tile's halo) leaves the whole push to its partner
+            pi = 0.0 if still[i] else (2.0 * p if still[j] else p)
+            pj = 0.0 if still[j] else (2.0 * p if still[i] else p)
+            xy[i, 0] += pi * dx
+            xy[i, 1] += pi * dy
+            xy[j, 0] -= pj * dx
+            xy[j, 1] -= pj * dy
             moved += 1
     return moved
 
 
 @nb.njit(cache=True)
-def _fix_dots(xy, lo, hi, grid, x0, y0, cw, ch, home, eps, need, ed):  # pragma: no cover
+def _fix_dots(xy, lo, hi, grid, x0, y0, cw, ch, home, eps, need, ed, still):  # pragma: no cover
     ny, nx = grid.shape
     fixed = 0
     for i in range(xy.shape[0]):
+        if still[i]:
+            continue
         x = min(max(xy[i, 0], lo[0]), hi[0])
         y = min(max(xy[i, 1], lo[1]), hi[1])
         if ed[0].shape[0] > 0:
@@ -103,6 +108,7 @@ def legalize(
     dot_radius: float,
     dmin: float,
     max_sweeps: int = 1000,
+    frozen: np.ndarray | None = None,
 ) -> LegalizeResult:
     """Project ``xy`` onto the feasible set and round it to :data:`RESOLUTION`.
 
@@ -114,6 +120,8 @@ def legalize(
         dot_radius: r0, mm.
         dmin: minimum centre distance, mm.
         max_sweeps: give up (the caller raises) after this many sweeps.
+        frozen: ``[n]`` bool, dots that stay where they are (a tile's halo: a pair with
+            one of them is fixed by moving the other the whole way).
 
     Returns:
         :class:`LegalizeResult`; ``sweeps == max_sweeps`` means it did not settle.
@@ -128,14 +136,15 @@ def legalize(
     target = dmin + MARGIN
     pair_fixes = dot_fixes = 0
     home = np.asarray(home_cell, dtype=np.int64)
+    still = np.zeros(len(xy), np.uint8) if frozen is None else frozen.astype(np.uint8)
     sweeps = 0
     while sweeps < max_sweeps:
         sweeps += 1
         fixed = _fix_dots(
-            xy, lo, hi, density.grid, density.x0, density.y0, cw, ch, home, MARGIN, need, ed
+            xy, lo, hi, density.grid, density.x0, density.y0, cw, ch, home, MARGIN, need, ed, still
         )
         ptr, nbr = neighbor_pairs(xy, 0.5 * target, 0.02)
-        moved = _push_pairs(xy, ptr, nbr, target, 0.5 * MARGIN)
+        moved = _push_pairs(xy, ptr, nbr, target, 0.5 * MARGIN, still)
         pair_fixes += moved
         dot_fixes += fixed
         if moved == 0 and fixed == 0:

@@ -49,6 +49,25 @@ class VerletPenalty:
         return penalty_fast(xy, self.terms, self.verlet.update(xy), grad.reshape(-1, 2))
 
 
+class FrozenPenalty(VerletPenalty):
+    """:class:`VerletPenalty` with some dots held still: their gradient is zero, so every
+    L-BFGS direction (built from gradients and steps only) is zero for them and they keep
+    their positions exactly, while the dots around them feel them as fixed neighbours.
+
+    Args:
+        frozen: ``[n]`` bool, the dots that do not move.
+    """
+
+    def __init__(self, terms: PenaltyTerms, skin: float, frozen: np.ndarray) -> None:
+        super().__init__(terms, skin)
+        self.frozen = np.flatnonzero(frozen)
+
+    def __call__(self, x: np.ndarray, grad: np.ndarray) -> float:
+        f = super().__call__(x, grad)
+        grad.reshape(-1, 2)[self.frozen] = 0.0
+        return f
+
+
 @dataclass
 class RelaxResult:
     """Outcome of :func:`relax`.
@@ -82,9 +101,11 @@ def relax(
     skin: float = 0.3,
     callback: Progress | None = None,
     gtol: float = 0.0,
+    frozen: np.ndarray | None = None,
 ) -> RelaxResult:
-    """Minimize the penalty from ``xy0`` (``[n, 2]`` mm) by L-BFGS with memory ``memory``."""
-    fun = VerletPenalty(terms, skin)
+    """Minimize the penalty from ``xy0`` (``[n, 2]`` mm) by L-BFGS with memory ``memory``;
+    dots marked in ``frozen`` (``[n]`` bool) stay where they are."""
+    fun = VerletPenalty(terms, skin) if frozen is None else FrozenPenalty(terms, skin, frozen)
     res = minimize_lbfgs(
         fun,
         xy0.ravel(),
@@ -124,13 +145,20 @@ def relax_staged(
     rho: np.ndarray,
     settings: RelaxSettings,
     progress: Progress | None = None,
+    start: np.ndarray | None = None,
+    frozen: np.ndarray | None = None,
 ) -> tuple[np.ndarray, dict, list[float]]:
     """Relax ``xy0`` (``[n, 2]`` mm, fill ``rho`` ``[n]``) through the formulation's stages.
 
     Containers stay centred on ``xy0`` in every stage. Returns positions, run info and
     the penalty after each iteration. A stage halted by ``progress`` ends the run.
+
+    Args:
+        start: ``[n, 2]`` positions to start from, mm (default ``xy0``): a tile's second
+            phase resumes from the first phase's positions, containers still on ``xy0``.
+        frozen: ``[n]`` bool, dots that do not move (a tile's halo).
     """
-    xy = xy0
+    xy = xy0 if start is None else start
     info = {"iterations": 0, "evaluations": 0, "neighbor_builds": 0}
     history: list[float] = []
     done = 0
@@ -146,6 +174,7 @@ def relax_staged(
             skin=settings.skin,
             callback=None if progress is None else (lambda i, f, o=done: progress(o + i, f)),
             gtol=settings.gtol,
+            frozen=frozen,
         )
         done += iters
         xy = res.xy

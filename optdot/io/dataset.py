@@ -1,0 +1,357 @@
+"""Large patterns as a partitioned Parquet dataset: ``NAME.parquet/`` holds one file per tile
+and a manifest.
+
+Layout::
+
+    NAME.parquet/
+        part-00000.parquet     columns x_mm, y_mm, diameter_mm (float64), one tile each,
+        part-00001.parquet     tiles row by row (part k = tile (k % nx, k // nx))
+        ...
+        _manifest.json         format, job, seed, dot count, diameter, box, outline (WKB
+                               hex), tiling, and per part: file, tile, count, sha256
+
+pandas (``pd.read_parquet("NAME.parquet")``), Dask (``dd.read_parquet``), DuckDB
+(``read_parquet('NAME.parquet/*.parquet')``) and Polars (``pl.read_parquet``) read the
+directory as it is: files starting with ``_`` are not data to them.
+
+Writing is all-or-nothing: parts go to a temporary directory beside the target, each is
+checked (rows, checksum) as it is written, the manifest is written last, and only then is
+the directory put in place (an atomic exchange with a previous dataset of the same name,
+which is then removed). An interrupted or failed run leaves the previous dataset as it was
+and no directory that looks complete; a dataset without its manifest is refused on
+reading.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import ctypes.util
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import ExportError, PatternFileError, one_line
+from .atomic import _check_interrupt, _fsync_dir, _short
+
+MANIFEST = "_manifest.json"
+FORMAT = "optdot.dataset"
+VERSION = 1
+COLUMNS = ("x_mm", "y_mm", "diameter_mm")
+
+
+def is_dataset(path: str | Path) -> bool:
+    """``path`` names a dataset (``.parquet``): a directory, or a name to create one."""
+    return Path(path).suffix.lower() == ".parquet"
+
+
+def part_name(k: int) -> str:
+    return f"part-{k:05d}.parquet"
+
+
+def _table(xy: np.ndarray, diameter: np.ndarray):
+    import pyarrow as pa
+
+    return pa.table(
+        {
+            "x_mm": pa.array(np.ascontiguousarray(xy[:, 0]), pa.float64()),
+            "y_mm": pa.array(np.ascontiguousarray(xy[:, 1]), pa.float64()),
+            "diameter_mm": pa.array(np.ascontiguousarray(diameter), pa.float64()),
+        }
+    )
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+@dataclass
+class DatasetWriter:
+    """Writes the parts of one dataset into a temporary directory; :meth:`commit` puts it
+    in place. Use through :func:`write_dataset`."""
+
+    tmp: Path
+    target: Path
+    parts: dict[int, dict[str, Any]] = field(default_factory=dict)
+
+    def write_part(self, k: int, tile: tuple[int, int], xy: np.ndarray, diameter) -> None:
+        """Write tile ``tile`` (part ``k``): ``xy`` ``[n, 2]`` mm, ``diameter`` mm (one or
+        ``[n]``)."""
+        import pyarrow.parquet as pq
+
+        _check_interrupt()
+        d = np.broadcast_to(np.asarray(diameter, np.float64), (len(xy),))
+        path = self.tmp / part_name(k)
+        try:
+            pq.write_table(_table(xy, d), path, compression="zstd", write_statistics=True)
+            rows = pq.ParquetFile(path).metadata.num_rows
+        except OSError as e:
+            raise ExportError(f"{self.target}: cannot write ({one_line(e)})") from None
+        if rows != len(xy):
+            raise ExportError(f"{self.target}: part {k} holds {rows} of {len(xy)} rows")
+        self.parts[k] = {
+            "file": path.name,
+            "tile": list(tile),
+            "count": len(xy),
+            "sha256": _sha256(path),
+        }
+
+
+def _renameat2_exchange(a: Path, b: Path) -> bool:
+    """Swap two paths atomically (Linux ``renameat2(RENAME_EXCHANGE)``); False where the
+    system cannot."""
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
+        fn = libc.renameat2
+    except (OSError, AttributeError, TypeError):
+        return False
+    at_fdcwd, rename_exchange = -100, 2
+    rc = fn(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange)
+    return rc == 0
+
+
+def check_dataset_target(target: Path) -> None:
+    """Refuse a target that is a directory but not an optdot dataset (never replaced)."""
+    if target.is_dir() and not (target / MANIFEST).is_file():
+        raise ExportError(f"{target}: is a directory that is not an optdot dataset")
+    if target.exists() and not target.is_dir():
+        raise ExportError(f"{target}: is a file, not a dataset directory")
+
+
+@contextlib.contextmanager
+def write_dataset(target: str | Path, manifest: dict[str, Any]) -> Iterator[DatasetWriter]:
+    """Write a dataset: yields a :class:`DatasetWriter`; on leaving the block the manifest
+    (``manifest`` plus the parts) is written and the dataset put in place.
+
+    Raises:
+        ExportError: the target cannot be written or is a directory of something else;
+            nothing at ``target`` changed.
+    """
+    target = Path(target)
+    directory = target.parent if str(target.parent) else Path(".")
+    check_dataset_target(target)
+    try:
+        tmp = Path(tempfile.mkdtemp(prefix=f".{_short(target.name)}.", dir=directory))
+    except OSError as e:
+        raise ExportError(f"{target}: cannot write here ({e.strerror})") from None
+    writer = DatasetWriter(tmp, target)
+    try:
+        yield writer
+        parts = [writer.parts[k] for k in sorted(writer.parts)]
+        doc = {"format": FORMAT, "version": VERSION, **manifest, "parts": parts}
+        doc["n"] = sum(p["count"] for p in parts)
+        data = json.dumps(doc, indent=1, sort_keys=True).encode() + b"\n"
+        try:
+            with open(tmp / MANIFEST, "wb") as fh:
+                fh.write(data)
+                fh.flush()
+                os.fsync(fh.fileno())
+            for p in parts:
+                fd = os.open(tmp / p["file"], os.O_RDONLY)
+                try:
+                    os.fsync(fd)
+                finally:
+                    os.close(fd)
+        except OSError as e:
+            raise ExportError(f"{target}: cannot write ({e.strerror})") from None
+        if (tmp / MANIFEST).stat().st_size != len(data):
+            raise ExportError(f"{target}: the manifest is incomplete (disk full?)")
+        os.chmod(tmp, 0o755)
+        _check_interrupt()
+        if target.is_dir():
+            check_dataset_target(target)
+            if not _renameat2_exchange(tmp, target):
+                old = directory / f".{_short(target.name)}.old"
+                os.rename(target, old)
+                os.rename(tmp, target)
+                tmp = old
+            shutil.rmtree(tmp, ignore_errors=True)  # the previous dataset
+        else:
+            os.rename(tmp, target)
+        _fsync_dir(directory)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+@dataclass(frozen=True)
+class Dataset:
+    """An opened dataset: its manifest, checked, and where its parts are.
+
+    Attributes:
+        path: the directory.
+        manifest: the parsed manifest.
+    """
+
+    path: Path
+    manifest: dict[str, Any]
+
+    @property
+    def n(self) -> int:
+        return int(self.manifest["n"])
+
+    @property
+    def box(self) -> tuple[float, float, float, float]:
+        return tuple(float(v) for v in self.manifest["box"])  # type: ignore[return-value]
+
+    @property
+    def parts(self) -> list[dict[str, Any]]:
+        return self.manifest["parts"]
+
+    def read_part(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Part ``k`` (position in :attr:`parts`): ``(xy [n, 2], diameter [n])``, mm."""
+        import pyarrow.parquet as pq
+
+        part = self.parts[k]
+        path = self.path / part["file"]
+        try:
+            table = pq.read_table(path, columns=list(COLUMNS))
+        except (OSError, ValueError) as e:
+            raise PatternFileError(f"{path}: not a readable Parquet part ({one_line(e)})") from None
+        if table.num_rows != part["count"]:
+            raise PatternFileError(
+                f"{path}: holds {table.num_rows} dots, the manifest says {part['count']}"
+            )
+        cols = [table.column(c).to_numpy().astype(np.float64, copy=False) for c in COLUMNS]
+        return np.column_stack(cols[:2]), cols[2]
+
+    def iter_parts(self) -> Iterator[tuple[tuple[int, int], np.ndarray, np.ndarray]]:
+        """``(tile, xy, diameter)`` of every part, in order."""
+        for k, part in enumerate(self.parts):
+            xy, d = self.read_part(k)
+            yield tuple(part["tile"]), xy, d  # type: ignore[misc]
+
+    def verify(self) -> None:
+        """Check every part's checksum against the manifest.
+
+        Raises:
+            PatternFileError: a part is missing or changed.
+        """
+        for part in self.parts:
+            path = self.path / part["file"]
+            if not path.is_file():
+                raise PatternFileError(f"{path}: part listed in the manifest is missing")
+            if _sha256(path) != part["sha256"]:
+                raise PatternFileError(f"{path}: checksum differs from the manifest")
+
+
+def open_dataset(path: str | Path) -> Dataset:
+    """Open a dataset and check its manifest (not yet the parts' checksums).
+
+    Raises:
+        PatternFileError: not a directory, no manifest (an incomplete write), or a
+            manifest that is not this format.
+    """
+    path = Path(path)
+    if not path.is_dir():
+        raise PatternFileError(f"{path}: dataset directory not found")
+    mf = path / MANIFEST
+    if not mf.is_file():
+        raise PatternFileError(f"{path}: no {MANIFEST} (not an optdot dataset, or incomplete)")
+    try:
+        doc = json.loads(mf.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise PatternFileError(f"{mf}: not a readable manifest ({one_line(e)})") from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise PatternFileError(f"{mf}: not an optdot dataset manifest")
+    if doc.get("version") != VERSION:
+        raise PatternFileError(f"{mf}: dataset version {doc.get('version')!r} is not {VERSION}")
+    try:
+        parts = doc["parts"]
+        box = [float(v) for v in doc["box"]]
+        ok = len(box) == 4 and all(np.isfinite(box)) and box[0] < box[2] and box[1] < box[3]
+        ok = ok and isinstance(parts, list) and doc["n"] == sum(int(p["count"]) for p in parts)
+        ok = ok and all(
+            isinstance(p["file"], str) and "/" not in p["file"] and len(p["tile"]) == 2
+            for p in parts
+        )
+    except (KeyError, TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise PatternFileError(f"{mf}: malformed manifest (box, n, parts)")
+    return Dataset(path, doc)
+
+
+def outline_hex(outline) -> dict[str, Any]:
+    """Manifest fields of a panel outline (a Domain, or None for the box): WKB as hex,
+    bit-exact, and the edge margin."""
+    if outline is None:
+        return {}
+    import shapely
+
+    wkb = shapely.to_wkb(outline.geometry, byte_order=1, hex=True)
+    return {"outline_wkb_hex": wkb, "edge_margin_mm": float(outline.edge_margin)}
+
+
+def load_dataset(path: str | Path, box=None):
+    """The whole dataset as one :class:`~optdot.pattern.Pattern` (parts in order), for
+    patterns that fit in memory; checksums are verified.
+
+    Raises:
+        PatternFileError: see :func:`open_dataset`, :meth:`Dataset.verify`.
+    """
+    import shapely
+
+    from ..geometry.domain import Domain, orient_all
+    from ..pattern import Pattern
+    from .patterns import validate_dots
+
+    ds = open_dataset(path)
+    ds.verify()
+    xys, ds_ = [], []
+    for _, xy, d in ds.iter_parts():
+        xys.append(xy)
+        ds_.append(d)
+    xy = np.concatenate(xys) if xys else np.zeros((0, 2))
+    d = np.concatenate(ds_) if ds_ else np.zeros(0)
+    the_box = box or ds.box
+    validate_dots(ds.path, xy, d, the_box)
+    outline = None
+    m = ds.manifest
+    if "outline_wkb_hex" in m:
+        try:
+            geom = orient_all(shapely.from_wkb(m["outline_wkb_hex"]))
+        except (shapely.errors.ShapelyError, TypeError, ValueError) as e:
+            raise PatternFileError(
+                f"{ds.path}: bad outline in the manifest ({one_line(e)})"
+            ) from None
+        outline = Domain(geom, float(m.get("edge_margin_mm", 0.0)), False, str(ds.path))
+    meta = dict(m.get("meta", {}))
+    return Pattern(xy=xy, diameter=d, box=the_box, meta=meta, outline=outline)
+
+
+def pattern_manifest(pattern, tiles: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Manifest fields of a pattern: its meta, box, nominal diameter and outline."""
+    return {
+        "job": pattern.meta.get("job"),
+        "seed": pattern.meta.get("seed"),
+        "diameter_mm": pattern.nominal_diameter,
+        "box": list(pattern.box),
+        "meta": pattern.meta,
+        "tiles": tiles
+        or {
+            "nx": 1,
+            "ny": 1,
+            "xs": [pattern.box[0], pattern.box[2]],
+            "ys": [pattern.box[1], pattern.box[3]],
+        },
+        **outline_hex(pattern.outline),
+    }
+
+
+def save_dataset(pattern, path: str | Path) -> None:
+    """Write an in-memory pattern as a one-part dataset."""
+    with write_dataset(path, pattern_manifest(pattern)) as w:
+        w.write_part(0, (0, 0), pattern.xy, pattern.diameter)
