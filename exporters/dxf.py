@@ -14,9 +14,9 @@ import re
 from pathlib import Path
 
 import ezdxf
-import numpy as np
 
 from optdot.io.atomic import atomic_path, expect_tail
+from optdot.io.dataset import Dataset
 from optdot.pattern import Pattern
 
 from .options import ExportOptions
@@ -126,25 +126,28 @@ def _find_float(lines: list[str], value: float) -> int:
     raise RuntimeError("template circle not found in ezdxf output")  # pragma: no cover
 
 
-def write_dxf(pattern: Pattern, path: str | Path, opts: ExportOptions) -> None:
-    """Write the DXF atomically (R2010 by default, ``opts.dxf_version`` otherwise)."""
+def write_dxf(pattern: Pattern | Dataset, path: str | Path, opts: ExportOptions) -> None:
+    """Write the DXF atomically (R2010 by default, ``opts.dxf_version`` otherwise); a
+    dataset is streamed part by part (memory: one part)."""
     head, fmt, tail, seed = _template(pattern, opts.dxf_version)
     has_handle = "%X" in fmt
     varying = pattern.uniform_diameter is None
     n = pattern.n
-    handles = np.arange(seed, seed + n, dtype=np.int64)
     head = head.replace("{SEED}", f"{seed + n:X}")
     verify = expect_tail(tail[-8:].encode("ascii"), str(path))  # "  0\nEOF\n"
     with atomic_path(path, verify) as tmp, open(tmp, "w", encoding="ascii", newline="\n") as fh:
         fh.write(head)
         chunk = 100_000
-        for a in range(0, n, chunk):
-            xy = pattern.xy[a : a + chunk]
-            cols = [xy[:, 0].tolist(), xy[:, 1].tolist()]
-            if has_handle:
-                cols.insert(0, handles[a : a + chunk].tolist())
-            if varying:
-                cols.append((0.5 * pattern.diameter[a : a + chunk]).tolist())
-            rows = zip(*cols, strict=True)
-            fh.write("".join(fmt % row for row in rows))
+        done = 0
+        for _, part_xy, part_d in pattern.chunks():  # one part, or one per tile (datasets)
+            for a in range(0, len(part_xy), chunk):
+                xy = part_xy[a : a + chunk]
+                cols = [xy[:, 0].tolist(), xy[:, 1].tolist()]
+                if has_handle:
+                    cols.insert(0, list(range(seed + done, seed + done + len(xy))))
+                if varying:
+                    cols.append((0.5 * part_d[a : a + chunk]).tolist())
+                rows = zip(*cols, strict=True)
+                fh.write("".join(fmt % row for row in rows))
+                done += len(xy)
         fh.write(tail)

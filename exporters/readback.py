@@ -67,32 +67,7 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
     top = tops[0]
     centres: list[np.ndarray] = []
     diameters: list[np.ndarray] = []
-    on_layer = (opts.layer, opts.datatype)
-    for ref in top.references:
-        cell = ref.cell
-        if isinstance(cell, str):
-            raise PatternFileError(f"{path}: reference to a missing cell {cell!r}")
-        pts = [p for p in cell.polygons if (p.layer, p.datatype) == on_layer]
-        if not pts:
-            continue
-        if len(pts) > 1:
-            raise PatternFileError(
-                f"{path}: cell {cell.name} holds {len(pts)} shapes on layer "
-                f"{opts.layer}/{opts.datatype}; a dot cell holds one circle"
-            )
-        centre, radius = _circle(path, pts[0].points, f"cell {cell.name}", to_mm)
-        if np.hypot(*centre) * to_mm > 1e-6:
-            raise PatternFileError(
-                f"{path}: the circle of cell {cell.name} is not centred on the cell origin"
-            )
-        # vertices sit on the circle, snapped to the database grid: their mean radius
-        # recovers the diameter to well under 1 nm
-        diameter = round(2 * radius, 6)
-        origins = np.array([ref.origin])
-        if ref.repetition.size > 1:
-            origins = ref.repetition.get_offsets() + np.array(ref.origin)
-        centres.append(origins * to_mm)
-        diameters.append(np.full(len(origins), diameter))
+    _collect(path, top, np.zeros(2), opts, to_mm, centres, diameters, 0)
     for poly in top.polygons:
         if (poly.layer, poly.datatype) != (opts.layer, opts.datatype):
             continue
@@ -111,6 +86,48 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
     rings = [p.points * to_mm for p in outline]
     xy = np.round(np.concatenate(centres), 6)
     return _pattern(path, xy, np.concatenate(diameters), rings, filled=True)
+
+
+#: Deepest hierarchy read: top -> tile cells -> dot cells is 2.
+MAX_DEPTH = 4
+
+
+def _collect(path, cell, offset, opts, to_mm, centres, diameters, depth) -> None:
+    """Dots placed by ``cell``'s references, shifted by ``offset`` (file units): a
+    referenced cell with one circle on the dots' layer is a dot cell; one with references
+    of its own (a tile of a tiled export) is walked in turn."""
+    on_layer = (opts.layer, opts.datatype)
+    for ref in cell.references:
+        sub = ref.cell
+        if isinstance(sub, str):
+            raise PatternFileError(f"{path}: reference to a missing cell {sub!r}")
+        origins = np.array([ref.origin]) + offset
+        if ref.repetition.size > 1:
+            origins = ref.repetition.get_offsets() + origins[0]
+        pts = [p for p in sub.polygons if (p.layer, p.datatype) == on_layer]
+        if sub.references and not pts:
+            if depth >= MAX_DEPTH:
+                raise PatternFileError(f"{path}: cells nested deeper than {MAX_DEPTH}")
+            for o in origins:
+                _collect(path, sub, o, opts, to_mm, centres, diameters, depth + 1)
+            continue
+        if not pts:
+            continue
+        if len(pts) > 1:
+            raise PatternFileError(
+                f"{path}: cell {sub.name} holds {len(pts)} shapes on layer "
+                f"{opts.layer}/{opts.datatype}; a dot cell holds one circle"
+            )
+        centre, radius = _circle(path, pts[0].points, f"cell {sub.name}", to_mm)
+        if np.hypot(*centre) * to_mm > 1e-6:
+            raise PatternFileError(
+                f"{path}: the circle of cell {sub.name} is not centred on the cell origin"
+            )
+        # vertices sit on the circle, snapped to the database grid: their mean radius
+        # recovers the diameter to well under 1 nm
+        diameter = round(2 * radius, 6)
+        centres.append(origins * to_mm)
+        diameters.append(np.full(len(origins), diameter))
 
 
 def _circle(path: Path, pts: np.ndarray, what: str, to_mm: float) -> tuple[np.ndarray, float]:

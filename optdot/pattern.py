@@ -57,6 +57,11 @@ class Pattern:
         x0, y0, x1, y1 = self.box
         return [np.array([(x0, y0), (x1, y0), (x1, y1), (x0, y1)], dtype=np.float64)]
 
+    def chunks(self):
+        """``(label, xy [n, 2], diameter [n])`` parts of the dots: one, all of them (a
+        :class:`~optdot.io.dataset.Dataset` yields one per tile; exporters stream either)."""
+        yield (0, 0), self.xy, self.diameter
+
     @property
     def n(self) -> int:
         """Number of dots."""

@@ -205,6 +205,7 @@ def _tiled_meta(job: Job, plan: TilePlan) -> dict:
         "max_iter": opt.max_iter,
         "n": int(plan.quotas.sum()),
         "tiles": f"{plan.nx}x{plan.ny}",
+        "tiling": {"xs": [float(v) for v in plan.xs], "ys": [float(v) for v in plan.ys]},
     }
 
 
@@ -281,6 +282,7 @@ def _run_tiled(job, plan, executor, output, progress) -> Pattern | TiledRun:
             "job": job.name,
             "seed": job.optimize.seed,
             "diameter_mm": job.diameter,
+            "uniform_diameter_mm": job.diameter,
             "box": list(job.box),
             "meta": meta,
             "tiles": plan.to_json(),

@@ -28,6 +28,7 @@ ALLOWED = {
     "sampling": {"geometry"},
     "spatial": set(),
     "relax": {"errors", "geometry", "spatial"},
+    "tiling": {"config", "errors", "geometry", "relax", "runtime", "sampling", "spatial"},
     "pattern": {"geometry", "io", "_imports"},
     "quality": {"config", "geometry", "pattern", "io"},
     "exporters": {"errors", "geometry", "io", "pattern", "runtime"},
@@ -42,6 +43,7 @@ ALLOWED = {
         "runtime",
         "sampling",
         "exporters",
+        "tiling",
     },
     "cli": {"config", "errors", "exporters", "io", "pipeline", "quality"},
 }

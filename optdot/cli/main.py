@@ -227,6 +227,35 @@ def run_job(job, quiet: bool):
     return pattern
 
 
+def _tile_options(fn):
+    """``--tiles``, ``--tile-size``, ``--scheduler``, ``--workers``: tiled runs on Dask."""
+    fn = click.option(
+        "--workers",
+        type=click.IntRange(1, 1024),
+        help="Worker processes of the embedded local cluster (default: the cores).",
+    )(fn)
+    fn = click.option(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="Run the tiles on this Dask scheduler (tcp://HOST:8786; default: "
+        "$DASK_SCHEDULER_ADDRESS, else a local cluster started here).",
+    )(fn)
+    fn = click.option(
+        "--tile-size",
+        type=click.FloatRange(0.5, 10_000, min_open=False),
+        metavar="MM",
+        help="Side of a tile, mm (default: about 150,000 dots per tile).",
+    )(fn)
+    return click.option(
+        "--tiles",
+        type=click.Choice(["auto", "on", "off"]),
+        default="auto",
+        show_default=True,
+        help="Tiled generation on Dask: auto = when one process would not fit, or from "
+        "2 million dots.",
+    )(fn)
+
+
 @main.command()
 @click.argument("job_file", type=click.Path(path_type=Path))
 @click.option(
@@ -234,18 +263,37 @@ def run_job(job, quiet: bool):
     "--output",
     type=click.Path(path_type=Path),
     required=True,
-    help="Pattern file to write (.csv or .npz).",
+    help="Pattern to write: .csv, .npz, or .parquet (a dataset directory, for large ones).",
 )
 @_job_options
+@_tile_options
 @_user_errors
-def generate(job_file, output, seed, max_iter, method, formulation, quiet):
+def generate(
+    job_file,
+    output,
+    seed,
+    max_iter,
+    method,
+    formulation,
+    quiet,
+    tiles,
+    tile_size,
+    scheduler,
+    workers,
+):
     """Generate the dot pattern of JOB_FILE and write it to OUTPUT."""
     from ..io.patterns import save_pattern
+    from ..pipeline import use_tiles
 
-    if output.suffix.lower() not in (".csv", ".npz"):
-        raise click.BadParameter("must end in .csv or .npz", param_hint="'-o' / '--output'")
+    if output.suffix.lower() not in (".csv", ".npz", ".parquet"):
+        raise click.BadParameter(
+            "must end in .csv, .npz or .parquet", param_hint="'-o' / '--output'"
+        )
     job = load_job_with(job_file, seed, max_iter, method, formulation)
     _check_outputs({"output": output}, job.inputs)  # before the run, not after it
+    if use_tiles(job, tiles):
+        _generate_tiled(job, output, quiet, tile_size, scheduler, workers)
+        return
     pattern = run_job(job, quiet)
     save_pattern(pattern, output)
     m = pattern.meta
@@ -255,6 +303,50 @@ def generate(job_file, output, seed, max_iter, method, formulation, quiet):
             f"{pattern.stats['total_s']:.1f} s",
             err=True,
         )
+
+
+def _generate_tiled(job, output: Path, quiet: bool, tile_size, scheduler, workers) -> None:
+    """``generate`` in tiles: a dataset streamed tile by tile, or a gathered pattern."""
+    import time
+
+    from ..io.atomic import interrupted
+    from ..io.dataset import is_dataset
+    from ..io.patterns import save_pattern
+    from ..pipeline import generate_tiled
+    from .progress import ProgressBar
+
+    bar = ProgressBar(1000, label="tiles", enabled=False if quiet else None)
+
+    def progress(fraction: float, line: str) -> None:
+        bar.line(fraction, line)
+        if interrupted():
+            raise KeyboardInterrupt
+
+    def announce(line: str) -> None:
+        if not quiet:
+            click.echo(line, err=True)
+
+    t0 = time.perf_counter()
+    target = output if is_dataset(output) else None
+    try:
+        result = generate_tiled(
+            job,
+            target,
+            tile_size=tile_size,
+            scheduler=scheduler,
+            workers=workers,
+            announce=announce,
+            progress=progress,
+        )
+    finally:
+        bar.close()
+    if target is None:
+        save_pattern(result, output)
+        n = result.n
+    else:
+        n = sum(result.counts.values())
+    if not quiet:
+        click.echo(f"{output}: {n} dots in tiles, {time.perf_counter() - t0:.1f} s", err=True)
 
 
 def _inputs(source: Path, job_path) -> tuple:

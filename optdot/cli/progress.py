@@ -49,6 +49,21 @@ class ProgressBar:
         self.stream.flush()
         self._drawn = True
 
+    def line(self, fraction: float, text: str) -> None:
+        """Draw a fraction done (0..1) and a line of text (tiled runs: tiles and ETA)."""
+        if not self.enabled:
+            return
+        now = time.perf_counter()
+        if now - self._last < 0.1 and fraction < 1.0:
+            return
+        self._last = now
+        width = 24
+        done = int(width * min(max(fraction, 0.0), 1.0))
+        bar = "#" * done + "." * (width - done)
+        self.stream.write(f"\r{self.label} [{bar}] {text}  {now - self.t0:.1f} s ")
+        self.stream.flush()
+        self._drawn = True
+
     def close(self) -> None:
         """End the line if anything was drawn."""
         if self._drawn:

@@ -69,7 +69,11 @@ def check_target(target: str | Path, inputs: tuple[Path, ...] = ()) -> None:
             f"{target.name[:40]}...: file name is {len(os.fsencode(target.name))} bytes, "
             f"longer than the {name_max} this file system allows"
         )
-    if target.is_dir():
+    if target.suffix.lower() == ".parquet":
+        from .dataset import check_dataset_target  # a dataset is a directory it replaces
+
+        check_dataset_target(target)
+    elif target.is_dir():
         raise ExportError(f"{target}: is a directory")
     _refuse_read_only(target)
     if not os.access(directory, os.W_OK | os.X_OK):

@@ -34,6 +34,7 @@ import shutil
 import tempfile
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -186,7 +187,7 @@ def write_dataset(target: str | Path, manifest: dict[str, Any]) -> Iterator[Data
         raise
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Dataset:
     """An opened dataset: its manifest, checked, and where its parts are.
 
@@ -209,6 +210,45 @@ class Dataset:
     @property
     def parts(self) -> list[dict[str, Any]]:
         return self.manifest["parts"]
+
+    @property
+    def uniform_diameter(self) -> float | None:
+        """The one diameter of every dot, mm, or None when sizes vary."""
+        v = self.manifest.get("uniform_diameter_mm")
+        return None if v is None else float(v)
+
+    @property
+    def nominal_diameter(self) -> float:
+        return float(self.manifest["diameter_mm"])
+
+    @cached_property
+    def outline(self):
+        """The panel outline (a :class:`~optdot.geometry.domain.Domain`), or None."""
+        m = self.manifest
+        if "outline_wkb_hex" not in m:
+            return None
+        import shapely
+
+        from ..geometry.domain import Domain, orient_all
+
+        try:
+            geom = orient_all(shapely.from_wkb(m["outline_wkb_hex"]))
+        except (shapely.errors.ShapelyError, TypeError, ValueError) as e:
+            raise PatternFileError(
+                f"{self.path}: bad outline in the manifest ({one_line(e)})"
+            ) from None
+        return Domain(geom, float(m.get("edge_margin_mm", 0.0)), False, str(self.path))
+
+    def outline_rings(self) -> list[np.ndarray]:
+        """Boundary loops of the panel (outline and holes, or the box), mm."""
+        if self.outline is not None:
+            return self.outline.rings()
+        x0, y0, x1, y1 = self.box
+        return [np.array([(x0, y0), (x1, y0), (x1, y1), (x0, y1)], dtype=np.float64)]
+
+    def chunks(self) -> Iterator[tuple[tuple[int, int], np.ndarray, np.ndarray]]:
+        """``(tile, xy [n, 2], diameter [n])`` per part (what streamed exporters read)."""
+        return self.iter_parts()
 
     def read_part(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         """Part ``k`` (position in :attr:`parts`): ``(xy [n, 2], diameter [n])``, mm."""
@@ -302,9 +342,7 @@ def load_dataset(path: str | Path, box=None):
     Raises:
         PatternFileError: see :func:`open_dataset`, :meth:`Dataset.verify`.
     """
-    import shapely
 
-    from ..geometry.domain import Domain, orient_all
     from ..pattern import Pattern
     from .patterns import validate_dots
 
@@ -318,17 +356,11 @@ def load_dataset(path: str | Path, box=None):
     d = np.concatenate(ds_) if ds_ else np.zeros(0)
     the_box = box or ds.box
     validate_dots(ds.path, xy, d, the_box)
-    outline = None
     m = ds.manifest
-    if "outline_wkb_hex" in m:
-        try:
-            geom = orient_all(shapely.from_wkb(m["outline_wkb_hex"]))
-        except (shapely.errors.ShapelyError, TypeError, ValueError) as e:
-            raise PatternFileError(
-                f"{ds.path}: bad outline in the manifest ({one_line(e)})"
-            ) from None
-        outline = Domain(geom, float(m.get("edge_margin_mm", 0.0)), False, str(ds.path))
+    outline = ds.outline
     meta = dict(m.get("meta", {}))
+    if isinstance(m.get("tiles"), dict) and m["tiles"].get("nx", 1) * m["tiles"].get("ny", 1) > 1:
+        meta["tiling"] = {"xs": m["tiles"]["xs"], "ys": m["tiles"]["ys"]}
     return Pattern(xy=xy, diameter=d, box=the_box, meta=meta, outline=outline)
 
 
@@ -338,6 +370,7 @@ def pattern_manifest(pattern, tiles: dict[str, Any] | None = None) -> dict[str, 
         "job": pattern.meta.get("job"),
         "seed": pattern.meta.get("seed"),
         "diameter_mm": pattern.nominal_diameter,
+        "uniform_diameter_mm": pattern.uniform_diameter,
         "box": list(pattern.box),
         "meta": pattern.meta,
         "tiles": tiles

@@ -23,6 +23,7 @@ from .metrics import (
     psi6,
     radial_spectrum,
 )
+from .seams import seam_metrics
 
 
 @dataclass
@@ -191,6 +192,22 @@ def run_qa(
             )
         )
         m["edge_band_coverage_ratio"] = edge_bands(pattern, density)
+
+    tiling = pattern.meta.get("tiling")
+    if isinstance(tiling, dict) and "xs" in tiling and "ys" in tiling:
+        flag = np.zeros(n, bool)
+        flag[near.ravel()] = True
+        nn_n = arrays.get("nn_norm")
+        m["seams"] = seam_metrics(
+            xy,
+            pattern.areas,
+            np.asarray(tiling["xs"], float),
+            np.asarray(tiling["ys"], float),
+            flag,
+            np.abs(psi),
+            nn_n if nn_n is not None and len(nn_n) == n else None,
+            density,
+        )
 
     tile = densest_tile(pattern, 2.0)
     freq, power = radial_spectrum(xy, tile, px=pattern.nominal_diameter / 4)

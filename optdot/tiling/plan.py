@@ -23,7 +23,7 @@ from ..relax.circles import hex_radius
 DEFAULT_TILE_DOTS = 150_000
 #: Phase-2 band half-width and frozen shell, in units of the largest hexagonal spacing.
 BAND_SPACINGS = 6.0
-HALO_SPACINGS = 3.0
+HALO_SPACINGS = 2.0
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,14 @@ from ..config.job import Job, OptimizeParams
 from ..geometry.density import DensityMap
 from ..runtime.cluster import single_threaded
 from .plan import TilePlan, plan_tiles
-from .tasks import TileDots, apply_seams, legalize_tile, relax_seams, relax_tile
+from .tasks import (
+    TileDots,
+    apply_seams,
+    initial_task,
+    legalize_tile,
+    relax_seams,
+    relax_tile,
+)
 
 #: ``sink(tile, xy)``: a finished tile's final positions ``[n, 2]``, mm.
 Sink = Callable[[tuple[int, int], np.ndarray], None]
@@ -120,14 +127,16 @@ def run_tiles(
     }
     schedule: list[tuple[int, int, int, int, tuple[int, int]]] = []
     for i, j in tiles:
-        schedule.append((j, 0, j, 0, (i, j)))  # relax: wave j
+        schedule.append((j, -1, j, 0, (i, j)))  # initial dots: wave j (relax j-1 needs them)
+        schedule.append((j + 1, 0, j, 0, (i, j)))  # relax: needs initial j-1..j+1
     for i, j in corners:
-        schedule.append((j, 1, j, 0, (i, j)))  # seams of corner row j: needs relax j-1, j
+        schedule.append((j + 1, 1, j, 0, (i, j)))  # seams of corner row j: relax j-1, j
     for i, j in tiles:
-        schedule.append((j + 1, 2, j, 0, (i, j)))  # merge: needs corners j, j+1
+        schedule.append((j + 2, 2, j, 0, (i, j)))  # merge: needs corners j, j+1
         c = plan.colour(i, j)
-        schedule.append((j + 2 + (j % 2), 3 + (j % 2), j, c, (i, j)))  # guarantee
+        schedule.append((j + 3 + (j % 2), 3 + (j % 2), j, c, (i, j)))  # guarantee
     schedule.sort()
+    initial: dict = {}
     relaxed: dict = {}
     seams: dict = {}
     merged: dict = {}
@@ -135,8 +144,11 @@ def run_tiles(
     kind_of: dict[Any, str] = {}
     for _, kind, _, _, (i, j) in schedule:
         key = f"{i}-{j}"
-        if kind == 0:
-            h = executor.submit("relax", key, relax_tile, jobf, plan, i, j)
+        if kind == -1:
+            initial[i, j] = executor.submit("initial", key, initial_task, jobf, plan, i, j)
+        elif kind == 0:
+            around = [initial[u] for u in plan.neighbours(i, j)]
+            h = executor.submit("relax", key, relax_tile, jobf, plan, i, j, initial[i, j], *around)
             relaxed[i, j] = h
             kind_of[id(h)] = "relax"
         elif kind == 1:
@@ -156,7 +168,12 @@ def run_tiles(
     counts: dict[tuple[int, int], int] = {}
     tile_of = {id(h): t for t, h in final.items()}
     watched = list(relaxed.values()) + list(final.values())
-    relaxed.clear(), seams.clear(), merged.clear()  # the graph holds what it still needs
+    (
+        initial.clear(),
+        relaxed.clear(),
+        seams.clear(),
+        merged.clear(),
+    )  # the graph holds what it still needs
     n_done = 0
     for h in executor.finished(watched):
         kind = kind_of[id(h)]
