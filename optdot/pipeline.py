@@ -228,6 +228,7 @@ def generate_tiled(
     tile_size: float | None = None,
     scheduler: str | None = None,
     workers: int | None = None,
+    worker_memory: int | None = None,
     executor: InProcess | OnDask | None = None,
     announce: Announce | None = None,
     progress: TileProgress | None = None,
@@ -241,6 +242,7 @@ def generate_tiled(
         tile_size: tile side, mm (default: about 150k dots per tile).
         scheduler: an existing Dask scheduler's address (default: a LocalCluster).
         workers: LocalCluster worker processes (default: the cores).
+        worker_memory: LocalCluster memory limit per worker, bytes.
         executor: run on this instead of a cluster (tests: :class:`InProcess`).
         announce: told the cluster's dashboard and the tiling before the run.
         progress: ``progress(fraction, line)`` as tiles finish.
@@ -256,7 +258,7 @@ def generate_tiled(
     plan = plan or plan_tiles(job, tile_size)
     if executor is not None:
         return _run_tiled(job, plan, executor, output, progress)
-    with connect(scheduler_address(scheduler), workers) as cluster:
+    with connect(scheduler_address(scheduler), workers, worker_memory) as cluster:
         _check_tile_memory(job, plan, cluster.memory_per_worker)
         if announce is not None:
             kind = "local cluster" if cluster.embedded else "cluster"
@@ -340,6 +342,7 @@ def export(
     job: Job | None = None,
     options=None,
     force: bool = False,
+    stream=None,
 ) -> QAResult:
     """Run the QA gate, then write ``pattern`` in each format of ``outputs``.
 
@@ -349,6 +352,8 @@ def export(
         job: thresholds and map of the gate (None: default thresholds).
         options: :class:`optdot.exporters.ExportOptions` (None: defaults).
         force: write even if the gate fails.
+        stream: the :class:`~optdot.io.dataset.Dataset` ``pattern`` was read from: masks
+            (GDS/OAS/DXF) are then streamed from it tile by tile, hierarchically.
 
     Returns:
         The gate's result (check ``passed``: with ``force`` it may have failed).
@@ -364,5 +369,6 @@ def export(
         raise QAGateError(result)
     with transaction():  # all outputs replaced together, or none
         for fmt, path in outputs.items():
-            exporters.write(pattern, fmt, path, options)
+            src = stream if stream is not None and fmt in ("gds", "oas", "dxf") else pattern
+            exporters.write(src, fmt, path, options)
     return result

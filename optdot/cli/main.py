@@ -230,6 +230,13 @@ def run_job(job, quiet: bool):
 def _tile_options(fn):
     """``--tiles``, ``--tile-size``, ``--scheduler``, ``--workers``: tiled runs on Dask."""
     fn = click.option(
+        "--worker-memory",
+        type=click.FloatRange(0.01, 4096),
+        metavar="GIB",
+        help="Memory limit of each local worker, GiB (default: 85 % of the available "
+        "memory shared evenly).",
+    )(fn)
+    fn = click.option(
         "--workers",
         type=click.IntRange(1, 1024),
         help="Worker processes of the embedded local cluster (default: the cores).",
@@ -280,6 +287,7 @@ def generate(
     tile_size,
     scheduler,
     workers,
+    worker_memory,
 ):
     """Generate the dot pattern of JOB_FILE and write it to OUTPUT."""
     from ..io.patterns import save_pattern
@@ -292,7 +300,8 @@ def generate(
     job = load_job_with(job_file, seed, max_iter, method, formulation)
     _check_outputs({"output": output}, job.inputs)  # before the run, not after it
     if use_tiles(job, tiles):
-        _generate_tiled(job, output, quiet, tile_size, scheduler, workers)
+        memory = None if worker_memory is None else int(worker_memory * 2**30)
+        _generate_tiled(job, output, quiet, tile_size, scheduler, workers, memory)
         return
     pattern = run_job(job, quiet)
     save_pattern(pattern, output)
@@ -305,7 +314,9 @@ def generate(
         )
 
 
-def _generate_tiled(job, output: Path, quiet: bool, tile_size, scheduler, workers) -> None:
+def _generate_tiled(
+    job, output: Path, quiet: bool, tile_size, scheduler, workers, worker_memory
+) -> None:
     """``generate`` in tiles: a dataset streamed tile by tile, or a gathered pattern."""
     import time
 
@@ -335,6 +346,7 @@ def _generate_tiled(job, output: Path, quiet: bool, tile_size, scheduler, worker
             tile_size=tile_size,
             scheduler=scheduler,
             workers=workers,
+            worker_memory=worker_memory,
             announce=announce,
             progress=progress,
         )
@@ -434,7 +446,7 @@ def export(
     formulation,
     quiet,
 ):
-    """Write masks and previews of SOURCE (a job file, or a pattern .csv/.npz).
+    """Write masks and previews of SOURCE (a job file, or a pattern .csv/.npz/.parquet).
 
     Existing output files are replaced (atomically: a failed run leaves them as they were).
     Masks are written only if the QA gate passes, unless --force.
@@ -471,11 +483,16 @@ def export(
     else:
         job, inputs = _inputs(source, job_path)
     _check_outputs(outputs, inputs)
+    stream = None
     if source.suffix.lower() == ".toml":
         pattern = run_job(job, quiet)
     else:
         pattern = _read_with_job(source, job)
-    result = export_pattern(pattern, outputs, job, opts, force=force)
+        if source.suffix.lower() == ".parquet":
+            from ..io.dataset import open_dataset
+
+            stream = open_dataset(source)  # masks streamed tile by tile
+    result = export_pattern(pattern, outputs, job, opts, force=force, stream=stream)
     if not result.passed:
         click.echo(
             f"optdot: warning: QA gate failed ({result.failures()}); writing anyway (--force)",

@@ -1,0 +1,310 @@
+"""Tiled generation (optdot.tiling), the Parquet dataset and streamed hierarchical masks.
+
+The Dask cases run the real command on a LocalCluster: the led sample (111k dots) in
+8 tiles of 10 mm, on 2 workers and on 1 worker, must give the same bytes."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from optdot.config.schema import load_job
+from optdot.errors import PatternFileError
+from optdot.io.dataset import MANIFEST, load_dataset, open_dataset
+from optdot.pipeline import generate_tiled, qa
+from optdot.relax.legalize import legalize
+from optdot.tiling.plan import plan_tiles, tile_integrals
+from optdot.tiling.run import InProcess
+from optdot.tiling.tasks import initial_tile
+
+from .conftest import SAMPLES
+
+LED = SAMPLES / "led" / "job.toml"
+
+
+def optdot(*args, check=True) -> subprocess.CompletedProcess:
+    r = subprocess.run(
+        [sys.executable, "-m", "optdot", *map(str, args)], capture_output=True, text=True
+    )
+    if check:
+        assert r.returncode == 0, r.stderr
+    return r
+
+
+@pytest.mark.parametrize("sample,side", [("led", 10.0), ("led", 7.0), ("outline", 8.0)])
+def test_tile_quotas_sum_to_the_jobs_dot_count(sample, side):
+    job = load_job(SAMPLES / sample / "job.toml")
+    plan = plan_tiles(job, side=side)
+    assert plan.count > 1
+    assert int(plan.quotas.sum()) == job.n_dots
+    w = tile_integrals(job, plan.xs, plan.ys)
+    exact = job.n_dots * w / w.sum()
+    assert np.abs(plan.quotas - exact).max() < 1.0  # largest remainders: within one dot
+
+
+def test_initial_tile_dots_lie_in_their_tile_and_follow_the_map():
+    job = load_job(LED)
+    plan = plan_tiles(job, side=10.0)
+    for i, j in plan.tiles():
+        xy = initial_tile(job, plan, i, j)
+        x0, y0, x1, y1 = plan.rect(i, j)
+        assert len(xy) == plan.quotas[j, i]
+        assert (xy[:, 0] >= x0).all() and (xy[:, 0] <= x1).all()
+        assert (xy[:, 1] >= y0).all() and (xy[:, 1] <= y1).all()
+        assert not job.density.empty_mask(xy).any()
+    # dots per map cell over the whole panel follow rho x cell area (Sobol: tight)
+    xy = np.concatenate([initial_tile(job, plan, i, j) for i, j in plan.tiles()])
+    got = np.bincount(job.density.cell_index(xy), minlength=job.density.grid.size)
+    got = got.reshape(job.density.shape).sum(axis=1)  # per row of cells
+    want = job.density.grid.sum(axis=1) / job.density.grid.sum() * len(xy)
+    assert np.abs(got - want).max() <= 12  # a random throw: off by ~sqrt(want), 18..50
+    assert np.sqrt(want).mean() > 30
+
+
+def test_frozen_dots_keep_their_positions_exactly():
+    from optdot.relax.optdot import relax_staged
+    from optdot.tiling.steps import formulation_for, problem_of, settings_for
+
+    job = load_job(LED)
+    rng = np.random.default_rng(5)
+    xy0 = rng.uniform([10.0, 5.0], [11.0, 6.0], (300, 2))
+    frozen = rng.random(300) < 0.3
+    rho = job.density.at(xy0)
+    assert (rho > 0).all()
+    xy, _, _ = relax_staged(
+        problem_of(job), formulation_for(job), xy0, rho, settings_for(job), frozen=frozen
+    )
+    assert np.array_equal(xy[frozen], xy0[frozen])
+    assert np.abs(xy[~frozen] - xy0[~frozen]).max() > 1e-4  # the others moved
+
+
+def test_a_frozen_partner_leaves_the_whole_push_to_the_other_dot(tiny_job):
+    xy = np.array([[1.0, 0.75], [1.03, 0.75], [1.5, 0.75]])
+    frozen = np.array([True, False, False])
+    home = tiny_job.density.cell_index(xy)
+    leg = legalize(xy, tiny_job.density, home, tiny_job.domain, 0.023, 0.046, frozen=frozen)
+    assert np.array_equal(leg.xy[0], np.round(xy[0], 6))
+    assert np.hypot(*(leg.xy[1] - leg.xy[0])) >= 0.046
+
+
+def test_a_tiled_job_in_process_meets_the_guarantee_with_the_exact_count():
+    job = load_job(SAMPLES / "outline" / "job.toml")
+    plan = plan_tiles(job, side=8.0)
+    p = generate_tiled(job, plan=plan, executor=InProcess())
+    assert p.n == job.n_dots
+    pairs = cKDTree(p.xy).query_pairs(job.min_distance, output_type="ndarray")
+    assert len(pairs) == 0
+    r = qa(p, job)
+    assert r.passed, r.failures()
+    assert r.metrics["seams"]["tiles"] == [plan.nx, plan.ny]
+
+
+@pytest.fixture(scope="module")
+def tiled(tmp_path_factory):
+    """The led sample tiled on a 2-worker and on a 1-worker LocalCluster."""
+    d = tmp_path_factory.mktemp("tiled")
+    common = ["generate", LED, "--tiles", "on", "--tile-size", "10"]
+    r2 = optdot(*common, "--workers", "2", "-o", d / "two.parquet")
+    optdot(*common, "--workers", "1", "-o", d / "one.parquet", "-q")
+    return d, r2
+
+
+def test_two_workers_and_one_give_the_same_bytes(tiled):
+    d, r2 = tiled
+    two, one = d / "two.parquet", d / "one.parquet"
+    names = sorted(p.name for p in two.iterdir())
+    assert names == sorted(p.name for p in one.iterdir())
+    assert len(names) == 9 and MANIFEST in names
+    for name in names:
+        assert (two / name).read_bytes() == (one / name).read_bytes(), name
+    assert "local cluster: 2 workers, dashboard http" in r2.stderr
+    assert "8 tiles (4 x 2)" in r2.stderr
+
+
+def test_the_tiled_pattern_passes_qa_and_its_seams_are_not_found(tiled):
+    d, _ = tiled
+    job = load_job(LED)
+    p = load_dataset(d / "two.parquet")
+    assert p.n == job.n_dots
+    r = qa(p, job)
+    assert r.passed, r.failures()
+    seams = r.metrics["seams"]
+    assert seams["passed"], seams
+    assert seams["band_dots"] > 10_000
+
+
+def test_pandas_and_dask_read_the_dataset_as_it_is(tiled):
+    pd = pytest.importorskip("pandas")
+    import dask.dataframe as dd
+
+    d, _ = tiled
+    path = d / "two.parquet"
+    ds = open_dataset(path)
+    df = pd.read_parquet(path)
+    assert list(df.columns) == ["x_mm", "y_mm", "diameter_mm"] and len(df) == ds.n
+    assert len(dd.read_parquet(str(path)).compute()) == ds.n
+    ours = load_dataset(path)
+    assert np.array_equal(np.sort(df["x_mm"].to_numpy()), np.sort(ours.xy[:, 0]))
+
+
+def _klayout_centres(path, layer=1, datatype=0) -> np.ndarray:
+    import klayout.db as kdb
+
+    ly = kdb.Layout()
+    ly.read(str(path))
+    li = ly.layer(layer, datatype)
+    it = ly.top_cell().begin_shapes_rec(li)
+    out = []
+    while not it.at_end():
+        box = it.shape().bbox().transformed(it.trans())
+        out.append(((box.left + box.right) // 2, (box.bottom + box.top) // 2))
+        it.next()
+    a = np.array(out, dtype=np.int64)
+    return a[np.lexsort((a[:, 1], a[:, 0]))]
+
+
+@pytest.mark.parametrize("fmt", ["gds", "oas"])
+def test_hierarchical_masks_hold_exactly_the_dots_of_the_flat_export(tiled, tmp_path, fmt):
+    from optdot import exporters
+
+    d, _ = tiled
+    src = d / "two.parquet"
+    tiled_mask = tmp_path / f"tiled.{fmt}"
+    optdot("export", src, f"--{fmt}", tiled_mask, "--job", LED, "-q")
+    flat = tmp_path / f"flat.{fmt}"
+    exporters.write(load_dataset(src), fmt, flat)
+    a, b = _klayout_centres(tiled_mask), _klayout_centres(flat)
+    assert len(a) == open_dataset(src).n
+    assert np.array_equal(a, b)
+    import klayout.db as kdb
+
+    ly = kdb.Layout()
+    ly.read(str(tiled_mask))
+    names = {ly.cell(c).name for c in ly.each_cell_bottom_up()}
+    assert {"TOP", "DOT", "T0_0", "T3_1"} <= names  # one cell per tile
+    r = optdot("qa", tiled_mask, "--job", LED, check=False)
+    assert r.returncode == 0, r.stdout + r.stderr
+
+
+def test_a_dataset_without_its_manifest_or_with_a_changed_part_is_refused(tiled, tmp_path):
+    import shutil
+
+    d, _ = tiled
+    copy = tmp_path / "c.parquet"
+    shutil.copytree(d / "two.parquet", copy)
+    part = copy / "part-00003.parquet"
+    data = bytearray(part.read_bytes())
+    data[100] ^= 0xFF
+    part.write_bytes(bytes(data))
+    with pytest.raises(PatternFileError, match="checksum"):
+        load_dataset(copy)
+    (copy / MANIFEST).unlink()
+    with pytest.raises(PatternFileError, match="no _manifest.json"):
+        load_dataset(copy)
+
+
+def test_an_interrupted_tiled_run_leaves_the_previous_dataset(tiled, tmp_path):
+    import shutil
+
+    d, _ = tiled
+    out = tmp_path / "run.parquet"
+    shutil.copytree(d / "one.parquet", out)
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    args = ["generate", LED, "--tiles", "on", "--tile-size", "10", "--seed", "9", "-o", out]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "optdot", *map(str, args)], stderr=subprocess.PIPE, text=True
+    )
+    deadline = time.time() + 60
+    while time.time() < deadline and "dashboard" not in (err := proc.stderr.readline()):
+        pass
+    time.sleep(1.0)  # tiles are being relaxed
+    proc.send_signal(signal.SIGINT)
+    rest = proc.communicate(timeout=120)[1]
+    assert proc.returncode == 130, err + rest
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert [p.name for p in tmp_path.iterdir()] == ["run.parquet"]  # no temporary left
+
+
+def test_cluster_faults_are_one_line(tmp_path):
+    out = tmp_path / "x.parquet"
+    r = optdot(
+        "generate",
+        LED,
+        "--tiles",
+        "on",
+        "--scheduler",
+        "tcp://127.0.0.1:9",
+        "-o",
+        out,
+        check=False,
+    )
+    assert r.returncode == 4 and "cannot reach the Dask scheduler" in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    r = optdot(
+        "generate",
+        LED,
+        "--tiles",
+        "on",
+        "--tile-size",
+        "10",
+        "--worker-memory",
+        "0.05",
+        "-o",
+        out,
+        check=False,
+    )
+    assert r.returncode == 2 and "cannot" not in r.stderr and "each worker has" in r.stderr
+    assert not out.exists()
+
+
+def test_a_full_disk_while_writing_the_dataset_keeps_the_old_one(tiled, tmp_path):
+    import shutil
+
+    from .test_faults import optdot_limited
+
+    d, _ = tiled
+    out = tmp_path / "full.parquet"
+    shutil.copytree(d / "one.parquet", out)
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    r = optdot_limited(
+        200_000,
+        "generate",
+        LED,
+        "--tiles",
+        "on",
+        "--tile-size",
+        "10",
+        "--seed",
+        "4",
+        "-o",
+        out,
+        "-q",
+    )
+    assert r.returncode == 2, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and str(out) in r.stderr, r.stderr
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert [p.name for p in tmp_path.iterdir()] == ["full.parquet"]
+
+
+def test_a_directory_that_is_not_a_dataset_is_never_replaced(tmp_path):
+    victim = tmp_path / "precious.parquet"
+    victim.mkdir()
+    (victim / "notes.txt").write_text("keep me")
+    r = optdot("generate", SAMPLES / "tiny" / "job.toml", "-o", victim, "-q", check=False)
+    assert r.returncode == 2 and "not an optdot dataset" in r.stderr
+    assert (victim / "notes.txt").read_text() == "keep me"
+
+
+def test_a_small_job_writes_a_one_part_dataset_with_todays_dots(tmp_path, tiny_pattern):
+    out = tmp_path / "t.parquet"
+    optdot("generate", SAMPLES / "tiny" / "job.toml", "-o", out, "-q")
+    m = json.loads((out / MANIFEST).read_text())
+    assert m["tiles"]["nx"] == 1 and len(m["parts"]) == 1
+    assert np.array_equal(load_dataset(out).xy, tiny_pattern.xy)
