@@ -34,7 +34,7 @@ from .relax.legalize import check_guarantee, legalize
 from .relax.md import MDForce, md_relax
 from .relax.optdot import Progress, relax_staged
 from .runtime.cluster import connect, scheduler_address
-from .runtime.memory import available_bytes, check_memory, estimate_bytes
+from .runtime.memory import BASE_BYTES, available_bytes, check_memory, estimate_bytes
 from .sampling.initial import initial_dots, initial_dots_in
 from .tiling.plan import TilePlan, plan_tiles
 from .tiling.run import InProcess, OnDask, TiledRun, TileProgress, run_tiles, warm_up
@@ -209,6 +209,39 @@ def _tiled_meta(job: Job, plan: TilePlan) -> dict:
     }
 
 
+#: Bytes per dot of a tiled run gathered into one pattern in the command's process
+#: (positions, the order of tiles, the pattern, what the writer formats).
+GATHERED_BYTES_PER_DOT = 64
+#: Bytes per dot of a dataset on disk (three float64 columns, zstd), an upper bound.
+DATASET_BYTES_PER_DOT = 26
+
+
+def _check_gathered(job: Job, output: str | Path | None, where: str) -> None:
+    """Refuse, before any work, a tiled run whose result cannot be held or stored: in
+    memory when gathered (CSV/NPZ), on disk for a dataset."""
+    import shutil
+
+    n = job.n_dots
+    if output is None:
+        need = BASE_BYTES + n * GATHERED_BYTES_PER_DOT
+        have = available_bytes()
+        if need > 0.9 * have:
+            raise ResourceError(
+                f"{where}: {n:,} dots gathered into one pattern need about "
+                f"{need / 2**30:.1f} GiB but only {have / 2**30:.1f} GiB is available; "
+                "write a .parquet dataset instead"
+            )
+        return
+    parent = Path(output).resolve().parent
+    free = shutil.disk_usage(parent).free
+    need = n * DATASET_BYTES_PER_DOT
+    if need > free:
+        raise ResourceError(
+            f"{where}: the dataset of {n:,} dots needs about {need / 1e9:.1f} GB on disk, "
+            f"{parent} has {free / 1e9:.1f} GB free"
+        )
+
+
 def _check_tile_memory(job: Job, plan: TilePlan, per_worker: int) -> None:
     """Refuse tiles that cannot fit a worker's memory limit (0 = no limit)."""
     biggest = int(plan.quotas.max())
@@ -255,6 +288,7 @@ def generate_tiled(
     """
     where = str(job.source) if job.source else job.name
     _check_room(job, job.n_dots, where)
+    _check_gathered(job, output, where)
     plan = plan or plan_tiles(job, tile_size)
     if executor is not None:
         return _run_tiled(job, plan, executor, output, progress)

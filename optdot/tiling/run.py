@@ -121,8 +121,9 @@ def run_tiles(
     jobf = executor.share(job)
     tiles = plan.tiles()
     corners = plan.corners()
+    corner_set = set(corners)
     corners_of = {
-        t: [c for c in ((t[0] + a, t[1] + b) for b in (0, 1) for a in (0, 1)) if c in corners]
+        t: [c for c in ((t[0] + a, t[1] + b) for b in (0, 1) for a in (0, 1)) if c in corner_set]
         for t in tiles
     }
     schedule: list[tuple[int, int, int, int, tuple[int, int]]] = []

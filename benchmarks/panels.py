@@ -1,0 +1,172 @@
+"""Panel-scale benchmark: edge-lit light guides of a notebook, a monitor and a TV.
+
+Writes each panel's job and map (fill 0.08-0.42, LEDs along the bottom long edge; 1 mm
+cells) under ``benchmarks/out/panels/`` (not committed), runs ``optdot generate`` as a
+subprocess and prints dots, seconds, dots/s and the peak RSS of the whole process tree
+(the command, the Dask scheduler, nannies and workers), sampled every 0.2 s; then the QA
+summary and the seam table (bands along tile borders against tile interiors).
+
+    python benchmarks/panels.py notebook --single        # single process and tiled
+    python benchmarks/panels.py notebook monitor tv      # tiled only
+    python benchmarks/panels.py notebook --tile-size 20 --tile-size 30   # sweep tile size
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import psutil
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "benchmarks" / "out" / "panels"
+#: name: (width, height) mm
+PANELS = {
+    "notebook": (345.0, 194.0),  # 15.6-inch, ~1e7 dots
+    "monitor": (598.0, 336.0),  # 27-inch, ~3e7
+    "tv": (1218.0, 685.0),  # 55-inch, ~1.2e8
+    "coupon": (120.0, 70.0),  # ~1.2e6, for quick checks
+}
+
+
+def edge_lit_map(width: float, height: float, cell: float = 1.0) -> np.ndarray:
+    """``[ny, nx]`` fill 0.08-0.42: low at the LED edge (y = 0), rising away from it, with
+    darker spots in front of LEDs every 20 mm and brighter gaps between them."""
+    nx, ny = round(width / cell), round(height / cell)
+    x = (np.arange(nx) + 0.5) * cell
+    y = (np.arange(ny) + 0.5) * cell
+    X, Y = np.meshgrid(x, y)
+    t = Y / height
+    base = 0.08 + 0.30 * t**1.2
+    pitch = 20.0
+    led = np.cos(np.pi * X / pitch) ** 2  # 1 in front of an LED
+    near = np.exp(-Y / 8.0)
+    f = base + 0.04 * near * (1.0 - 2.0 * led) + 0.04 * t**3
+    return np.clip(f, 0.08, 0.42)
+
+
+def write_panel(name: str) -> Path:
+    w, h = PANELS[name]
+    d = OUT / name
+    d.mkdir(parents=True, exist_ok=True)
+    np.save(d / "density.npy", edge_lit_map(w, h))
+    (d / "job.toml").write_text(
+        f'name = "{name}"\n[domain]\nwidth = {w}\nheight = {h}\n'
+        '[density]\ngrid = "density.npy"\n[dots]\ndiameter = 0.046\n'
+        '[optimize]\nmethod = "optdot"\nmax_iter = 80\nseed = 1\n'
+    )
+    return d / "job.toml"
+
+
+def run(cmd: list[str]) -> tuple[float, float, int, str]:
+    """``(seconds, peak RSS of the tree in GiB, exit code, stderr)`` of a command."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
+    peak = [0]
+    done = threading.Event()
+
+    def watch() -> None:
+        root = psutil.Process(proc.pid)
+        while not done.is_set():
+            try:
+                procs = [root, *root.children(recursive=True)]
+                rss = 0
+                for p in procs:
+                    try:
+                        rss += p.memory_info().rss
+                    except psutil.Error:
+                        pass
+                peak[0] = max(peak[0], rss)
+            except psutil.Error:
+                pass
+            time.sleep(0.2)
+
+    th = threading.Thread(target=watch, daemon=True)
+    th.start()
+    err = proc.communicate()[1]
+    done.set()
+    th.join()
+    return time.perf_counter() - t0, peak[0] / 2**30, proc.returncode, err
+
+
+def optdot(*args) -> list[str]:
+    return [sys.executable, "-m", "optdot", *map(str, args)]
+
+
+def report(label: str, dots: int, secs: float, gib: float) -> None:
+    print(f"| {label} | {dots:,} | {secs:.0f} | {dots / secs:,.0f} | {gib:.2f} |", flush=True)
+
+
+def qa_summary(pattern: Path, job: Path) -> dict:
+    js = pattern.with_suffix(".qa.json")
+    secs, gib, rc, err = run(optdot("qa", pattern, "--job", job, "--json", js))
+    m = json.loads(js.read_text())["metrics"]
+    m["_qa_s"], m["_qa_gib"] = secs, gib
+    return m
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("panels", nargs="+", choices=sorted(PANELS))
+    ap.add_argument("--single", action="store_true", help="also run the single process")
+    ap.add_argument("--tile-size", type=float, action="append", help="tile side, mm")
+    ap.add_argument("--qa", action="store_true", help="QA every pattern (in memory)")
+    args = ap.parse_args()
+    print("| run | dots | s | dots/s | peak GiB (all processes) |\n|---|---|---|---|---|")
+    for name in args.panels:
+        job = write_panel(name)
+        outs = []
+        if args.single:
+            out = OUT / name / "single.npz"
+            secs, gib, rc, err = run(optdot("generate", job, "-o", out, "--tiles", "off", "-q"))
+            if rc:
+                print(err, file=sys.stderr)
+                continue
+            n = int(np.load(out)["xy"].shape[0])
+            report(f"{name} single process", n, secs, gib)
+            outs.append(("single", out))
+        for side in args.tile_size or [None]:
+            out = OUT / name / f"tiled{'' if side is None else f'-{side:g}'}.parquet"
+            cmd = ["generate", job, "-o", out, "--tiles", "on"]
+            if side is not None:
+                cmd += ["--tile-size", side]
+            secs, gib, rc, err = run(optdot(*cmd))
+            if rc:
+                print(err, file=sys.stderr)
+                continue
+            n = json.loads((out / "_manifest.json").read_text())["n"]
+            tiles = [ln for ln in err.splitlines() if "tiles (" in ln]
+            report(f"{name} tiled {tiles[0].split('; ')[-1] if tiles else ''}", n, secs, gib)
+            outs.append((f"tiled {side or 'auto'}", out))
+        if args.qa:
+            print("\n| pattern | pairs < 60 µm | ψ6 mean | coverage RMS | QA s | QA GiB |")
+            print("|---|---|---|---|---|---|")
+            seams = []
+            for label, out in outs:
+                m = qa_summary(out, job)
+                print(
+                    f"| {name} {label} | {m['pairs_below_close']:,} | "
+                    f"{m['psi6_local_mean']:.4f} | {100 * m['coverage_rel_rms_smoothed']:.3f} % "
+                    f"| {m['_qa_s']:.0f} | {m['_qa_gib']:.2f} |"
+                )
+                if m.get("seams"):
+                    seams.append((label, m["seams"]))
+            for label, s in seams:
+                print(f"\nseams of {name} {label} (band {s['band_mm']} mm, tiles {s['tiles']}):")
+                print("| measure | band | interior | band sd | interior sd | passed |")
+                print("|---|---|---|---|---|---|")
+                for k, v in s["measures"].items():
+                    print(
+                        f"| {k} | {v['band']:.5f} | {v['interior']:.5f} | {v['band_sd']:.5f} "
+                        f"| {v['interior_sd']:.5f} | {v['passed']} |"
+                    )
+
+
+if __name__ == "__main__":
+    main()
