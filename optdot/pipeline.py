@@ -25,7 +25,7 @@ from .config.job import Job, QAParams
 from .errors import GeometryError, GuaranteeError, JobError, QAGateError, ResourceError
 from .geometry.morton import spatial_order
 from .io.atomic import transaction
-from .io.dataset import outline_hex, write_dataset
+from .io.dataset import manifest_of, write_dataset
 from .pattern import Pattern
 from .quality.gate import QAResult, run_qa
 from .relax.circles import hex_radius
@@ -314,16 +314,17 @@ def _warm() -> int:
 def _run_tiled(job, plan, executor, output, progress) -> Pattern | TiledRun:
     meta = _tiled_meta(job, plan)
     if output is not None:
-        manifest = {
-            "job": job.name,
-            "seed": job.optimize.seed,
-            "diameter_mm": job.diameter,
-            "uniform_diameter_mm": job.diameter,
-            "box": list(job.box),
-            "meta": meta,
-            "tiles": plan.to_json(),
-            **outline_hex(None if job.domain.rectangle else job.domain),
-        }
+        outline = None if job.domain.rectangle else job.domain
+        manifest = manifest_of(
+            job.name,
+            job.optimize.seed,
+            job.diameter,
+            job.diameter,
+            job.box,
+            meta,
+            outline,
+            plan.to_json(),
+        )
         with write_dataset(output, manifest) as w:
 
             def to_part(tile, xy):

@@ -27,6 +27,8 @@ from optdot.tiling.tasks import initial_tile
 from .conftest import SAMPLES
 
 LED = SAMPLES / "led" / "job.toml"
+#: The led sample in 8 tiles of 10 mm.
+TILED = ("--tiles", "on", "--tile-size", "10")
 
 
 def optdot(*args, check=True) -> subprocess.CompletedProcess:
@@ -110,7 +112,7 @@ def test_a_tiled_job_in_process_meets_the_guarantee_with_the_exact_count():
 def tiled(tmp_path_factory):
     """The led sample tiled on a 2-worker and on a 1-worker LocalCluster."""
     d = tmp_path_factory.mktemp("tiled")
-    common = ["generate", LED, "--tiles", "on", "--tile-size", "10"]
+    common = ["generate", LED, *TILED]
     r2 = optdot(*common, "--workers", "2", "-o", d / "two.parquet")
     optdot(*common, "--workers", "1", "-o", d / "one.parquet", "-q")
     return d, r2
@@ -217,7 +219,7 @@ def test_an_interrupted_tiled_run_leaves_the_previous_dataset(tiled, tmp_path):
     out = tmp_path / "run.parquet"
     shutil.copytree(d / "one.parquet", out)
     before = {p.name: p.read_bytes() for p in out.iterdir()}
-    args = ["generate", LED, "--tiles", "on", "--tile-size", "10", "--seed", "9", "-o", out]
+    args = ["generate", LED, *TILED, "--seed", "9", "-o", out]
     proc = subprocess.Popen(
         [sys.executable, "-m", "optdot", *map(str, args)], stderr=subprocess.PIPE, text=True
     )
@@ -250,10 +252,7 @@ def test_cluster_faults_are_one_line(tmp_path):
     r = optdot(
         "generate",
         LED,
-        "--tiles",
-        "on",
-        "--tile-size",
-        "10",
+        *TILED,
         "--worker-memory",
         "0.05",
         "-o",
@@ -277,10 +276,7 @@ def test_a_full_disk_while_writing_the_dataset_keeps_the_old_one(tiled, tmp_path
         200_000,
         "generate",
         LED,
-        "--tiles",
-        "on",
-        "--tile-size",
-        "10",
+        *TILED,
         "--seed",
         "4",
         "-o",

@@ -80,6 +80,17 @@ class DensityMap:
         )
         return inside & (self.at(xy) <= 0.0)
 
+    def integral(
+        self, x0: float, y0: float, x1: float, y1: float, cell_weights: np.ndarray | None = None
+    ) -> float:
+        """Integral of the fill fraction over the rectangle ``[x0, x1] x [y0, y1]``, mm²
+        (each cell's value times ``cell_weights`` when given)."""
+        g = self.grid if cell_weights is None else self.grid * cell_weights
+        cw, ch = self.cell_size
+        fx = axis_overlap(np.array([x0, x1]), self.x0, cw, self.shape[1])[0]
+        fy = axis_overlap(np.array([y0, y1]), self.y0, ch, self.shape[0])[0]
+        return float(fy @ g @ fx)
+
     def dot_count(self, dot_area: float, cell_weights: np.ndarray | None = None) -> int:
         """Number of dots of area ``dot_area`` (mm²) that realise the map.
 
@@ -91,3 +102,13 @@ class DensityMap:
         dx, dy = self.cell_size
         g = self.grid if cell_weights is None else self.grid * cell_weights
         return int(round(float(g.sum()) * dx * dy / dot_area))
+
+
+def axis_overlap(edges: np.ndarray, lo: float, step: float, n: int) -> np.ndarray:
+    """``[len(edges) - 1, n]`` length of each interval ``edges[k]..edges[k + 1]`` inside
+    each of ``n`` grid cells of width ``step`` starting at ``lo``, mm."""
+    c0 = lo + np.arange(n) * step
+    c1 = c0 + step
+    a = np.maximum(edges[:-1, None], c0[None, :])
+    b = np.minimum(edges[1:, None], c1[None, :])
+    return np.clip(b - a, 0.0, None)

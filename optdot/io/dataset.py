@@ -364,24 +364,41 @@ def load_dataset(path: str | Path, box=None):
     return Pattern(xy=xy, diameter=d, box=the_box, meta=meta, outline=outline)
 
 
-def pattern_manifest(pattern, tiles: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Manifest fields of a pattern: its meta, box, nominal diameter and outline."""
+def manifest_of(
+    job: str | None,
+    seed: int | None,
+    diameter: float,
+    uniform: float | None,
+    box,
+    meta: dict[str, Any],
+    outline=None,
+    tiles: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """The manifest fields of a dataset besides its parts (one tile = the box by default)."""
     return {
-        "job": pattern.meta.get("job"),
-        "seed": pattern.meta.get("seed"),
-        "diameter_mm": pattern.nominal_diameter,
-        "uniform_diameter_mm": pattern.uniform_diameter,
-        "box": list(pattern.box),
-        "meta": pattern.meta,
-        "tiles": tiles
-        or {
-            "nx": 1,
-            "ny": 1,
-            "xs": [pattern.box[0], pattern.box[2]],
-            "ys": [pattern.box[1], pattern.box[3]],
-        },
-        **outline_hex(pattern.outline),
+        "job": job,
+        "seed": seed,
+        "diameter_mm": float(diameter),
+        "uniform_diameter_mm": uniform,
+        "box": [float(v) for v in box],
+        "meta": meta,
+        "tiles": tiles or {"nx": 1, "ny": 1, "xs": [box[0], box[2]], "ys": [box[1], box[3]]},
+        **outline_hex(outline),
     }
+
+
+def pattern_manifest(pattern) -> dict[str, Any]:
+    """Manifest fields of an in-memory pattern (one part)."""
+    m = pattern.meta
+    return manifest_of(
+        m.get("job"),
+        m.get("seed"),
+        pattern.nominal_diameter,
+        pattern.uniform_diameter,
+        pattern.box,
+        m,
+        pattern.outline,
+    )
 
 
 def save_dataset(pattern, path: str | Path) -> None:

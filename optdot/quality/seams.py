@@ -25,17 +25,6 @@ BAND_MM = 0.5
 MIN_DOTS = 200
 
 
-def _rect_integral(density: DensityMap, x0: float, y0: float, x1: float, y1: float) -> float:
-    """Integral of the fill fraction over a rectangle, mm²."""
-    d = density
-    cw, ch = d.cell_size
-    cx = d.x0 + np.arange(d.shape[1] + 1) * cw
-    cy = d.y0 + np.arange(d.shape[0] + 1) * ch
-    fx = np.clip(np.minimum(cx[1:], x1) - np.maximum(cx[:-1], x0), 0, None)
-    fy = np.clip(np.minimum(cy[1:], y1) - np.maximum(cy[:-1], y0), 0, None)
-    return float(fy @ d.grid @ fx)
-
-
 def seam_metrics(
     xy: np.ndarray,
     areas: np.ndarray,
@@ -94,9 +83,8 @@ def seam_metrics(
         for j in range(ny):
             for i in range(nx):
                 x0, x1, y0, y1 = xs[i], xs[i + 1], ys[j], ys[j + 1]
-                whole[j * nx + i] = _rect_integral(density, x0, y0, x1, y1)
-                inner[j * nx + i] = _rect_integral(
-                    density,
+                whole[j * nx + i] = density.integral(x0, y0, x1, y1)
+                inner[j * nx + i] = density.integral(
                     x0 + (width if i > 0 else 0),
                     y0 + (width if j > 0 else 0),
                     x1 - (width if i < nx - 1 else 0),

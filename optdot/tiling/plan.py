@@ -16,6 +16,7 @@ import numpy as np
 
 from ..config.job import Job
 from ..errors import JobError
+from ..geometry.density import axis_overlap
 from ..relax.circles import hex_radius
 
 #: Dots per tile that minimise the time per dot on this kind of machine (2 cores, L2 of
@@ -171,22 +172,13 @@ def plan_tiles(job: Job, side: float | None = None, tile_dots: int = DEFAULT_TIL
     return TilePlan(xs=xs, ys=ys, quotas=tile_quotas(job, xs, ys), band=band, halo=halo)
 
 
-def _overlap(edges: np.ndarray, lo: float, step: float, n: int) -> np.ndarray:
-    """``[len(edges) - 1, n]`` length of each interval of ``edges`` inside each grid cell."""
-    c0 = lo + np.arange(n) * step
-    c1 = c0 + step
-    a = np.maximum(edges[:-1, None], c0[None, :])
-    b = np.minimum(edges[1:, None], c1[None, :])
-    return np.clip(b - a, 0.0, None)
-
-
 def tile_integrals(job: Job, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
     """``[ny, nx]`` integral of the fill fraction over each tile (inside the outline), mm²."""
     d = job.density
     g = d.grid if job.cell_weights is None else d.grid * job.cell_weights
     cw, ch = d.cell_size
-    fx = _overlap(xs, d.x0, cw, d.shape[1])  # [nx_t, nx_c]
-    fy = _overlap(ys, d.y0, ch, d.shape[0])  # [ny_t, ny_c]
+    fx = axis_overlap(xs, d.x0, cw, d.shape[1])  # [nx_t, nx_c]
+    fy = axis_overlap(ys, d.y0, ch, d.shape[0])  # [ny_t, ny_c]
     return fy @ g @ fx.T
 
 

@@ -60,13 +60,14 @@ import numpy as np
 
 from ..config.job import Job
 from ..errors import GeometryError, GuaranteeError
+from ..geometry.density import axis_overlap
 from ..geometry.domain import box_protruding
 from ..geometry.morton import spatial_order
 from ..relax.legalize import legalize
 from ..relax.optdot import relax_staged
 from ..sampling.sobol import sobol_points
 from ..spatial.cellgrid import pairs_within
-from .plan import TilePlan, _overlap
+from .plan import TilePlan
 from .steps import formulation_for, problem_of, settings_for
 
 #: Salt of a tile's Sobol scrambling seed: ``[seed, SALT, tile index]``.
@@ -96,8 +97,8 @@ def initial_tile(job: Job, plan: TilePlan, i: int, j: int) -> np.ndarray:
     d = job.density
     x0, y0, x1, y1 = plan.rect(i, j)
     cw, ch = d.cell_size
-    fx = _overlap(np.array([x0, x1]), d.x0, cw, d.shape[1])[0]
-    fy = _overlap(np.array([y0, y1]), d.y0, ch, d.shape[0])[0]
+    fx = axis_overlap(np.array([x0, x1]), d.x0, cw, d.shape[1])[0]
+    fy = axis_overlap(np.array([y0, y1]), d.y0, ch, d.shape[0])[0]
     cols = np.flatnonzero(fx > 0)
     rows = np.flatnonzero(fy > 0)
     w = (d.grid[np.ix_(rows, cols)] * fy[rows, None] * fx[None, cols]).ravel()
@@ -244,7 +245,7 @@ def apply_seams(dots: TileDots, results: list[SeamMoves]) -> TileDots:
     return TileDots(dots.tile, dots.xy0, xy)
 
 
-def _halo_of(plan: TilePlan, dots: TileDots, neighbours: list[np.ndarray], width: float):
+def _halo_of(dots: TileDots, neighbours: list[np.ndarray], width: float) -> np.ndarray:
     """Neighbour positions within ``width`` of the tile's own dots' bounding box."""
     if len(dots.xy) == 0 or not neighbours:
         return np.zeros((0, 2))
@@ -266,7 +267,7 @@ def legalize_tile(job: Job, plan: TilePlan, dots: TileDots, neighbours: list[np.
     """
     r0 = 0.5 * job.diameter
     dmin = job.min_distance
-    halo = _halo_of(plan, dots, neighbours, 2.0 * dmin)
+    halo = _halo_of(dots, neighbours, 2.0 * dmin)
     n = len(dots.xy)
     if n == 0:
         return dots.xy
