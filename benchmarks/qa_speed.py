@@ -43,7 +43,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         t = time.perf_counter()
         write_json(r, Path(tmp) / "r.json")
-        write_html(r, p, Path(tmp) / "r.html")
+        write_html(r, Path(tmp) / "r.html")
         t_rep = time.perf_counter() - t
     print("dots | qa seconds | report seconds | verdict | peak RSS MB")
     verdict = "PASS" if r.passed else "FAIL"

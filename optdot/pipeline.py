@@ -27,7 +27,7 @@ from .geometry.morton import spatial_order
 from .io.atomic import transaction
 from .io.dataset import manifest_of, write_dataset
 from .pattern import Pattern
-from .quality.gate import QAResult, run_qa
+from .quality.gate import QAResult, run_qa, run_qa_dataset
 from .relax.circles import hex_radius
 from .relax.formulation import Formulation
 from .relax.legalize import check_guarantee, legalize
@@ -349,30 +349,48 @@ def with_job_panel(pattern: Pattern, job: Job | None) -> Pattern:
 
 
 def qa(
-    pattern: Pattern,
+    pattern: Pattern | None,
     job: Job | None = None,
     collision: float | None = None,
     close: float | None = None,
+    dataset=None,
 ) -> QAResult:
-    """Measure ``pattern`` and judge it (see :func:`optdot.quality.gate.run_qa`).
+    """Measure ``pattern`` (or ``dataset``) and judge it (see
+    :func:`optdot.quality.gate.run_qa`).
 
     Args:
-        pattern: the dots.
-        job: the target map and thresholds (None: defaults, no map checks).
+        pattern: the dots in memory, or None to measure ``dataset``.
+        job: the target map and thresholds (None: defaults, no map checks); its panel
+            box and outline are the panel's.
         collision: collision distance, mm (default: the job's diameter + gap, else the
             pattern's nominal diameter).
         close: too-close distance, mm (default: the job's ``qa.close_distance``).
+        dataset: an opened :class:`~optdot.io.dataset.Dataset`, measured tile by tile in
+            bounded memory (:func:`optdot.quality.gate.run_qa_dataset`).
     """
     params = job.qa if job else QAParams()
     if close is not None:
         params = replace(params, close_distance=close)
     if collision is None:
-        collision = job.collision_distance if job else pattern.nominal_diameter
-    return run_qa(pattern, job.density if job else None, params, collision)
+        if job:
+            collision = job.collision_distance
+        else:
+            collision = (pattern or dataset).nominal_diameter
+    density = job.density if job else None
+    if pattern is not None:
+        return run_qa(pattern, density, params, collision)
+    if job is None:
+        return run_qa_dataset(dataset, density, params, collision)
+    outline = None if job.domain.rectangle else job.domain
+    return run_qa_dataset(dataset, density, params, collision, box=job.box, outline=outline)
+
+
+#: Formats written straight from a dataset's parts (hierarchical masks).
+STREAMED = ("gds", "oas", "dxf")
 
 
 def export(
-    pattern: Pattern,
+    pattern: Pattern | None,
     outputs: Mapping[str, str | Path],
     job: Job | None = None,
     options=None,
@@ -382,13 +400,15 @@ def export(
     """Run the QA gate, then write ``pattern`` in each format of ``outputs``.
 
     Args:
-        pattern: the dots.
+        pattern: the dots, or None when ``stream`` is given (then read from it only if a
+            format needs the whole pattern in memory).
         outputs: ``{format: path}``, formats of :data:`optdot.exporters.FORMATS`.
         job: thresholds and map of the gate (None: default thresholds).
         options: :class:`optdot.exporters.ExportOptions` (None: defaults).
         force: write even if the gate fails.
-        stream: the :class:`~optdot.io.dataset.Dataset` ``pattern`` was read from: masks
-            (GDS/OAS/DXF) are then streamed from it tile by tile, hierarchically.
+        stream: the :class:`~optdot.io.dataset.Dataset` the pattern is read from: the gate
+            then measures it tile by tile and the masks (:data:`STREAMED`) are written
+            from it tile by tile, hierarchically.
 
     Returns:
         The gate's result (check ``passed``: with ``force`` it may have failed).
@@ -399,11 +419,25 @@ def export(
     """
     from . import exporters
 
-    result = qa(pattern, job)
+    if pattern is None and stream is None:
+        raise ValueError("export needs a pattern or a dataset")
+    result = qa(pattern, job, dataset=stream)
     if not result.passed and not force:
         raise QAGateError(result)
     with transaction():  # all outputs replaced together, or none
         for fmt, path in outputs.items():
-            src = stream if stream is not None and fmt in ("gds", "oas", "dxf") else pattern
+            if stream is not None and fmt in STREAMED:
+                src = stream
+            else:
+                if pattern is None:
+                    pattern = dataset_pattern(stream, job)
+                src = pattern
             exporters.write(src, fmt, path, options)
     return result
+
+
+def dataset_pattern(ds, job: Job | None) -> Pattern:
+    """The whole dataset ``ds`` in memory, on the job's panel when there is a job."""
+    from .io.dataset import load_dataset
+
+    return with_job_panel(load_dataset(ds.path, box=job.box if job else None), job)

@@ -19,6 +19,7 @@ from optdot.config.schema import load_job
 from optdot.errors import PatternFileError
 from optdot.io.dataset import MANIFEST, load_dataset, open_dataset
 from optdot.pipeline import generate_tiled, qa
+from optdot.quality.metrics import close_pairs
 from optdot.relax.legalize import legalize
 from optdot.tiling.plan import plan_tiles, tile_integrals
 from optdot.tiling.run import InProcess
@@ -304,3 +305,78 @@ def test_a_small_job_writes_a_one_part_dataset_with_todays_dots(tmp_path, tiny_p
     m = json.loads((out / MANIFEST).read_text())
     assert m["tiles"]["nx"] == 1 and len(m["parts"]) == 1
     assert np.array_equal(load_dataset(out).xy, tiny_pattern.xy)
+
+
+def _parts_source(xy: np.ndarray, box, cuts: int):
+    """``xy`` split into ``cuts x cuts`` parts by position, as a QA source."""
+    from optdot.quality.measure import Source
+
+    ix = np.minimum((xy[:, 0] - box[0]) / (box[2] - box[0]) * cuts, cuts - 1).astype(int)
+    iy = np.minimum((xy[:, 1] - box[1]) / (box[3] - box[1]) * cuts, cuts - 1).astype(int)
+    parts = [xy[(iy == j) & (ix == i)] for j in range(cuts) for i in range(cuts)]
+    xy_all = np.vstack(parts)
+    return xy_all, Source(
+        box=box,
+        outline=None,
+        uniform_diameter=0.046,
+        nominal_diameter=0.046,
+        counts=[len(p) for p in parts],
+        read=lambda k: (parts[k], np.full(len(parts[k]), 0.046)),
+        cache_parts=3,
+    )
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_qa_part_by_part_with_halos_equals_qa_of_the_whole(seed):
+    """Dense clusters (pairs across part borders) beside sparse regions (nearest
+    neighbours beyond the halo, re-queried): every count and distance as in one part."""
+    from optdot.pattern import Pattern
+    from optdot.quality.measure import measure, pattern_source
+
+    rng = np.random.default_rng(seed)
+    box = (0.0, 0.0, 12.0, 12.0)
+    dense = rng.uniform(4.0, 8.0, (6000, 2))  # ~40 µm apart: many close pairs
+    sparse = rng.uniform(0.0, 12.0, (60, 2))  # ~1.5 mm apart: beyond the 1 mm halo
+    xy, src = _parts_source(np.vstack([dense, sparse]), box, cuts=4)
+    whole = measure(pattern_source(Pattern(xy, 0.046, box)), None, 1.0, 0.060, 0.046)
+    parts = measure(src, None, 1.0, 0.060, 0.046)
+    a, b = whole.metrics, parts.metrics
+    want_close = len(close_pairs(xy, 0.060))  # GEOS, the independent engine
+    assert a["pairs_below_close"] == b["pairs_below_close"] == want_close > 1000
+    assert a["pairs_below_collision"] == b["pairs_below_collision"] > 100
+    assert a["dots_in_close_pairs_fraction"] == b["dots_in_close_pairs_fraction"]
+    assert a["nn_min_mm"] == b["nn_min_mm"]
+    assert a["nn_percentiles_mm"] == b["nn_percentiles_mm"]
+    assert b["qa_requeried_dots"] > 0
+    assert b["psi6_local_mean"] == pytest.approx(a["psi6_local_mean"], rel=1e-12)
+    assert b["psi6_coherence_2mm"] == pytest.approx(a["psi6_coherence_2mm"], rel=1e-12)
+    assert b["protruding"] == a["protruding"]
+
+
+def test_qa_of_the_dataset_tile_by_tile_equals_qa_in_memory(tiled):
+    d, _ = tiled
+    job = load_job(LED)
+    path = d / "two.parquet"
+    mem = qa(load_dataset(path), job, close=0.075)
+    ds = qa(None, job, close=0.075, dataset=open_dataset(path))
+    a, b = mem.metrics, ds.metrics
+    assert b["pairs_below_close"] == a["pairs_below_close"] > 1000  # many cross tile borders
+    for key in (
+        "pairs_below_collision",
+        "dots_in_close_pairs_fraction",
+        "nn_min_mm",
+        "nn_percentiles_mm",
+        "nn_normalized_percentiles",
+        "protruding",
+        "in_empty_cells",
+        "coverage_rel_rms_smoothed",
+        "coverage_per_cell_rel_rms",
+        "dots_expected",
+    ):
+        assert b[key] == a[key], key
+    assert b["psi6_local_mean"] == pytest.approx(a["psi6_local_mean"], rel=1e-12)
+    for name, v in a["edge_band_coverage_ratio"].items():
+        assert b["edge_band_coverage_ratio"][name] == pytest.approx(v, rel=1e-12)
+    for name, v in a["seams"]["measures"].items():
+        assert b["seams"]["measures"][name]["band"] == pytest.approx(v["band"], rel=1e-9)
+    assert [c.passed for c in ds.checks] == [c.passed for c in mem.checks]

@@ -483,15 +483,15 @@ def export(
     else:
         job, inputs = _inputs(source, job_path)
     _check_outputs(outputs, inputs)
-    stream = None
+    stream = pattern = None
     if source.suffix.lower() == ".toml":
         pattern = run_job(job, quiet)
+    elif source.suffix.lower() == ".parquet":
+        from ..io.dataset import open_dataset
+
+        stream = open_dataset(source)  # gate and masks tile by tile
     else:
         pattern = _read_with_job(source, job)
-        if source.suffix.lower() == ".parquet":
-            from ..io.dataset import open_dataset
-
-            stream = open_dataset(source)  # masks streamed tile by tile
     result = export_pattern(pattern, outputs, job, opts, force=force, stream=stream)
     if not result.passed:
         click.echo(
@@ -500,7 +500,7 @@ def export(
         )
     if not quiet:
         for fmt, path in outputs.items():
-            click.echo(f"{path}: {fmt.upper()}, {pattern.n} dots", err=True)
+            click.echo(f"{path}: {fmt.upper()}, {result.metrics['dots']} dots", err=True)
 
 
 @main.command()
@@ -546,13 +546,19 @@ def qa(
     outs = {k: v for k, v in (("html", html_path), ("json", json_path)) if v is not None}
     job, inputs = _inputs(pattern_file, job_path)
     _check_outputs(outs, inputs)
-    pattern = _read_with_job(pattern_file, job, opts)
-    result = run_gate(pattern, job, collision, close)
+    if pattern_file.suffix.lower() == ".parquet":
+        from ..io.dataset import open_dataset
+
+        # a dataset is measured tile by tile with halos, in bounded memory
+        result = run_gate(None, job, collision, close, dataset=open_dataset(pattern_file))
+    else:
+        pattern = _read_with_job(pattern_file, job, opts)
+        result = run_gate(pattern, job, collision, close)
     with transaction():  # both reports replaced together, or neither
         if json_path:
             write_json(result, json_path)
         if html_path:
-            write_html(result, pattern, html_path, title=f"optdot QA: {pattern_file.name}")
+            write_html(result, html_path, title=f"optdot QA: {pattern_file.name}")
     if not quiet:
         for c in result.checks:
             mark = "PASS" if c.passed else "FAIL"

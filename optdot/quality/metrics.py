@@ -9,6 +9,7 @@ are made in :mod:`optdot.quality.gate`. All lengths in mm unless a name says oth
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -53,15 +54,52 @@ def patch_coherence(
     xy: np.ndarray, psi: np.ndarray, patch: float = 2.0, min_dots: int = 50
 ) -> float:
     """Mean over ``patch``-mm squares of |mean psi6| (high = hexagonal grains)."""
-    key = np.floor(xy / patch).astype(np.int64)
-    _, inv = np.unique(key[:, 0] * 1_000_003 + key[:, 1], return_inverse=True)
-    cnt = np.bincount(inv)
-    re = np.bincount(inv, psi.real)
-    im = np.bincount(inv, psi.imag)
-    ok = cnt >= min_dots
-    if not ok.any():
-        return float(np.abs(psi.mean()))
-    return float(np.mean(np.hypot(re[ok], im[ok]) / cnt[ok]))
+    if len(xy) == 0:
+        return 0.0
+    grid = PatchGrid.over(xy.min(axis=0), xy.max(axis=0), patch)
+    sums = grid.sums(xy, psi)
+    return grid.coherence(*sums, total=complex(psi.sum()), n=len(xy), min_dots=min_dots)
+
+
+@dataclass(frozen=True)
+class PatchGrid:
+    """Squares of ``patch`` mm on the global lattice ``floor(xy / patch)``, numbered
+    ``kx * ny + ky`` from the corner ``(kx0, ky0)`` (the order of the lattice keys)."""
+
+    patch: float
+    kx0: int
+    ky0: int
+    nx: int
+    ny: int
+
+    @classmethod
+    def over(cls, lo, hi, patch: float) -> PatchGrid:
+        """The squares covering the extent ``lo``..``hi`` (``[2]`` mm each)."""
+        k0 = np.floor(np.asarray(lo, float) / patch).astype(np.int64)
+        k1 = np.floor(np.asarray(hi, float) / patch).astype(np.int64)
+        return cls(patch, int(k0[0]), int(k0[1]), int(k1[0] - k0[0] + 1), int(k1[1] - k0[1] + 1))
+
+    def sums(self, xy: np.ndarray, psi: np.ndarray):
+        """``(count, sum Re psi, sum Im psi)`` per square, ``[nx * ny]`` each."""
+        key = np.floor(xy / self.patch).astype(np.int64)
+        idx = np.clip(key[:, 0] - self.kx0, 0, self.nx - 1) * self.ny + np.clip(
+            key[:, 1] - self.ky0, 0, self.ny - 1
+        )
+        size = self.nx * self.ny
+        return (
+            np.bincount(idx, minlength=size),
+            np.bincount(idx, psi.real, minlength=size),
+            np.bincount(idx, psi.imag, minlength=size),
+        )
+
+    @staticmethod
+    def coherence(cnt, re, im, total: complex, n: int, min_dots: int = 50) -> float:
+        """Mean |mean psi6| over the squares holding ``min_dots`` or more (none: the
+        |mean| of all ``n`` dots' psi6, whose sum is ``total``)."""
+        ok = cnt >= min_dots
+        if not ok.any():
+            return float(abs(total / max(n, 1)))
+        return float(np.mean(np.hypot(re[ok], im[ok]) / cnt[ok]))
 
 
 def radial_spectrum(xy: np.ndarray, window: tuple[float, float, float, float], px: float):
@@ -89,17 +127,18 @@ def radial_spectrum(xy: np.ndarray, window: tuple[float, float, float, float], p
     return freq[m][1:], p[m][1:]
 
 
-def area_per_cell(pattern: Pattern, sel: np.ndarray, cells: np.ndarray, size: int) -> np.ndarray:
-    """Dot area (mm²) of the selected dots summed per flat cell index, ``[size]``.
-
-    Args:
-        sel: ``[n]`` bool, the dots to count.
-        cells: the selected dots' flat cell indices.
-    """
-    u = pattern.uniform_diameter
-    if u is not None:
-        return np.bincount(cells, minlength=size) * _disc_area(u)
-    return np.bincount(cells, weights=pattern.areas[sel], minlength=size)
+def cell_area_sums(
+    xy: np.ndarray, diameter: np.ndarray, uniform: bool, density: DensityMap
+) -> np.ndarray:
+    """Dot area per map cell of the dots whose centre lies in the map's box, ``[ny * nx]``:
+    dot counts (int64) when ``uniform`` (multiply by one dot's area), else areas in mm².
+    Sums over parts of a pattern add up to the whole pattern's."""
+    inside = in_box(xy, density)
+    cells = density.cell_index(xy[inside])
+    size = density.grid.size
+    if uniform:
+        return np.bincount(cells, minlength=size)
+    return np.bincount(cells, weights=np.pi * (0.5 * diameter[inside]) ** 2, minlength=size)
 
 
 def in_box(xy: np.ndarray, density: DensityMap) -> np.ndarray:
@@ -112,24 +151,39 @@ def in_box(xy: np.ndarray, density: DensityMap) -> np.ndarray:
     )
 
 
-def nn_normalized(pattern: Pattern, density: DensityMap, nn: np.ndarray) -> np.ndarray:
-    """Nearest-neighbour distances ``nn`` (``[n]`` mm) in units of the local hexagonal
-    spacing 2 r' at each dot's fill, for the dots inside the map where it is > 0."""
-    xy = pattern.xy
+def nn_normalized(
+    xy: np.ndarray, radius: np.ndarray, density: DensityMap, nn: np.ndarray
+) -> np.ndarray:
+    """Nearest-neighbour distances ``nn`` (``[n]`` mm) of dots at ``xy`` (``[n, 2]``) of
+    ``radius`` (``[n]`` mm) in units of the local hexagonal spacing 2 r' at each dot's
+    fill, ``[n]``: NaN for dots outside the map or where it is 0."""
     inside = in_box(xy, density)
     rho = np.where(inside, density.at(xy), np.nan)
     ok = inside & (rho > 0)
-    r0 = pattern.radius[ok]
-    spacing = 2 * r0 * np.sqrt(math.pi / (2 * math.sqrt(3) * rho[ok]))
-    return nn[ok] / spacing
+    out = np.full(len(xy), np.nan)
+    spacing = 2 * radius[ok] * np.sqrt(math.pi / (2 * math.sqrt(3) * rho[ok]))
+    out[ok] = nn[ok] / spacing
+    return out
 
 
 def coverage(
-    pattern: Pattern, density: DensityMap, smoothing: float
+    sums: np.ndarray,
+    uniform: float | None,
+    n: int,
+    nominal: float,
+    outline,
+    density: DensityMap,
+    smoothing: float,
 ) -> tuple[dict[str, Any], np.ndarray, tuple[float, float, float, float]]:
     """Coverage against the map: per cell, and after Gaussian smoothing of ``smoothing`` mm.
 
     With an outline each cell counts only its share inside it.
+
+    Args:
+        sums: ``[ny * nx]`` of :func:`cell_area_sums` over the whole pattern.
+        uniform: the one dot diameter when ``sums`` are counts, mm, else None.
+        n: number of dots. nominal: nominal dot diameter, mm.
+        outline: the panel outline (a :class:`~optdot.geometry.domain.Domain`) or None.
 
     Returns:
         ``(metrics, rel, extent)``: the numbers (``dots_expected``, ``dot_count_error``,
@@ -137,21 +191,19 @@ def coverage(
         ``coverage_worst_at_mm``, ``coverage_per_cell_rel_rms``), the ``[ny, nx]``
         relative error after smoothing and its extent ``(x0, x1, y0, y1)`` mm.
     """
-    xy = pattern.xy
     m: dict[str, Any] = {}
-    inside = in_box(xy, density)
     ny, nx = density.shape
     cw, ch = density.cell_size
-    cells = density.cell_index(xy[inside])
-    got = area_per_cell(pattern, inside, cells, nx * ny).reshape(ny, nx) / (cw * ch)
-    if pattern.outline is None:
+    area = sums * disc_area(uniform) if uniform is not None else sums
+    got = area.reshape(ny, nx) / (cw * ch)
+    if outline is None:
         frac = np.ones_like(density.grid)
     else:
-        frac = pattern.outline.cell_fractions(density.x0, density.y0, cw, ch, nx, ny)
+        frac = outline.cell_fractions(density.x0, density.y0, cw, ch, nx, ny)
     target = density.grid * frac
-    dot_area = _disc_area(pattern.nominal_diameter)
-    m["dots_expected"] = density.dot_count(dot_area, None if pattern.outline is None else frac)
-    m["dot_count_error"] = (pattern.n - m["dots_expected"]) / max(m["dots_expected"], 1)
+    dot_area = disc_area(nominal)
+    m["dots_expected"] = density.dot_count(dot_area, None if outline is None else frac)
+    m["dot_count_error"] = (n - m["dots_expected"]) / max(m["dots_expected"], 1)
     sig = (smoothing / ch, smoothing / cw)
     gs = gaussian_filter(got, sig, mode="constant")
     ts = gaussian_filter(target, sig, mode="constant")
@@ -173,48 +225,44 @@ def coverage(
     return m, rel, extent
 
 
-def edge_bands(pattern: Pattern, density: DensityMap) -> dict[str, float | None]:
-    """Dot area / target in the 1 mm band inside each edge: ``left``/``right``/``bottom``/
-    ``top`` of the box, or each loop of an outline (``outline``, ``hole 1``, ...)."""
-    if pattern.outline is not None:
-        return _outline_bands(pattern, density)
-    xy = pattern.xy
-    band = {}
-    x0, y0, x1, y1 = pattern.box
+def edge_bands(box, outline, density: DensityMap) -> list[tuple[str, Any, float]]:
+    """The 1 mm bands inside each edge: ``left``/``right``/``bottom``/``top`` of the box,
+    or each loop of an outline (``outline``, ``hole 1``, ...).
+
+    Returns:
+        ``[(name, inside, want)]``: ``inside(xy [n, 2]) -> [n] bool`` selects the dots of
+        the band, ``want`` is the dot area the map asks for in it, mm² (cell-exact).
+    """
+    if outline is not None:
+        return _outline_bands(outline, density)
+    x0, y0, x1, y1 = box
     bands = {
         "left": (x0, x0 + 1, y0, y1),
         "right": (x1 - 1, x1, y0, y1),
         "bottom": (x0, x1, y0, y0 + 1),
         "top": (x0, x1, y1 - 1, y1),
     }
+    out = []
     for name, (bx0, bx1, by0, by1) in bands.items():
-        sel = (xy[:, 0] >= bx0) & (xy[:, 0] <= bx1) & (xy[:, 1] >= by0) & (xy[:, 1] <= by1)
-        want = _target_area(density, (bx0, bx1, by0, by1))
-        band[name] = float(_area_of(pattern, sel) / want) if want > 0 else None
-    return band
+
+        def inside(xy, b=(bx0, bx1, by0, by1)):
+            return (xy[:, 0] >= b[0]) & (xy[:, 0] <= b[1]) & (xy[:, 1] >= b[2]) & (xy[:, 1] <= b[3])
+
+        out.append((name, inside, _target_area(density, (bx0, bx1, by0, by1))))
+    return out
 
 
-def _disc_area(diameter: float) -> float:
+def disc_area(diameter: float) -> float:
     """Area of a dot of ``diameter`` mm, mm² (as ``pi r r``, the order QA always used)."""
     r = 0.5 * diameter
     return math.pi * r * r
 
 
-def _area_of(pattern: Pattern, sel: np.ndarray) -> float:
-    """Total dot area of the selected dots, mm² (count x area when sizes are uniform)."""
-    u = pattern.uniform_diameter
-    if u is not None:
-        return sel.sum() * _disc_area(u)
-    return float(pattern.areas[sel].sum())
-
-
-def _outline_bands(pattern: Pattern, density: DensityMap) -> dict:
-    """Dot area / target in the 1 mm band inside each loop of the outline (outline, hole 1,
-    ...), counted on the cells' exact shares of the band."""
-    dom = pattern.outline
+def _outline_bands(dom, density: DensityMap) -> list[tuple[str, Any, float]]:
+    """The 1 mm band inside each loop of the outline (outline, hole 1, ...), its target
+    counted on the cells' exact shares of the band."""
     ny, nx = density.shape
     cw, ch = density.cell_size
-    out = {}
     loops = [(p.exterior, p.interiors) for p in dom.polygons]
     named = []
     n_holes = 0
@@ -223,12 +271,17 @@ def _outline_bands(pattern: Pattern, density: DensityMap) -> dict:
         for h in holes:
             n_holes += 1
             named.append((f"hole {n_holes}", h))
+    out = []
     for name, ring in named:
         band = dom.geometry.intersection(shapely.LineString(ring.coords).buffer(1.0))
+        shapely.prepare(band)
         frac = polygon_cell_fractions(band, density.x0, density.y0, cw, ch, nx, ny)
         want = float((density.grid * frac).sum() * cw * ch)
-        sel = shapely.contains_xy(band, pattern.xy[:, 0], pattern.xy[:, 1])
-        out[name] = float(_area_of(pattern, sel) / want) if want > 0 else None
+
+        def inside(xy, band=band):
+            return shapely.contains_xy(band, xy[:, 0], xy[:, 1])
+
+        out.append((name, inside, want))
     return out
 
 
@@ -243,16 +296,41 @@ def _target_area(density: DensityMap, b) -> float:
     return float((density.grid * np.outer(oy, ox)).sum())
 
 
+@dataclass(frozen=True)
+class SquareGrid:
+    """``size``-mm squares from the box's corner (as many whole ones as fit, at least
+    one), for finding the densest region: counts per part add up."""
+
+    x0: float
+    y0: float
+    s: float
+    nx: int
+    ny: int
+
+    @classmethod
+    def of(cls, box, size: float) -> SquareGrid:
+        x0, y0, x1, y1 = box
+        s = min(size, x1 - x0, y1 - y0)
+        return cls(x0, y0, s, max(1, int((x1 - x0) / s)), max(1, int((y1 - y0) / s)))
+
+    def counts(self, xy: np.ndarray) -> np.ndarray:
+        """``[nx, ny]`` dots per square."""
+        h, _, _ = np.histogram2d(
+            xy[:, 0],
+            xy[:, 1],
+            bins=(self.nx, self.ny),
+            range=((self.x0, self.x0 + self.nx * self.s), (self.y0, self.y0 + self.ny * self.s)),
+        )
+        return h
+
+    def densest(self, counts: np.ndarray) -> tuple[float, float, float, float]:
+        """The square with the most dots, ``(x0, y0, x1, y1)`` mm."""
+        i, j = np.unravel_index(np.argmax(counts), counts.shape)
+        s = self.s
+        return self.x0 + i * s, self.y0 + j * s, self.x0 + (i + 1) * s, self.y0 + (j + 1) * s
+
+
 def densest_tile(pattern: Pattern, size: float) -> tuple[float, float, float, float]:
-    x0, y0, x1, y1 = pattern.box
-    s = min(size, x1 - x0, y1 - y0)
-    nxb = max(1, int((x1 - x0) / s))
-    nyb = max(1, int((y1 - y0) / s))
-    h, _, _ = np.histogram2d(
-        pattern.xy[:, 0],
-        pattern.xy[:, 1],
-        bins=(nxb, nyb),
-        range=((x0, x0 + nxb * s), (y0, y0 + nyb * s)),
-    )
-    i, j = np.unravel_index(np.argmax(h), h.shape)
-    return x0 + i * s, y0 + j * s, x0 + (i + 1) * s, y0 + (j + 1) * s
+    """The ``size``-mm square of the pattern holding the most dots, ``(x0, y0, x1, y1)``."""
+    grid = SquareGrid.of(pattern.box, size)
+    return grid.densest(grid.counts(pattern.xy))

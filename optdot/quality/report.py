@@ -11,7 +11,6 @@ from pathlib import Path
 import numpy as np
 
 from ..io.atomic import atomic_path, expect_tail
-from ..pattern import Pattern, coverage_image
 from .gate import QAResult
 
 
@@ -22,11 +21,12 @@ def write_json(result: QAResult, path: str | Path) -> None:
         tmp.write_text(text + "\n", encoding="utf-8")
 
 
-def write_html(
-    result: QAResult, pattern: Pattern, path: str | Path, title: str = "optdot QA"
-) -> None:
-    """Write the HTML report atomically: verdict first, then the plots and the numbers."""
-    figs = _figures(result, pattern)
+def write_html(result: QAResult, path: str | Path, title: str = "optdot QA") -> None:
+    """Write the HTML report atomically: verdict first, then the plots and the numbers.
+
+    Everything drawn comes from ``result`` (its plot arrays are bounded in size), so a
+    panel of any dot count gives a report of the same size."""
+    figs = _figures(result)
     verdict = "PASS" if result.passed else "FAIL"
     color = "#1a7f37" if result.passed else "#cf222e"
     rows = "".join(
@@ -40,7 +40,9 @@ def write_html(
         f"<figcaption>{html.escape(cap)}</figcaption></figure>"
         for cap, b64 in figs
     )
-    metrics = html.escape(json.dumps(result.metrics, indent=1, default=_jsonable))
+    m = result.metrics
+    box = m["box_mm"]
+    metrics = html.escape(json.dumps(m, indent=1, default=_jsonable))
     doc = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>
 <style>body{{font-family:sans-serif;margin:2em;max-width:1200px}}
@@ -48,7 +50,7 @@ def write_html(
 table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:.2em .5em}}
 figure{{display:inline-block;margin:.5em}}img{{max-width:560px}}</style></head><body>
 <h1>{html.escape(title)}</h1><div class="verdict" id="verdict">{verdict}</div>
-<p>{pattern.n:,} dots, diameter {_diameter_text(pattern)}, panel {pattern.box[2] - pattern.box[0]:.3f} × {pattern.box[3] - pattern.box[1]:.3f} mm</p>
+<p>{m["dots"]:,} dots, diameter {_diameter_text(m["diameter_mm"])}, panel {box[2] - box[0]:.3f} × {box[3] - box[1]:.3f} mm</p>
 <h2>Gate</h2><table><tr><th></th><th>check</th><th>value</th><th>limit</th><th>where (mm, first 5)</th></tr>{rows}</table>
 <h2>Plots</h2>{imgs}<h2>All numbers</h2><pre>{metrics}</pre></body></html>
 """
@@ -56,17 +58,16 @@ figure{{display:inline-block;margin:.5em}}img{{max-width:560px}}</style></head><
         tmp.write_text(doc, encoding="utf-8")
 
 
-def _figures(result: QAResult, pattern: Pattern) -> list[tuple[str, str]]:
+def _figures(result: QAResult) -> list[tuple[str, str]]:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.collections import EllipseCollection
+    from matplotlib.collections import EllipseCollection, LineCollection
 
     out: list[tuple[str, str]] = []
     a = result.arrays
-    xy = pattern.xy
-    x0, y0, x1, y1 = pattern.box
+    m = result.metrics
 
     def save(fig, caption):
         buf = io.BytesIO()
@@ -75,25 +76,21 @@ def _figures(result: QAResult, pattern: Pattern) -> list[tuple[str, str]]:
         plt.close(fig)
         out.append((caption, base64.b64encode(buf.getvalue()).decode("ascii")))
 
-    img, ext = coverage_image(pattern, 300)
+    img, ext = a["overview"]
     fig, ax = plt.subplots(figsize=(6, 4))
     im = ax.imshow(img, origin="lower", extent=ext, interpolation="nearest")
     fig.colorbar(im, ax=ax, label="fill fraction")
-    if pattern.outline is not None:
-        for ring in pattern.outline_rings():
-            loop = np.vstack([ring, ring[:1]])
-            ax.plot(loop[:, 0], loop[:, 1], color="white", lw=0.7)
-    close = a["close"]
-    if len(close):
-        mid = 0.5 * (xy[close[:, 0]] + xy[close[:, 1]])
-        ax.plot(mid[:, 0], mid[:, 1], ",", color="orange")
-    col = a["collisions"]
-    if len(col):
-        mid = 0.5 * (xy[col[:, 0]] + xy[col[:, 1]])
-        ax.plot(mid[:, 0], mid[:, 1], "rx", ms=8)
-    for key in ("protruding", "in_empty"):
-        if key in a and len(a[key]):
-            ax.plot(xy[a[key], 0], xy[a[key], 1], "m+", ms=8)
+    for ring in a["rings"]:
+        loop = np.vstack([ring, ring[:1]])
+        ax.plot(loop[:, 0], loop[:, 1], color="white", lw=0.7)
+    for key, style in (
+        ("close_mid", dict(ls="", marker=",", color="orange")),
+        ("collision_mid", dict(ls="", marker="x", color="r", ms=8)),
+        ("defects", dict(ls="", marker="+", color="m", ms=8)),
+    ):
+        pts = a[key]
+        if len(pts):
+            ax.plot(pts[:, 0], pts[:, 1], **style)
     ax.set(
         xlabel="x (mm)",
         ylabel="y (mm)",
@@ -104,17 +101,12 @@ def _figures(result: QAResult, pattern: Pattern) -> list[tuple[str, str]]:
     tx0, ty0, tx1, ty1 = a["tile"]
     s = min(1.0, tx1 - tx0)
     fig, ax = plt.subplots(figsize=(5, 5))
-    sel = (xy[:, 0] > tx0) & (xy[:, 0] < tx0 + s) & (xy[:, 1] > ty0) & (xy[:, 1] < ty0 + s)
-    d = pattern.uniform_diameter or pattern.diameter[sel]
+    zxy, zd, seg = a["zoom"]
     ax.add_collection(
-        EllipseCollection(
-            d, d, 0, units="xy", offsets=xy[sel], offset_transform=ax.transData, fc="k"
-        )
+        EllipseCollection(zd, zd, 0, units="xy", offsets=zxy, offset_transform=ax.transData, fc="k")
     )
-    idx = np.flatnonzero(sel)
-    bad = close[np.isin(close[:, 0], idx)] if len(close) else close
-    for i, j in bad[:2000]:
-        ax.plot(*xy[[i, j]].T, color="orange", lw=1)
+    if len(seg):
+        ax.add_collection(LineCollection(seg, colors="orange", linewidths=1))
     ax.set(
         xlim=(tx0, tx0 + s),
         ylim=(ty0, ty0 + s),
@@ -126,10 +118,9 @@ def _figures(result: QAResult, pattern: Pattern) -> list[tuple[str, str]]:
     save(fig, "densest region")
 
     fig, ax = plt.subplots(figsize=(6, 3.5))
-    nn = a["nn"]
-    if len(nn) and np.isfinite(nn).all():
-        ax.hist(nn * 1e3, bins=100, color="steelblue")
-    m = result.metrics
+    if a["nn_hist"] is not None:
+        counts, edges = a["nn_hist"]
+        ax.stairs(counts, edges, fill=True, color="steelblue")
     ax.axvline(m["collision_distance_mm"] * 1e3, color="red", label="collision")
     ax.axvline(m["close_distance_mm"] * 1e3, color="orange", label="too close")
     ax.set(
@@ -162,11 +153,10 @@ def _figures(result: QAResult, pattern: Pattern) -> list[tuple[str, str]]:
     return out
 
 
-def _diameter_text(pattern: Pattern) -> str:
-    u = pattern.uniform_diameter
-    if u is not None:
-        return f"{u * 1e3:.1f} µm"
-    return f"{pattern.diameter.min() * 1e3:.1f}–{pattern.diameter.max() * 1e3:.1f} µm"
+def _diameter_text(d) -> str:
+    if isinstance(d, dict):
+        return f"{d['min'] * 1e3:.1f}–{d['max'] * 1e3:.1f} µm"
+    return f"{d * 1e3:.1f} µm"
 
 
 def _fmt(v) -> str:

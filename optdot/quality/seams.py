@@ -43,19 +43,36 @@ def seam_metrics(
         xs, ys: tile edges, mm (``[nx + 1]``, ``[ny + 1]``).
         close_flag: ``[n]`` bool, the dot is in a pair closer than the close distance.
         psi_abs: ``[n]`` |ψ6|.
-        nn_norm: ``[n]`` nearest-neighbour distance over the local hexagonal spacing.
+        nn_norm: ``[n]`` nearest-neighbour distance over the local hexagonal spacing
+            (NaN where the map gives no spacing: those dots are left out of its mean).
         density: the map (None: no coverage numbers).
         width: band width, mm.
 
     Returns:
-        ``{"band_mm", "tiles", "measures": {name: {"band", "interior", "band_sd",
-        "interior_sd", "passed"}}, "passed"}``; empty when there is one tile.
+        ``{"band_mm", "tiles", "band_dots", "interior_dots", "measures": {name: {"band",
+        "interior", "band_sd", "interior_sd", "passed"}}, "passed"}``; empty when there is
+        one tile.
     """
+    sums = seam_sums(xy, areas, xs, ys, close_flag, psi_abs, nn_norm, width)
+    return seam_finish(sums, xs, ys, density, width)
+
+
+def seam_sums(
+    xy: np.ndarray,
+    areas: np.ndarray,
+    xs: np.ndarray,
+    ys: np.ndarray,
+    close_flag: np.ndarray,
+    psi_abs: np.ndarray,
+    nn_norm: np.ndarray | None,
+    width: float = BAND_MM,
+) -> dict[str, dict[str, np.ndarray]]:
+    """Per-tile sums of some dots (arguments as :func:`seam_metrics`): ``{"band" |
+    "interior": {"count", "close", "psi", "area"[, "nn"]: [tiles]}}``. Sums over the
+    parts of a pattern add up to the whole pattern's."""
     xs = np.asarray(xs, float)
     ys = np.asarray(ys, float)
     nx, ny = len(xs) - 1, len(ys) - 1
-    if nx * ny < 2 or len(xy) == 0:
-        return {}
     ti = np.clip(np.searchsorted(xs, xy[:, 0], "right") - 1, 0, nx - 1)
     tj = np.clip(np.searchsorted(ys, xy[:, 1], "right") - 1, 0, ny - 1)
     dist = np.full(len(xy), np.inf)
@@ -76,7 +93,28 @@ def seam_metrics(
             "area": np.bincount(tile[sel], areas[sel], minlength=k),
         }
         if nn_norm is not None:
-            per[name]["nn"] = np.bincount(tile[sel], nn_norm[sel], minlength=k)
+            ok = sel & ~np.isnan(nn_norm)
+            per[name]["nn"] = np.bincount(tile[ok], nn_norm[ok], minlength=k)
+            per[name]["nn_count"] = np.bincount(tile[ok], minlength=k).astype(float)
+    return per
+
+
+def seam_finish(
+    per: dict[str, dict[str, np.ndarray]],
+    xs: np.ndarray,
+    ys: np.ndarray,
+    density: DensityMap | None,
+    width: float = BAND_MM,
+) -> dict[str, Any]:
+    """The verdict of :func:`seam_metrics` from the summed :func:`seam_sums`."""
+    xs = np.asarray(xs, float)
+    ys = np.asarray(ys, float)
+    nx, ny = len(xs) - 1, len(ys) - 1
+    k = nx * ny
+    n_band = int(per["band"]["count"].sum())
+    n_int = int(per["interior"]["count"].sum())
+    if k < 2 or n_band + n_int == 0:
+        return {}
     if density is not None:
         whole = np.zeros(k)
         inner = np.zeros(k)
@@ -110,15 +148,15 @@ def seam_metrics(
 
     ratio("close_pair_dots_per_dot", "close", "count")
     ratio("psi6_mean", "psi", "count")
-    if nn_norm is not None:
-        ratio("nn_normalized_mean", "nn", "count")
+    if "nn" in per["band"]:
+        ratio("nn_normalized_mean", "nn", "nn_count")
     if density is not None:
         ratio("coverage_error", "area", "target", minus=1.0)
     return {
         "band_mm": width,
         "tiles": [nx, ny],
-        "band_dots": int(band.sum()),
-        "interior_dots": int((~band).sum()),
+        "band_dots": n_band,
+        "interior_dots": n_int,
         "measures": measures,
         "passed": all(m["passed"] for m in measures.values()),
     }

@@ -1,0 +1,585 @@
+"""Measuring a pattern part by part, each part with a halo of its neighbours' dots, so a
+panel of 10⁸ dots is measured in the memory of a few tiles and every number is the one
+the whole pattern at once would give.
+
+A :class:`Source` is an in-memory :class:`~optdot.pattern.Pattern` (one part, no halo
+needed) or a partitioned :class:`~optdot.io.dataset.Dataset` (one part per tile). Two passes:
+
+1. **Each part alone** (:func:`_first_pass`): its bounding box, the dot area per map cell
+   (coverage), dot counts per 2 mm square (densest region), the overview image, dots
+   protruding from the panel or in zero-density cells, dot area in the edge bands. These
+   are sums over dots, so parts add up exactly (counts are integers; float sums differ
+   from one pass over all dots only in the order of addition).
+2. **Each part with a halo** (:func:`_second_pass`): the dots of the other parts within
+   ``H`` of the part's box, ``H = max(HALO_MM, 2 x the largest pair distance)``, read
+   through a cache of recently used parts (parts come in tile order, so a few rows of
+   tiles are held).
+
+   - *Pairs* closer than a distance are found among own + halo dots (scipy ``cKDTree``);
+     a pair of two own dots is counted by its part, a pair with a halo dot by the lower
+     of the two parts' indices: each pair once. A dot is "in a close pair" whichever
+     part counts the pair.
+   - *k nearest neighbours* (nn and ψ6 over 6 neighbours) are exact for a dot whose k-th
+     distance is at most ``H`` plus its distance to the edge of its part's box: any dot
+     nearer lies in the halo. The rare dots beside a wide empty region that fail this
+     are queried again with a halo as wide as their k-th distance (an upper bound of the
+     true one), which makes them exact too.
+   - ψ6 is summed per 2 mm patch and per tile band/interior (seams); nn and the
+     normalised nn are kept per dot (16 B per dot, the only per-dot memory, so the
+     percentiles are exact).
+
+shapely/GEOS (:func:`optdot.quality.metrics.close_pairs`) stays the independent
+cross-check of the pair counts in the tests.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..geometry.density import DensityMap
+from ..geometry.domain import Domain, box_protruding
+from .metrics import (
+    PatchGrid,
+    SquareGrid,
+    cell_area_sums,
+    coverage,
+    disc_area,
+    edge_bands,
+    nn_normalized,
+    radial_spectrum,
+)
+from .seams import seam_finish, seam_sums
+
+#: Smallest halo around a part, mm: covers the 6 nearest neighbours at any fill > ~0.01
+#: of 46 µm dots (beyond, the exact re-query takes over).
+HALO_MM = 1.0
+#: Neighbours per dot for ψ6 (the dot itself first).
+K_NEAREST = 7
+#: Most markers (close pairs, defects) kept for the report's plots; counts stay exact.
+MAX_MARKS = 100_000
+#: Most close-pair segments drawn in the zoom of the densest region.
+MAX_SEGMENTS = 2000
+#: Side of the densest region whose spectrum is taken, mm; of its zoom, mm.
+DENSEST_MM, ZOOM_MM = 2.0, 1.0
+#: Longest side of the overview image, pixels.
+OVERVIEW_PX = 300
+
+
+@dataclass
+class Source:
+    """Dots in parts on a panel: what QA measures.
+
+    Attributes:
+        box: panel ``(xmin, ymin, xmax, ymax)``, mm.
+        outline: the panel outline, or None for the box.
+        uniform_diameter: the one dot diameter, mm, or None when sizes vary.
+        nominal_diameter: the uniform or median diameter, mm.
+        counts: dots per part.
+        read: ``read(k) -> (xy [n_k, 2], diameter [n_k])``, mm.
+        tiling: ``(xs, ys)`` tile edges of a tiled pattern (seam metrics), or None.
+        label: the file, for messages.
+        cache_parts: parts kept in memory while their neighbours are measured.
+    """
+
+    box: tuple[float, float, float, float]
+    outline: Domain | None
+    uniform_diameter: float | None
+    nominal_diameter: float
+    counts: list[int]
+    read: Callable[[int], tuple[np.ndarray, np.ndarray]]
+    tiling: tuple[np.ndarray, np.ndarray] | None = None
+    label: str = ""
+    cache_parts: int = 8
+    _cache: OrderedDict = field(default_factory=OrderedDict, repr=False)
+
+    @property
+    def n(self) -> int:
+        return int(sum(self.counts))
+
+    def part(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Part ``k``, through the cache."""
+        if k in self._cache:
+            self._cache.move_to_end(k)
+            return self._cache[k]
+        got = self.read(k)
+        self._cache[k] = got
+        while len(self._cache) > self.cache_parts:
+            self._cache.popitem(last=False)
+        return got
+
+
+def pattern_source(pattern) -> Source:
+    """An in-memory pattern as one part."""
+    tiling = pattern.meta.get("tiling")
+    tiles = None
+    if isinstance(tiling, dict) and "xs" in tiling and "ys" in tiling:
+        tiles = (np.asarray(tiling["xs"], float), np.asarray(tiling["ys"], float))
+    return Source(
+        box=pattern.box,
+        outline=pattern.outline,
+        uniform_diameter=pattern.uniform_diameter,
+        nominal_diameter=pattern.nominal_diameter,
+        counts=[pattern.n],
+        read=lambda k: (pattern.xy, pattern.diameter),
+        tiling=tiles,
+        cache_parts=1,
+    )
+
+
+def dataset_source(ds, box=None, outline: Domain | None | bool = True) -> Source:
+    """A :class:`~optdot.io.dataset.Dataset`, part by part, each part checked as it is read.
+
+    Args:
+        box: the panel box (default: the dataset's).
+        outline: the panel outline; True (default) for the dataset's own.
+    """
+    from ..io.patterns import validate_dots
+
+    the_box = tuple(box) if box is not None else ds.box
+
+    def read(k: int):
+        xy, d = ds.read_part(k)
+        validate_dots(ds.path / ds.parts[k]["file"], xy, d, the_box)
+        return xy, d
+
+    tiles = ds.manifest.get("tiles")
+    tiling = None
+    if isinstance(tiles, dict) and tiles.get("nx", 1) * tiles.get("ny", 1) > 1:
+        tiling = (np.asarray(tiles["xs"], float), np.asarray(tiles["ys"], float))
+    nx = int(tiles.get("nx", 1)) if isinstance(tiles, dict) else 1
+    return Source(
+        box=the_box,
+        outline=ds.outline if outline is True else outline,
+        uniform_diameter=ds.uniform_diameter,
+        nominal_diameter=ds.nominal_diameter,
+        counts=[int(p["count"]) for p in ds.parts],
+        read=read,
+        tiling=tiling,
+        label=str(ds.path),
+        cache_parts=3 * nx + 3,
+    )
+
+
+@dataclass
+class Measured:
+    """Numbers for the gate and the report.
+
+    Attributes:
+        metrics: JSON-ready numbers (see :func:`measure`).
+        where: ``{check: [[x, y], ...]}`` places of failures, mm (first 20).
+        arrays: plot data: ``overview`` (image, extent), ``close_mid`` / ``collision_mid``
+            / ``defects`` (``[m, 2]`` mm, at most :data:`MAX_MARKS`), ``zoom`` (xy, d,
+            segments ``[s, 2, 2]``), ``nn_hist`` (counts, µm edges), ``coverage_error``
+            (rel ``[ny, nx]``, extent), ``spectrum`` (freq, power), ``tile``, ``rings`` (the
+            outline's loops; none for a box).
+    """
+
+    metrics: dict[str, Any]
+    where: dict[str, list[list[float]]]
+    arrays: dict[str, Any]
+
+
+def measure(
+    src: Source, density: DensityMap | None, smoothing: float, close: float, collision: float
+) -> Measured:
+    """Measure every QA number of ``src``.
+
+    Args:
+        density: the target map (None: no map numbers).
+        smoothing: coverage smoothing, mm. close: too-close distance, mm.
+        collision: centre distance below which dots collide, mm.
+    """
+    first = _first_pass(src, density)
+    second = _second_pass(src, density, first, close, collision)
+    return _finish(src, density, smoothing, close, collision, first, second)
+
+
+@dataclass
+class _First:
+    boxes: np.ndarray  # [P, 4] bounding boxes of the parts (NaN for empty parts)
+    cells: np.ndarray | None
+    squares: SquareGrid
+    square_counts: np.ndarray
+    overview: np.ndarray
+    overview_extent: tuple[float, float, float, float]
+    protruding: int = 0
+    outside: int = 0
+    margin_violations: int = 0
+    empty: int = 0
+    defects: list[np.ndarray] = field(default_factory=list)
+    where_protruding: list[np.ndarray] = field(default_factory=list)
+    where_empty: list[np.ndarray] = field(default_factory=list)
+    bands: list[tuple[str, Any, float]] = field(default_factory=list)
+    band_sums: list[float] = field(default_factory=list)
+    diameters: list[np.ndarray] = field(default_factory=list)
+
+
+def _overview_grid(src: Source) -> tuple[int, int, float]:
+    x0, y0, x1, y1 = src.box
+    px = max(max(x1 - x0, y1 - y0) / OVERVIEW_PX, 6.0 * src.nominal_diameter)
+    return max(1, int(round((x1 - x0) / px))), max(1, int(round((y1 - y0) / px))), px
+
+
+def _first_pass(src: Source, density: DensityMap | None) -> _First:
+    x0, y0, x1, y1 = src.box
+    onx, ony, _ = _overview_grid(src)
+    uniform = src.uniform_diameter
+    squares = SquareGrid.of(src.box, DENSEST_MM)
+    f = _First(
+        boxes=np.full((len(src.counts), 4), np.nan),
+        cells=None
+        if density is None
+        else np.zeros(density.grid.size, np.int64 if uniform else float),
+        squares=squares,
+        square_counts=np.zeros((squares.nx, squares.ny)),
+        overview=np.zeros((ony, onx)),
+        overview_extent=(x0, x1, y0, y1),
+    )
+    if density is not None:
+        f.bands = edge_bands(src.box, src.outline, density)
+        f.band_sums = [0 if uniform is not None else 0.0 for _ in f.bands]
+    for k in range(len(src.counts)):
+        xy, d = src.part(k)
+        if not len(xy):
+            continue
+        f.boxes[k] = (*xy.min(axis=0), *xy.max(axis=0))
+        if uniform is None:
+            f.diameters.append(d)
+        area = None if uniform is not None else np.pi * (0.5 * d) ** 2
+        f.square_counts += squares.counts(xy)
+        h, _, _ = np.histogram2d(
+            xy[:, 1], xy[:, 0], bins=(ony, onx), range=((y0, y1), (x0, x1)), weights=area
+        )
+        f.overview += h
+        r = 0.5 * d
+        if src.outline is None:
+            out = box_protruding(xy, src.box, r)
+        else:
+            out = src.outline.protruding(xy, r, margin=False)
+            f.outside += int((~src.outline.contains(xy)).sum())
+            f.margin_violations += int(src.outline.protruding(xy, r).sum())
+        f.protruding += int(out.sum())
+        _keep(f.where_protruding, xy[out], 20)
+        _keep(f.defects, xy[out], MAX_MARKS)
+        if density is not None:
+            f.cells += cell_area_sums(xy, d, uniform is not None, density)
+            empty = density.empty_mask(xy)
+            f.empty += int(empty.sum())
+            _keep(f.where_empty, xy[empty], 20)
+            _keep(f.defects, xy[empty], MAX_MARKS)
+            for b, (_, inside, _) in enumerate(f.bands):
+                sel = inside(xy)
+                f.band_sums[b] += int(sel.sum()) if uniform is not None else area[sel].sum()
+    cell = (x1 - x0) / onx * (y1 - y0) / ony
+    if uniform is not None:
+        f.overview *= np.pi * (0.5 * uniform) ** 2
+    f.overview /= cell
+    return f
+
+
+@dataclass
+class _Second:
+    pairs_collision: int = 0
+    pairs_close: int = 0
+    close_dots: int = 0
+    collision_mid: list[np.ndarray] = field(default_factory=list)
+    close_mid: list[np.ndarray] = field(default_factory=list)
+    nn: np.ndarray | None = None
+    nn_norm: list[np.ndarray] = field(default_factory=list)
+    psi_abs_sum: float = 0.0
+    psi_sum: complex = 0j
+    patches: tuple | None = None
+    seams: dict | None = None
+    window_xy: list[np.ndarray] = field(default_factory=list)
+    zoom_xy: list[np.ndarray] = field(default_factory=list)
+    zoom_d: list[np.ndarray] = field(default_factory=list)
+    segments: list[np.ndarray] = field(default_factory=list)
+    requeried: int = 0
+
+
+def _second_pass(
+    src: Source, density: DensityMap | None, first: _First, close: float, collision: float
+) -> _Second:
+    n = src.n
+    s = _Second(nn=np.full(n, np.inf))
+    reach = max(close, collision)
+    halo = max(HALO_MM, 2.0 * reach)
+    boxes = first.boxes
+    lo = np.nanmin(np.vstack([boxes[:, :2], [src.box[:2]]]), axis=0)
+    hi = np.nanmax(np.vstack([boxes[:, 2:], [src.box[2:]]]), axis=0)
+    patches = PatchGrid.over(lo, hi, 2.0)
+    size = patches.nx * patches.ny
+    p_cnt, p_re, p_im = np.zeros(size, np.int64), np.zeros(size), np.zeros(size)
+    window = first.squares.densest(first.square_counts)
+    zs = min(ZOOM_MM, window[2] - window[0])
+    zoom = (window[0], window[1], window[0] + zs, window[1] + zs)
+    offsets = np.concatenate([[0], np.cumsum(src.counts)]).astype(np.int64)
+    for k in range(len(src.counts)):
+        own, d = src.part(k)
+        m = len(own)
+        if m == 0:
+            continue
+        hxy, hpart = _gather(src, boxes, k, halo)
+        pts = np.vstack([own, hxy]) if len(hxy) else own
+        tree = cKDTree(pts)
+        # pairs: own-own here; own-halo by the lower part index
+        pr = tree.query_pairs(reach, output_type="ndarray")
+        if len(pr):
+            pr = pr[pr[:, 0] < m]  # query_pairs gives i < j; own dots come first
+        flag = np.zeros(m, bool)
+        if len(pr):
+            dist = np.hypot(*(pts[pr[:, 0]] - pts[pr[:, 1]]).T)
+            near = dist < close
+            flag[pr[near, 0]] = True
+            inner = pr[near & (pr[:, 1] < m), 1]
+            flag[inner] = True
+            mine = pr[:, 1] < m
+            if len(hpart):
+                mine |= hpart[np.clip(pr[:, 1] - m, 0, len(hpart) - 1)] > k
+            order = np.lexsort((pr[:, 1], pr[:, 0]))
+            pr, dist, near, mine = pr[order], dist[order], near[order], mine[order]
+            for sel, count_attr, mids in (
+                (near & mine, "pairs_close", s.close_mid),
+                ((dist < collision) & mine, "pairs_collision", s.collision_mid),
+            ):
+                setattr(s, count_attr, getattr(s, count_attr) + int(sel.sum()))
+                _keep(mids, 0.5 * (pts[pr[sel, 0]] + pts[pr[sel, 1]]), MAX_MARKS)
+            seg = near & mine
+            a = pts[pr[seg, 0]]
+            inz = _in_rect(a, zoom, closed=False)
+            _keep(s.segments, np.stack([a[inz], pts[pr[seg, 1]][inz]], axis=1), MAX_SEGMENTS)
+        s.close_dots += int(flag.sum())
+        nn, psi, again = _nearest(src, boxes, k, own, pts, tree, halo)
+        s.requeried += again
+        s.nn[offsets[k] : offsets[k] + m] = nn
+        s.psi_abs_sum += float(np.abs(psi).sum())
+        s.psi_sum += complex(psi.sum())
+        c, re, im = patches.sums(own, psi)
+        p_cnt += c
+        p_re += re
+        p_im += im
+        nn_n = None
+        if density is not None:
+            nn_n = nn_normalized(own, 0.5 * d, density, nn)  # NaN where not defined
+            s.nn_norm.append(nn_n[~np.isnan(nn_n)])
+        if src.tiling is not None:
+            part = seam_sums(
+                own,
+                np.pi * (0.5 * d) ** 2,
+                *src.tiling,
+                flag,
+                np.abs(psi),
+                nn_n,
+            )
+            s.seams = part if s.seams is None else _add(s.seams, part)
+        s.window_xy.append(own[_in_rect(own, window)])
+        inz = _in_rect(own, zoom, closed=False)
+        s.zoom_xy.append(own[inz])
+        s.zoom_d.append(d[inz])
+    s.patches = (patches, p_cnt, p_re, p_im)
+    return s
+
+
+def _nearest(
+    src: Source, boxes: np.ndarray, k: int, own: np.ndarray, pts: np.ndarray, tree, halo: float
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Exact nearest-neighbour distance and ψ6 of part ``k``'s dots ``own`` (``[m, 2]``),
+    first among ``pts`` (own + halo, in ``tree``), then, for the dots this cannot settle,
+    among ever wider halos.
+
+    A dot is settled when its k-th distance is at most the halo plus its distance to the
+    edge of the part's box, and there were k points to find (k = :data:`K_NEAREST`, or
+    every dot of the pattern when it holds fewer).
+
+    Returns:
+        ``(nn [m], psi [m] complex, dots re-queried)``.
+    """
+    m = len(own)
+    need = min(K_NEAREST, src.n)
+    nn = np.full(m, np.inf)
+    psi = np.zeros(m, complex)
+    b = boxes[k]
+    edge = np.minimum.reduce(
+        [own[:, 0] - b[0], b[2] - own[:, 0], own[:, 1] - b[1], b[3] - own[:, 1]]
+    )
+    todo = np.arange(m)
+    width = halo
+    again = 0
+    while len(todo):
+        kk = min(need, len(pts))
+        dist, idx = tree.query(own[todo], k=kk)
+        if kk == 1:
+            dist, idx = dist[:, None], idx[:, None]
+        if kk == need:
+            done = dist[:, -1] <= width + edge[todo]
+            if len(src.counts) == 1:
+                done[:] = True
+        else:
+            done = np.zeros(len(todo), bool)
+        if kk > 1:
+            nn[todo[done]] = dist[done, 1]
+        psi[todo[done]] = _psi(pts, own[todo[done]], idx[done])
+        todo = todo[~done]
+        if not len(todo):
+            break
+        again += len(todo) if width == halo else 0
+        # found distances bound the true ones from above; with too few points, double
+        width = float(dist[~done, -1].max()) if kk == need else 2.0 * width
+        hxy, _ = _gather(src, boxes, k, width)
+        pts = np.vstack([own, hxy]) if len(hxy) else own
+        tree = cKDTree(pts)
+    return nn, psi, again
+
+
+def _psi(pts: np.ndarray, own: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """ψ6 of each dot of ``own`` over its neighbours ``idx[:, 1:]`` among ``pts``."""
+    if idx.shape[1] < 2:
+        return np.zeros(len(own), complex)
+    v = pts[idx[:, 1:]] - own[:, None, :]
+    return np.exp(6j * np.arctan2(v[..., 1], v[..., 0])).mean(axis=1)
+
+
+def _gather(src: Source, boxes: np.ndarray, k: int, halo: float) -> tuple[np.ndarray, np.ndarray]:
+    """Dots of the other parts within the box of part ``k`` grown by ``halo``:
+    ``(xy [h, 2], part index [h])``."""
+    b = boxes[k]
+    g = (b[0] - halo, b[1] - halo, b[2] + halo, b[3] + halo)
+    ok = ~np.isnan(boxes[:, 0])
+    ok &= (
+        (boxes[:, 0] <= g[2])
+        & (boxes[:, 2] >= g[0])
+        & (boxes[:, 1] <= g[3])
+        & (boxes[:, 3] >= g[1])
+    )
+    ok[k] = False
+    xys, parts = [], []
+    for j in np.flatnonzero(ok):
+        xy, _ = src.part(int(j))
+        sel = _in_rect(xy, g)
+        xys.append(xy[sel])
+        parts.append(np.full(int(sel.sum()), j, np.int64))
+    if not xys:
+        return np.zeros((0, 2)), np.zeros(0, np.int64)
+    return np.vstack(xys), np.concatenate(parts)
+
+
+def _add(a: dict, b: dict) -> dict:
+    """Sum of two nested dicts of arrays with the same keys."""
+    return {k: _add(v, b[k]) if isinstance(v, dict) else v + b[k] for k, v in a.items()}
+
+
+def _keep(bucket: list[np.ndarray], rows: np.ndarray, limit: int) -> None:
+    """Append ``rows`` to ``bucket`` up to ``limit`` rows in all."""
+    have = sum(len(r) for r in bucket)
+    if have < limit and len(rows):
+        bucket.append(rows[: limit - have])
+
+
+def _cat(bucket: list[np.ndarray], shape: tuple[int, ...]) -> np.ndarray:
+    return np.concatenate(bucket) if bucket else np.zeros((0, *shape))
+
+
+def _finish(
+    src: Source,
+    density: DensityMap | None,
+    smoothing: float,
+    close: float,
+    collision: float,
+    f: _First,
+    s: _Second,
+) -> Measured:
+    n = src.n
+    u = src.uniform_diameter
+    m: dict[str, Any] = {"dots": n, "box_mm": list(src.box)}
+    if u is not None:
+        m["diameter_mm"] = u
+    else:
+        d = np.concatenate(f.diameters)
+        m["diameter_mm"] = {
+            "min": float(d.min()),
+            "median": float(np.median(d)),
+            "max": float(d.max()),
+        }
+    where: dict[str, list[list[float]]] = {}
+    arrays: dict[str, Any] = {"rings": [] if src.outline is None else src.outline.rings()}
+    m["collision_distance_mm"] = collision
+    m["close_distance_mm"] = close
+    m["pairs_below_collision"] = s.pairs_collision
+    m["pairs_below_close"] = s.pairs_close
+    m["dots_in_close_pairs_fraction"] = float(s.close_dots / max(n, 1))
+    arrays["collision_mid"] = _cat(s.collision_mid, (2,))
+    arrays["close_mid"] = _cat(s.close_mid, (2,))
+    where["collisions"] = _where(arrays["collision_mid"])
+    nn = s.nn
+    ok = n > 1
+    m["nn_min_mm"] = float(nn.min()) if ok else None
+    m["nn_percentiles_mm"] = _percentiles(nn) if ok else {}
+    arrays["nn_hist"] = np.histogram(nn * 1e3, bins=100) if ok and np.isfinite(nn).all() else None
+    if src.outline is not None:
+        m["outside_outline_or_in_holes"] = f.outside
+        m["edge_margin_mm"] = src.outline.edge_margin
+        m["edge_margin_violations"] = f.margin_violations
+    m["protruding"] = f.protruding
+    where["protruding"] = _where(_cat(f.where_protruding, (2,)))
+    arrays["defects"] = _cat(f.defects, (2,))
+    m["psi6_local_mean"] = float(s.psi_abs_sum / n) if n else 0.0
+    grid, cnt, re, im = s.patches
+    m["psi6_coherence_2mm"] = grid.coherence(cnt, re, im, total=s.psi_sum, n=n)
+    nn_norm = None
+    if density is not None:
+        m["in_empty_cells"] = f.empty
+        where["in_empty"] = _where(_cat(f.where_empty, (2,)))
+        nn_norm = np.concatenate(s.nn_norm) if s.nn_norm else np.zeros(0)
+        m["nn_normalized_percentiles"] = _percentiles(nn_norm) if len(nn_norm) else {}
+        cov, rel, extent = coverage(
+            f.cells, u, n, src.nominal_diameter, src.outline, density, smoothing
+        )
+        m.update(cov)
+        arrays["coverage_error"] = (rel, extent)
+        where["coverage"] = [cov["coverage_worst_at_mm"]]
+        one = disc_area(u) if u is not None else 1.0
+        m["edge_band_coverage_ratio"] = {
+            name: float(got * one / want) if want > 0 else None
+            for (name, _, want), got in zip(f.bands, f.band_sums, strict=True)
+        }
+    if src.tiling is not None and s.seams is not None:
+        m["seams"] = seam_finish(s.seams, *src.tiling, density)
+    if len(src.counts) > 1:
+        m["qa_requeried_dots"] = s.requeried  # k-NN re-queried with a wider halo
+    tile = f.squares.densest(f.square_counts)
+    freq, power = radial_spectrum(_cat(s.window_xy, (2,)), tile, px=src.nominal_diameter / 4)
+    arrays["spectrum"] = (freq, power)
+    arrays["tile"] = tile
+    arrays["overview"] = (f.overview, f.overview_extent)
+    arrays["zoom"] = (_cat(s.zoom_xy, (2,)), _cat(s.zoom_d, ()), _cat(s.segments, (2, 2)))
+    if len(power):
+        lo = freq > 0.3 / (np.median(nn) if n > 1 else 1)
+        m["spectrum_peak_ratio"] = (
+            float(power[lo].max() / np.median(power[lo])) if lo.any() else None
+        )
+    return Measured(metrics=m, where=where, arrays=arrays)
+
+
+def _in_rect(xy: np.ndarray, r, closed: bool = True) -> np.ndarray:
+    """``[n]`` bool: the point lies in rectangle ``r = (x0, y0, x1, y1)`` (edges included
+    when ``closed``)."""
+    x, y = xy[:, 0], xy[:, 1]
+    if closed:
+        return (x >= r[0]) & (x <= r[2]) & (y >= r[1]) & (y <= r[3])
+    return (x > r[0]) & (x < r[2]) & (y > r[1]) & (y < r[3])
+
+
+def _percentiles(v: np.ndarray) -> dict[str, float]:
+    """The 1st, 5th, 50th and 95th percentiles of ``v``, keyed by their number."""
+    qs = (1, 5, 50, 95)
+    return {str(q): float(x) for q, x in zip(qs, np.percentile(v, qs), strict=True)}
+
+
+def _where(points: np.ndarray, limit: int = 20) -> list[list[float]]:
+    return [[round(float(x), 6), round(float(y), 6)] for x, y in points[:limit]]
