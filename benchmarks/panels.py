@@ -9,6 +9,11 @@ summary and the seam table (bands along tile borders against tile interiors).
     python benchmarks/panels.py notebook --single        # single process and tiled
     python benchmarks/panels.py notebook monitor tv      # tiled only
     python benchmarks/panels.py notebook --tile-size 20 --tile-size 30   # sweep tile size
+    python benchmarks/panels.py tv --reuse --qa --masks   # QA and GDSII/OASIS of a run
+
+``--qa`` times ``optdot qa`` (JSON + HTML report; a dataset is measured tile by tile),
+``--masks`` times ``optdot export`` to GDSII and to OASIS (each gated by QA), both as
+subprocesses with the peak RSS of their process tree.
 """
 
 from __future__ import annotations
@@ -105,7 +110,10 @@ def report(label: str, dots: int, secs: float, gib: float) -> None:
 
 def qa_summary(pattern: Path, job: Path) -> dict:
     js = pattern.with_suffix(".qa.json")
-    secs, gib, rc, err = run(optdot("qa", pattern, "--job", job, "--json", js))
+    page = pattern.with_suffix(".qa.html")
+    secs, gib, rc, err = run(optdot("qa", pattern, "--job", job, "--json", js, "--html", page))
+    if rc not in (0, 1):
+        raise SystemExit(f"qa failed: {err}")
     m = json.loads(js.read_text())["metrics"]
     m["_qa_s"], m["_qa_gib"] = secs, gib
     return m
@@ -116,34 +124,54 @@ def main() -> None:
     ap.add_argument("panels", nargs="+", choices=sorted(PANELS))
     ap.add_argument("--single", action="store_true", help="also run the single process")
     ap.add_argument("--tile-size", type=float, action="append", help="tile side, mm")
-    ap.add_argument("--qa", action="store_true", help="QA every pattern (in memory)")
+    ap.add_argument("--qa", action="store_true", help="QA every pattern (JSON + HTML)")
+    ap.add_argument("--masks", action="store_true", help="export GDSII and OASIS, timed")
+    ap.add_argument("--reuse", action="store_true", help="keep patterns already generated")
     args = ap.parse_args()
     print("| run | dots | s | dots/s | peak GiB (all processes) |\n|---|---|---|---|---|")
+    sys.stdout.flush()
     for name in args.panels:
         job = write_panel(name)
         outs = []
         if args.single:
             out = OUT / name / "single.npz"
-            secs, gib, rc, err = run(optdot("generate", job, "-o", out, "--tiles", "off", "-q"))
-            if rc:
-                print(err, file=sys.stderr)
-                continue
-            n = int(np.load(out)["xy"].shape[0])
-            report(f"{name} single process", n, secs, gib)
+            if not (args.reuse and out.exists()):
+                secs, gib, rc, err = run(optdot("generate", job, "-o", out, "--tiles", "off", "-q"))
+                if rc:
+                    print(err, file=sys.stderr)
+                    continue
+                n = int(np.load(out)["xy"].shape[0])
+                report(f"{name} single process", n, secs, gib)
             outs.append(("single", out))
         for side in args.tile_size or [None]:
             out = OUT / name / f"tiled{'' if side is None else f'-{side:g}'}.parquet"
             cmd = ["generate", job, "-o", out, "--tiles", "on"]
             if side is not None:
                 cmd += ["--tile-size", side]
-            secs, gib, rc, err = run(optdot(*cmd))
-            if rc:
-                print(err, file=sys.stderr)
-                continue
-            n = json.loads((out / "_manifest.json").read_text())["n"]
-            tiles = [ln for ln in err.splitlines() if "tiles (" in ln]
-            report(f"{name} tiled {tiles[0].split('; ')[-1] if tiles else ''}", n, secs, gib)
+            if not (args.reuse and out.exists()):
+                secs, gib, rc, err = run(optdot(*cmd))
+                if rc:
+                    print(err, file=sys.stderr)
+                    continue
+                n = json.loads((out / "_manifest.json").read_text())["n"]
+                tiles = [ln for ln in err.splitlines() if "tiles (" in ln]
+                report(f"{name} tiled {tiles[0].split('; ')[-1] if tiles else ''}", n, secs, gib)
             outs.append((f"tiled {side or 'auto'}", out))
+        if args.masks:
+            print("\n| pattern | mask | s | peak GiB | file GB |\n|---|---|---|---|---|")
+            for label, out in outs:
+                if out.suffix != ".parquet":
+                    continue
+                for fmt in ("gds", "oas"):
+                    mask = out.with_suffix(f".{fmt}")
+                    secs, gib, rc, err = run(
+                        optdot("export", out, "--job", job, f"--{fmt}", mask, "-q")
+                    )
+                    if rc:
+                        print(err, file=sys.stderr)
+                        continue
+                    size = mask.stat().st_size / 1e9
+                    print(f"| {name} {label} | {fmt} | {secs:.0f} | {gib:.2f} | {size:.2f} |")
         if args.qa:
             print("\n| pattern | pairs < 60 µm | ψ6 mean | coverage RMS | QA s | QA GiB |")
             print("|---|---|---|---|---|---|")

@@ -12,11 +12,14 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from ..errors import GeometryError, JobError
 from ..geometry.density import DensityMap
 from ..geometry.domain import DEFAULT_TOLERANCE, Domain, orient_all
 from ..geometry.outline_io import load_outline, parse_keep_out
 from .grids import load_grid, validate_grid
+from .images import IMAGE_SUFFIXES, check_ranges, load_image
 from .job import Job, OptimizeParams, QAParams
 
 SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
@@ -30,7 +33,12 @@ SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
         "keep_out_layer": (str,),
         "edge_margin": (int, float),
     },
-    "density": {"grid": (str,)},
+    "density": {
+        "grid": (str,),
+        "image": (str,),
+        "fill_range": (list,),
+        "value_range": (list,),
+    },
     "dots": {"diameter": (int, float)},
     "optimize": {
         "method": (str,),
@@ -60,7 +68,7 @@ SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
         "smoothing": (int, float),
     },
 }
-_REQUIRED = {"density": ("grid",), "dots": ("diameter",)}
+_REQUIRED = {"dots": ("diameter",)}
 
 
 def load_job(path: str | Path) -> Job:
@@ -128,8 +136,7 @@ def job_from_dict(raw: dict[str, Any], base: Path = Path("."), source: Path | No
                     f"box ({size:.6g} mm); with an outline the density grid covers that box, "
                     "so leave width/height out or check the outline's units (mm)"
                 )
-    grid_path = base / sections["density"]["grid"]
-    grid = load_grid(grid_path)
+    grid_path, grid = _load_density(sections.get("density", {}), base, where)
     try:
         opt = OptimizeParams(**_floats(sections.get("optimize", {})))
         qa = QAParams(**_floats(sections.get("qa", {})))
@@ -150,6 +157,35 @@ def job_from_dict(raw: dict[str, Any], base: Path = Path("."), source: Path | No
         name=str(sections[""].get("name", source.stem if source else "optdot")),
         source=source,
         inputs=tuple(p for p in (source, grid_path, *_outline_files(dom, base)) if p is not None),
+    )
+
+
+def _load_density(sec: dict[str, Any], base: Path, where: str) -> tuple[Path, np.ndarray]:
+    """The ``[density]`` map: ``grid`` (CSV/.npy, row 0 = bottom) or ``image`` (PNG/TIFF,
+    top-down; see :mod:`optdot.config.images`), exactly one. Returns ``(file, [ny, nx])``."""
+    given = [k for k in ("grid", "image") if k in sec]
+    if len(given) != 1:
+        why = "both given" if given else "missing"
+        raise JobError(f"{where}: give one of density.grid or density.image ({why})")
+    path = base / sec[given[0]]
+    fill_range, value_range = sec.get("fill_range"), sec.get("value_range")
+    if given[0] == "grid":
+        if fill_range is not None or value_range is not None:
+            raise JobError(
+                f"{where}: density.fill_range/value_range apply to density.image only "
+                "(grid values are fill fractions)"
+            )
+        return path, load_grid(path)
+    check_ranges(fill_range, value_range, where)
+    if path.suffix.lower() not in IMAGE_SUFFIXES:
+        raise JobError(
+            f"{path}: density.image must be {', '.join(IMAGE_SUFFIXES)} "
+            "(CSV and .npy grids go in density.grid)"
+        )
+    return path, load_image(
+        path,
+        None if fill_range is None else tuple(map(float, fill_range)),
+        None if value_range is None else tuple(map(float, value_range)),
     )
 
 

@@ -107,14 +107,64 @@ def polygon_cell_fractions(
         fx = np.clip(np.minimum(xs[1:], bx1) - np.maximum(xs[:-1], bx0), 0, None) / cw
         fy = np.clip(np.minimum(ys[1:], by1) - np.maximum(ys[:-1], by0), 0, None) / ch
         return fy[:, None] * fx[None, :]
-    iy, ix = np.mgrid[0:ny, 0:nx]
+    inside = _centres_inside(geom, x0, y0, cw, ch, nx, ny)
+    frac = inside.astype(np.float64)
+    iy, ix = np.nonzero(_crossed(geom, x0, y0, cw, ch, nx, ny))
     cells = shapely.box(x0 + ix * cw, y0 + iy * ch, x0 + (ix + 1) * cw, y0 + (iy + 1) * ch)
     shapely.prepare(geom)
-    inside = shapely.contains(geom, cells)
-    frac = inside.astype(np.float64)
-    edge = ~inside & shapely.intersects(geom, cells)
-    frac[edge] = shapely.area(shapely.intersection(cells[edge], geom)) / (cw * ch)
+    full = shapely.contains(geom, cells)
+    part = ~full & shapely.intersects(geom, cells)
+    share = np.zeros(len(cells))
+    share[full] = 1.0
+    share[part] = shapely.area(shapely.intersection(cells[part], geom)) / (cw * ch)
+    frac[iy, ix] = share
     return frac
+
+
+def _rings(geom) -> list[np.ndarray]:
+    """Every boundary loop of a (multi)polygon, ``[k, 2]`` vertices."""
+    polys = getattr(geom, "geoms", [geom])
+    return [np.asarray(r.coords) for p in polys for r in (p.exterior, *p.interiors)]
+
+
+def _centres_inside(geom, x0, y0, cw, ch, nx, ny) -> np.ndarray:
+    """``[ny, nx]`` bool: the cell's centre lies inside ``geom`` (even-odd scanlines over
+    every ring: O(rows x edges), no object per cell)."""
+    seg = np.concatenate([np.stack([r[:-1], r[1:]], axis=1) for r in _rings(geom)])
+    (ax, ay), (bx, by) = seg[:, 0].T, seg[:, 1].T
+    xc = x0 + (np.arange(nx) + 0.5) * cw
+    out = np.zeros((ny, nx), bool)
+    for j in range(ny):
+        yc = y0 + (j + 0.5) * ch
+        hit = (ay <= yc) != (by <= yc)
+        if not hit.any():
+            continue
+        xs = np.sort(ax[hit] + (yc - ay[hit]) * (bx[hit] - ax[hit]) / (by[hit] - ay[hit]))
+        out[j] = np.searchsorted(xs, xc) % 2 == 1
+    return out
+
+
+def _crossed(geom, x0, y0, cw, ch, nx, ny) -> np.ndarray:
+    """``[ny, nx]`` bool: cells the boundary may cross (a superset): the cells of points
+    every <= one cell along each edge, grown by one cell (a cell an edge crosses lies
+    within one cell of such a point)."""
+    step = min(cw, ch)
+    mask = np.zeros((ny, nx), bool)
+    for r in _rings(geom):
+        a, b = r[:-1], r[1:]
+        k = np.maximum(1, np.ceil(np.hypot(*(b - a).T) / step).astype(np.int64))
+        t = np.concatenate([np.arange(n + 1) / n for n in k])
+        s = np.repeat(np.arange(len(a)), k + 1)
+        pts = a[s] + (b[s] - a[s]) * t[:, None]
+        ix = np.floor((pts[:, 0] - x0) / cw).astype(np.int64)
+        iy = np.floor((pts[:, 1] - y0) / ch).astype(np.int64)
+        ok = (ix >= -1) & (ix <= nx) & (iy >= -1) & (iy <= ny)
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                jx, jy = ix[ok] + dx, iy[ok] + dy
+                keep = (jx >= 0) & (jx < nx) & (jy >= 0) & (jy < ny)
+                mask[jy[keep], jx[keep]] = True
+    return mask
 
 
 def orient_all(geom: Polygon | MultiPolygon) -> Polygon | MultiPolygon:
