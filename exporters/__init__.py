@@ -9,6 +9,7 @@ OASIS      :func:`optdot.exporters.gds.write_oas` (gdstk)
 DXF        :func:`optdot.exporters.dxf.write_dxf` (streamed, ezdxf template)
 CSV        :func:`optdot.io.patterns.write_csv`
 SVG/PNG    :func:`optdot.exporters.preview.write_svg`, :func:`optdot.exporters.preview.write_png`
+Speos      :func:`optdot.exporters.speos.write_speos` (``.OPT3DMapping``, streamed)
 =========  ======================================================
 """
 
@@ -21,7 +22,7 @@ from optdot.pattern import Pattern
 
 from .options import ExportOptions
 
-FORMATS = ("gds", "oas", "dxf", "csv", "svg", "png")
+FORMATS = ("gds", "oas", "dxf", "csv", "svg", "png", "speos")
 
 
 def write(pattern: Pattern, fmt: str, path: str | Path, opts: ExportOptions | None = None) -> None:
@@ -41,6 +42,10 @@ def write(pattern: Pattern, fmt: str, path: str | Path, opts: ExportOptions | No
         write_dxf(pattern, path, opts)
     elif fmt == "csv":
         write_csv(pattern, path)
+    elif fmt == "speos":
+        from .speos import write_speos
+
+        write_speos(pattern, path, opts)
     elif fmt == "svg":
         from .preview import write_svg
 

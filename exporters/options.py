@@ -21,6 +21,8 @@ class ExportOptions:
         top_cell: name of the top cell.
         dot_cell: name of the dot cell.
         dxf_version: DXF release (R2010 default; R12 for older CAM).
+        speos_reference_mm: the diameter a Speos texture element stands for, mm (scale
+            1); None: the pattern's nominal diameter.
     """
 
     tolerance_um: float = 0.01
@@ -32,6 +34,7 @@ class ExportOptions:
     top_cell: str = "TOP"
     dot_cell: str = "DOT"
     dxf_version: str = "R2010"
+    speos_reference_mm: float | None = None
 
     def __post_init__(self) -> None:
         if not 1e-4 <= self.tolerance_um <= 10:
@@ -51,5 +54,8 @@ class ExportOptions:
             )
         if self.top_cell == self.dot_cell:
             raise ExportError("--top-cell and the dot cell must differ")
+        ref = self.speos_reference_mm
+        if ref is not None and not (0 < ref < float("inf")):
+            raise ExportError(f"--speos-reference-diameter {ref} must be > 0 mm")
         if self.dxf_version not in DXF_VERSIONS:
             raise ExportError(f"--dxf-version {self.dxf_version!r}: use one of {DXF_VERSIONS}")

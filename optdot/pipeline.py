@@ -386,7 +386,7 @@ def qa(
 
 
 #: Formats written straight from a dataset's parts (hierarchical masks).
-STREAMED = ("gds", "oas", "dxf")
+STREAMED = ("gds", "oas", "dxf", "speos")
 
 
 def export(

@@ -402,6 +402,16 @@ def _check_outputs(outputs: dict[str, Path], inputs: tuple = ()) -> None:
 @click.option("--svg", type=click.Path(path_type=Path), help="SVG preview to write.")
 @click.option("--png", type=click.Path(path_type=Path), help="PNG preview to write.")
 @click.option(
+    "--speos",
+    type=click.Path(path_type=Path),
+    help="Ansys Speos 3D-texture mapping to write (.OPT3DMapping: position and scale per dot).",
+)
+@click.option(
+    "--speos-reference-diameter",
+    type=float,
+    help="Diameter of the Speos texture element, mm (scale 1; default: the nominal diameter).",
+)
+@click.option(
     "--job",
     "job_path",
     type=click.Path(path_type=Path),
@@ -431,6 +441,8 @@ def export(
     csv,
     svg,
     png,
+    speos,
+    speos_reference_diameter,
     job_path,
     tolerance,
     flatten,
@@ -463,11 +475,12 @@ def export(
             ("csv", csv),
             ("svg", svg),
             ("png", png),
+            ("speos", speos),
         )
         if v is not None
     }
     if not outputs:
-        raise click.UsageError("give at least one of --gds --oas --dxf --csv --svg --png")
+        raise click.UsageError("give at least one of --gds --oas --dxf --csv --svg --png --speos")
     opts = ExportOptions(
         tolerance_um=tolerance,
         flatten=flatten,
@@ -476,6 +489,7 @@ def export(
         outline_layer=outline_layer,
         top_cell=top_cell,
         dxf_version=dxf_version,
+        speos_reference_mm=speos_reference_diameter,
     )
     if source.suffix.lower() == ".toml":
         job = load_job_with(source, seed, max_iter, method, formulation)

@@ -1,0 +1,69 @@
+"""Ansys Speos 3D-texture mapping (``*.OPT3DMapping``): the dots back into the ray tracer.
+
+The format (Speos user guide, "Mapping File"): a text file whose first line is the number
+of elements, then one line per element ``x y z ix iy iz jx jy jz kx ky kz``: the
+element's origin in the texture's axis system, its X and Y directions, and its scale
+along x, y and z (1 = 100 % of the pattern element's size).
+
+optdot writes, per dot: its centre in mm with z = 0, X = (1, 0, 0) and Y = (0, 1, 0) (the
+panel's axes), and the scale ``d_i / reference`` on all three axes, ``reference`` being
+the diameter the Speos pattern element was drawn at (default: the pattern's nominal
+diameter, so fixed-size dots all have scale 1). Scaling z too keeps the element's shape
+(a moulded micro-dot's depth follows its diameter); a texture whose depth is fixed edits
+that column. Numbers have 6 decimals (1 nm in position). The file is written part by
+part (a dataset streams tile by tile) and verified by size before it replaces anything.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from optdot.errors import ExportError
+from optdot.io.atomic import atomic_path, expect_size
+from optdot.io.patterns import format_fixed6
+
+from .options import ExportOptions
+
+#: Rows formatted at once (memory of one batch, not of the pattern).
+BATCH = 200_000
+
+
+def write_speos(pattern, path: str | Path, opts: ExportOptions) -> None:
+    """Write ``pattern`` (a :class:`~optdot.pattern.Pattern` or a dataset) as an
+    ``.OPT3DMapping`` file, atomically.
+
+    Raises:
+        ExportError: no dots, or the file cannot be written whole.
+    """
+    if pattern.n == 0:
+        raise ExportError(f"{path}: the pattern has no dots")
+    ref = opts.speos_reference_mm or pattern.nominal_diameter
+    written = 0
+
+    def lines(xy: np.ndarray, d: np.ndarray) -> bytes:
+        n = len(xy)
+        rows = np.zeros((n, 12))
+        rows[:, :2] = xy
+        rows[:, 3] = 1.0  # X direction
+        rows[:, 7] = 1.0  # Y direction
+        rows[:, 9:] = (d / ref)[:, None]
+        return format_fixed6(rows).replace(b",", b" ")
+
+    head = f"{pattern.n}\n".encode("ascii")
+    with atomic_path(path, _verify(path, lambda: written)) as tmp, open(tmp, "wb") as fh:
+        fh.write(head)
+        written += len(head)
+        for _, xy, d in pattern.chunks():  # one part, or one per tile (datasets)
+            for a in range(0, len(xy), BATCH):
+                data = lines(xy[a : a + BATCH], d[a : a + BATCH])
+                fh.write(data)
+                written += len(data)
+
+
+def _verify(path, size):
+    def check(tmp: Path) -> None:
+        expect_size(size(), str(path))(tmp)
+
+    return check
