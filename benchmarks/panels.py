@@ -111,7 +111,9 @@ def report(label: str, dots: int, secs: float, gib: float) -> None:
 def qa_summary(pattern: Path, job: Path) -> dict:
     js = pattern.with_suffix(".qa.json")
     page = pattern.with_suffix(".qa.html")
-    secs, gib, rc, err = run(optdot("qa", pattern, "--job", job, "--json", js, "--html", page))
+    secs, gib, rc, err = run(
+        optdot("qa", pattern, "--job", job, "--json", js, "--html", page, "-q")
+    )
     if rc not in (0, 1):
         raise SystemExit(f"qa failed: {err}")
     m = json.loads(js.read_text())["metrics"]
