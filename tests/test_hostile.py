@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import time
 
 import ezdxf
 import gdstk
@@ -363,3 +364,23 @@ def test_a_reader_crash_is_one_line(tmp_path, monkeypatch, tiny_pattern):
 
     monkeypatch.setattr(readback, "_read_layout", crash)
     one_error(["qa", tmp_path / "m.gds"], 2, "m.gds: damaged GDS file", "SIGSEGV")
+
+
+def _spin(seconds: float) -> str:
+    end = time.process_time() + seconds
+    while time.process_time() < end:
+        pass
+    return "done"
+
+
+def test_a_reader_that_hangs_is_stopped_and_one_that_works_is_not(monkeypatch):
+    """A corrupted heap can deadlock the child (seen in CI): no CPU for STALL_SECONDS and
+    it is killed and reported; a child busy for longer than that is left to finish."""
+    from optdot.runtime import isolate
+
+    monkeypatch.setattr(isolate, "STALL_SECONDS", 1.0)
+    t0 = time.monotonic()
+    with pytest.raises(isolate.ChildCrashed, match="hung"):
+        isolate.in_child(time.sleep, 60)
+    assert time.monotonic() - t0 < 10
+    assert isolate.in_child(_spin, 2.5) == "done"
