@@ -101,9 +101,7 @@ def coverage_image(
     reads as coverage rather than as dot positions; at most ``max_px`` a side.
     """
     x0, y0, x1, y1 = pattern.box
-    px = max(max((x1 - x0), (y1 - y0)) / max_px, 6.0 * pattern.nominal_diameter)
-    nx = max(1, int(round((x1 - x0) / px)))
-    ny = max(1, int(round((y1 - y0) / px)))
+    nx, ny = coverage_pixels(pattern.box, pattern.nominal_diameter, max_px)
     rng = ((y0, y1), (x0, x1))
     cell = (x1 - x0) / nx * (y1 - y0) / ny
     u = pattern.uniform_diameter
@@ -114,6 +112,14 @@ def coverage_image(
         pattern.xy[:, 1], pattern.xy[:, 0], bins=(ny, nx), range=rng, weights=pattern.areas
     )
     return h / cell, (x0, x1, y0, y1)
+
+
+def coverage_pixels(box, nominal: float, max_px: int) -> tuple[int, int]:
+    """``(nx, ny)`` pixels of a coverage image of the panel ``box`` (mm): pixels of at
+    least 6 ``nominal`` dot diameters (mm), at most ``max_px`` a side."""
+    x0, y0, x1, y1 = box
+    px = max(max((x1 - x0), (y1 - y0)) / max_px, 6.0 * nominal)
+    return max(1, int(round((x1 - x0) / px))), max(1, int(round((y1 - y0) / px)))
 
 
 #: Names that lived here until 0.2 and moved to :mod:`optdot.io.patterns`.

@@ -44,6 +44,7 @@ from scipy.spatial import cKDTree
 
 from ..geometry.density import DensityMap
 from ..geometry.domain import Domain, box_protruding
+from ..pattern import coverage_pixels
 from .metrics import (
     PatchGrid,
     SquareGrid,
@@ -52,6 +53,7 @@ from .metrics import (
     disc_area,
     edge_bands,
     nn_normalized,
+    psi6_of,
     radial_spectrum,
 )
 from .seams import seam_finish, seam_sums
@@ -220,15 +222,9 @@ class _First:
     diameters: list[np.ndarray] = field(default_factory=list)
 
 
-def _overview_grid(src: Source) -> tuple[int, int, float]:
-    x0, y0, x1, y1 = src.box
-    px = max(max(x1 - x0, y1 - y0) / OVERVIEW_PX, 6.0 * src.nominal_diameter)
-    return max(1, int(round((x1 - x0) / px))), max(1, int(round((y1 - y0) / px))), px
-
-
 def _first_pass(src: Source, density: DensityMap | None) -> _First:
     x0, y0, x1, y1 = src.box
-    onx, ony, _ = _overview_grid(src)
+    onx, ony = coverage_pixels(src.box, src.nominal_diameter, OVERVIEW_PX)
     uniform = src.uniform_diameter
     squares = SquareGrid.of(src.box, DENSEST_MM)
     f = _First(
@@ -424,7 +420,7 @@ def _nearest(
             done = np.zeros(len(todo), bool)
         if kk > 1:
             nn[todo[done]] = dist[done, 1]
-        psi[todo[done]] = _psi(pts, own[todo[done]], idx[done])
+        psi[todo[done]] = psi6_of(pts, own[todo[done]], idx[done])
         todo = todo[~done]
         if not len(todo):
             break
@@ -435,14 +431,6 @@ def _nearest(
         pts = np.vstack([own, hxy]) if len(hxy) else own
         tree = cKDTree(pts)
     return nn, psi, again
-
-
-def _psi(pts: np.ndarray, own: np.ndarray, idx: np.ndarray) -> np.ndarray:
-    """ψ6 of each dot of ``own`` over its neighbours ``idx[:, 1:]`` among ``pts``."""
-    if idx.shape[1] < 2:
-        return np.zeros(len(own), complex)
-    v = pts[idx[:, 1:]] - own[:, None, :]
-    return np.exp(6j * np.arctan2(v[..., 1], v[..., 0])).mean(axis=1)
 
 
 def _gather(src: Source, boxes: np.ndarray, k: int, halo: float) -> tuple[np.ndarray, np.ndarray]:

@@ -19,7 +19,6 @@ from scipy.spatial import cKDTree
 
 from ..geometry.density import DensityMap
 from ..geometry.domain import polygon_cell_fractions
-from ..pattern import Pattern
 
 
 def close_pairs(xy: np.ndarray, distance: float) -> np.ndarray:
@@ -43,10 +42,18 @@ def psi6(xy: np.ndarray, tree: cKDTree | None = None) -> np.ndarray:
     """Six-fold bond order of each dot over its 6 nearest neighbours, ``[n]`` complex."""
     tree = tree or cKDTree(xy)
     k = min(7, len(xy))
-    _, idx = tree.query(xy, k=k)
     if k < 2:
         return np.zeros(len(xy), complex)
-    v = xy[idx[:, 1:]] - xy[:, None, :]
+    _, idx = tree.query(xy, k=k)
+    return psi6_of(xy, xy, idx)
+
+
+def psi6_of(pts: np.ndarray, own: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """ψ6 of each dot of ``own`` (``[m, 2]``) over its neighbours ``pts[idx[:, 1:]]``
+    (``idx`` ``[m, k]``, column 0 the dot itself), ``[m]`` complex."""
+    if idx.shape[1] < 2:
+        return np.zeros(len(own), complex)
+    v = pts[idx[:, 1:]] - own[:, None, :]
     return np.exp(6j * np.arctan2(v[..., 1], v[..., 0])).mean(axis=1)
 
 
@@ -328,9 +335,3 @@ class SquareGrid:
         i, j = np.unravel_index(np.argmax(counts), counts.shape)
         s = self.s
         return self.x0 + i * s, self.y0 + j * s, self.x0 + (i + 1) * s, self.y0 + (j + 1) * s
-
-
-def densest_tile(pattern: Pattern, size: float) -> tuple[float, float, float, float]:
-    """The ``size``-mm square of the pattern holding the most dots, ``(x0, y0, x1, y1)``."""
-    grid = SquareGrid.of(pattern.box, size)
-    return grid.densest(grid.counts(pattern.xy))

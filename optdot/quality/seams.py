@@ -25,38 +25,6 @@ BAND_MM = 0.5
 MIN_DOTS = 200
 
 
-def seam_metrics(
-    xy: np.ndarray,
-    areas: np.ndarray,
-    xs: np.ndarray,
-    ys: np.ndarray,
-    close_flag: np.ndarray,
-    psi_abs: np.ndarray,
-    nn_norm: np.ndarray | None,
-    density: DensityMap | None,
-    width: float = BAND_MM,
-) -> dict[str, Any]:
-    """Band-against-interior numbers of a tiled pattern.
-
-    Args:
-        xy: ``[n, 2]`` centres, mm. areas: ``[n]`` dot areas, mm².
-        xs, ys: tile edges, mm (``[nx + 1]``, ``[ny + 1]``).
-        close_flag: ``[n]`` bool, the dot is in a pair closer than the close distance.
-        psi_abs: ``[n]`` |ψ6|.
-        nn_norm: ``[n]`` nearest-neighbour distance over the local hexagonal spacing
-            (NaN where the map gives no spacing: those dots are left out of its mean).
-        density: the map (None: no coverage numbers).
-        width: band width, mm.
-
-    Returns:
-        ``{"band_mm", "tiles", "band_dots", "interior_dots", "measures": {name: {"band",
-        "interior", "band_sd", "interior_sd", "passed"}}, "passed"}``; empty when there is
-        one tile.
-    """
-    sums = seam_sums(xy, areas, xs, ys, close_flag, psi_abs, nn_norm, width)
-    return seam_finish(sums, xs, ys, density, width)
-
-
 def seam_sums(
     xy: np.ndarray,
     areas: np.ndarray,
@@ -67,9 +35,19 @@ def seam_sums(
     nn_norm: np.ndarray | None,
     width: float = BAND_MM,
 ) -> dict[str, dict[str, np.ndarray]]:
-    """Per-tile sums of some dots (arguments as :func:`seam_metrics`): ``{"band" |
-    "interior": {"count", "close", "psi", "area"[, "nn"]: [tiles]}}``. Sums over the
-    parts of a pattern add up to the whole pattern's."""
+    """Per-tile sums of some dots: ``{"band" | "interior": {"count", "close", "psi",
+    "area"[, "nn", "nn_count"]: [tiles]}}``. Sums over the parts of a pattern add up to
+    the whole pattern's (:func:`seam_finish` judges them).
+
+    Args:
+        xy: ``[n, 2]`` centres, mm. areas: ``[n]`` dot areas, mm².
+        xs, ys: tile edges, mm (``[nx + 1]``, ``[ny + 1]``).
+        close_flag: ``[n]`` bool, the dot is in a pair closer than the close distance.
+        psi_abs: ``[n]`` |ψ6|.
+        nn_norm: ``[n]`` nearest-neighbour distance over the local hexagonal spacing
+            (NaN where the map gives no spacing: those dots are left out of its mean).
+        width: band width, mm.
+    """
     xs = np.asarray(xs, float)
     ys = np.asarray(ys, float)
     nx, ny = len(xs) - 1, len(ys) - 1
@@ -106,7 +84,14 @@ def seam_finish(
     density: DensityMap | None,
     width: float = BAND_MM,
 ) -> dict[str, Any]:
-    """The verdict of :func:`seam_metrics` from the summed :func:`seam_sums`."""
+    """Band-against-interior numbers of a tiled pattern from its summed
+    :func:`seam_sums` (``density``: the map, None for no coverage numbers).
+
+    Returns:
+        ``{"band_mm", "tiles", "band_dots", "interior_dots", "measures": {name: {"band",
+        "interior", "band_sd", "interior_sd", "passed"}}, "passed"}``; empty when there is
+        one tile.
+    """
     xs = np.asarray(xs, float)
     ys = np.asarray(ys, float)
     nx, ny = len(xs) - 1, len(ys) - 1
