@@ -1,7 +1,7 @@
 """QA time on a generated pattern: python benchmarks/qa_speed.py [--dots 1e6]
 
 Generates a synthetic direct-lit pattern (as benchmarks/scaling.py), then times
-``run_qa`` (all metrics, shapely/GEOS pair counts) and the HTML + JSON report.
+``run_qa`` (all metrics, pair counts by cKDTree) and the HTML + JSON report.
 """
 
 from __future__ import annotations
