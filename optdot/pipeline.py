@@ -33,12 +33,17 @@ from .relax.formulation import Formulation
 from .relax.legalize import check_guarantee, legalize
 from .relax.md import MDForce, md_relax
 from .relax.optdot import Progress, relax_staged
+from .relax.resize import fit_sizes
 from .runtime.cluster import connect, scheduler_address
 from .runtime.memory import BASE_BYTES, available_bytes, check_memory, estimate_bytes
 from .sampling.initial import initial_dots, initial_dots_in
 from .tiling.plan import TilePlan, plan_tiles
 from .tiling.run import InProcess, OnDask, TiledRun, TileProgress, run_tiles, warm_up
 from .tiling.steps import formulation_for, problem_of, settings_for
+
+#: Width of the blur the dot sizes are fitted under, as a share of ``qa.smoothing``
+#: (:mod:`optdot.relax.resize`).
+FIT_SHARE = 0.5
 
 
 def _check_room(job: Job, n: int, where: str) -> None:
@@ -91,10 +96,11 @@ def generate(
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
 
+    weights = job.dart_weights  # None for one size: darts in proportion to the fill
     if job.domain.rectangle:
-        xy_init = initial_dots(job.density, n, opt.seed)
+        xy_init = initial_dots(job.density, n, opt.seed, weights)
     else:
-        xy_init = initial_dots_in(job.density, n, opt.seed, job.domain.contains)
+        xy_init = initial_dots_in(job.density, n, opt.seed, job.domain.contains, weights)
         if len(xy_init) < n:
             raise GeometryError(
                 f"{where}: could only place {len(xy_init)} of {n} dots inside the outline; "
@@ -102,7 +108,9 @@ def generate(
             )
     home = job.density.cell_index(xy_init)
     rho = job.density.grid.ravel()[home]
+    diameter = job.diameters_at(home)  # one number, or [n] when sizes vary
     order = spatial_order(xy_init)
+    sized = None if np.ndim(diameter) == 0 else diameter[order]
     xy0 = np.ascontiguousarray(xy_init[order])
     timings["initial_s"] = time.perf_counter() - t0
 
@@ -133,17 +141,30 @@ def generate(
     else:
         form = formulation_for(job) if formulation is None else formulation
         relaxed, info, history = relax_staged(
-            problem_of(job), form, xy0, rho[order], settings_for(job), progress
+            problem_of(job), form, xy0, rho[order], settings_for(job), progress, diameters=sized
         )
     timings["relax_s"] = time.perf_counter() - t1
 
     t2 = time.perf_counter()
-    leg = legalize(relaxed, job.density, home[order], job.domain, r0, job.min_distance)
-    viol = check_guarantee(leg.xy, job.density, job.domain, r0, job.min_distance)
+    radius, dmin = r0, job.min_distance
+    if sized is not None:  # per dot: own radius, own diameter + gap
+        if job.sizes.rule != "grid":  # sizes fitted to the coverage where the dots stand
+            sigma = FIT_SHARE * job.qa.smoothing
+            sized = fit_sizes(relaxed, sized, job.sizes, job.density, job.domain, sigma)
+            diameter = np.empty_like(sized)
+            diameter[order] = sized
+        radius, dmin = 0.5 * sized, sized + opt.gap
+    leg = legalize(relaxed, job.density, home[order], job.domain, radius, dmin)
+    viol = check_guarantee(leg.xy, job.density, job.domain, radius, dmin)
     if not viol.ok:
+        closer = (
+            "closer than their radii + gap"
+            if sized is not None
+            else (f"closer than {job.min_distance * 1e3:.1f} um")
+        )
         raise GuaranteeError(
             f"{where}: could not meet the guarantee after {leg.sweeps} sweeps: "
-            f"{viol.collisions} pairs closer than {job.min_distance * 1e3:.1f} um, "
+            f"{viol.collisions} pairs {closer}, "
             f"{viol.protruding} dots protruding, {viol.in_empty} dots in zero-density cells"
         )
     timings["legalize_s"] = time.perf_counter() - t2
@@ -163,13 +184,17 @@ def generate(
         "legalize_pair_fixes": int(leg.pair_fixes),
         "legalize_dot_fixes": int(leg.dot_fixes),
     }
+    if job.sizes is not None:
+        meta["diameter_rule"] = job.sizes.rule
+    if job.interpolation != "nearest":
+        meta["interpolation"] = job.interpolation
     stats: dict = {**timings, "history": history}
     if keep_stages:
         stats["initial_xy"] = xy_init
         stats["relaxed_xy"] = np.empty_like(relaxed)
         stats["relaxed_xy"][order] = relaxed
     outline = None if job.domain.rectangle else job.domain
-    return Pattern(xy=xy, diameter=job.diameter, box=box, meta=meta, stats=stats, outline=outline)
+    return Pattern(xy=xy, diameter=diameter, box=box, meta=meta, stats=stats, outline=outline)
 
 
 #: ``tiles="auto"`` tiles a job of at least this many dots even when one process would
@@ -183,6 +208,13 @@ Announce = Callable[[str], None]
 def use_tiles(job: Job, mode: str = "auto") -> bool:
     """Whether ``job`` runs tiled: ``on``, ``off``, or ``auto`` (when one process would
     not fit, or from :data:`TILE_BREAK_EVEN` dots; the MD baseline never tiles)."""
+    if job.sizes is not None:
+        if mode == "on":
+            raise JobError(
+                f"{job.name}: tiles take one dot size for now; a job with dots.diameter = "
+                "[low, high] runs in one process (--tiles off)"
+            )
+        return False
     if mode == "on":
         if job.optimize.method != "optdot":
             raise JobError(f"{job.name}: tiles need optimize.method = 'optdot' (MD is a baseline)")
@@ -354,6 +386,7 @@ def qa(
     collision: float | None = None,
     close: float | None = None,
     dataset=None,
+    close_gap: float | None = None,
 ) -> QAResult:
     """Measure ``pattern`` (or ``dataset``) and judge it (see
     :func:`optdot.quality.gate.run_qa`).
@@ -365,24 +398,37 @@ def qa(
         collision: collision distance, mm (default: the job's diameter + gap, else the
             pattern's nominal diameter).
         close: too-close distance, mm (default: the job's ``qa.close_distance``).
+            ``collision`` and ``close`` are centre distances for dots of one size; dots of
+            varying size are judged by edge gaps: ``close_gap`` (default the job's
+            ``qa.close_gap``, else 14 µm) and the job's ``optimize.gap``.
         dataset: an opened :class:`~optdot.io.dataset.Dataset`, measured tile by tile in
             bounded memory (:func:`optdot.quality.gate.run_qa_dataset`).
     """
     params = job.qa if job else QAParams()
+    if (pattern or dataset).uniform_diameter is None and (collision, close) != (None, None):
+        raise JobError(
+            "--collision/--close are centre distances for dots of one size; these dots vary "
+            "in size and are judged by edge gaps (--close-gap, the job's optimize.gap)"
+        )
     if close is not None:
         params = replace(params, close_distance=close)
+    if close_gap is not None:
+        params = replace(params, close_gap=close_gap)
     if collision is None:
         if job:
             collision = job.collision_distance
         else:
             collision = (pattern or dataset).nominal_diameter
+    gap = job.optimize.gap if job else 0.0  # dots of varying size collide below it
     density = job.density if job else None
     if pattern is not None:
-        return run_qa(pattern, density, params, collision)
+        return run_qa(pattern, density, params, collision, gap)
     if job is None:
-        return run_qa_dataset(dataset, density, params, collision)
+        return run_qa_dataset(dataset, density, params, collision, collision_gap=gap)
     outline = None if job.domain.rectangle else job.domain
-    return run_qa_dataset(dataset, density, params, collision, box=job.box, outline=outline)
+    return run_qa_dataset(
+        dataset, density, params, collision, box=job.box, outline=outline, collision_gap=gap
+    )
 
 
 #: Formats written straight from a dataset's parts (hierarchical masks).

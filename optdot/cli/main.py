@@ -531,6 +531,11 @@ def export(
     "--collision", type=float, help="Collision distance, mm (default: dot diameter + gap)."
 )
 @click.option("--close", type=float, help="Too-close distance, mm (default 0.060).")
+@click.option(
+    "--close-gap",
+    type=float,
+    help="Too-close edge gap, mm (dots of varying size; default qa.close_gap or 0.014).",
+)
 @_layer_options
 @click.option("--quiet", "-q", is_flag=True, help="Only the exit code.")
 @_user_errors
@@ -541,6 +546,7 @@ def qa(
     json_path,
     collision,
     close,
+    close_gap,
     layer,
     datatype,
     outline_layer,
@@ -554,6 +560,8 @@ def qa(
     for v, name in ((collision, "--collision"), (close, "--close")):
         if v is not None and not v > 0:
             raise click.BadParameter("must be > 0 mm", param_hint=name)
+    if close_gap is not None and not 0 <= close_gap < 10:
+        raise click.BadParameter("must be an edge gap in mm, 0 <= x < 10", param_hint="--close-gap")
     from ..exporters.options import ExportOptions
 
     opts = ExportOptions(layer=layer, datatype=datatype, outline_layer=outline_layer)
@@ -564,10 +572,11 @@ def qa(
         from ..io.dataset import open_dataset
 
         # a dataset is measured tile by tile with halos, in bounded memory
-        result = run_gate(None, job, collision, close, dataset=open_dataset(pattern_file))
+        dataset = open_dataset(pattern_file)
+        result = run_gate(None, job, collision, close, dataset=dataset, close_gap=close_gap)
     else:
         pattern = _read_with_job(pattern_file, job, opts)
-        result = run_gate(pattern, job, collision, close)
+        result = run_gate(pattern, job, collision, close, close_gap=close_gap)
     with transaction():  # both reports replaced together, or neither
         if json_path:
             write_json(result, json_path)

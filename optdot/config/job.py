@@ -19,9 +19,13 @@ from ..errors import JobError
 from ..geometry.density import DensityMap
 from ..geometry.domain import Domain
 from ..geometry.limits import DIAMETER_RANGE_MM, MAX_EXTENT_MM
+from ..geometry.sizes import DotSizes, dots_per_cell
 from .grids import validate_grid
 
 METHODS = ("optdot", "md")
+#: Edge gap below which two dots of varying size are "too close", mm: the 60 µm centre
+#: rule for 46 µm dots (``qa.close_gap``).
+DEFAULT_CLOSE_GAP = 0.014
 FORMULATIONS = ("paper", "optdot")
 
 
@@ -120,6 +124,9 @@ class QAParams:
         max_coverage_rms: allowed RMS relative coverage error after 1 mm smoothing.
         max_psi6_coherence: allowed |mean psi6| over 2 mm patches (moire risk).
         smoothing: Gaussian sigma for the visible-coverage check, mm.
+        close_gap: edge gap below which a pair is "too close", mm. Dots of varying size
+            are always judged this way (default :data:`DEFAULT_CLOSE_GAP`); dots of one
+            size by ``close_distance`` unless this is given (then diameter + close_gap).
     """
 
     collision_distance: float | None = None
@@ -131,8 +138,16 @@ class QAParams:
     max_coverage_rms: float = 0.05
     max_psi6_coherence: float = 0.10
     smoothing: float = 1.0
+    close_gap: float | None = None
+
+    @property
+    def effective_close_gap(self) -> float:
+        """``close_gap``, or :data:`DEFAULT_CLOSE_GAP` when not given, mm."""
+        return DEFAULT_CLOSE_GAP if self.close_gap is None else self.close_gap
 
     def __post_init__(self) -> None:
+        if self.close_gap is not None:
+            _check(0 <= self.close_gap < 10, "qa.close_gap", self.close_gap, "0 <= x < 10 mm")
         if self.collision_distance is not None:
             _check(
                 self.collision_distance > 0, "qa.collision_distance", self.collision_distance, "> 0"
@@ -164,8 +179,12 @@ class Job:
     Attributes:
         width, height: size of the density grid, mm. Without an outline the panel is
             ``[0, width] x [0, height]``; with one, the grid covers its bounding box.
-        density: the fill-fraction map over the panel.
-        diameter: dot diameter, mm.
+        density: the fill-fraction map over the panel (with ``interpolation = "linear"``
+            already refined into sub-cells, see :meth:`DensityMap.interpolated`).
+        diameter: dot diameter, mm; with ``sizes``, the smallest diameter of the range
+            (the reference the optimizer's gap rules are shifted from).
+        sizes: how diameters vary (``[dots] diameter = [lo, hi]``), or None for one size.
+        interpolation: how the map was read, ``"nearest"`` or ``"linear"``.
         optimize: optimizer settings.
         qa: QA gate thresholds.
         name: a label carried into outputs.
@@ -185,6 +204,8 @@ class Job:
     source: Path | None = None
     domain: Domain | None = None
     inputs: tuple[Path, ...] = ()
+    sizes: DotSizes | None = None
+    interpolation: str = "nearest"
 
     def __post_init__(self) -> None:
         where = str(self.source) if self.source else "job"
@@ -205,12 +226,45 @@ class Job:
             )
         if self.diameter >= min(self.width, self.height):
             raise JobError(f"{where}: dots.diameter = {self.diameter} does not fit the panel")
+        if self.sizes is not None:
+            high = self.sizes.high
+            if not (math.isfinite(high) and self.diameter < high <= hi):
+                raise JobError(
+                    f"{where}: dots.diameter = [{self.diameter}, {high}] must be two diameters "
+                    f"in mm, {lo:g} <= low < high <= {hi:g}"
+                )
+            if high >= min(self.width, self.height):
+                raise JobError(f"{where}: dots.diameter = {high} does not fit the panel")
+            if self.optimize.method == "md":
+                raise JobError(
+                    f"{where}: optimize.method = 'md' takes one dot size (the baseline of "
+                    "Idé et al. has one); give dots.diameter as a number or use 'optdot'"
+                )
         validate_grid(self.density.grid, f"{where}: density.grid")
 
     @property
     def min_distance(self) -> float:
-        """Smallest allowed centre distance, mm (diameter + gap)."""
+        """Smallest allowed centre distance, mm (diameter + gap; with ``sizes``, of two
+        dots of the smallest size)."""
         return self.diameter + self.optimize.gap
+
+    @cached_property
+    def cell_diameters(self) -> np.ndarray | None:
+        """``[ny, nx]`` diameter of each map cell's dots, mm (None: one size)."""
+        return None if self.sizes is None else self.sizes.cell_diameters(self.density)
+
+    @property
+    def dart_weights(self) -> np.ndarray | None:
+        """``[ny, nx]`` multiplier of each cell's fill in the dart throw, so that darts
+        land in proportion to the dot count (fill / dot area); None: one size."""
+        d = self.cell_diameters
+        return None if d is None else (self.diameter / d) ** 2
+
+    def diameters_at(self, cells: np.ndarray) -> np.ndarray | float:
+        """Diameter of the dots whose cells (flat indices ``[n]``) are given, mm: ``[n]``,
+        or the one diameter."""
+        d = self.cell_diameters
+        return self.diameter if d is None else d.ravel()[cells]
 
     @property
     def collision_distance(self) -> float:
@@ -220,9 +274,14 @@ class Job:
 
     @property
     def close_target(self) -> float:
-        """Centre distance the optimizer's hard core aims to clear, mm."""
+        """Centre distance the optimizer's hard core aims to clear, mm (with ``sizes``,
+        for two dots of :attr:`diameter`; the others' targets shift with their size)."""
         c = self.optimize.close_target
-        return self.qa.close_distance if c is None else c
+        if c is not None:
+            return c
+        if self.sizes is not None or self.qa.close_gap is not None:
+            return self.diameter + self.qa.effective_close_gap
+        return self.qa.close_distance
 
     @property
     def dot_area(self) -> float:
@@ -244,8 +303,12 @@ class Job:
 
     @property
     def n_dots(self) -> int:
-        """Number of dots the map asks for over the domain (paper §2.1)."""
-        return self.density.dot_count(self.dot_area, self.cell_weights)
+        """Number of dots the map asks for over the domain (paper §2.1); with ``sizes``,
+        each cell's fill over its own dot area."""
+        d = self.cell_diameters
+        if d is None:
+            return self.density.dot_count(self.dot_area, self.cell_weights)
+        return int(round(float(dots_per_cell(self.density, d, self.cell_weights).sum())))
 
     def with_overrides(self, **optimize: Any) -> Job:
         """A copy with some :class:`OptimizeParams` fields replaced (None = keep)."""

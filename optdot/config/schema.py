@@ -15,9 +15,10 @@ from typing import Any
 import numpy as np
 
 from ..errors import GeometryError, JobError
-from ..geometry.density import DensityMap
+from ..geometry.density import INTERPOLATIONS, DensityMap
 from ..geometry.domain import DEFAULT_TOLERANCE, Domain, orient_all
 from ..geometry.outline_io import load_outline, parse_keep_out
+from ..geometry.sizes import DEFAULT_STEP, DotSizes
 from .grids import load_grid, validate_grid
 from .images import IMAGE_SUFFIXES, check_ranges, load_image
 from .job import Job, OptimizeParams, QAParams
@@ -38,8 +39,14 @@ SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
         "image": (str,),
         "fill_range": (list,),
         "value_range": (list,),
+        "interpolation": (str,),
     },
-    "dots": {"diameter": (int, float)},
+    "dots": {
+        "diameter": (int, float, list),
+        "spacing": (int, float),
+        "diameter_grid": (str,),
+        "diameter_step": (int, float),
+    },
     "optimize": {
         "method": (str,),
         "max_iter": (int,),
@@ -66,6 +73,7 @@ SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
         "max_coverage_rms": (int, float),
         "max_psi6_coherence": (int, float),
         "smoothing": (int, float),
+        "close_gap": (int, float),
     },
 }
 _REQUIRED = {"dots": ("diameter",)}
@@ -146,18 +154,90 @@ def job_from_dict(raw: dict[str, Any], base: Path = Path("."), source: Path | No
         raise JobError(f"{where}: domain.width/height = {width}, {height} must be > 0 mm")
     validate_grid(grid, str(grid_path))
     density = DensityMap(grid, width, height, x0, y0)
+    interpolation = sections.get("density", {}).get("interpolation", "nearest")
+    if interpolation not in INTERPOLATIONS:
+        raise JobError(
+            f"{where}: density.interpolation = {interpolation!r} must be one of "
+            f"{', '.join(INTERPOLATIONS)}"
+        )
+    if interpolation == "linear":
+        density = density.interpolated()
+    dots = sections["dots"]
+    diameter, sizes, size_file = _dot_sizes(dots, sections.get("qa", {}), qa, base, where)
     return Job(
         domain=domain,
         width=width,
         height=height,
         density=density,
-        diameter=float(sections["dots"]["diameter"]),
+        diameter=diameter,
         optimize=opt,
         qa=qa,
         name=str(sections[""].get("name", source.stem if source else "optdot")),
         source=source,
-        inputs=tuple(p for p in (source, grid_path, *_outline_files(dom, base)) if p is not None),
+        inputs=tuple(
+            p for p in (source, grid_path, size_file, *_outline_files(dom, base)) if p is not None
+        ),
+        sizes=sizes,
+        interpolation=interpolation,
     )
+
+
+def _dot_sizes(
+    dots: dict[str, Any], qa_sec: dict[str, Any], qa: QAParams, base: Path, where: str
+) -> tuple[float, DotSizes | None, Path | None]:
+    """``[dots]``: one diameter, or a range with its rule (see :mod:`optdot.geometry.sizes`).
+
+    Returns ``(diameter or the range's low end, sizes or None, diameter grid file)``.
+    """
+    value = dots["diameter"]
+    extra = [k for k in ("spacing", "diameter_grid", "diameter_step") if k in dots]
+    if not isinstance(value, list):
+        if extra:
+            raise JobError(
+                f"{where}: dots.{extra[0]} needs a diameter range, dots.diameter = [low, high]"
+            )
+        return float(value), None, None
+    if len(value) != 2 or not all(
+        isinstance(v, int | float) and not isinstance(v, bool) for v in value
+    ):
+        raise JobError(f"{where}: dots.diameter = {value!r} must be a number or [low, high] (mm)")
+    low, high = (float(v) for v in value)
+    if not (math.isfinite(low) and math.isfinite(high) and low < high):
+        raise JobError(f"{where}: dots.diameter = {value!r} must be [low, high] with low < high")
+    for key in ("close_distance", "collision_distance"):
+        if key in qa_sec:
+            raise JobError(
+                f"{where}: qa.{key} is a centre distance, which cannot apply to dots of "
+                "varying size; use qa.close_gap (edge gap, mm) and optimize.gap"
+            )
+    if "spacing" in dots and "diameter_grid" in dots:
+        raise JobError(f"{where}: give dots.spacing or dots.diameter_grid, not both")
+    step = float(dots.get("diameter_step", DEFAULT_STEP))
+    if not (math.isfinite(step) and 1e-6 <= step <= high - low):
+        raise JobError(
+            f"{where}: dots.diameter_step = {step!r} must be in mm, 0.000001 <= step <= "
+            f"high - low ({high - low:g})"
+        )
+    spacing = None
+    if "spacing" in dots:
+        spacing = float(dots["spacing"])
+        if not (math.isfinite(spacing) and low < spacing <= 10.0):
+            raise JobError(
+                f"{where}: dots.spacing = {spacing!r} must be in mm, {low:g} < spacing <= 10"
+            )
+    grid = path = None
+    if "diameter_grid" in dots:
+        path = base / dots["diameter_grid"]
+        grid = load_grid(path)
+        bad = ~(np.isfinite(grid) & (grid >= low - 1e-9) & (grid <= high + 1e-9))
+        if bad.any():
+            iy, ix = np.argwhere(bad)[0]
+            raise JobError(
+                f"{path}: dots.diameter_grid: row {iy + 1}, column {ix + 1}: {grid[iy, ix]!r} "
+                f"is not a diameter in the range [{low:g}, {high:g}] mm"
+            )
+    sizes = DotSizes(low, high, step, spacing, qa.effective_close_gap, grid)
+    return low, sizes, path
 
 
 def _load_density(sec: dict[str, Any], base: Path, where: str) -> tuple[Path, np.ndarray]:

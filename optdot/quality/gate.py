@@ -56,7 +56,11 @@ class QAResult:
 
 
 def run_qa(
-    pattern: Pattern, density: DensityMap | None, params: QAParams, collision: float
+    pattern: Pattern,
+    density: DensityMap | None,
+    params: QAParams,
+    collision: float,
+    collision_gap: float = 0.0,
 ) -> QAResult:
     """Measure an in-memory ``pattern`` and apply the gate.
 
@@ -64,13 +68,20 @@ def run_qa(
         pattern: the dots.
         density: the target map (None: density, empty-cell and psi-normalised metrics skipped).
         params: thresholds.
-        collision: centre distance below which dots collide, mm.
+        collision: centre distance below which dots of one size collide, mm.
+        collision_gap: edge gap below which dots of varying size collide, mm.
     """
-    return judge(pattern_source(pattern), density, params, collision)
+    return judge(pattern_source(pattern), density, params, collision, collision_gap)
 
 
 def run_qa_dataset(
-    ds, density: DensityMap | None, params: QAParams, collision: float, box=None, outline=True
+    ds,
+    density: DensityMap | None,
+    params: QAParams,
+    collision: float,
+    box=None,
+    outline=True,
+    collision_gap: float = 0.0,
 ) -> QAResult:
     """Measure a partitioned dataset tile by tile (bounded memory) and apply the gate.
 
@@ -80,23 +91,48 @@ def run_qa_dataset(
         Others as :func:`run_qa`.
     """
     ds.verify()
-    return judge(dataset_source(ds, box, outline), density, params, collision)
+    return judge(dataset_source(ds, box, outline), density, params, collision, collision_gap)
 
 
-def judge(src: Source, density: DensityMap | None, params: QAParams, collision: float) -> QAResult:
-    """Measure ``src`` (:func:`optdot.quality.measure.measure`) and make the gate lines."""
-    got = measure(src, density, params.smoothing, params.close_distance, collision)
+def judge(
+    src: Source,
+    density: DensityMap | None,
+    params: QAParams,
+    collision: float,
+    collision_gap: float = 0.0,
+) -> QAResult:
+    """Measure ``src`` (:func:`optdot.quality.measure.measure`) and make the gate lines.
+
+    Dots of one size are judged by centre distances (``collision``, and
+    ``params.close_distance``, or the diameter + ``params.close_gap`` when that is set);
+    dots of varying size by edge gaps (``collision_gap``, ``params.close_gap`` or
+    :data:`~optdot.config.job.DEFAULT_CLOSE_GAP`).
+    """
+    close = params.close_distance
+    u = src.uniform_diameter
+    if u is not None and params.close_gap is not None:
+        close = u + params.close_gap
+    gaps = None
+    if u is None:
+        gaps = (params.effective_close_gap, collision_gap)
+    got = measure(src, density, params.smoothing, close, collision, gaps)
     m, w = got.metrics, got.where
+    if gaps is None:
+        collide_text = f"pairs closer than {collision * 1e3:.1f} µm (collisions)"
+        close_text = f"share of dots in pairs closer than {close * 1e3:.1f} µm"
+    else:
+        collide_text = f"pairs with an edge gap under {gaps[1] * 1e3:.1f} µm (collisions)"
+        close_text = f"share of dots in pairs with an edge gap under {gaps[0] * 1e3:.1f} µm"
     checks = [
         Check(
-            f"pairs closer than {collision * 1e3:.1f} µm (collisions)",
+            collide_text,
             m["pairs_below_collision"],
             params.max_collisions,
             m["pairs_below_collision"] <= params.max_collisions,
             w["collisions"],
         ),
         Check(
-            f"share of dots in pairs closer than {params.close_distance * 1e3:.1f} µm",
+            close_text,
             m["dots_in_close_pairs_fraction"],
             params.max_close_fraction,
             m["dots_in_close_pairs_fraction"] <= params.max_close_fraction,

@@ -188,7 +188,12 @@ class Measured:
 
 
 def measure(
-    src: Source, density: DensityMap | None, smoothing: float, close: float, collision: float
+    src: Source,
+    density: DensityMap | None,
+    smoothing: float,
+    close: float,
+    collision: float,
+    gaps: tuple[float, float] | None = None,
 ) -> Measured:
     """Measure every QA number of ``src``.
 
@@ -196,10 +201,18 @@ def measure(
         density: the target map (None: no map numbers).
         smoothing: coverage smoothing, mm. close: too-close distance, mm.
         collision: centre distance below which dots collide, mm.
+        gaps: ``(close_gap, collision_gap)``, mm, for dots of varying size: then a pair
+            (i, j) is too close below the centre distance ``(d_i + d_j) / 2 + close_gap``
+            and collides below ``(d_i + d_j) / 2 + collision_gap`` (an edge-gap rule),
+            and ``close``/``collision`` are not used. Required when sizes vary.
     """
+    if src.uniform_diameter is None and src.n and gaps is None:
+        raise ValueError("dots of varying size are judged by edge gaps: pass gaps")
+    if src.uniform_diameter is not None:
+        gaps = None
     first = _first_pass(src, density)
-    second = _second_pass(src, density, first, close, collision)
-    return _finish(src, density, smoothing, close, collision, first, second)
+    second = _second_pass(src, density, first, close, collision, gaps)
+    return _finish(src, density, smoothing, close, collision, first, second, gaps)
 
 
 @dataclass
@@ -300,11 +313,19 @@ class _Second:
 
 
 def _second_pass(
-    src: Source, density: DensityMap | None, first: _First, close: float, collision: float
+    src: Source,
+    density: DensityMap | None,
+    first: _First,
+    close: float,
+    collision: float,
+    gaps: tuple[float, float] | None,
 ) -> _Second:
     n = src.n
     s = _Second(nn=np.full(n, np.inf))
-    reach = max(close, collision)
+    if gaps is None:
+        reach = max(close, collision)
+    else:  # the widest pair: two of the largest dots
+        reach = max(float(d.max()) for d in first.diameters) + max(gaps)
     halo = max(HALO_MM, 2.0 * reach)
     boxes = first.boxes
     lo = np.nanmin(np.vstack([boxes[:, :2], [src.box[:2]]]), axis=0)
@@ -321,7 +342,7 @@ def _second_pass(
         m = len(own)
         if m == 0:
             continue
-        hxy, hpart = _gather(src, boxes, k, halo)
+        hxy, hpart, hd = _gather(src, boxes, k, halo)
         pts = np.vstack([own, hxy]) if len(hxy) else own
         tree = cKDTree(pts)
         # pairs: own-own here; own-halo by the lower part index
@@ -331,7 +352,12 @@ def _second_pass(
         flag = np.zeros(m, bool)
         if len(pr):
             dist = np.hypot(*(pts[pr[:, 0]] - pts[pr[:, 1]]).T)
-            near = dist < close
+            close_at, collision_at = close, collision
+            if gaps is not None:  # edge gaps: each pair's own centre distances
+                dd = np.concatenate([d, hd])
+                mean = 0.5 * (dd[pr[:, 0]] + dd[pr[:, 1]])
+                close_at, collision_at = mean + gaps[0], mean + gaps[1]
+            near = dist < close_at
             flag[pr[near, 0]] = True
             inner = pr[near & (pr[:, 1] < m), 1]
             flag[inner] = True
@@ -340,9 +366,10 @@ def _second_pass(
                 mine |= hpart[np.clip(pr[:, 1] - m, 0, len(hpart) - 1)] > k
             order = np.lexsort((pr[:, 1], pr[:, 0]))
             pr, dist, near, mine = pr[order], dist[order], near[order], mine[order]
+            collides = (dist < np.broadcast_to(collision_at, len(order))[order]) & mine
             for sel, count_attr, mids in (
                 (near & mine, "pairs_close", s.close_mid),
-                ((dist < collision) & mine, "pairs_collision", s.collision_mid),
+                (collides, "pairs_collision", s.collision_mid),
             ):
                 setattr(s, count_attr, getattr(s, count_attr) + int(sel.sum()))
                 _keep(mids, 0.5 * (pts[pr[sel, 0]] + pts[pr[sel, 1]]), MAX_MARKS)
@@ -427,15 +454,17 @@ def _nearest(
         again += len(todo) if width == halo else 0
         # found distances bound the true ones from above; with too few points, double
         width = float(dist[~done, -1].max()) if kk == need else 2.0 * width
-        hxy, _ = _gather(src, boxes, k, width)
+        hxy, _, _ = _gather(src, boxes, k, width)
         pts = np.vstack([own, hxy]) if len(hxy) else own
         tree = cKDTree(pts)
     return nn, psi, again
 
 
-def _gather(src: Source, boxes: np.ndarray, k: int, halo: float) -> tuple[np.ndarray, np.ndarray]:
+def _gather(
+    src: Source, boxes: np.ndarray, k: int, halo: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Dots of the other parts within the box of part ``k`` grown by ``halo``:
-    ``(xy [h, 2], part index [h])``."""
+    ``(xy [h, 2], part index [h], diameter [h])``."""
     b = boxes[k]
     g = (b[0] - halo, b[1] - halo, b[2] + halo, b[3] + halo)
     ok = ~np.isnan(boxes[:, 0])
@@ -446,15 +475,16 @@ def _gather(src: Source, boxes: np.ndarray, k: int, halo: float) -> tuple[np.nda
         & (boxes[:, 3] >= g[1])
     )
     ok[k] = False
-    xys, parts = [], []
+    xys, parts, ds = [], [], []
     for j in np.flatnonzero(ok):
-        xy, _ = src.part(int(j))
+        xy, d = src.part(int(j))
         sel = _in_rect(xy, g)
         xys.append(xy[sel])
         parts.append(np.full(int(sel.sum()), j, np.int64))
+        ds.append(np.broadcast_to(d, (len(xy),))[sel])
     if not xys:
-        return np.zeros((0, 2)), np.zeros(0, np.int64)
-    return np.vstack(xys), np.concatenate(parts)
+        return np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0)
+    return np.vstack(xys), np.concatenate(parts), np.concatenate(ds)
 
 
 def _add(a: dict, b: dict) -> dict:
@@ -481,6 +511,7 @@ def _finish(
     collision: float,
     f: _First,
     s: _Second,
+    gaps: tuple[float, float] | None = None,
 ) -> Measured:
     n = src.n
     u = src.uniform_diameter
@@ -496,8 +527,12 @@ def _finish(
         }
     where: dict[str, list[list[float]]] = {}
     arrays: dict[str, Any] = {"rings": [] if src.outline is None else src.outline.rings()}
-    m["collision_distance_mm"] = collision
-    m["close_distance_mm"] = close
+    if gaps is None:
+        m["collision_distance_mm"] = collision
+        m["close_distance_mm"] = close
+    else:
+        m["collision_gap_mm"] = gaps[1]
+        m["close_gap_mm"] = gaps[0]
     m["pairs_below_collision"] = s.pairs_collision
     m["pairs_below_close"] = s.pairs_close
     m["dots_in_close_pairs_fraction"] = float(s.close_dots / max(n, 1))

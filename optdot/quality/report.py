@@ -121,12 +121,13 @@ def _figures(result: QAResult) -> list[tuple[str, str]]:
     if a["nn_hist"] is not None:
         counts, edges = a["nn_hist"]
         ax.stairs(counts, edges, fill=True, color="steelblue")
-    ax.axvline(m["collision_distance_mm"] * 1e3, color="red", label="collision")
-    ax.axvline(m["close_distance_mm"] * 1e3, color="orange", label="too close")
+    if "close_distance_mm" in m:  # one size: the thresholds are centre distances
+        ax.axvline(m["collision_distance_mm"] * 1e3, color="red", label="collision")
+        ax.axvline(m["close_distance_mm"] * 1e3, color="orange", label="too close")
+        ax.legend()
     ax.set(
         xlabel="nearest-neighbour distance (µm)", ylabel="dots", title="Nearest-neighbour distances"
     )
-    ax.legend()
     save(fig, "nearest-neighbour histogram")
 
     if "coverage_error" in a:

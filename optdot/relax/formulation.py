@@ -94,8 +94,11 @@ class Formulation:
     container_factor: float = 4.0
     close_ref: float = 0.060
 
-    def radii(self, rho: np.ndarray, r0: float, seed: int, multiplier: float = 1.0) -> np.ndarray:
-        """``[n]`` circle radii, mm, for dots at fill ``rho`` (``[n]``)."""
+    def radii(
+        self, rho: np.ndarray, r0: float | np.ndarray, seed: int, multiplier: float = 1.0
+    ) -> np.ndarray:
+        """``[n]`` circle radii, mm, for dots of radius ``r0`` (mm, one or ``[n]``) at
+        fill ``rho`` (``[n]``)."""
         ramp = np.clip((rho - self.light_rho) / (self.dense_rho - self.light_rho), 0.0, 1.0)
         factor = self.radius_factor * multiplier * (1.0 + (self.dense_factor - 1.0) * ramp)
         r = circle_radius(rho, r0, 1.0) * factor
@@ -106,23 +109,41 @@ class Formulation:
         return r
 
     def terms(
-        self, problem: Problem, xy0: np.ndarray, rho: np.ndarray, multiplier: float = 1.0
+        self,
+        problem: Problem,
+        xy0: np.ndarray,
+        rho: np.ndarray,
+        multiplier: float = 1.0,
+        diameters: np.ndarray | None = None,
     ) -> PenaltyTerms:
         """Penalty terms for dots starting at ``xy0`` (``[n, 2]`` mm) with fill ``rho``
-        (``[n]``); ``multiplier`` scales the circle radii (staged relaxation)."""
+        (``[n]``); ``multiplier`` scales the circle radii (staged relaxation).
+
+        ``diameters`` (``[n]`` mm, dots of varying size): each dot's circle and hexagonal
+        radii follow its own r0_i (the circle radius rule then depends only on the local
+        dot count, r = 1 / sqrt(sqrt3 n)), and every centre distance of the hard-core
+        rule (its minimum, floor, cap and gap, given for two dots of ``2 *
+        problem.dot_radius``) shifts by ``d_i - 2 r0`` per dot, so a pair's core target
+        keeps the same *edge gap* whatever the two sizes. The hard panel term keeps r0
+        (the smallest dot); the soft one uses each dot's own radius and the guarantee
+        pass keeps every centre its own radius from the edges.
+        """
         r0 = problem.dot_radius
-        r = self.radii(rho, r0, problem.seed, multiplier)
-        core = np.full(len(r), 0.5 * problem.min_distance)
+        r0i = r0 if diameters is None else 0.5 * np.asarray(diameters, dtype=np.float64)
+        shift = 0.0 if diameters is None else 2.0 * (r0i - r0)
+        r = self.radii(rho, r0i, problem.seed, multiplier)
+        core = np.full(len(r), 0.5 * problem.min_distance) + 0.5 * shift
         k = problem.close_target / self.close_ref
         if self.core_share > 0:
-            share = self.core_share * hex_radius(rho, r0)
+            share = self.core_share * hex_radius(rho, r0i)
             if self.core_cap > 0:
-                share = np.minimum(share, 0.5 * k * self.core_cap)
-            core = np.where(2.0 * share >= k * self.core_floor, np.maximum(core, share), core)
+                share = np.minimum(share, 0.5 * (k * self.core_cap + shift))
+            floor = k * self.core_floor + shift
+            core = np.where(2.0 * share >= floor, np.maximum(core, share), core)
         if self.gap > 0:
-            wide = 2.0 * hex_radius(rho, r0) * self.gap_share >= k * self.gap
-            core[wide] = np.maximum(core[wide], 0.5 * k * self.gap)
-        panel_r = np.maximum(hex_radius(rho, r0), r0) if self.hex_panel else r
+            wide = 2.0 * hex_radius(rho, r0i) * self.gap_share >= k * self.gap + shift
+            core = np.where(wide, np.maximum(core, 0.5 * (k * self.gap + shift)), core)
+        panel_r = np.maximum(hex_radius(rho, r0i), r0i) if self.hex_panel else r
         density = problem.density
         empty = (density.grid <= 0).astype(np.uint8) if self.empty_term else None
         dom = problem.domain

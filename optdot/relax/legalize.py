@@ -28,16 +28,16 @@ MARGIN = 3e-6
 
 
 @nb.njit(cache=True)
-def _push_pairs(xy, ptr, nbr, target, slack, still):  # pragma: no cover - compiled
+def _push_pairs(xy, ptr, nbr, half, slack, still):  # pragma: no cover - compiled
     moved = 0
-    t2 = target * target
     for i in range(xy.shape[0]):
         for k in range(ptr[i], ptr[i + 1]):
             j = nbr[k]
+            target = half[i] + half[j]
             dx = xy[i, 0] - xy[j, 0]
             dy = xy[i, 1] - xy[j, 1]
             d2 = dx * dx + dy * dy
-            if d2 >= t2 or (still[i] and still[j]):
+            if d2 >= target * target or (still[i] and still[j]):
                 continue
             d = np.sqrt(d2)
             if d < 1e-12:
@@ -55,14 +55,17 @@ def _push_pairs(xy, ptr, nbr, target, slack, still):  # pragma: no cover - compi
 
 
 @nb.njit(cache=True)
-def _fix_dots(xy, lo, hi, grid, x0, y0, cw, ch, home, eps, need, ed, still):  # pragma: no cover
+def _fix_dots(xy, box, grid, x0, y0, cw, ch, home, eps, needs, ed, still):  # pragma: no cover
     ny, nx = grid.shape
     fixed = 0
     for i in range(xy.shape[0]):
         if still[i]:
             continue
-        x = min(max(xy[i, 0], lo[0]), hi[0])
-        y = min(max(xy[i, 1], lo[1]), hi[1])
+        need = needs[i]
+        lo0, lo1 = box[0] + need + eps, box[1] + need + eps
+        hi0, hi1 = box[2] - need - eps, box[3] - need - eps
+        x = min(max(xy[i, 0], lo0), hi0)
+        y = min(max(xy[i, 1], lo1), hi1)
         if ed[0].shape[0] > 0:
             # outline: move along the edge normal until ``need`` (+ eps) inside
             for _ in range(8):
@@ -81,8 +84,8 @@ def _fix_dots(xy, lo, hi, grid, x0, y0, cw, ch, home, eps, need, ed, still):  # 
             hy, hx = home[i] // nx, home[i] % nx
             x = min(max(x, x0 + hx * cw + eps), x0 + (hx + 1) * cw - eps)
             y = min(max(y, y0 + hy * ch + eps), y0 + (hy + 1) * ch - eps)
-            x = min(max(x, lo[0]), hi[0])
-            y = min(max(y, lo[1]), hi[1])
+            x = min(max(x, lo0), hi0)
+            y = min(max(y, lo1), hi1)
         if x != xy[i, 0] or y != xy[i, 1]:
             xy[i, 0] = x
             xy[i, 1] = y
@@ -105,8 +108,8 @@ def legalize(
     density: DensityMap,
     home_cell: np.ndarray,
     domain: Domain,
-    dot_radius: float,
-    dmin: float,
+    dot_radius: float | np.ndarray,
+    dmin: float | np.ndarray,
     max_sweeps: int = 1000,
     frozen: np.ndarray | None = None,
 ) -> LegalizeResult:
@@ -117,8 +120,9 @@ def legalize(
         density: the map; dots may not sit in its zero cells.
         home_cell: ``[n]`` flat index of each dot's start cell (a non-zero cell).
         domain: the panel; centres keep ``r0 + edge_margin`` from its edges.
-        dot_radius: r0, mm.
-        dmin: minimum centre distance, mm.
+        dot_radius: r0, mm, or ``[n]`` per dot.
+        dmin: minimum centre distance, mm; or ``[n]`` per dot (its diameter + gap),
+            a pair then keeping the mean of its two.
         max_sweeps: give up (the caller raises) after this many sweeps.
         frozen: ``[n]`` bool, dots that stay where they are (a tile's halo: a pair with
             one of them is fixed by moving the other the whole way).
@@ -127,13 +131,14 @@ def legalize(
         :class:`LegalizeResult`; ``sweeps == max_sweeps`` means it did not settle.
     """
     xy = np.array(xy, dtype=np.float64, order="C")
-    box = domain.box
-    need = dot_radius + domain.edge_margin
-    lo = np.array([box[0] + need + MARGIN, box[1] + need + MARGIN])
-    hi = np.array([box[2] - need - MARGIN, box[3] - need - MARGIN])
-    ed = NO_EDGES if domain.rectangle else edge_args(EdgeIndex.build(domain, need + 4 * MARGIN))
+    n = len(xy)
+    box = np.asarray(domain.box, dtype=np.float64)
+    need = np.ascontiguousarray(np.broadcast_to(dot_radius + domain.edge_margin, (n,)))
+    reach = float(need.max(initial=0.0)) + 4 * MARGIN
+    ed = NO_EDGES if domain.rectangle else edge_args(EdgeIndex.build(domain, reach))
     cw, ch = density.cell_size
-    target = dmin + MARGIN
+    half = 0.5 * (dmin + MARGIN)  # a pair keeps half_i + half_j
+    half_n = np.ascontiguousarray(np.broadcast_to(half, (n,)))
     pair_fixes = dot_fixes = 0
     home = np.asarray(home_cell, dtype=np.int64)
     still = np.zeros(len(xy), np.uint8) if frozen is None else frozen.astype(np.uint8)
@@ -141,10 +146,10 @@ def legalize(
     while sweeps < max_sweeps:
         sweeps += 1
         fixed = _fix_dots(
-            xy, lo, hi, density.grid, density.x0, density.y0, cw, ch, home, MARGIN, need, ed, still
+            xy, box, density.grid, density.x0, density.y0, cw, ch, home, MARGIN, need, ed, still
         )
-        ptr, nbr = neighbor_pairs(xy, 0.5 * target, 0.02)
-        moved = _push_pairs(xy, ptr, nbr, target, 0.5 * MARGIN, still)
+        ptr, nbr = neighbor_pairs(xy, half, 0.02)
+        moved = _push_pairs(xy, ptr, nbr, half_n, 0.5 * MARGIN, still)
         pair_fixes += moved
         dot_fixes += fixed
         if moved == 0 and fixed == 0:
@@ -171,16 +176,22 @@ def check_guarantee(
     xy: np.ndarray,
     density: DensityMap,
     domain: Domain,
-    dot_radius: float,
-    dmin: float,
+    dot_radius: float | np.ndarray,
+    dmin: float | np.ndarray,
 ) -> Violations:
-    """Count violations of the final positions.
+    """Count violations of the final positions (``dot_radius`` and ``dmin`` as in
+    :func:`legalize`).
 
     Pairs come from the cell-grid search (property-tested against brute force); the
     independent cross-check is QA's shapely/GEOS count, which ``optdot export`` and
     ``optdot qa`` run on every pattern before it reaches a mask.
     """
-    collisions = len(pairs_within(xy, dmin))
+    if np.ndim(dmin) == 0:
+        collisions = len(pairs_within(xy, dmin))
+    else:
+        pr = pairs_within(xy, float(np.max(dmin, initial=0.0)))
+        dist = np.hypot(*(xy[pr[:, 0]] - xy[pr[:, 1]]).T)
+        collisions = int((dist < 0.5 * (dmin[pr[:, 0]] + dmin[pr[:, 1]])).sum())
     if domain.rectangle:
         out = box_protruding(xy, domain.box, dot_radius + domain.edge_margin)
     else:

@@ -147,6 +147,7 @@ def relax_staged(
     progress: Progress | None = None,
     start: np.ndarray | None = None,
     frozen: np.ndarray | None = None,
+    diameters: np.ndarray | None = None,
 ) -> tuple[np.ndarray, dict, list[float]]:
     """Relax ``xy0`` (``[n, 2]`` mm, fill ``rho`` ``[n]``) through the formulation's stages.
 
@@ -157,6 +158,8 @@ def relax_staged(
         start: ``[n, 2]`` positions to start from, mm (default ``xy0``): a tile's second
             phase resumes from the first phase's positions, containers still on ``xy0``.
         frozen: ``[n]`` bool, dots that do not move (a tile's halo).
+        diameters: ``[n]`` dot diameters, mm, when sizes vary (see
+            :meth:`~optdot.relax.formulation.Formulation.terms`).
     """
     xy = xy0 if start is None else start
     info = {"iterations": 0, "evaluations": 0, "neighbor_builds": 0}
@@ -167,7 +170,7 @@ def relax_staged(
         iters = settings.max_iter - done if last else round(share * settings.max_iter)
         res = relax(
             xy,
-            form.terms(problem, xy0, rho, multiplier),
+            form.terms(problem, xy0, rho, multiplier, diameters),
             max_iter=iters,
             memory=settings.memory,
             ftol=settings.ftol,

@@ -46,7 +46,11 @@ def initial_dots(
 
 
 def initial_dots_in(
-    density: DensityMap, n: int, seed: int, inside: Callable[[np.ndarray], np.ndarray]
+    density: DensityMap,
+    n: int,
+    seed: int,
+    inside: Callable[[np.ndarray], np.ndarray],
+    cell_weights: np.ndarray | None = None,
 ) -> np.ndarray:
     """:func:`initial_dots` restricted to a domain: the first ``n`` darts that land inside.
 
@@ -56,10 +60,12 @@ def initial_dots_in(
 
     Args:
         inside: ``inside(xy) -> [m] bool`` for ``[m, 2]`` positions.
+        cell_weights: optional ``[ny, nx]`` multiplier of each cell's probability (dots
+            of varying size: in proportion to the dot count, not the fill).
     """
     m = max(n, 16)
     while True:
-        xy = initial_dots(density, m, seed)
+        xy = initial_dots(density, m, seed, cell_weights)
         keep = xy[inside(xy)]
         if len(keep) >= n or m > 64 * max(n, 16):
             return keep[:n]
