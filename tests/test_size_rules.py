@@ -332,3 +332,70 @@ def test_cli_exports_every_format_and_qa_agrees_on_each(sized, tmp_path):
         assert m["coverage_rel_rms_smoothed"] == pytest.approx(
             ref["coverage_rel_rms_smoothed"], rel=1e-6
         )
+
+
+def test_core_targets_keep_the_edge_gap_whatever_the_sizes():
+    from optdot.relax.formulation import PRESETS, Problem
+
+    m = DensityMap(np.full((2, 2), 0.3), 2.0, 2.0)
+    prob = Problem(Domain.rect(0, 0, 2, 2), m, 0.015, 0.030, close_target=0.044)
+    xy = np.array([[0.5, 0.5], [1.5, 1.5], [0.5, 1.5]])
+    rho = np.full(3, 0.3)
+    d = np.array([0.030, 0.075, 0.120])
+    t = PRESETS["optdot"].terms(prob, xy, rho, diameters=d)
+    same = PRESETS["optdot"].terms(prob, xy, rho, diameters=np.full(3, 0.030))
+    # every size's core is its own radius plus the same half gap as the smallest dot's
+    # (where the hexagonal spacing allows that gap at all, as it does at fill 0.3 here)
+    gap = 2 * same.core_radius[0] - 0.030
+    np.testing.assert_allclose(t.core_radius - d / 2, gap / 2, atol=1e-12)
+    # circles: r = r0_i sqrt(pi / (sqrt3 rho)) x 1.05, each with its own r0
+    np.testing.assert_allclose(t.radius / same.radius, d / 0.030, rtol=1e-12)
+
+
+def test_guarantee_pass_pushes_a_mixed_pair_to_its_own_distance():
+    from optdot.relax.legalize import MARGIN, check_guarantee, legalize
+
+    m = DensityMap(np.full((1, 1), 0.3), 1.0, 1.0)
+    dom = Domain.rect(0, 0, 1, 1)
+    xy = np.array([[0.50, 0.5], [0.55, 0.5], [0.2, 0.2]])
+    d = np.array([0.030, 0.120, 0.030])
+    home = m.cell_index(xy)
+    before = check_guarantee(xy, m, dom, d / 2, d)
+    assert before.collisions == 1
+    leg = legalize(xy, m, home, dom, d / 2, d)
+    dist = np.hypot(*(leg.xy[0] - leg.xy[1]))
+    assert 0.075 <= dist <= 0.075 + 2 * MARGIN  # (30 + 120) / 2 µm, not more
+    assert check_guarantee(leg.xy, m, dom, d / 2, d).ok
+    np.testing.assert_array_equal(leg.xy[2], xy[2])  # a dot with room is left alone
+
+
+@pytest.mark.parametrize("fmt", ["gds", "oas"])
+def test_klayout_reads_every_generated_diameter(sized, tmp_path, fmt):
+    kdb = pytest.importorskip("klayout.db")
+    from optdot import exporters
+
+    _, p, _ = sized
+    path = tmp_path / f"s.{fmt}"
+    exporters.write(p, fmt, path)
+    layout = kdb.Layout()
+    layout.read(str(path))
+    got = []
+    for inst in layout.top_cell().each_inst():
+        name = layout.cell(inst.cell_index).name
+        assert name.startswith("DOT_")
+        width = layout.cell(inst.cell_index).bbox().width()  # dbu = 1 nm
+        # the polygon lies within the 10 nm export tolerance inside its circle
+        assert 0 <= int(name[4:]) - width <= 20
+        for t in inst.cell_inst.each_trans():
+            got.append((t.disp.x, t.disp.y, int(name[4:])))
+    got = np.array(sorted(got))
+    want = np.array(
+        sorted(
+            zip(
+                *np.round(p.xy.T * 1e6).astype(np.int64),
+                np.round(p.diameter * 1e6).astype(int),
+                strict=True,
+            )
+        )
+    )
+    np.testing.assert_array_equal(got, want)  # every dot, position and diameter to 1 nm

@@ -6,8 +6,9 @@ sizes can absorb that noise: after relaxation every dot's diameter is scaled so 
 coverage, blurred by a Gaussian of width ``sigma``, equals the target map blurred the
 same way, ``d_i <- d_i sqrt(T_s(x_i) / C_s(x_i))``, repeated :data:`ROUNDS` times (each
 round shrinks the blurred error; on a relaxed pattern, whose error is small to begin
-with, the first does most of the work), then quantised. Each dot may move within ``1 / f .. f`` of its rule diameter, f the largest
-factor up to ``1 + FREEDOM`` that keeps that band inside the range: a band clipped on one
+with, the first does most of the work), then quantised. Each dot may move within
+``1 / f .. f`` of its rule diameter, f the largest factor up to ``1 + FREEDOM`` that
+keeps that band inside the range: a band clipped on one
 side only would let dots near an end of the range grow but not shrink (or the other way),
 and that one-sided clipping would bias the fill where the count carries the map. Dots at
 an end keep their size; their free neighbours absorb the noise. Last, the free dots are
