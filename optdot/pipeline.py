@@ -18,6 +18,7 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -387,6 +388,7 @@ def qa(
     close: float | None = None,
     dataset=None,
     close_gap: float | None = None,
+    view: dict[str, Any] | None = None,
 ) -> QAResult:
     """Measure ``pattern`` (or ``dataset``) and judge it (see
     :func:`optdot.quality.gate.run_qa`).
@@ -403,8 +405,12 @@ def qa(
             ``qa.close_gap``, else 14 µm) and the job's ``optimize.gap``.
         dataset: an opened :class:`~optdot.io.dataset.Dataset`, measured tile by tile in
             bounded memory (:func:`optdot.quality.gate.run_qa_dataset`).
+        view: overrides of the visibility check, keys of :class:`QAParams`
+            (``view``, ``view_distance``, ``view_luminance``, ``psf``, ``max_jnd``).
     """
     params = job.qa if job else QAParams()
+    if view:
+        params = replace(params, **view)
     if (pattern or dataset).uniform_diameter is None and (collision, close) != (None, None):
         raise JobError(
             "--collision/--close are centre distances for dots of one size; these dots vary "

@@ -375,6 +375,11 @@ def test_qa_of_the_dataset_tile_by_tile_equals_qa_in_memory(tiled):
     ):
         assert b[key] == a[key], key
     assert b["psi6_local_mean"] == pytest.approx(a["psi6_local_mean"], rel=1e-12)
+    va, vb = a["visibility"], b["visibility"]  # the luminance grid filled tile by tile
+    assert vb["max_jnd"] == pytest.approx(va["max_jnd"], rel=1e-9)
+    assert vb["max_jnd_at_mm"] == va["max_jnd_at_mm"]
+    assert vb["jnd_percentiles"] == pytest.approx(va["jnd_percentiles"], rel=1e-9)
+    assert [x["jnd"] for x in vb["blobs"]] == pytest.approx([x["jnd"] for x in va["blobs"]])
     for name, v in a["edge_band_coverage_ratio"].items():
         assert b["edge_band_coverage_ratio"][name] == pytest.approx(v, rel=1e-12)
     for name, v in a["seams"]["measures"].items():

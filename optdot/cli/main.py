@@ -21,6 +21,7 @@ from pathlib import Path
 
 import click
 
+from ..config.viewing import VIEW_PRESETS
 from ..errors import OptdotError, QAGateError, one_line
 
 #: Exit code of an unexpected internal error (sysexits' EX_SOFTWARE).
@@ -536,6 +537,15 @@ def export(
     type=float,
     help="Too-close edge gap, mm (dots of varying size; default qa.close_gap or 0.014).",
 )
+@click.option(
+    "--view",
+    type=click.Choice(list(VIEW_PRESETS)),
+    help="Viewing preset of the visibility check (default qa.view or notebook).",
+)
+@click.option("--distance", type=float, help="Viewing distance, mm (overrides the preset).")
+@click.option("--luminance", type=float, help="Screen luminance, cd/m² (overrides the preset).")
+@click.option("--psf", type=float, help="Gaussian sigma of the stack's blur, mm (default 1.0).")
+@click.option("--max-jnd", type=float, help="Gate: largest allowed |JND| (default: not gated).")
 @_layer_options
 @click.option("--quiet", "-q", is_flag=True, help="Only the exit code.")
 @_user_errors
@@ -547,6 +557,11 @@ def qa(
     collision,
     close,
     close_gap,
+    view,
+    distance,
+    luminance,
+    psf,
+    max_jnd,
     layer,
     datatype,
     outline_layer,
@@ -566,6 +581,17 @@ def qa(
 
     opts = ExportOptions(layer=layer, datatype=datatype, outline_layer=outline_layer)
     outs = {k: v for k, v in (("html", html_path), ("json", json_path)) if v is not None}
+    looks = {
+        k: v
+        for k, v in (
+            ("view", view),
+            ("view_distance", distance),
+            ("view_luminance", luminance),
+            ("psf", psf),
+            ("max_jnd", max_jnd),
+        )
+        if v is not None
+    }
     job, inputs = _inputs(pattern_file, job_path)
     _check_outputs(outs, inputs)
     if pattern_file.suffix.lower() == ".parquet":
@@ -573,20 +599,34 @@ def qa(
 
         # a dataset is measured tile by tile with halos, in bounded memory
         dataset = open_dataset(pattern_file)
-        result = run_gate(None, job, collision, close, dataset=dataset, close_gap=close_gap)
+        result = run_gate(
+            None, job, collision, close, dataset=dataset, close_gap=close_gap, view=looks
+        )
     else:
         pattern = _read_with_job(pattern_file, job, opts)
-        result = run_gate(pattern, job, collision, close, close_gap=close_gap)
+        result = run_gate(pattern, job, collision, close, close_gap=close_gap, view=looks)
     with transaction():  # both reports replaced together, or neither
         if json_path:
             write_json(result, json_path)
         if html_path:
-            write_html(result, html_path, title=f"optdot QA: {pattern_file.name}")
+            link = None
+            if json_path and Path(json_path).parent.resolve() == Path(html_path).parent.resolve():
+                link = Path(json_path).name
+            write_html(result, html_path, title=f"optdot QA: {pattern_file.name}", json_link=link)
     if not quiet:
         for c in result.checks:
             mark = "PASS" if c.passed else "FAIL"
             where = f"  at {c.where[:3]}" if (c.where and not c.passed) else ""
             click.echo(f"{mark}  {c.name}: {_num(c.value)} (limit {_num(c.limit)}){where}")
+        vis = result.metrics.get("visibility")
+        if vis:
+            x, y = vis["max_jnd_at_mm"]
+            click.echo(
+                f"visibility ({vis['view']}, {vis['distance_mm']:g} mm, "
+                f"{vis['luminance_cd_m2']:g} cd/m², PSF sigma {vis['psf_sigma_mm']:g} mm): "
+                f"largest |JND| {vis['max_jnd']:.2f} at ({x:.2f}, {y:.2f}) mm, "
+                f"{vis['blobs_over_1_jnd']} blobs over 1 JND"
+            )
         click.echo(f"verdict: {'PASS' if result.passed else 'FAIL'}")
     sys.exit(0 if result.passed else 1)
 

@@ -21,6 +21,7 @@ from ..geometry.domain import Domain
 from ..geometry.limits import DIAMETER_RANGE_MM, MAX_EXTENT_MM
 from ..geometry.sizes import DotSizes, dots_per_cell
 from .grids import validate_grid
+from .viewing import DEFAULT_VIEW, Viewing, viewing
 
 METHODS = ("optdot", "md")
 #: Edge gap below which two dots of varying size are "too close", mm: the 60 µm centre
@@ -127,6 +128,10 @@ class QAParams:
         close_gap: edge gap below which a pair is "too close", mm. Dots of varying size
             are always judged this way (default :data:`DEFAULT_CLOSE_GAP`); dots of one
             size by ``close_distance`` unless this is given (then diameter + close_gap).
+        view: viewing preset of the visibility check (:data:`~optdot.config.viewing.VIEW_PRESETS`).
+        view_distance, view_luminance: override the preset's distance (mm) and luminance
+            (cd/m²). psf: Gaussian sigma of the stack's blur, mm.
+        max_jnd: allowed largest |JND| of the visibility map (None = reported, not gated).
     """
 
     collision_distance: float | None = None
@@ -139,6 +144,16 @@ class QAParams:
     max_psi6_coherence: float = 0.10
     smoothing: float = 1.0
     close_gap: float | None = None
+    view: str = DEFAULT_VIEW
+    view_distance: float | None = None
+    view_luminance: float | None = None
+    psf: float | None = None
+    max_jnd: float | None = None
+
+    @property
+    def viewing(self) -> Viewing:
+        """The viewing condition of the visibility check."""
+        return viewing(self.view, self.view_distance, self.view_luminance, self.psf)
 
     @property
     def effective_close_gap(self) -> float:
@@ -170,6 +185,9 @@ class QAParams:
             "0 < x <= 1",
         )
         _check(self.smoothing > 0, "qa.smoothing", self.smoothing, "> 0")
+        if self.max_jnd is not None:
+            _check(0 < self.max_jnd < 1e6, "qa.max_jnd", self.max_jnd, "> 0")
+        viewing(self.view, self.view_distance, self.view_luminance, self.psf)  # validates
 
 
 @dataclass(frozen=True, eq=False)

@@ -74,6 +74,11 @@ SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
         "max_psi6_coherence": (int, float),
         "smoothing": (int, float),
         "close_gap": (int, float),
+        "view": (str,),
+        "view_distance": (int, float),
+        "view_luminance": (int, float),
+        "psf": (int, float),
+        "max_jnd": (int, float),
     },
 }
 _REQUIRED = {"dots": ("diameter",)}

@@ -115,7 +115,7 @@ def judge(
     gaps = None
     if u is None:
         gaps = (params.effective_close_gap, collision_gap)
-    got = measure(src, density, params.smoothing, close, collision, gaps)
+    got = measure(src, density, params.smoothing, close, collision, gaps, params.viewing)
     m, w = got.metrics, got.where
     if gaps is None:
         collide_text = f"pairs closer than {collision * 1e3:.1f} µm (collisions)"
@@ -171,6 +171,17 @@ def judge(
                 params.max_coverage_rms,
                 rms <= params.max_coverage_rms,
                 w["coverage"],
+            )
+        )
+    if params.max_jnd is not None and "visibility" in m:
+        vis = m["visibility"]
+        checks.append(
+            Check(
+                f"largest |JND| at {params.viewing.describe()}",
+                vis["max_jnd"],
+                params.max_jnd,
+                vis["max_jnd"] <= params.max_jnd,
+                w["visibility"],
             )
         )
     return QAResult(metrics=m, checks=checks, arrays=got.arrays)

@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..config.viewing import Viewing
 from ..geometry.density import DensityMap
 from ..geometry.domain import Domain, box_protruding
 from ..pattern import coverage_pixels
@@ -57,6 +58,7 @@ from .metrics import (
     radial_spectrum,
 )
 from .seams import seam_finish, seam_sums
+from .visibility import LuminanceGrid, visibility
 
 #: Smallest halo around a part, mm: covers the 6 nearest neighbours at any fill > ~0.01
 #: of 46 µm dots (beyond, the exact re-query takes over).
@@ -194,6 +196,7 @@ def measure(
     close: float,
     collision: float,
     gaps: tuple[float, float] | None = None,
+    view: Viewing | None = None,
 ) -> Measured:
     """Measure every QA number of ``src``.
 
@@ -205,14 +208,22 @@ def measure(
             (i, j) is too close below the centre distance ``(d_i + d_j) / 2 + close_gap``
             and collides below ``(d_i + d_j) / 2 + collision_gap`` (an edge-gap rule),
             and ``close``/``collision`` are not used. Required when sizes vary.
+        view: the viewing condition of the visibility check
+            (:mod:`optdot.quality.visibility`; needs ``density``); None skips it.
     """
     if src.uniform_diameter is None and src.n and gaps is None:
         raise ValueError("dots of varying size are judged by edge gaps: pass gaps")
     if src.uniform_diameter is not None:
         gaps = None
-    first = _first_pass(src, density)
+    first = _first_pass(src, density, view)
     second = _second_pass(src, density, first, close, collision, gaps)
-    return _finish(src, density, smoothing, close, collision, first, second, gaps)
+    got = _finish(src, density, smoothing, close, collision, first, second, gaps)
+    if first.luminance is not None and view is not None and density is not None:
+        vis, arrays = visibility(first.luminance, density, src.outline, view)
+        got.metrics["visibility"] = vis
+        got.where["visibility"] = [vis["max_jnd_at_mm"]]
+        got.arrays["jnd"] = arrays["jnd"]
+    return got
 
 
 @dataclass
@@ -233,9 +244,10 @@ class _First:
     bands: list[tuple[str, Any, float]] = field(default_factory=list)
     band_sums: list[float] = field(default_factory=list)
     diameters: list[np.ndarray] = field(default_factory=list)
+    luminance: LuminanceGrid | None = None
 
 
-def _first_pass(src: Source, density: DensityMap | None) -> _First:
+def _first_pass(src: Source, density: DensityMap | None, view: Viewing | None = None) -> _First:
     x0, y0, x1, y1 = src.box
     onx, ony = coverage_pixels(src.box, src.nominal_diameter, OVERVIEW_PX)
     uniform = src.uniform_diameter
@@ -251,6 +263,8 @@ def _first_pass(src: Source, density: DensityMap | None) -> _First:
         overview_extent=(x0, x1, y0, y1),
     )
     if density is not None:
+        if view is not None:
+            f.luminance = LuminanceGrid.over(density, view)
         f.bands = edge_bands(src.box, src.outline, density)
         f.band_sums = [0 if uniform is not None else 0.0 for _ in f.bands]
     for k in range(len(src.counts)):
@@ -276,6 +290,8 @@ def _first_pass(src: Source, density: DensityMap | None) -> _First:
         f.protruding += int(out.sum())
         _keep(f.where_protruding, xy[out], 20)
         _keep(f.defects, xy[out], MAX_MARKS)
+        if f.luminance is not None:
+            f.luminance.add(xy, disc_area(uniform) if area is None else area)
         if density is not None:
             f.cells += cell_area_sums(xy, d, uniform is not None, density)
             empty = density.empty_mask(xy)

@@ -21,12 +21,16 @@ def write_json(result: QAResult, path: str | Path) -> None:
         tmp.write_text(text + "\n", encoding="utf-8")
 
 
-def write_html(result: QAResult, path: str | Path, title: str = "optdot QA") -> None:
-    """Write the HTML report atomically: verdict first, then the plots and the numbers.
+def write_html(
+    result: QAResult, path: str | Path, title: str = "optdot QA", json_link: str | None = None
+) -> None:
+    """Write the HTML report atomically: verdict first, then what a viewer will see, the
+    plots, and a link to the JSON (``json_link``, relative to the HTML) or the numbers.
 
     Everything drawn comes from ``result`` (its plot arrays are bounded in size), so a
     panel of any dot count gives a report of the same size."""
     figs = _figures(result)
+    seen = _visibility_section(result)
     verdict = "PASS" if result.passed else "FAIL"
     color = "#1a7f37" if result.passed else "#cf222e"
     rows = "".join(
@@ -42,7 +46,17 @@ def write_html(result: QAResult, path: str | Path, title: str = "optdot QA") -> 
     )
     m = result.metrics
     box = m["box_mm"]
-    metrics = html.escape(json.dumps(m, indent=1, default=_jsonable))
+    if json_link is None:
+        numbers = (
+            "<details><summary>All numbers (JSON)</summary><pre>"
+            + html.escape(json.dumps(m, indent=1, default=_jsonable))
+            + "</pre></details>"
+        )
+    else:
+        numbers = (
+            f"<p>Every number, for scripts: <a href='{html.escape(json_link)}'>"
+            f"{html.escape(json_link)}</a>.</p>"
+        )
     doc = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>
 <style>body{{font-family:sans-serif;margin:2em;max-width:1200px}}
@@ -52,10 +66,88 @@ figure{{display:inline-block;margin:.5em}}img{{max-width:560px}}</style></head><
 <h1>{html.escape(title)}</h1><div class="verdict" id="verdict">{verdict}</div>
 <p>{m["dots"]:,} dots, diameter {_diameter_text(m["diameter_mm"])}, panel {box[2] - box[0]:.3f} × {box[3] - box[1]:.3f} mm</p>
 <h2>Gate</h2><table><tr><th></th><th>check</th><th>value</th><th>limit</th><th>where (mm, first 5)</th></tr>{rows}</table>
-<h2>Plots</h2>{imgs}<h2>All numbers</h2><pre>{metrics}</pre></body></html>
+{seen}
+<h2>Spacing, order and coverage</h2>
+<p>The overview shows the fill the dots realise, close pairs and defects; the zoom the
+densest region at true scale; the histogram the nearest-neighbour distances against the
+collision and too-close limits; the coverage map the error after smoothing; the spectrum a
+peak where the pattern orders (moiré risk).</p>{imgs}<h2>Numbers</h2>{numbers}</body></html>
 """
     with atomic_path(path, expect_tail(b"</html>\n", str(path))) as tmp:
         tmp.write_text(doc, encoding="utf-8")
+
+
+def _visibility_section(result: QAResult) -> str:
+    """The "will a viewer see it" section: JND map, the worst blobs, what to do."""
+    vis = result.metrics.get("visibility")
+    if not vis:
+        return (
+            "<h2>Will a viewer see it?</h2><p>Not computed: the visibility check compares "
+            "the luminance with the target map; give the job (<code>--job</code>).</p>"
+        )
+    jnd_png = _jnd_figure(result)
+    blobs = "".join(
+        f"<tr><td>{b['x_mm']:.2f}, {b['y_mm']:.2f}</td><td>{b['area_mm2']:.3g}</td>"
+        f"<td>{b['contrast_percent']:+.3f}</td><td>{b['jnd']:+.2f}</td><td>{b['semu']:.2f}</td></tr>"
+        for b in vis["blobs"][:10]
+    )
+    x, y = vis["max_jnd_at_mm"]
+    coarse = (
+        " The grid was coarsened to bound memory; fine detail is smoothed."
+        if vis["grid_coarsened"]
+        else ""
+    )
+    return f"""<h2>Will a viewer see it?</h2>
+<p>Viewing: <b>{html.escape(str(vis["view"]))}</b>, {vis["distance_mm"]:g} mm,
+{vis["luminance_cd_m2"]:g} cd/m², stack blur (PSF sigma) {vis["psf_sigma_mm"]:g} mm.
+Largest |JND| <b>{vis["max_jnd"]:.2f}</b> at ({x:.2f}, {y:.2f}) mm;
+{vis["blobs_over_1_jnd"]} region(s) over 1 JND.{coarse}</p>
+<p>The map is the luminance the dots give after the stack's blur, relative to the target
+map (the intended gradient is not an error), as contrast against the eye's 2° surround,
+filtered by Barten's contrast sensitivity at this distance and luminance: 1 JND is just
+visible (50 % of observers), red brighter, blue darker. Regions over 1 JND are what a
+viewer will notice; under 0.5 nobody will. <b>What to do</b>: a blob inside the panel
+with a map of its shape is a coverage error of the pattern (regenerate with another seed
+or more iterations, check the map's resolution); a line along an edge is the dots'
+layering against the wall (hidden under a frame of a few mm, or use
+<code>edge_margin</code>); speckle all over means the stack blurs less than the grain of
+the dots: smaller dots (<code>[dots] diameter = [lo, hi]</code>) or more diffusion. The
+PSF and the gate (<code>qa.max_jnd</code>, off by default) should be calibrated against a
+photographed test plate (README, "Visibility").</p>
+<figure><img style="max-width:100%" alt="JND map" src="data:image/png;base64,{jnd_png}">
+<figcaption>JND map over the panel</figcaption></figure>
+<table><tr><th>blob at (mm)</th><th>area (mm²)</th><th>contrast (%)</th><th>JND</th>
+<th>SEMU index |C|/C<sub>jnd</sub></th></tr>{blobs}</table>
+<p>SEMU index: |C| over C<sub>jnd</sub> = 1.97/S<sup>0.33</sup> + 0.72 % (S the blob's
+area in mm²; the commonly cited form of SEMI D31), a second opinion that ignores distance;
+blobs are regions where |JND| ≥ 0.5.</p>"""
+
+
+def _jnd_figure(result: QAResult) -> str:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    img, ext = result.arrays["jnd"]
+    w, h = ext[1] - ext[0], ext[3] - ext[2]
+    fig, ax = plt.subplots(figsize=(10, max(2.5, min(8.0, 10 * h / max(w, 1e-9) + 1))))
+    v = max(2.0, float(np.abs(img).max()) if img.size else 2.0)
+    v = min(v, 5.0)
+    im = ax.imshow(img, origin="lower", extent=ext, cmap="RdBu_r", vmin=-v, vmax=v)
+    fig.colorbar(im, ax=ax, label="JND (1 = just visible)")
+    for ring in result.arrays.get("rings", []):
+        loop = np.vstack([ring, ring[:1]])
+        ax.plot(loop[:, 0], loop[:, 1], color="k", lw=0.7)
+    for b in result.metrics["visibility"]["blobs"][:10]:
+        if abs(b["jnd"]) >= 1:
+            ax.plot(b["x_mm"], b["y_mm"], marker="o", mfc="none", mec="k", ms=12)
+    ax.set(xlabel="x (mm)", ylabel="y (mm)", title="What a viewer sees (circles: over 1 JND)")
+    buf = io.BytesIO()
+    fig.tight_layout()
+    fig.savefig(buf, format="png", dpi=90, metadata={"Software": None})
+    plt.close(fig)
+    return base64.b64encode(buf.getvalue()).decode("ascii")
 
 
 def _figures(result: QAResult) -> list[tuple[str, str]]:

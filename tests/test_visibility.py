@@ -1,0 +1,245 @@
+"""Visibility QA: Barten's CSF against published values, the unit conversion by hand, the
+whole chain on a grating of known contrast, and defects planted in the LED sample."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from scipy.optimize import minimize_scalar
+
+from optdot.config.viewing import viewing
+from optdot.errors import JobError
+from optdot.geometry.density import DensityMap
+from optdot.quality.csf import (
+    barten_csf,
+    cycles_per_degree,
+    pupil_diameter,
+    retinal_illuminance,
+    semu_threshold,
+)
+from optdot.quality.visibility import FIELD_DEG, LuminanceGrid, visibility
+
+from .conftest import SAMPLES
+
+LED = SAMPLES / "led" / "job.toml"
+CENTRE = np.array([18.0, 7.5])  # middle of the 36 x 15 mm LED sample, mm
+
+
+# --- the eye model against published numbers ------------------------------------------
+
+
+def test_barten_csf_matches_published_values():
+    """colour-science 0.4 documents S(4 c/deg) = 360.8691122 for Barten's standard
+    observer with a 2.1 mm pupil, E = retinal illuminance at 20 cd/m², X0 = 60°, and
+    E(100 cd/m², 2.1 mm) = 330.4115803 Td."""
+    assert retinal_illuminance(100, 2.1) == pytest.approx(330.4115803, rel=1e-9)
+    s = barten_csf(4, 20, 60, pupil_mm=2.1, illuminance_td=retinal_illuminance(20, 2.1))
+    assert float(s) == pytest.approx(360.8691122, rel=1e-9)
+
+
+@pytest.mark.parametrize(
+    "luminance, mdc",
+    # ITU-R BT.2246-4 (2015) fig. 31: minimum detectable contrast 2/1.27/S at the peak
+    # frequency, tabulated in colour-science's documentation (pupil from its natural-log
+    # formula, so it is passed in)
+    [(100.0, 0.0022897), (0.01, 0.0207396)],
+)
+def test_barten_peak_sensitivity_matches_itu_bt2246(luminance, mdc):
+    d = 5 - 3 * math.tanh(0.4 * math.log(luminance * 60 * 60 / 40**2))
+    e = retinal_illuminance(luminance, d)
+    best = minimize_scalar(
+        lambda u: -barten_csf(u, luminance, 60, pupil_mm=d, illuminance_td=e),
+        bounds=(0.01, 30),
+        method="bounded",
+        options={"xatol": 1e-6},
+    )
+    assert 2 / 1.27 / -best.fun == pytest.approx(mdc, rel=1e-4)
+
+
+def test_pupil_uses_barten_log10_and_csf_shape():
+    # by hand: 5 - 3 tanh(0.4 log10(100 * 60² / 40²)) = 5 - 3 tanh(0.94087) = 2.79313
+    assert pupil_diameter(100, 60) == pytest.approx(2.79313, abs=1e-5)
+    u = np.array([0.0, 0.5, 3.0, 60.0])
+    s = barten_csf(u, 400, FIELD_DEG)
+    assert s[0] == 0 and s[2] > 2 * s[1] and s[2] > 100 * s[3]  # band-pass, DC blind
+
+
+def test_units_cycles_per_degree_by_hand():
+    # one degree at 500 mm spans 500 * pi / 180 = 8.72665 mm: 1 cycle/mm = 8.72665 c/deg
+    assert float(cycles_per_degree(1.0, 500)) == pytest.approx(8.72665, rel=1e-6)
+    assert float(cycles_per_degree(0.5, 2600)) == pytest.approx(22.6893, rel=1e-5)
+    assert viewing("tv").mm_per_degree == pytest.approx(45.3786, rel=1e-5)
+
+
+def test_semu_threshold_commonly_cited_form():
+    # 1.97 / 10^0.33 + 0.72 = 1.97 / 2.1380 + 0.72 = 1.6414 % for a 10 mm² mura
+    assert float(semu_threshold(10.0)) == pytest.approx(1.6414, abs=1e-4)
+
+
+# --- the chain on a grating of known contrast -----------------------------------------
+
+
+@pytest.mark.parametrize("period_mm", [2.0, 5.0])
+def test_a_grating_of_modulation_m_reads_m_times_s(period_mm):
+    """Coverage 0.3 (1 + m sin(2 pi x / p)) on a uniform map: away from the edges the JND
+    map's amplitude is m S(u) (attenuated by the PSF's transfer at that frequency)."""
+    m = 0.004
+    view = viewing("notebook", psf=0.3)
+    density = DensityMap(np.full((10, 30), 0.3), 60.0, 20.0)
+    g = LuminanceGrid.over(density, view)
+    x = g.x0 + (np.arange(g.nx) + 0.5) * g.cw
+    g.sums[:] = 0.3 * (1 + m * np.sin(2 * np.pi * x / period_mm))[None, :] * g.cw * g.ch
+    metrics, arrays = visibility(g, density, None, view)
+    f = 1 / period_mm
+    u = float(cycles_per_degree(f, view.distance))
+    psf_mtf = math.exp(-2 * math.pi**2 * view.psf**2 * f**2)
+    expected = m * psf_mtf * float(barten_csf(u, view.luminance, FIELD_DEG))
+    img, ext = arrays["jnd"]
+    mid = img[img.shape[0] // 2, img.shape[1] // 3 : 2 * img.shape[1] // 3]
+    assert np.abs(mid).max() == pytest.approx(expected, rel=0.03)
+    assert metrics["max_jnd"] == pytest.approx(expected, rel=0.15)
+
+
+def test_deposit_keeps_every_dots_area():
+    view = viewing("notebook")
+    density = DensityMap(np.full((3, 4), 0.2), 4.0, 3.0)
+    g = LuminanceGrid.over(density, view)
+    rng = np.random.default_rng(1)
+    xy = rng.uniform((-0.1, -0.1), (4.1, 3.1), (500, 2))
+    g.add(xy, 0.002)
+    assert g.sums.sum() == pytest.approx(500 * 0.002, rel=1e-12)
+
+
+# --- defects planted in the LED sample ------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def led():
+    from optdot.config.schema import load_job
+    from optdot.pipeline import generate
+
+    job = load_job(LED)
+    return job, generate(job)
+
+
+def _jnd(job, xy, area, view):
+    g = LuminanceGrid.over(job.density, view)
+    g.add(xy, area)
+    metrics, arrays = visibility(g, job.density, None, view)
+    img, ext = arrays["jnd"]
+    x = ext[0] + (np.arange(img.shape[1]) + 0.5) * (ext[1] - ext[0]) / img.shape[1]
+    y = ext[2] + (np.arange(img.shape[0]) + 0.5) * (ext[3] - ext[2]) / img.shape[0]
+    return metrics, img, x, y
+
+
+def _at(img, x, y, p) -> float:
+    return float(img[np.abs(y - p[1]).argmin(), np.abs(x - p[0]).argmin()])
+
+
+@pytest.mark.parametrize("amplitude, visible", [(0.01, True), (0.002, False)])
+def test_a_coverage_bump_is_seen_at_notebook_distance_only_when_large(led, amplitude, visible):
+    """A Gaussian coverage bump (sigma 3 mm) planted by scaling dot areas: +1 % is
+    reported visible at notebook distance (JND >= 1.5 at its centre, and a blob there),
+    +0.2 % is not (JND < 1 at its centre)."""
+    job, pattern = led
+    view = viewing("notebook")
+    area = np.pi * (0.5 * pattern.diameter) ** 2 * np.ones(len(pattern.xy))
+    bump = amplitude * np.exp(-((pattern.xy - CENTRE) ** 2).sum(1) / (2 * 3.0**2))
+    metrics, img, x, y = _jnd(job, pattern.xy, area * (1 + bump), view)
+    here = _at(img, x, y, CENTRE)
+    near = [
+        b
+        for b in metrics["blobs"]
+        if math.hypot(b["x_mm"] - CENTRE[0], b["y_mm"] - CENTRE[1]) < 3 and b["jnd"] >= 1.5
+    ]
+    if visible:
+        assert here >= 1.5 and near
+        assert near[0]["contrast_percent"] > 0.5
+    else:
+        assert abs(here) < 1 and not near
+
+
+def test_a_seam_of_missing_dots_is_seen_at_half_a_metre_not_from_a_tv_sofa(led):
+    """A seam: along 10 mm, 1 % of the dots within 0.125 mm of a line removed (every
+    100th in x order). With a thin stack (PSF sigma 0.3 mm), the JND it adds along the
+    line is over 1 at 0.5 m and under 1 at 2.6 m. The map is linear in the pattern, so
+    the seam's own JND is the planted map minus the clean one."""
+    job, pattern = led
+    xy = pattern.xy
+    area = np.pi * (0.5 * pattern.diameter) ** 2 * np.ones(len(xy))
+    band = np.flatnonzero((np.abs(xy[:, 1] - CENTRE[1]) < 0.125) & (np.abs(xy[:, 0] - 18) < 5))
+    gone = band[np.argsort(xy[band, 0], kind="stable")][::100]
+    keep = np.ones(len(xy), bool)
+    keep[gone] = False
+    seen = {}
+    for name in ("notebook", "tv"):
+        view = viewing(name, psf=0.3)
+        _, clean, x, y = _jnd(job, xy, area, view)
+        _, seam, _, _ = _jnd(job, xy[keep], area[keep], view)
+        row = np.abs(y - CENTRE[1]).argmin()
+        along = np.abs(x - 18) < 4
+        seen[name] = float(-(seam - clean)[row, along].mean())
+    assert seen["notebook"] >= 1 > seen["tv"] > 0, seen
+
+
+def test_the_clean_led_sample_reports_its_own_largest_jnd(led, tmp_path):
+    """The report states the clean pattern's largest |JND|: the brightest place is the
+    row of dots layered against the bottom edge (+23 % coverage in its first 0.25 mm)."""
+    from optdot.pipeline import qa
+
+    job, pattern = led
+    vis = qa(pattern, job).metrics["visibility"]
+    assert vis["view"] == "notebook" and vis["psf_sigma_mm"] == 1.0
+    assert vis["max_jnd"] > 1 and vis["max_jnd_at_mm"][1] < 0.5
+    assert vis["blobs"][0]["jnd"] == pytest.approx(vis["max_jnd"])
+
+
+# --- job, CLI, gate ---------------------------------------------------------------------
+
+
+def test_view_settings_are_validated():
+    from optdot.config.job import QAParams
+
+    with pytest.raises(JobError, match="qa.view"):
+        QAParams(view="cinema")
+    with pytest.raises(JobError, match="qa.psf"):
+        QAParams(psf=0.0)
+    with pytest.raises(JobError, match="qa.view_distance"):
+        QAParams(view_distance=float("nan"))
+    with pytest.raises(JobError, match="qa.max_jnd"):
+        QAParams(max_jnd=-1.0)
+    p = replace(QAParams(), view="tv", view_distance=2000.0)
+    assert (p.viewing.distance, p.viewing.luminance) == (2000.0, 270.0)
+
+
+def test_cli_view_options_and_the_jnd_gate(tiny_pattern, tmp_path):
+    from optdot.io.patterns import save_pattern
+
+    src = tmp_path / "tiny.npz"
+    save_pattern(tiny_pattern, src)
+    job = SAMPLES / "tiny" / "job.toml"
+
+    def run(*args):
+        return subprocess.run(
+            [sys.executable, "-m", "optdot", "qa", str(src), "--job", str(job), *args],
+            capture_output=True,
+            text=True,
+        )
+
+    ok = run("--view", "tv", "--psf", "0.3", "--json", str(tmp_path / "r.json"))
+    assert ok.returncode == 0, ok.stderr
+    assert "visibility (tv, 2600 mm, 270 cd/m², PSF sigma 0.3 mm)" in ok.stdout
+    vis = json.loads((tmp_path / "r.json").read_text())["metrics"]["visibility"]
+    assert vis["distance_mm"] == 2600 and vis["psf_sigma_mm"] == 0.3
+    gated = run("--view", "tv", "--psf", "0.3", "--max-jnd", str(vis["max_jnd"] * 0.9))
+    assert gated.returncode == 1 and "FAIL  largest |JND|" in gated.stdout
+    passed = run("--view", "tv", "--psf", "0.3", "--max-jnd", str(vis["max_jnd"] * 1.1))
+    assert passed.returncode == 0
+    bad = run("--psf", "-1")
+    assert bad.returncode == 2 and "qa.psf" in bad.stderr and "Traceback" not in bad.stderr
