@@ -143,6 +143,13 @@ def _jnd_figure(result: QAResult) -> str:
         if abs(b["jnd"]) >= 1:
             ax.plot(b["x_mm"], b["y_mm"], marker="o", mfc="none", mec="k", ms=12)
     ax.set(xlabel="x (mm)", ylabel="y (mm)", title="What a viewer sees (circles: over 1 JND)")
+    return _png_base64(fig)
+
+
+def _png_base64(fig) -> str:
+    """``fig`` as a base64 PNG (90 dpi, no software stamp: same figure, same bytes); closes it."""
+    import matplotlib.pyplot as plt
+
     buf = io.BytesIO()
     fig.tight_layout()
     fig.savefig(buf, format="png", dpi=90, metadata={"Software": None})
@@ -162,11 +169,7 @@ def _figures(result: QAResult) -> list[tuple[str, str]]:
     m = result.metrics
 
     def save(fig, caption):
-        buf = io.BytesIO()
-        fig.tight_layout()
-        fig.savefig(buf, format="png", dpi=90, metadata={"Software": None})
-        plt.close(fig)
-        out.append((caption, base64.b64encode(buf.getvalue()).decode("ascii")))
+        out.append((caption, _png_base64(fig)))
 
     img, ext = a["overview"]
     fig, ax = plt.subplots(figsize=(6, 4))
