@@ -44,12 +44,17 @@ def circle_vertices(radius_um: float, tolerance_um: float) -> int:
     return max(8, math.ceil(math.pi / math.acos(1.0 - t / radius_um)))
 
 
-def _check_extent(box: tuple[float, float, float, float]) -> None:
-    lo = min(box[0], box[1])
-    hi = max(box[2], box[3])
-    if max(abs(lo), abs(hi)) > MAX_EXTENT_MM:
+def _check_extent(box, xy: np.ndarray | None = None, diameter=None) -> None:
+    """Refuse coordinates a 32-bit GDSII integer cannot hold at 1 nm (they would wrap:
+    3000 mm reads back as -1294.97 mm): the panel box and, when given, the dots
+    themselves (``xy`` ``[n, 2]`` mm, ``diameter`` mm), whatever box they claim."""
+    far = max(abs(float(v)) for v in box)
+    if xy is not None and len(xy):
+        r = 0.5 * float(np.max(diameter))
+        far = max(far, float(np.max(np.abs(xy))) + r)
+    if not far <= MAX_EXTENT_MM:
         raise ExportError(
-            f"pattern extent {max(abs(lo), abs(hi)):.1f} mm exceeds the GDSII/OASIS 32-bit "
+            f"pattern extent {far:.1f} mm exceeds the GDSII/OASIS 32-bit "
             f"limit of {MAX_EXTENT_MM:.1f} mm at 1 nm"
         )
 
@@ -76,7 +81,7 @@ def _placed(dot: gdstk.Cell | str, xy_um: np.ndarray) -> gdstk.Reference:
 
 def build_library(pattern: Pattern, opts: ExportOptions, oasis: bool = False) -> gdstk.Library:
     """The gdstk library of a pattern (µm user unit, nm database unit)."""
-    _check_extent(pattern.box)
+    _check_extent(pattern.box, pattern.xy, pattern.diameter)
     lib = gdstk.Library("OPTDOT", unit=1e-6, precision=1e-9)
     groups = _size_groups(pattern, opts)
     top = gdstk.Cell(opts.top_cell)
@@ -102,10 +107,11 @@ def _size_groups(pattern: Pattern, opts: ExportOptions) -> list[tuple[gdstk.Cell
     d_nm = np.round(pattern.diameter * 1e6).astype(np.int64)
     sizes = np.unique(d_nm)
     groups = []
+    names = {opts.top_cell: "the top cell"}
     for size in sizes:
         r_um = 0.5 * float(size) * 1e-3 if len(sizes) > 1 else float(pattern.radius[0]) * 1e3
         name = opts.dot_cell if len(sizes) == 1 else f"{opts.dot_cell}_{size}"
-        dot = dot_cell(name, r_um, opts)
+        dot = dot_cell(_unique(name, f"the {size} nm dot", names), r_um, opts)
         groups.append((dot, d_nm == size if len(sizes) > 1 else np.ones(pattern.n, bool)))
     return groups
 
@@ -145,15 +151,30 @@ def _tile_cells(ds: Dataset, opts: ExportOptions, sizes: dict[int, str]):
     ``T<i>_<j>`` placing the dot cells by name (one reference per size, explicit
     repetition). ``sizes`` collects ``{diameter nm: dot cell name}`` as they appear."""
     uniform = ds.uniform_diameter
+    names = {opts.top_cell: "the top cell"}
     for (i, j), xy, d in ds.chunks():
-        cell = gdstk.Cell(f"T{i}_{j}")
+        _check_extent(ds.box, xy, d)
+        cell = gdstk.Cell(_unique(f"T{i}_{j}", f"tile ({i}, {j})", names))
         d_nm = np.round(d * 1e6).astype(np.int64)
         for size in np.unique(d_nm):
             name = opts.dot_cell if uniform is not None else f"{opts.dot_cell}_{size}"
-            sizes.setdefault(int(size), name)
+            if int(size) not in sizes:
+                sizes[int(size)] = _unique(name, f"the {size} nm dot", names)
             sel = xy[d_nm == size] * 1e3
             cell.add(_placed(name, sel[spatial_order(sel)]))
         yield cell, len(xy)
+
+
+def _unique(name: str, what: str, names: dict[str, str]) -> str:
+    """``name``, recorded in ``names`` (cell name -> what it holds), or refuse a second
+    cell of that name: a library with two structures of one name is a broken mask."""
+    if name in names:
+        raise ExportError(
+            f"cell name {name!r} is used by {names[name]} and {what}; choose another "
+            "--top-cell or dot cell name"
+        )
+    names[name] = what
+    return name
 
 
 def _dot_cells(ds: Dataset, sizes: dict[int, str], opts: ExportOptions) -> list[gdstk.Cell]:

@@ -9,15 +9,17 @@ qa's distances would be wrong for it. The panel box is the outline's bounding bo
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
 
-from optdot.errors import GeometryError, PatternFileError, one_line
+from optdot.errors import GeometryError, PatternFileError, ResourceError, one_line
 from optdot.geometry.domain import domain_from_rings
 from optdot.io.patterns import load_pattern, validate_dots
 from optdot.pattern import Pattern
 from optdot.runtime.isolate import ChildCrashed, in_child
+from optdot.runtime.memory import max_dots_read
 
 from .gds import MIN_DOT_VERTICES as MIN_VERTICES
 from .gds import quietly
@@ -43,7 +45,7 @@ def read_any(path: str | Path, opts: ExportOptions | None = None, box=None) -> P
             return in_child(_read_layout, path, opts)
         if suffix == ".dxf":
             return _read_dxf(path)
-    except PatternFileError:
+    except (PatternFileError, ResourceError):
         raise
     except ChildCrashed as e:
         raise PatternFileError(f"{path}: damaged {suffix[1:].upper()} file ({e})") from None
@@ -67,15 +69,9 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
     top = tops[0]
     centres: list[np.ndarray] = []
     diameters: list[np.ndarray] = []
-    _collect(path, top, np.zeros(2), opts, to_mm, centres, diameters, 0)
-    for poly in top.polygons:
-        if (poly.layer, poly.datatype) != (opts.layer, opts.datatype):
-            continue
-        c, radius = _circle(path, poly.points, "a polygon", to_mm)
-        diameter = round(2 * radius, 6)
-        reps = poly.repetition.get_offsets() if poly.repetition.size > 1 else np.zeros((1, 2))
-        centres.append((c + reps) * to_mm)
-        diameters.append(np.full(len(reps), diameter))
+    budget = [max_dots_read()]
+    gds = path.suffix.lower() != ".oas"
+    _collect(path, top, _IDENTITY, opts, to_mm, centres, diameters, 0, budget, gds)
     if not centres:
         raise PatternFileError(f"{path}: no dots on layer {opts.layer}/{opts.datatype}")
     outline = [
@@ -90,30 +86,94 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
 
 #: Deepest hierarchy read: top -> tile cells -> dot cells is 2.
 MAX_DEPTH = 4
+#: Most columns or rows of a GDSII array reference (COLROW holds signed 16-bit numbers).
+GDS_MAX_COLROW = 32767
+#: The identity placement: ``(A [2, 2], b [2])`` maps a cell's points p to A p + b.
+_IDENTITY = (np.eye(2), np.zeros(2))
 
 
-def _collect(path, cell, offset, opts, to_mm, centres, diameters, depth) -> None:
-    """Dots placed by ``cell``'s references, shifted by ``offset`` (file units): a
-    referenced cell with one circle on the dots' layer is a dot cell; one with references
-    of its own (a tile of a tiled export) is walked in turn."""
+def _placement(ref) -> np.ndarray:
+    """The linear part of a reference's transform (file units are kept): magnification
+    times rotation times, with ``x_reflection``, the mirror about the x axis (applied
+    first, as GDSII STRANS defines it)."""
+    m = float(ref.magnification)
+    c, s = math.cos(ref.rotation), math.sin(ref.rotation)
+    a = m * np.array([[c, -s], [s, c]])
+    if ref.x_reflection:
+        a = a @ np.diag([1.0, -1.0])
+    return a
+
+
+def _origins(path, rep, origin: np.ndarray, budget: list[int], gds: bool) -> np.ndarray:
+    """``[k, 2]`` positions of a (repeated) placement, file units, in its parent cell."""
+    if rep.size <= 1:
+        return origin[None, :]
+    cols, rows = rep.columns, rep.rows
+    if gds and cols is not None and (cols > GDS_MAX_COLROW or rows > GDS_MAX_COLROW):
+        raise PatternFileError(
+            f"{path}: an array reference of {cols} x {rows} exceeds GDSII's "
+            f"{GDS_MAX_COLROW} columns/rows (an overflowed AREF)"
+        )
+    budget[0] -= int(rep.size)
+    if budget[0] < 0:
+        raise ResourceError(
+            f"{path}: references place more than {max_dots_read():,} dots, more than "
+            "this machine's memory can check"
+        )
+    return rep.get_offsets() + origin
+
+
+def _collect(path, cell, place, opts, to_mm, centres, diameters, depth, budget, gds) -> None:
+    """Dots drawn by ``cell`` placed by ``place`` (``(A, b)`` in file units; see
+    :data:`_IDENTITY`): its polygons on the dots' layer, and its references: a referenced
+    cell with one circle on the dots' layer is a dot cell (the reference's origin is the
+    dot's centre, its magnification scales the diameter; rotation and mirroring move the
+    centres of nested cells); one with references of its own (a tile of a tiled export) is
+    walked in turn with the composed transform."""
+    a, b = place
     on_layer = (opts.layer, opts.datatype)
+    scale = math.sqrt(abs(np.linalg.det(a)))
+    if depth == 0:  # deeper, a dot cell's circle is read by the reference placing it
+        for poly in cell.polygons:
+            if (poly.layer, poly.datatype) != on_layer:
+                continue
+            c, radius = _circle(path, poly.points, "a polygon", to_mm)
+            at = _origins(path, poly.repetition, c, budget, gds)
+            centres.append((at @ a.T + b) * to_mm)
+            diameters.append(np.full(len(at), round(2 * radius * scale, 6)))
     for ref in cell.references:
         sub = ref.cell
         if isinstance(sub, str):
             raise PatternFileError(f"{path}: reference to a missing cell {sub!r}")
-        origins = np.array([ref.origin]) + offset
-        if ref.repetition.size > 1:
-            origins = ref.repetition.get_offsets() + origins[0]
+        m = float(ref.magnification)
+        if not (math.isfinite(m) and m > 0 and math.isfinite(ref.rotation)):
+            raise PatternFileError(
+                f"{path}: a reference to {sub.name} has magnification {m!r}, "
+                f"rotation {ref.rotation!r}"
+            )
+        origins = _origins(path, ref.repetition, np.asarray(ref.origin, float), budget, gds)
+        inner = a @ _placement(ref)
         pts = [p for p in sub.polygons if (p.layer, p.datatype) == on_layer]
         if sub.references and not pts:
             if depth >= MAX_DEPTH:
                 raise PatternFileError(f"{path}: cells nested deeper than {MAX_DEPTH}")
             for o in origins:
-                _collect(path, sub, o, opts, to_mm, centres, diameters, depth + 1)
+                _collect(
+                    path,
+                    sub,
+                    (inner, a @ o + b),
+                    opts,
+                    to_mm,
+                    centres,
+                    diameters,
+                    depth + 1,
+                    budget,
+                    gds,
+                )
             continue
         if not pts:
             continue
-        if len(pts) > 1:
+        if len(pts) > 1 or pts[0].repetition.size > 1:
             raise PatternFileError(
                 f"{path}: cell {sub.name} holds {len(pts)} shapes on layer "
                 f"{opts.layer}/{opts.datatype}; a dot cell holds one circle"
@@ -125,8 +185,8 @@ def _collect(path, cell, offset, opts, to_mm, centres, diameters, depth) -> None
             )
         # vertices sit on the circle, snapped to the database grid: their mean radius
         # recovers the diameter to well under 1 nm
-        diameter = round(2 * radius, 6)
-        centres.append(origins * to_mm)
+        diameter = round(2 * radius * math.sqrt(abs(np.linalg.det(inner))), 6)
+        centres.append((origins @ a.T + b) * to_mm)
         diameters.append(np.full(len(origins), diameter))
 
 
@@ -148,30 +208,69 @@ def _circle(path: Path, pts: np.ndarray, what: str, to_mm: float) -> tuple[np.nd
 
 
 def _read_dxf(path: Path) -> Pattern:
+    """Dots are the CIRCLEs on layer ``DOTS``, the panel the closed polylines on
+    ``OUTLINE``, everything in the drawing's units converted to mm and block references
+    expanded (:mod:`optdot.geometry.dxf_entities`). A circle is placed by its centre in
+    world coordinates (an extrusion of -Z mirrors x); anything else on ``DOTS`` (an
+    ellipse from a stretched block, a polyline, a circle seen at a slant) is refused,
+    as qa's distances would be wrong for it."""
     import ezdxf
 
+    from optdot.geometry.dxf_entities import drawn_entities, mm_per_unit
+
     doc = ezdxf.readfile(str(path))
-    msp = doc.modelspace()
-    circles = msp.query('CIRCLE[layer=="DOTS"]')
-    if not len(circles):
+    try:
+        scale = mm_per_unit(doc, path)
+        xy_l, r_l, rings = [], [], []
+        for e in drawn_entities(doc.modelspace(), path):
+            layer, kind = e.dxf.get("layer", "0"), e.dxftype()
+            if layer == "DOTS":
+                xy_l.append(_dxf_dot(path, e, kind))
+                r_l.append(float(e.dxf.radius))
+            elif layer == "OUTLINE" and kind in ("LWPOLYLINE", "POLYLINE"):
+                pts = (
+                    [p[:2] for p in e.get_points()]
+                    if kind == "LWPOLYLINE"
+                    else [v.dxf.location[:2] for v in e.vertices]
+                )
+                ocs = e.ocs()
+                if ocs.transform:
+                    z = float(e.dxf.elevation) if kind == "LWPOLYLINE" else 0.0
+                    pts = [ocs.to_wcs((x, y, z))[:2] for x, y in pts]
+                rings.append(np.array(pts, dtype=np.float64) * scale)
+    except GeometryError as err:
+        raise PatternFileError(str(err)) from None
+    if not xy_l:
         raise PatternFileError(f"{path}: no CIRCLE entities on layer DOTS")
-    xy = np.array([(c.dxf.center.x, c.dxf.center.y) for c in circles], dtype=np.float64)
-    radii = np.array([c.dxf.radius for c in circles], dtype=np.float64)
+    xy = np.array(xy_l, dtype=np.float64) * scale
+    radii = np.array(r_l, dtype=np.float64) * scale
     bad = ~(np.isfinite(radii) & (radii > 0))
     if bad.any():
         i = int(np.argmax(bad))
         raise PatternFileError(
-            f"{path}: CIRCLE {circles[i].dxf.handle} on layer DOTS has radius {float(radii[i])!r}; "
+            f"{path}: CIRCLE {i + 1} on layer DOTS has radius {float(radii[i])!r}; "
             "dots need a radius > 0"
         )
-    rings = []
-    for e in msp.query('LWPOLYLINE POLYLINE[layer=="OUTLINE"]'):
-        rings.append(
-            np.array([p[:2] for p in e.get_points()], dtype=np.float64)
-            if e.dxftype() == "LWPOLYLINE"
-            else np.array([v.dxf.location[:2] for v in e.vertices], dtype=np.float64)
-        )
     return _pattern(path, np.round(xy, 6), 2 * radii, rings)
+
+
+def _dxf_dot(path: Path, e, kind: str) -> tuple[float, float]:
+    """World x-y of a dot CIRCLE, or refuse what is not a round dot seen from above."""
+    where = f"{kind} {e.dxf.handle or '(in a block)'}"
+    if kind != "CIRCLE":
+        raise PatternFileError(
+            f"{path}: {where} on layer DOTS is not a CIRCLE; qa checks round dots only"
+        )
+    ext = e.dxf.get("extrusion", (0.0, 0.0, 1.0))
+    if abs(float(ext[0])) > 1e-9 or abs(float(ext[1])) > 1e-9:
+        raise PatternFileError(
+            f"{path}: {where} on layer DOTS is tilted (extrusion {tuple(ext)}); "
+            "seen from above it is an ellipse"
+        )
+    c = e.dxf.center
+    if float(ext[2]) < 0:  # seen from below: the object x axis points the other way
+        c = e.ocs().to_wcs(c)
+    return float(c[0]), float(c[1])
 
 
 def _pattern(

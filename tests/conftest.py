@@ -50,3 +50,28 @@ def tiny_pattern(tiny_job):
     from optdot.pipeline import generate
 
     return generate(tiny_job)
+
+
+def cli(*args):
+    """``(exit code, stderr lines, stdout)`` of an ``optdot`` command run in-process, as a
+    user sees them (an exception escaping the top-level handler fails the test)."""
+    from click.testing import CliRunner
+
+    from optdot.cli import main
+
+    r = CliRunner().invoke(main, [str(a) for a in args])
+    assert r.exception is None or isinstance(r.exception, SystemExit), r.exception
+    return r.exit_code, r.stderr.strip().splitlines(), r.stdout
+
+
+def one_error(args, code: int, *words: str) -> str:
+    """Run ``optdot *args``: it must end with exit ``code`` and one line on stderr,
+    ``optdot: error: ...`` holding each of ``words``; that line is returned."""
+    rc, err, _ = cli(*args)
+    assert rc == code, (rc, err)
+    assert len(err) == 1, err
+    assert err[0].startswith("optdot: error: "), err
+    assert "Traceback" not in err[0]
+    for w in words:
+        assert w in err[0], (w, err[0])
+    return err[0]

@@ -53,7 +53,7 @@ def test_dxf_circle_holes_keep_r0_from_the_true_circles(tmp_path):
     """A notched panel with two screw holes drawn as DXF CIRCLEs (issue: 147 dots up to
     0.45 µm too close to the true holes with Bézier flattening)."""
     holes = [((2.5, 2.5), 1.6), ((6.4, 5.6), 1.2)]
-    doc = ezdxf.new("R2010")
+    doc = ezdxf.new("R2010", units=4)
     msp = doc.modelspace()
     outer = [(0, 0), (9, 0), (9, 4), (7.5, 4), (7.5, 4.6), (9, 4.6), (9, 8), (0, 8)]
     msp.add_lwpolyline(outer, close=True)
@@ -80,7 +80,7 @@ def test_bulge_and_arc_outline_keeps_r0_from_the_true_curves(tmp_path):
     chord = 9.0
     half = math.asin(0.5 * chord / 7.0)  # half the included angle
     bulge = math.tan(half / 2)  # tan(angle / 4), angle = 2 * half
-    doc = ezdxf.new("R2010")
+    doc = ezdxf.new("R2010", units=4)
     msp = doc.modelspace()
     msp.add_lwpolyline([(0, 0, 0), (9, 0, 0), (9, 6, bulge), (0, 6, 0)], format="xyb", close=True)
     # slot: two lines and two half-circle arcs of radius 0.5
@@ -148,7 +148,7 @@ def test_flattening_is_on_the_safe_side_within_tolerance(radius, region_left, sw
 
 def test_keep_out_file_curves_are_flattened_outwards(tmp_path):
     """A keep-out drawn as a DXF circle is subtracted: its polygon must contain the circle."""
-    doc = ezdxf.new("R2010")
+    doc = ezdxf.new("R2010", units=4)
     doc.modelspace().add_circle((1.0, 1.0), 0.5)
     doc.saveas(tmp_path / "ko.dxf")
     panel, _ = load_outline(tmp_path / "ko.dxf", 1e-3, region_inside=False)
@@ -161,7 +161,7 @@ def test_keep_out_file_curves_are_flattened_outwards(tmp_path):
 
 def test_mirrored_ocs_arcs_and_ellipses(tmp_path):
     """An arc with extrusion (0, 0, -1) is mirrored in x; an ellipse is exact too."""
-    doc = ezdxf.new("R2010")
+    doc = ezdxf.new("R2010", units=4)
     msp = doc.modelspace()
     msp.add_ellipse((5, 5), major_axis=(4, 0), ratio=0.5)
     # a circle hole drawn in a mirrored OCS: OCS centre (-5, 5) is WCS (5, 5)

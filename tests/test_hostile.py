@@ -15,34 +15,13 @@ import ezdxf
 import gdstk
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
-from optdot.cli import main
 from optdot.cli.main import EXIT_INTERNAL
 from optdot.io.patterns import save_pattern
 
-from .conftest import SAMPLES
+from .conftest import SAMPLES, cli, one_error
 
 TINY_DIR = SAMPLES / "tiny"
-
-
-def cli(*args):
-    """``(exit code, stderr lines, stdout)`` of the command, as a user sees them."""
-    r = CliRunner().invoke(main, [str(a) for a in args])
-    # an exception escaping the top-level handler would show up here
-    assert r.exception is None or isinstance(r.exception, SystemExit), r.exception
-    return r.exit_code, r.stderr.strip().splitlines(), r.stdout
-
-
-def one_error(args, code: int, *words: str) -> str:
-    rc, err, _ = cli(*args)
-    assert rc == code, (rc, err)
-    assert len(err) == 1, err
-    assert err[0].startswith("optdot: error: "), err
-    assert "Traceback" not in err[0]
-    for w in words:
-        assert w in err[0], (w, err[0])
-    return err[0]
 
 
 @pytest.fixture()
@@ -98,7 +77,7 @@ def test_geojson_that_is_not_an_object(tiny, content, words):
 
 
 def test_truncated_dxf_outline(tiny):
-    doc = ezdxf.new()
+    doc = ezdxf.new(units=4)
     doc.modelspace().add_lwpolyline([(0, 0), (3, 0), (3, 2), (0, 2)], close=True)
     doc.saveas(tiny / "o.dxf")
     data = (tiny / "o.dxf").read_bytes()
@@ -125,7 +104,7 @@ def test_dot_count_rounding_to_zero(tiny):
 
 
 def test_qa_dxf_circles_of_radius_zero(tmp_path):
-    doc = ezdxf.new()
+    doc = ezdxf.new(units=4)
     for i in range(5):
         doc.modelspace().add_circle((0.5 + 0.1 * i, 0.5), 0, dxfattribs={"layer": "DOTS"})
     doc.saveas(tmp_path / "r0.dxf")
@@ -289,7 +268,7 @@ def test_bom_in_job_grid_and_pattern_is_read_over(tiny, tiny_pattern):
 
 
 def test_keep_out_linestring_is_named_as_such(tiny):
-    doc = ezdxf.new()
+    doc = ezdxf.new(units=4)
     doc.modelspace().add_lwpolyline([(0, 0), (3, 0), (3, 2), (0, 2)], close=True)
     doc.saveas(tiny / "o.dxf")
     text = (tiny / "job.toml").read_text()

@@ -35,7 +35,7 @@ def notched_domain(margin: float = 0.0) -> Domain:
 
 
 def write_outline_dxf(path, *, hole_at=(1.2, 1.2), closed=True):
-    doc = ezdxf.new("R2010")
+    doc = ezdxf.new("R2010", units=4)
     msp = doc.modelspace()
     bulge = math.tan(math.radians(90) / 4)
     pts = [(0, 0, 0), (4, 0, 0), (4, 3, 0), (1, 3, bulge), (0, 2, 0)]  # rounded corner

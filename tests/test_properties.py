@@ -116,7 +116,7 @@ def _job_dir() -> Path:
     d.mkdir(exist_ok=True)
     np.savetxt(d / "density.csv", np.full((4, 6), 0.3), delimiter=",")
     (d / "o.wkt").write_text("POLYGON ((0 0, 3 0, 3 2, 0 2, 0 0), (1 1, 1.5 1, 1.5 1.5, 1 1))")
-    doc = ezdxf.new()
+    doc = ezdxf.new(units=4)
     doc.modelspace().add_lwpolyline([(0, 0), (3, 0), (3, 2), (0, 2)], close=True)
     doc.modelspace().add_circle((1.5, 1.0), 0.3)
     doc.saveas(d / "o.dxf")
@@ -262,7 +262,7 @@ entity = st.one_of(
 
 
 def _dxf_bytes(entities, extrusion_flip: bool) -> bytes:
-    doc = ezdxf.new("R2010")
+    doc = ezdxf.new("R2010", units=4)
     msp = doc.modelspace()
     attribs = {"extrusion": (0, 0, -1)} if extrusion_flip else {}
     for e in entities:

@@ -17,7 +17,7 @@ import numpy as np
 from ..errors import GeometryError, JobError
 from ..geometry.density import INTERPOLATIONS, DensityMap
 from ..geometry.domain import DEFAULT_TOLERANCE, Domain, orient_all
-from ..geometry.outline_io import load_outline, parse_keep_out
+from ..geometry.outline_io import keep_out_is_wkt, load_outline, parse_keep_out
 from ..geometry.sizes import DEFAULT_STEP, DotSizes
 from .grids import load_grid, validate_grid
 from .images import IMAGE_SUFFIXES, check_ranges, load_image
@@ -278,7 +278,7 @@ def _outline_files(dom: dict[str, Any], base: Path) -> list[Path]:
     """The outline and keep-out files a ``[domain]`` section names."""
     files = [base / dom["outline"]] if "outline" in dom else []
     for item in dom.get("keep_out", []):
-        if isinstance(item, str) and "(" not in item:  # not WKT: a file
+        if isinstance(item, str) and not keep_out_is_wkt(item):
             files.append(base / item.strip())
     return files
 
@@ -312,8 +312,8 @@ def _load_domain(dom: dict[str, Any], base: Path, where: str) -> Domain | None:
     size = max(x1 - x0, y1 - y0)
     if not 0.5 <= size <= 5000:
         raise GeometryError(
-            f"{where}: {dom['outline']}: the outline spans {size:.4g} units; optdot expects mm "
-            "(0.5 .. 5000)"
+            f"{where}: {dom['outline']}: the outline spans {size:.4g} mm; optdot expects "
+            "0.5 .. 5000 mm (are the drawing's units, DXF $INSUNITS, right?)"
         )
     geom = panel
     for k in keep:

@@ -31,6 +31,7 @@ from .curves import (
     rough_points,
 )
 from .domain import DEFAULT_TOLERANCE, validate_polygon
+from .dxf_entities import drawn_entities, mm_per_unit
 
 
 def load_outline(
@@ -76,10 +77,29 @@ def load_outline(
     return validate_polygon(polys[0], str(path)), []
 
 
-def parse_keep_out(item: str, base: Path, tolerance: float) -> list[Polygon]:
-    """A keep-out given in the job: a WKT polygon string or an outline file path."""
+def keep_out_is_wkt(item: str) -> bool:
+    """A ``domain.keep_out`` entry is WKT when it starts with a WKT geometry keyword
+    (``POLYGON ((...``); anything else is a file name, parentheses and all."""
     text = item.strip()
-    kind = text.split("(")[0].strip().upper()
+    head = text.split("(", 1)[0].strip().upper()
+    if "(" in text and head in (*_WKT_KINDS, "POLYGON", "MULTIPOLYGON"):
+        return True
+    words = head.split()
+    return (
+        len(words) == 2
+        and words[0] in (*_WKT_KINDS, "POLYGON", "MULTIPOLYGON")
+        and (words[1] in ("Z", "M", "ZM", "EMPTY"))
+    )
+
+
+def parse_keep_out(item: str, base: Path, tolerance: float) -> list[Polygon]:
+    """A keep-out given in the job: a WKT polygon string or an outline file path (see
+    :func:`keep_out_is_wkt`)."""
+    text = item.strip()
+    kind = (text.split("(")[0].strip().upper().split() or [""])[0]
+    if not keep_out_is_wkt(text):
+        panel, extra = load_outline(base / text, tolerance, region_inside=False)
+        return [panel, *extra]
     if kind in ("POLYGON", "MULTIPOLYGON"):
         geom = _parse(lambda: shapely.from_wkt(text), Path("domain.keep_out"), "WKT")
         return [
@@ -88,8 +108,7 @@ def parse_keep_out(item: str, base: Path, tolerance: float) -> list[Polygon]:
         ]
     if kind in _WKT_KINDS:
         raise GeometryError(f"domain.keep_out: {kind} is not an area; a keep-out is a POLYGON")
-    panel, extra = load_outline(base / text, tolerance, region_inside=False)
-    return [panel, *extra]
+    raise GeometryError(f"domain.keep_out: {kind} is not a WKT polygon")
 
 
 _WKT_KINDS = (
@@ -105,8 +124,10 @@ _WKT_KINDS = (
 
 
 def _parse(fn, path: Path, kind: str):
+    """The geometry ``fn`` reads, in x-y (a 3-D outline's z is dropped: panels are flat)."""
     try:
-        return fn()
+        geom = fn()
+        return None if geom is None else shapely.force_2d(geom)
     except UnicodeDecodeError:
         raise GeometryError(f"{path}: not UTF-8 text") from None
     except OSError as e:
@@ -190,11 +211,14 @@ def _dxf_loops(path: Path, tolerance: float, keep_layer: str | None):
     keep: list[list[Segment]] = []
     pieces: list[list[Segment]] = []
     kinds = ("LWPOLYLINE", "POLYLINE", "CIRCLE", "ARC", "LINE", "ELLIPSE", "SPLINE")
-    for e in doc.modelspace():
+    scale = mm_per_unit(doc, path)
+    for e in drawn_entities(doc.modelspace(), path):
         if e.dxftype() not in kinds:
             continue
         try:
-            segs, is_closed = _entity_segments(e, tolerance)
+            segs, is_closed = _entity_segments(e, tolerance / scale)
+            if scale != 1.0:
+                segs = [_mapped(s, lambda v, k=scale: v * k) for s in segs]
         except GeometryError as err:
             raise GeometryError(f"{path}: {e.dxftype()} {e.dxf.handle}: {err}") from None
         except (TypeError, ValueError, ArithmeticError, IndexError, AttributeError) as err:
@@ -311,10 +335,14 @@ def _to_wcs(seg: Segment, ocs, z: float) -> Segment:
     map, so circles under a tilted extrusion become the ellipses they project to)."""
     if not ocs.transform:
         return seg
+    return _mapped(seg, lambda v: _xy(ocs.to_wcs((float(v[0]), float(v[1]), z))))
 
-    def f(v: np.ndarray) -> np.ndarray:
-        return _xy(ocs.to_wcs((float(v[0]), float(v[1]), z)))
 
+def _mapped(seg: Segment, f) -> Segment:
+    """``seg`` under the affine map ``f`` (``[2] -> [2]`` points): a conic's centre and
+    axes map to the image conic's, a sampled curve's points one by one."""
+    if isinstance(seg, Sampled):
+        return Sampled(np.array([f(p) for p in seg.pts], dtype=np.float64))
     if isinstance(seg, Line):
         return Line(f(seg.p), f(seg.q))
     c = f(seg.c)

@@ -50,8 +50,9 @@ def _check_interrupt() -> None:
 
 def check_target(target: str | Path, inputs: tuple[Path, ...] = ()) -> None:
     """Refuse, before any work, an output that cannot be written or would overwrite an
-    input: a missing or unwritable directory, a directory in the way, a name longer than
-    the file system allows, or the same file as one of ``inputs``.
+    input: a missing or unwritable directory, a directory in the way, anything but a
+    regular file in the way (a device node, a FIFO, a socket), a name longer than the
+    file system allows, or the same file as one of ``inputs``.
 
     Raises:
         ExportError: one line naming the file and the problem.
@@ -73,14 +74,51 @@ def check_target(target: str | Path, inputs: tuple[Path, ...] = ()) -> None:
         from .dataset import check_dataset_target  # a dataset is a directory it replaces
 
         check_dataset_target(target)
-    elif target.is_dir():
-        raise ExportError(f"{target}: is a directory")
+    else:
+        target = writable_target(target)
+        directory = target.parent
     _refuse_read_only(target)
     if not os.access(directory, os.W_OK | os.X_OK):
         raise ExportError(f"{target}: cannot write in {directory} (permission denied)")
     for src in inputs:
         if _same_file(target, Path(src)):
             raise ExportError(f"{target}: is an input of this run ({src}); choose another name")
+
+
+_KINDS = {
+    stat.S_IFCHR: "a character device",
+    stat.S_IFBLK: "a block device",
+    stat.S_IFIFO: "a FIFO",
+    stat.S_IFSOCK: "a socket",
+    stat.S_IFDIR: "a directory",
+}
+
+
+def writable_target(target: str | Path) -> Path:
+    """The path a file output really replaces: ``target``, or the file a symbolic link
+    points to (the link is kept, as ``cp`` writes through it).
+
+    Only a regular file or a new name is ever replaced: renaming onto a device node
+    (``/dev/null``), a FIFO or a socket would put a regular file in its place.
+
+    Raises:
+        ExportError: something other than a regular file is in the way.
+    """
+    target = Path(target)
+    if target.is_symlink():
+        target = Path(os.path.realpath(target))
+    try:
+        mode = os.lstat(target).st_mode
+    except FileNotFoundError:
+        return target
+    except OSError as e:
+        raise ExportError(f"{target}: cannot check ({e.strerror or e})") from None
+    if not stat.S_ISREG(mode):
+        kind = _KINDS.get(stat.S_IFMT(mode), "not a regular file")
+        raise ExportError(
+            f"{target}: is {kind}; optdot replaces only regular files (choose a file name)"
+        )
+    return target
 
 
 def _refuse_read_only(target: Path) -> None:
@@ -123,7 +161,7 @@ def atomic_path(target: str | Path, verify: Verifier | None = None) -> Iterator[
         ExportError: the directory does not exist or is not writable, writing failed
             (the OS reason), or ``verify`` found the file wrong.
     """
-    target = Path(target)
+    target = writable_target(target)
     directory = target.parent if str(target.parent) else Path(".")
     if not directory.is_dir():
         raise ExportError(f"{target}: output directory {directory} does not exist")
@@ -145,6 +183,7 @@ def atomic_path(target: str | Path, verify: Verifier | None = None) -> Iterator[
         if pending is not None:
             pending.append((tmp_path, target))  # renamed when the transaction commits
             return
+        writable_target(target)  # still a regular file (or nothing) just before the rename
         os.replace(tmp_path, target)
         _fsync_dir(directory)
     except OSError as e:
@@ -193,13 +232,17 @@ def transaction() -> Iterator[None]:
         raise KeyboardInterrupt
     done = 0
     try:
+        for _, target in pending:
+            writable_target(target)
         for tmp, target in pending:
             os.replace(tmp, target)
             done += 1
-    except OSError as e:  # pragma: no cover - a rename in its own directory
+    except (OSError, ExportError) as e:
         for later, _ in pending[done:]:
             with contextlib.suppress(OSError):
                 later.unlink()
+        if isinstance(e, ExportError):
+            raise
         raise ExportError(f"{target}: cannot replace ({e.strerror})") from None
     for directory in {target.parent for _, target in pending}:
         _fsync_dir(directory)

@@ -29,7 +29,9 @@ import ctypes
 import ctypes.util
 import hashlib
 import json
+import math
 import os
+import re
 import shutil
 import tempfile
 from collections.abc import Iterator
@@ -124,11 +126,24 @@ def _renameat2_exchange(a: Path, b: Path) -> bool:
 
 
 def check_dataset_target(target: Path) -> None:
-    """Refuse a target that is a directory but not an optdot dataset (never replaced)."""
-    if target.is_dir() and not (target / MANIFEST).is_file():
-        raise ExportError(f"{target}: is a directory that is not an optdot dataset")
+    """Refuse a target that is not a new name or an optdot dataset (never replaced).
+
+    A directory is ours only when its own manifest says so (this format and version,
+    well formed) and it holds nothing but that manifest and the parts it lists: a user's
+    directory with a stray ``_manifest.json`` in it, or a dataset someone added files
+    to, is left alone.
+    """
+    if target.is_symlink():
+        raise ExportError(f"{target}: is a symbolic link; a dataset is replaced only in place")
     if target.exists() and not target.is_dir():
         raise ExportError(f"{target}: is a file, not a dataset directory")
+    if target.is_dir():
+        try:
+            open_dataset(target, strict=True)
+        except PatternFileError as e:
+            raise ExportError(
+                f"{target}: is a directory that is not an optdot dataset, never replaced ({e})"
+            ) from None
 
 
 @contextlib.contextmanager
@@ -265,7 +280,15 @@ class Dataset:
                 f"{path}: holds {table.num_rows} dots, the manifest says {part['count']}"
             )
         cols = [table.column(c).to_numpy().astype(np.float64, copy=False) for c in COLUMNS]
-        return np.column_stack(cols[:2]), cols[2]
+        d = cols[2]
+        u = self.uniform_diameter
+        if u is not None and len(d) and not np.all(np.abs(d - u) <= 1e-9):
+            i = int(np.argmax(np.abs(d - u) > 1e-9))
+            raise PatternFileError(
+                f"{path}: dot {i} has diameter {float(d[i]):.6g} mm, the manifest says every "
+                f"dot is {u:.6g} mm"
+            )
+        return np.column_stack(cols[:2]), d
 
     def iter_parts(self) -> Iterator[tuple[tuple[int, int], np.ndarray, np.ndarray]]:
         """``(tile, xy, diameter)`` of every part, in order."""
@@ -287,41 +310,121 @@ class Dataset:
                 raise PatternFileError(f"{path}: checksum differs from the manifest")
 
 
-def open_dataset(path: str | Path) -> Dataset:
+def open_dataset(path: str | Path, strict: bool = False) -> Dataset:
     """Open a dataset and check its manifest (not yet the parts' checksums).
 
+    Args:
+        path: the dataset directory.
+        strict: also refuse any entry of the directory the manifest does not list
+            (hidden ones too): a directory about to be replaced must be wholly ours.
+            Without it, a visible file besides the parts is still refused, as Parquet
+            readers would read it as data.
+
     Raises:
-        PatternFileError: not a directory, no manifest (an incomplete write), or a
-            manifest that is not this format.
+        PatternFileError: not a directory, no manifest (an incomplete write), a manifest
+            that is not this format or whose fields have the wrong type, or files the
+            manifest does not list.
     """
     path = Path(path)
+    if path.is_file():
+        raise PatternFileError(
+            f"{path}: is a single file; an optdot dataset is a directory (NAME.parquet/) "
+            "with a manifest"
+        )
     if not path.is_dir():
         raise PatternFileError(f"{path}: dataset directory not found")
     mf = path / MANIFEST
     if not mf.is_file():
         raise PatternFileError(f"{path}: no {MANIFEST} (not an optdot dataset, or incomplete)")
     try:
+        if mf.stat().st_size > MAX_MANIFEST_BYTES:
+            raise PatternFileError(
+                f"{mf}: {mf.stat().st_size:,} bytes, larger than any optdot manifest"
+            )
         doc = json.loads(mf.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as e:
         raise PatternFileError(f"{mf}: not a readable manifest ({one_line(e)})") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise PatternFileError(f"{mf}: not an optdot dataset manifest")
     if doc.get("version") != VERSION:
         raise PatternFileError(f"{mf}: dataset version {doc.get('version')!r} is not {VERSION}")
-    try:
-        parts = doc["parts"]
-        box = [float(v) for v in doc["box"]]
-        ok = len(box) == 4 and all(np.isfinite(box)) and box[0] < box[2] and box[1] < box[3]
-        ok = ok and isinstance(parts, list) and doc["n"] == sum(int(p["count"]) for p in parts)
-        ok = ok and all(
-            isinstance(p["file"], str) and "/" not in p["file"] and len(p["tile"]) == 2
-            for p in parts
-        )
-    except (KeyError, TypeError, ValueError):
-        ok = False
-    if not ok:
-        raise PatternFileError(f"{mf}: malformed manifest (box, n, parts)")
+    problem = _manifest_problem(doc)
+    if problem:
+        raise PatternFileError(f"{mf}: malformed manifest ({problem})")
+    listed = {p["file"] for p in doc["parts"]} | {MANIFEST}
+    for entry in sorted(os.listdir(path)):
+        if entry in listed:
+            continue
+        if strict or not entry.startswith(("_", ".")):
+            raise PatternFileError(
+                f"{path / entry}: is not a part the manifest lists"
+                + ("" if strict else " (Parquet readers would read it as data)")
+            )
     return Dataset(path, doc)
+
+
+#: Largest manifest read, bytes (a 10⁸-dot panel's is ~100 kB).
+MAX_MANIFEST_BYTES = 64 << 20
+
+
+def _is_num(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _is_int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _manifest_problem(doc: dict[str, Any]) -> str | None:
+    """What is wrong with a manifest's fields (names and types), or None."""
+    box = doc.get("box")
+    if not (isinstance(box, list) and len(box) == 4 and all(_is_num(v) for v in box)):
+        return "box must be 4 numbers"
+    if not (box[0] < box[2] and box[1] < box[3]):
+        return "box is empty"
+    for key in ("diameter_mm",):
+        if not (_is_num(doc.get(key)) and doc[key] > 0):
+            return f"{key} must be a number > 0"
+    u = doc.get("uniform_diameter_mm")
+    if u is not None and not (_is_num(u) and u > 0):
+        return "uniform_diameter_mm must be null or a number > 0"
+    if not isinstance(doc.get("meta", {}), dict):
+        return "meta must be an object"
+    if "outline_wkb_hex" in doc and not isinstance(doc["outline_wkb_hex"], str):
+        return "outline_wkb_hex must be a string"
+    if not _is_num(doc.get("edge_margin_mm", 0.0)):
+        return "edge_margin_mm must be a number"
+    tiles = doc.get("tiles")
+    if tiles is not None:
+        ok = isinstance(tiles, dict) and all(
+            _is_int(tiles.get(k)) and tiles[k] >= 1 for k in ("nx", "ny")
+        )
+        ok = ok and all(
+            isinstance(tiles.get(k), list) and all(_is_num(v) for v in tiles[k])
+            for k in ("xs", "ys")
+        )
+        if not ok:
+            return "tiles must hold nx, ny (integers) and xs, ys (numbers)"
+    parts = doc.get("parts")
+    if not isinstance(parts, list):
+        return "parts must be a list"
+    files = set()
+    for i, p in enumerate(parts):
+        ok = isinstance(p, dict) and isinstance(p.get("file"), str)
+        ok = ok and _PART_NAME.fullmatch(p["file"]) is not None and p["file"] not in files
+        ok = ok and _is_int(p.get("count")) and p["count"] >= 0
+        ok = ok and isinstance(p.get("tile"), list) and len(p["tile"]) == 2
+        ok = ok and all(_is_int(v) and v >= 0 for v in p["tile"])
+        ok = ok and isinstance(p.get("sha256"), str) and len(p["sha256"]) == 64
+        if not ok:
+            return f"part {i} needs file (part-NNNNN.parquet, once), count, tile, sha256"
+        files.add(p["file"])
+    if not (_is_int(doc.get("n")) and doc["n"] == sum(p["count"] for p in parts)):
+        return "n must be the sum of the parts' counts"
+    return None
+
+
+_PART_NAME = re.compile(r"part-\d{5,}\.parquet")
 
 
 def outline_hex(outline) -> dict[str, Any]:

@@ -47,3 +47,14 @@ def check_memory(n_dots: int, memory: int = 6, where: str = "job") -> None:
             f"{have / 2**30:.1f} GiB is available; coarsen the map, enlarge the dots or "
             "split the panel"
         )
+
+
+#: Bytes per dot of checking a pattern in memory (positions, diameters, k-d tree,
+#: nearest neighbours, coverage deposits), an upper bound from benchmarks/qa_speed.py
+#: (846 MB at 10⁶ dots).
+QA_BYTES_PER_DOT = 600
+
+
+def max_dots_read() -> int:
+    """Most dots a reader may produce before QA would exhaust the available memory."""
+    return max(int(0.8 * (available_bytes() - BASE_BYTES) / QA_BYTES_PER_DOT), 10**6)
