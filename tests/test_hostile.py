@@ -328,7 +328,6 @@ def test_a_reader_crash_is_one_line(tmp_path, monkeypatch, tiny_pattern):
     import signal
 
     from optdot.exporters import readback, write
-
     from optdot.runtime.isolate import ChildCrashed, in_child
 
     with pytest.raises(ChildCrashed, match="SIGABRT"):

@@ -141,8 +141,10 @@ def test_a_keep_out_file_with_parentheses_is_an_input_never_overwritten(tiny):
     keep = tiny / "frame (1).wkt"
     keep.write_text("POLYGON ((1 0.5, 2 0.5, 2 1.5, 1 1.5, 1 0.5))")
     (tiny / "outline.wkt").write_text("POLYGON ((0 0, 3 0, 3 2, 0 2, 0 0))")
-    text = (tiny / "job.toml").read_text().replace(
-        "[domain]", '[domain]\noutline = "outline.wkt"\nkeep_out = ["frame (1).wkt"]'
+    text = (
+        (tiny / "job.toml")
+        .read_text()
+        .replace("[domain]", '[domain]\noutline = "outline.wkt"\nkeep_out = ["frame (1).wkt"]')
     )
     text = text.replace("width = 3.0\n", "").replace("height = 2.0\n", "")
     (tiny / "j.toml").write_text(text)

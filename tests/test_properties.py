@@ -22,12 +22,12 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
-from optdot.exporters import write
-from optdot.exporters.readback import read_any
 
 from optdot.config.grids import load_grid, validate_grid
 from optdot.config.schema import SCHEMA, load_job
 from optdot.errors import OptdotError
+from optdot.exporters import write
+from optdot.exporters.readback import read_any
 from optdot.geometry.outline_io import load_outline
 from optdot.pipeline import _check_room, qa
 

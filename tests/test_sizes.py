@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from optdot.exporters.readback import read_any
 
 from optdot import Pattern, exporters, qa
+from optdot.exporters.readback import read_any
 from optdot.io.patterns import load_pattern, save_pattern
 
 
