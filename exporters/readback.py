@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from optdot.errors import GeometryError, PatternFileError, ResourceError, one_line
+from optdot.files import input_problem
 from optdot.geometry.domain import domain_from_rings
 from optdot.io.patterns import load_pattern, validate_dots
 from optdot.pattern import Pattern
@@ -35,10 +36,11 @@ def read_any(path: str | Path, opts: ExportOptions | None = None, box=None) -> P
     path = Path(path)
     opts = opts or ExportOptions()
     suffix = path.suffix.lower()
-    if not path.exists():
-        raise PatternFileError(f"{path}: file not found")
     if suffix in (".csv", ".npz", ".parquet"):
         return load_pattern(path, box)
+    problem = input_problem(path)
+    if problem is not None:
+        raise PatternFileError(f"{path}: {problem}")
     try:
         if suffix in (".gds", ".gds2", ".oas"):
             # gdstk's C++ readers can crash on a damaged file: read in a child process

@@ -14,8 +14,9 @@ callback) and the command line only parses options and prints what it returns.
 
 from __future__ import annotations
 
+import contextlib
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -324,7 +325,14 @@ def generate_tiled(
     _check_gathered(job, output, where)
     plan = plan or plan_tiles(job, tile_size)
     if executor is not None:
-        return _run_tiled(job, plan, executor, output, progress)
+        return _run_tiled(job, plan, contextlib.nullcontext(executor), output, progress)
+    on_cluster = _on_cluster(job, plan, scheduler, workers, worker_memory, announce)
+    return _run_tiled(job, plan, on_cluster, output, progress)
+
+
+@contextlib.contextmanager
+def _on_cluster(job, plan, scheduler, workers, worker_memory, announce) -> Iterator[OnDask]:
+    """An :class:`OnDask` executor on a connected cluster, kernels compiled on it."""
     with connect(scheduler_address(scheduler), workers, worker_memory) as cluster:
         _check_tile_memory(job, plan, cluster.memory_per_worker)
         if announce is not None:
@@ -334,7 +342,7 @@ def generate_tiled(
                 f"{plan.count} tiles ({plan.nx} x {plan.ny}) of ~{int(plan.quotas.mean()):,} dots"
             )
         cluster.client.submit(_warm, pure=False).result()  # compile once, not per worker
-        return _run_tiled(job, plan, OnDask(cluster.client), output, progress)
+        yield OnDask(cluster.client)
 
 
 def _warm() -> int:
@@ -344,7 +352,10 @@ def _warm() -> int:
     return warm_up()
 
 
-def _run_tiled(job, plan, executor, output, progress) -> Pattern | TiledRun:
+def _run_tiled(job, plan, executor_cm, output, progress) -> Pattern | TiledRun:
+    """Run the tiles on the executor ``executor_cm`` yields. A dataset is committed only
+    after the executor was closed (a cluster shut down): a signal during the shutdown
+    stops the run before the commit, never after it."""
     meta = _tiled_meta(job, plan)
     if output is not None:
         outline = None if job.domain.rectangle else job.domain
@@ -363,9 +374,12 @@ def _run_tiled(job, plan, executor, output, progress) -> Pattern | TiledRun:
             def to_part(tile, xy):
                 w.write_part(plan.index(*tile), tile, xy, job.diameter)
 
-            return run_tiles(job, plan, executor, to_part, progress)
+            with executor_cm as executor:
+                run = run_tiles(job, plan, executor, to_part, progress)
+        return run
     got: dict = {}
-    run = run_tiles(job, plan, executor, got.__setitem__, progress)
+    with executor_cm as executor:
+        run = run_tiles(job, plan, executor, got.__setitem__, progress)
     xy = np.concatenate([got[t] for t in plan.tiles()])
     outline = None if job.domain.rectangle else job.domain
     stats = {"total_s": run.seconds, "history": []}

@@ -21,17 +21,18 @@ ALLOWED = {
     "errors": set(),
     "_imports": set(),
     "__main__": {"cli"},
+    "files": {"runtime"},
     "runtime": {"errors"},
-    "io": {"errors", "pattern", "geometry"},
-    "geometry": {"errors"},
-    "config": {"errors", "geometry"},
+    "io": {"errors", "files", "pattern", "geometry", "runtime"},
+    "geometry": {"errors", "files"},
+    "config": {"errors", "files", "geometry", "runtime"},
     "sampling": {"geometry"},
     "spatial": set(),
     "relax": {"errors", "geometry", "spatial"},
     "tiling": {"config", "errors", "geometry", "relax", "runtime", "sampling", "spatial"},
     "pattern": {"geometry", "io", "_imports"},
-    "quality": {"config", "geometry", "pattern", "io"},
-    "exporters": {"errors", "geometry", "io", "pattern", "runtime"},
+    "quality": {"config", "errors", "geometry", "pattern", "io", "runtime"},
+    "exporters": {"errors", "files", "geometry", "io", "pattern", "runtime"},
     "pipeline": {
         "io",
         "config",
@@ -45,7 +46,7 @@ ALLOWED = {
         "exporters",
         "tiling",
     },
-    "cli": {"config", "errors", "exporters", "io", "pipeline", "quality"},
+    "cli": {"config", "errors", "exporters", "io", "pipeline", "quality", "runtime"},
 }
 
 

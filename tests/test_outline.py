@@ -163,7 +163,11 @@ BAD = {
     "zero area": ("outline.wkt", "POLYGON ((0 0, 4 0, 8 0, 0 0))", "zero area"),
     "not a polygon": ("outline.wkt", "LINESTRING (0 0, 4 0, 4 3)", "open loop"),
     "malformed": ("outline.wkt", "POLYGON ((0 0, 4 0", "malformed WKT"),
-    "units": ("outline.wkt", "POLYGON ((0 0, 40000 0, 40000 30000, 0 30000, 0 0))", "expects mm"),
+    "units": (
+        "outline.wkt",
+        "POLYGON ((0 0, 40000 0, 40000 30000, 0 30000, 0 0))",
+        "optdot expects 0.5 .. 5000 mm",
+    ),
     "geojson": ("outline.geojson", '{"type": "Point", "coordinates": [1, 2]}', "no polygon"),
 }
 

@@ -242,4 +242,4 @@ def test_cli_view_options_and_the_jnd_gate(tiny_pattern, tmp_path):
     passed = run("--view", "tv", "--psf", "0.3", "--max-jnd", str(vis["max_jnd"] * 1.1))
     assert passed.returncode == 0
     bad = run("--psf", "-1")
-    assert bad.returncode == 2 and "qa.psf" in bad.stderr and "Traceback" not in bad.stderr
+    assert bad.returncode == 2 and "--psf" in bad.stderr and "Traceback" not in bad.stderr

@@ -9,6 +9,7 @@ not meet the spacing guarantee; 70 internal error (a bug: traceback in a log fil
 from __future__ import annotations
 
 import functools
+import math
 import os
 import platform
 import signal
@@ -33,7 +34,7 @@ def _user_errors(fn):
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
-        from ..io.atomic import interrupted
+        from ..runtime.stop import interrupted
 
         previous = {s: signal.signal(s, _terminate) for s in (signal.SIGTERM, signal.SIGINT)}
         try:
@@ -69,7 +70,7 @@ def _terminate(signum, frame):
     its next safe point (the next iteration, or before any file is replaced). An exception
     raised at an arbitrary point can land inside numba's compiler or cache loader, which
     then crashes the process (SIGSEGV seen in testing); a second signal stops at once."""
-    from ..io.atomic import interrupted, mark_interrupted
+    from ..runtime.stop import interrupted, mark_interrupted
 
     if interrupted():
         raise KeyboardInterrupt
@@ -77,7 +78,7 @@ def _terminate(signum, frame):
 
 
 def _caused_by_interrupt(e: BaseException) -> bool:
-    from ..io.atomic import interrupted
+    from ..runtime.stop import interrupted
 
     seen = set()
     while e is not None and id(e) not in seen:
@@ -160,6 +161,24 @@ def main() -> None:
     """Non-overlapping random dot patterns for light guides, their masks, and QA."""
 
 
+class Finite(click.FloatRange):
+    """A float option that is a real number: ``nan`` and ``inf`` are refused (they pass
+    every range comparison), like values outside ``[min, max]``."""
+
+    name = "number"
+
+    def convert(self, value, param, ctx):
+        v = super().convert(value, param, ctx)
+        if not math.isfinite(v):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        return v
+
+
+#: A number > 0 (mm, cd/m², JND...); a GDS/OAS layer or datatype number.
+POSITIVE = Finite(0.0, None, min_open=True)
+LAYER = click.IntRange(0, 65535)
+
+
 def _job_options(fn):
     fn = click.option("--seed", type=click.IntRange(0, 2**63 - 1), help="Override optimize.seed.")(
         fn
@@ -193,23 +212,23 @@ def _layer_options(fn):
     GDSII/OASIS file (written by ``export``, read by ``qa``)."""
     fn = click.option(
         "--outline-layer",
-        type=int,
+        type=LAYER,
         default=2,
         show_default=True,
         help="GDS/OAS layer of the outline.",
     )(fn)
     fn = click.option(
-        "--datatype", type=int, default=0, show_default=True, help="GDS/OAS datatype of the dots."
+        "--datatype", type=LAYER, default=0, show_default=True, help="GDS/OAS datatype of the dots."
     )(fn)
     return click.option(
-        "--layer", type=int, default=1, show_default=True, help="GDS/OAS layer of the dots."
+        "--layer", type=LAYER, default=1, show_default=True, help="GDS/OAS layer of the dots."
     )(fn)
 
 
 def run_job(job, quiet: bool):
     """Generate the job's pattern with a progress bar."""
-    from ..io.atomic import interrupted
     from ..pipeline import generate
+    from ..runtime.stop import interrupted
     from .progress import ProgressBar
 
     bar = ProgressBar(
@@ -232,7 +251,7 @@ def _tile_options(fn):
     """``--tiles``, ``--tile-size``, ``--scheduler``, ``--workers``: tiled runs on Dask."""
     fn = click.option(
         "--worker-memory",
-        type=click.FloatRange(0.01, 4096),
+        type=Finite(0.01, 4096),
         metavar="GIB",
         help="Memory limit of each local worker, GiB (default: 85 % of the available "
         "memory shared evenly).",
@@ -250,7 +269,7 @@ def _tile_options(fn):
     )(fn)
     fn = click.option(
         "--tile-size",
-        type=click.FloatRange(0.5, 10_000, min_open=False),
+        type=Finite(0.5, 10_000),
         metavar="MM",
         help="Side of a tile, mm (default: about 150,000 dots per tile).",
     )(fn)
@@ -321,10 +340,10 @@ def _generate_tiled(
     """``generate`` in tiles: a dataset streamed tile by tile, or a gathered pattern."""
     import time
 
-    from ..io.atomic import interrupted
     from ..io.dataset import is_dataset
     from ..io.patterns import save_pattern
     from ..pipeline import generate_tiled
+    from ..runtime.stop import interrupted
     from .progress import ProgressBar
 
     bar = ProgressBar(1000, label="tiles", enabled=False if quiet else None)
@@ -409,7 +428,7 @@ def _check_outputs(outputs: dict[str, Path], inputs: tuple = ()) -> None:
 )
 @click.option(
     "--speos-reference-diameter",
-    type=float,
+    type=POSITIVE,
     help="Diameter of the Speos texture element, mm (scale 1; default: the nominal diameter).",
 )
 @click.option(
@@ -420,7 +439,7 @@ def _check_outputs(outputs: dict[str, Path], inputs: tuple = ()) -> None:
 )
 @click.option(
     "--tolerance",
-    type=float,
+    type=POSITIVE,
     default=0.01,
     show_default=True,
     help="Circle polygon tolerance, µm (GDS/OAS).",
@@ -529,12 +548,12 @@ def export(
 @click.option("--html", "html_path", type=click.Path(path_type=Path), help="HTML report to write.")
 @click.option("--json", "json_path", type=click.Path(path_type=Path), help="JSON report to write.")
 @click.option(
-    "--collision", type=float, help="Collision distance, mm (default: dot diameter + gap)."
+    "--collision", type=POSITIVE, help="Collision distance, mm (default: dot diameter + gap)."
 )
-@click.option("--close", type=float, help="Too-close distance, mm (default 0.060).")
+@click.option("--close", type=POSITIVE, help="Too-close distance, mm (default 0.060).")
 @click.option(
     "--close-gap",
-    type=float,
+    type=Finite(0.0, None),
     help="Too-close edge gap, mm (dots of varying size; default qa.close_gap or 0.014).",
 )
 @click.option(
@@ -542,10 +561,10 @@ def export(
     type=click.Choice(list(VIEW_PRESETS)),
     help="Viewing preset of the visibility check (default qa.view or notebook).",
 )
-@click.option("--distance", type=float, help="Viewing distance, mm (overrides the preset).")
-@click.option("--luminance", type=float, help="Screen luminance, cd/m² (overrides the preset).")
-@click.option("--psf", type=float, help="Gaussian sigma of the stack's blur, mm (default 1.0).")
-@click.option("--max-jnd", type=float, help="Gate: largest allowed |JND| (default: not gated).")
+@click.option("--distance", type=POSITIVE, help="Viewing distance, mm (overrides the preset).")
+@click.option("--luminance", type=POSITIVE, help="Screen luminance, cd/m² (overrides the preset).")
+@click.option("--psf", type=POSITIVE, help="Gaussian sigma of the stack's blur, mm (default 1.0).")
+@click.option("--max-jnd", type=POSITIVE, help="Gate: largest allowed |JND| (default: not gated).")
 @_layer_options
 @click.option("--quiet", "-q", is_flag=True, help="Only the exit code.")
 @_user_errors

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import JobError, one_line
+from ..files import input_problem
 from ..geometry.density import HEX_PACKING_LIMIT
 
 
@@ -17,9 +18,11 @@ def load_grid(path: Path) -> np.ndarray:
     Returns:
         ``[ny, nx]`` float64 (not yet range-checked; see :func:`validate_grid`).
     """
-    if not path.exists():
-        raise JobError(f"{path}: density grid file not found")
-    if path.suffix.lower() == ".npy":
+    binary = path.suffix.lower() == ".npy"  # sized from its header below
+    problem = input_problem(path, 1 << 62 if binary else None)
+    if problem is not None:
+        raise JobError(f"{path}: density grid {problem}")
+    if binary:
         return _load_npy(path)
     try:
         text = path.read_text(encoding="utf-8-sig")

@@ -25,7 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import JobError, one_line
+from ..errors import JobError, ResourceError, one_line
+from ..files import input_problem
+from ..runtime.memory import available_bytes
 
 #: Image suffixes read as density maps.
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff")
@@ -39,6 +41,30 @@ _FULL = {
     "I;16B": (0.0, 65535.0),
     "1": (0.0, 1.0),
 }
+
+
+#: Bytes per pixel while a map is read: the pixels, float64 values and fills, masks.
+BYTES_PER_PIXEL = 40
+
+
+def _upright(im, path: Path):
+    """The image as it is meant to be seen: the EXIF orientation of a PNG applied (an
+    editor may store the pixels turned and say so in the tag).
+
+    Pillow applies a TIFF's orientation tag itself while decoding, rightly for the
+    mirrored and half-turned ones (2-4) but not for those turned by a quarter (5-8: the
+    pixels come out scrambled, Pillow 13), so those are refused rather than read wrong."""
+    from PIL import ImageOps
+
+    if im.format == "TIFF":
+        tag = getattr(im, "tag_v2", {}).get(0x0112, 1)
+        if tag in (5, 6, 7, 8):
+            raise JobError(
+                f"{path}: TIFF orientation tag {tag} (turned by 90 degrees) is not read "
+                "reliably; save the map upright (orientation 1) or as PNG"
+            )
+        return im
+    return ImageOps.exif_transpose(im)
 
 
 def load_image(
@@ -64,8 +90,9 @@ def load_image(
     """
     from PIL import Image
 
-    if not path.exists():
-        raise JobError(f"{path}: density image not found")
+    problem = input_problem(path, 1 << 62)  # sized from its pixel count below
+    if problem is not None:
+        raise JobError(f"{path}: density image {problem}")
     Image.MAX_IMAGE_PIXELS = MAX_PIXELS
     try:
         with Image.open(path) as im:
@@ -80,7 +107,15 @@ def load_image(
                 )
             if getattr(im, "n_frames", 1) > 1:
                 raise JobError(f"{path}: holds {im.n_frames} images; give one page")
-            raw = np.asarray(im)
+            need = w * h * BYTES_PER_PIXEL
+            have = available_bytes()
+            if need > 0.8 * have:
+                raise ResourceError(
+                    f"{path}: {w} x {h} pixels need about {need / 2**30:.1f} GiB to read, "
+                    f"{have / 2**30:.1f} GiB is available; resample the map (a cell of "
+                    "1 mm is finer than any backlight needs)"
+                )
+            raw = np.asarray(_upright(im, path))
     except JobError:
         raise
     except (OSError, ValueError, Image.DecompressionBombError) as e:

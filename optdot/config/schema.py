@@ -14,7 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import GeometryError, JobError
+from ..errors import GeometryError, JobError, one_line
+from ..files import input_problem
 from ..geometry.density import INTERPOLATIONS, DensityMap
 from ..geometry.domain import DEFAULT_TOLERANCE, Domain, orient_all
 from ..geometry.outline_io import keep_out_is_wkt, load_outline, parse_keep_out
@@ -84,6 +85,10 @@ SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
 _REQUIRED = {"dots": ("diameter",)}
 
 
+#: Largest job file read, bytes (a job is a few hundred bytes; values are short).
+MAX_JOB_BYTES = 1 << 20
+
+
 def load_job(path: str | Path) -> Job:
     """Read and validate a TOML job file.
 
@@ -91,14 +96,17 @@ def load_job(path: str | Path) -> Job:
         JobError: one-line message naming the file, the field and the problem.
     """
     path = Path(path)
+    problem = input_problem(path, MAX_JOB_BYTES)
+    if problem is not None:
+        raise JobError(f"{path}: job file {problem.replace('file not found', 'not found')}")
     try:
         raw = tomllib.loads(path.read_text(encoding="utf-8-sig"))
-    except FileNotFoundError:
-        raise JobError(f"{path}: job file not found") from None
     except (OSError, UnicodeDecodeError) as e:
-        raise JobError(f"{path}: cannot read job file ({e})") from None
+        raise JobError(f"{path}: cannot read job file ({one_line(e)})") from None
     except tomllib.TOMLDecodeError as e:
-        raise JobError(f"{path}: malformed TOML ({e})") from None
+        raise JobError(f"{path}: malformed TOML ({one_line(e)})") from None
+    except RecursionError:
+        raise JobError(f"{path}: malformed TOML (arrays or tables nested too deep)") from None
     return job_from_dict(raw, base=path.parent, source=path)
 
 

@@ -20,6 +20,7 @@ import shapely
 from shapely.geometry import MultiPolygon, Polygon
 
 from ..errors import GeometryError, one_line
+from ..files import input_problem
 from .curves import (
     Conic,
     Line,
@@ -56,8 +57,9 @@ def load_outline(
     Raises:
         GeometryError: unreadable file, open or invalid loops (one line, file + reason).
     """
-    if not path.exists():
-        raise GeometryError(f"{path}: outline file not found")
+    problem = input_problem(path)
+    if problem is not None:
+        raise GeometryError(f"{path}: outline {problem}")
     suffix = path.suffix.lower()
     if suffix == ".dxf":
         loops, keep = _dxf_loops(path, tolerance, keep_out_layer)

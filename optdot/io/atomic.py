@@ -23,29 +23,22 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from ..errors import ExportError
+from ..files import KINDS
+from ..runtime.stop import check_interrupt, interrupted, mark_interrupted
+
+__all__ = [
+    "atomic_path",
+    "check_target",
+    "expect_size",
+    "expect_tail",
+    "interrupted",
+    "mark_interrupted",
+    "transaction",
+    "writable_target",
+]
 
 #: ``verify(tmp_path)``: raise :class:`ExportError` (or ``OSError``) if the file is wrong.
 Verifier = Callable[[Path], None]
-
-_interrupted = False
-
-
-def mark_interrupted() -> None:
-    """Record that the process was asked to stop (a signal handler calls this): from now
-    on no output replaces its target, even where compiled code swallowed the exception
-    the handler raised."""
-    global _interrupted
-    _interrupted = True
-
-
-def interrupted() -> bool:
-    """A stop was requested (see :func:`mark_interrupted`)."""
-    return _interrupted
-
-
-def _check_interrupt() -> None:
-    if _interrupted:
-        raise KeyboardInterrupt
 
 
 def check_target(target: str | Path, inputs: tuple[Path, ...] = ()) -> None:
@@ -85,15 +78,6 @@ def check_target(target: str | Path, inputs: tuple[Path, ...] = ()) -> None:
             raise ExportError(f"{target}: is an input of this run ({src}); choose another name")
 
 
-_KINDS = {
-    stat.S_IFCHR: "a character device",
-    stat.S_IFBLK: "a block device",
-    stat.S_IFIFO: "a FIFO",
-    stat.S_IFSOCK: "a socket",
-    stat.S_IFDIR: "a directory",
-}
-
-
 def writable_target(target: str | Path) -> Path:
     """The path a file output really replaces: ``target``, or the file a symbolic link
     points to (the link is kept, as ``cp`` writes through it).
@@ -114,7 +98,7 @@ def writable_target(target: str | Path) -> Path:
     except OSError as e:
         raise ExportError(f"{target}: cannot check ({e.strerror or e})") from None
     if not stat.S_ISREG(mode):
-        kind = _KINDS.get(stat.S_IFMT(mode), "not a regular file")
+        kind = KINDS.get(stat.S_IFMT(mode), "not a regular file")
         raise ExportError(
             f"{target}: is {kind}; optdot replaces only regular files (choose a file name)"
         )
@@ -179,7 +163,7 @@ def atomic_path(target: str | Path, verify: Verifier | None = None) -> Iterator[
         if verify is not None:
             verify(tmp_path)
         os.chmod(tmp_path, _mode_of(target))
-        _check_interrupt()
+        check_interrupt()
         if pending is not None:
             pending.append((tmp_path, target))  # renamed when the transaction commits
             return
@@ -225,7 +209,7 @@ def transaction() -> Iterator[None]:
         raise
     finally:
         _PENDING.reset(token)
-    if _interrupted:
+    if interrupted():
         for tmp, _ in pending:
             with contextlib.suppress(OSError):
                 tmp.unlink()

@@ -43,7 +43,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import ExportError, PatternFileError, one_line
-from .atomic import _check_interrupt, _fsync_dir, _short
+from ..runtime.stop import check_interrupt
+from .atomic import _fsync_dir, _short
 
 MANIFEST = "_manifest.json"
 FORMAT = "optdot.dataset"
@@ -94,7 +95,7 @@ class DatasetWriter:
         ``[n]``)."""
         import pyarrow.parquet as pq
 
-        _check_interrupt()
+        check_interrupt()
         d = np.broadcast_to(np.asarray(diameter, np.float64), (len(xy),))
         path = self.tmp / part_name(k)
         try:
@@ -185,7 +186,7 @@ def write_dataset(target: str | Path, manifest: dict[str, Any]) -> Iterator[Data
         if (tmp / MANIFEST).stat().st_size != len(data):
             raise ExportError(f"{target}: the manifest is incomplete (disk full?)")
         os.chmod(tmp, 0o755)
-        _check_interrupt()
+        check_interrupt()
         if target.is_dir():
             check_dataset_target(target)
             if not _renameat2_exchange(tmp, target):

@@ -21,6 +21,7 @@ import numpy as np
 import shapely
 
 from ..errors import ExportError, PatternFileError, one_line
+from ..files import input_problem
 from ..geometry.domain import Domain, orient_all
 from ..geometry.limits import DIAMETER_RANGE_MM, MAX_EXTENT_MM
 from ..pattern import Pattern
@@ -167,9 +168,13 @@ def load_pattern(path: str | Path, box: tuple[float, float, float, float] | None
         PatternFileError: missing, unreadable or malformed file (one line, names the file).
     """
     path = Path(path)
-    if not path.exists():
-        raise PatternFileError(f"{path}: pattern file not found")
     suffix = path.suffix.lower()
+    if suffix != ".parquet":  # a dataset is a directory, checked when opened
+        problem = input_problem(path, 1 << 62 if suffix == ".npz" else None)
+        if problem is not None:
+            raise PatternFileError(f"{path}: pattern {problem}")
+    elif not path.exists():
+        raise PatternFileError(f"{path}: pattern file not found")
     if suffix == ".parquet":
         from .dataset import load_dataset
 
@@ -206,11 +211,34 @@ def _load_csv(path: Path, box: tuple[float, float, float, float] | None) -> Patt
     return _validated(path, data[:, :2], data[:, 2], box, {})
 
 
+def _check_npz_sizes(path: Path, z) -> None:
+    """Refuse an archive whose arrays would not fit in memory before any is inflated: a
+    compressed member of 1.6 MB may declare gigabytes of zeros (a zip bomb). Each
+    member's ``.npy`` header states its shape and type."""
+    from ..runtime.memory import available_bytes
+
+    fmt = np.lib.format
+    total = 0
+    for name in z.files:
+        with z.zip.open(name + ".npy") as fh:
+            version = fmt.read_magic(fh)
+            read = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
+            shape, _, dtype = read(fh)
+        total += int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
+    have = available_bytes()
+    if total > have // 4:
+        raise PatternFileError(
+            f"{path}: its arrays declare {total / 2**30:,.1f} GiB, more than this machine can "
+            f"check ({have / 2**30:.1f} GiB available)"
+        )
+
+
 def _load_npz(path: Path, box: tuple[float, float, float, float] | None) -> Pattern:
     try:
         with np.load(path, allow_pickle=False) as z:
             if not isinstance(z, np.lib.npyio.NpzFile):
                 raise PatternFileError(f"{path}: a .npy array, not a pattern .npz archive")
+            _check_npz_sizes(path, z)
             xy = _real(path, z, "xy")
             diameter = _real(path, z, "diameter")
             file_box = _real(path, z, "box")

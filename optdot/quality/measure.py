@@ -43,9 +43,11 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..config.viewing import Viewing
+from ..errors import ResourceError
 from ..geometry.density import DensityMap
 from ..geometry.domain import Domain, box_protruding
 from ..pattern import coverage_pixels
+from ..runtime.memory import available_bytes
 from .metrics import (
     PatchGrid,
     SquareGrid,
@@ -132,6 +134,7 @@ def pattern_source(pattern) -> Source:
         counts=[pattern.n],
         read=lambda k: (pattern.xy, pattern.diameter),
         tiling=tiles,
+        label=str(pattern.meta.get("source", "")),
         cache_parts=1,
     )
 
@@ -361,6 +364,7 @@ def _second_pass(
         hxy, hpart, hd = _gather(src, boxes, k, halo)
         pts = np.vstack([own, hxy]) if len(hxy) else own
         tree = cKDTree(pts)
+        _check_pair_count(src, k, tree, reach)
         # pairs: own-own here; own-halo by the lower part index
         pr = tree.query_pairs(reach, output_type="ndarray")
         if len(pr):
@@ -474,6 +478,30 @@ def _nearest(
         pts = np.vstack([own, hxy]) if len(hxy) else own
         tree = cKDTree(pts)
     return nn, psi, again
+
+
+#: Bytes per listed pair while pairs are judged (indices, distances, masks, sort order).
+PAIR_BYTES = 96
+
+
+def _check_pair_count(src, k: int, tree: cKDTree, reach: float) -> None:
+    """Count the pairs within ``reach`` before listing them (counting takes no memory):
+    a file of duplicated or piled-up dots has pairs quadratic in its dots (20,000
+    identical rows: 2·10⁸), far more than a dot pattern (a few per dot) or the memory.
+
+    Raises:
+        ResourceError: more pairs than the available memory can list, with the count.
+    """
+    n = tree.n
+    pairs = (int(tree.count_neighbors(tree, reach)) - n) // 2
+    limit = max(16 * n, available_bytes() // (4 * PAIR_BYTES))
+    if pairs > limit:
+        raise ResourceError(
+            f"{src.label or 'the pattern'}: {pairs:,} pairs of dots closer than "
+            f"{reach * 1e3:.0f} µm among {n:,} dots (part {k}): not a dot pattern "
+            "(duplicated or piled-up dots?); listing them would need "
+            f"{pairs * PAIR_BYTES / 2**30:.1f} GiB"
+        )
 
 
 def _gather(

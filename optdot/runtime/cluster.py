@@ -19,13 +19,19 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
-from collections.abc import Iterator
+import shutil
+import signal
+import tempfile
+import threading
+import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from ..errors import ClusterError, one_line
 from .memory import available_bytes
+from .stop import check_interrupt
 
 
 def numba_cache_dir() -> Path:
@@ -82,8 +88,91 @@ class Cluster:
 
 
 def scheduler_address(option: str | None) -> str | None:
-    """The scheduler to use: the option, else ``DASK_SCHEDULER_ADDRESS``, else None."""
-    return option or os.environ.get("DASK_SCHEDULER_ADDRESS") or None
+    """The scheduler to use: the option, else ``DASK_SCHEDULER_ADDRESS``, else None,
+    checked to be a TCP or TLS address with a host and a port (``tcp://HOST:8786``; a
+    bare ``HOST:8786`` is taken as tcp).
+
+    Raises:
+        ClusterError: anything else (``inproc://``, no port, not an address), naming
+            where the address came from.
+    """
+    source = "--scheduler"
+    address = option
+    if not address:
+        address = os.environ.get("DASK_SCHEDULER_ADDRESS") or None
+        source = "DASK_SCHEDULER_ADDRESS"
+    if address is None:
+        return None
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    shown = address if len(address) <= 80 else address[:77] + "..."
+    try:
+        scheme, location = parse_address(address, strict=False)
+        if scheme not in ("tcp", "tls"):
+            raise ValueError(f"the {scheme}:// transport cannot reach another process")
+        host, port = parse_host_port(location)
+        if not host or not port:
+            raise ValueError("a host and a port are needed")
+    except (ValueError, TypeError) as e:
+        raise ClusterError(
+            f"{source} {shown!r} is not a Dask scheduler address ({one_line(e)}); "
+            "use tcp://HOST:PORT"
+        ) from None
+    return address
+
+
+#: Seconds without a heartbeat after which the embedded scheduler drops a worker (a
+#: frozen one: stopped, swapped out, deadlocked) and gives its tasks to the others; Dask's
+#: own default is 5 minutes. ``DASK_DISTRIBUTED__SCHEDULER__WORKER_TTL`` overrides it.
+WORKER_TTL = "60s"
+#: Seconds the embedded cluster may take to start its workers.
+START_TIMEOUT = 120.0
+
+
+def _within(fn: Callable[[], Any], seconds: float, what: str) -> Any:
+    """``fn()`` or, when it has not returned after ``seconds``, a :class:`ClusterError`.
+
+    Dask's connect timeout covers opening the connection, not a peer that accepts it and
+    then says nothing (a silent server hung the client for as long as it stayed up); the
+    call runs in a daemon thread that is left behind if it never returns. The wait
+    wakes every 0.2 s, so a signal stops it at once."""
+    box: dict[str, Any] = {}
+
+    def call() -> None:
+        try:
+            box["value"] = fn()
+        except BaseException as e:  # noqa: BLE001 - handed to the caller
+            box["error"] = e
+
+    t = threading.Thread(target=call, name="optdot-connect", daemon=True)
+    t.start()
+    deadline = time.monotonic() + seconds
+    while t.is_alive() and time.monotonic() < deadline:
+        t.join(0.2)
+        check_interrupt()
+    if t.is_alive():
+        raise ClusterError(f"{what} did not answer within {seconds:.0f} s")
+    if "error" in box:
+        raise box["error"]
+    return box["value"]
+
+
+@contextlib.contextmanager
+def _workers_deaf_to_ctrl_c() -> Iterator[None]:
+    """SIGINT ignored in this process while the workers are spawned: a new process
+    keeps an ignored SIGINT (Python installs its KeyboardInterrupt handler only over the
+    default one), so a Ctrl-C in the terminal, which reaches the whole process group, does
+    not print a traceback from a worker still importing its modules. SIGTERM still stops
+    the command; a Ctrl-C during these seconds is lost. Restarted workers get the same
+    from :mod:`optdot.runtime.worker_init`."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 @contextlib.contextmanager
@@ -95,57 +184,94 @@ def connect(
 ) -> Iterator[Cluster]:
     """A Dask cluster for the duration of the block.
 
+    The embedded cluster is private to this command: scheduler, workers and dashboard
+    listen on the loopback interface only, every connection is TLS with a certificate
+    made for this run and held only in this process and its workers (Dask's
+    ``Security.temporary()``: another local process cannot submit code to our workers),
+    and workers keep their scratch files in a private (0700) temporary directory removed
+    afterwards. A worker silent for :data:`WORKER_TTL` is dropped and its tasks retried
+    elsewhere.
+
     Args:
         address: an existing scheduler (``tcp://host:8786``); None starts a LocalCluster.
         workers: embedded worker processes (default: the cores).
         memory_per_worker: embedded workers' memory limit, bytes (default: 85 % of the
             available memory shared evenly).
-        timeout: seconds to wait for a scheduler and its workers.
+        timeout: seconds to wait for a scheduler and its workers, silent ones included.
 
     Raises:
-        ClusterError: the scheduler cannot be reached, has no workers, or the local
-            cluster cannot start.
+        ClusterError: the scheduler cannot be reached, does not answer, has no workers,
+            or the local cluster cannot start.
     """
     import dask
     from distributed import Client, LocalCluster
 
-    logging.getLogger("distributed").setLevel(logging.ERROR)
+    logging.getLogger("distributed").setLevel(logging.CRITICAL)
     if address:
+        with dask.config.set({"distributed.comm.timeouts.connect": f"{timeout}s"}):
+            try:
+                client = _within(
+                    lambda: Client(address, timeout=f"{timeout}s"),
+                    timeout + 5,
+                    f"the Dask scheduler at {address}",
+                )
+            except (OSError, TimeoutError) as e:
+                raise ClusterError(
+                    f"cannot reach the Dask scheduler at {address} ({one_line(e)})"
+                ) from None
         try:
-            client = Client(address, timeout=f"{timeout}s")
-        except (OSError, TimeoutError) as e:
-            raise ClusterError(
-                f"cannot reach the Dask scheduler at {address} ({one_line(e)})"
-            ) from None
-        try:
-            client.wait_for_workers(1, timeout=timeout)
+            _within(
+                lambda: client.wait_for_workers(1, timeout=timeout),
+                timeout + 5,
+                f"the Dask scheduler at {address}",
+            )
             info = client.scheduler_info(n_workers=-1)["workers"]
             limits = [w.get("memory_limit") or 0 for w in info.values()]
             yield Cluster(client, len(info), min(limits), client.dashboard_link or "", False)
         except TimeoutError:
             raise ClusterError(f"the Dask scheduler at {address} has no workers") from None
         finally:
-            client.close()
+            with contextlib.suppress(Exception):
+                client.close(timeout=5)
         return
     n = workers or os.cpu_count() or 1
     mem = memory_per_worker or int(0.85 * available_bytes() / n)
+    ttl = dask.config.get("distributed.scheduler.worker-ttl")
     config = {
         "distributed.nanny.pre-spawn-environ": worker_environment(),
         "distributed.worker.daemon": False,
         "distributed.scheduler.work-stealing": True,
-        "logging.distributed": "error",
+        "distributed.scheduler.worker-ttl": WORKER_TTL if ttl == "5 minutes" else ttl,
+        "distributed.worker.preload": ["optdot.runtime.worker_init"],
+        "logging.distributed": "critical",
     }
+    scratch = tempfile.mkdtemp(prefix="optdot-dask-")  # mode 0700: ours alone
+    config["temporary-directory"] = scratch  # the scheduler's scratch space too
     with dask.config.set(config):
         try:
-            cluster = LocalCluster(
-                n_workers=n,
-                threads_per_worker=1,
-                processes=True,
-                memory_limit=mem,
-                dashboard_address=":0",
-                silence_logs=logging.ERROR,
-            )
+            from distributed.security import Security
+
+            with _workers_deaf_to_ctrl_c():
+                cluster = _within(
+                    lambda: LocalCluster(
+                        n_workers=n,
+                        threads_per_worker=1,
+                        processes=True,
+                        memory_limit=mem,
+                        host="127.0.0.1",
+                        dashboard_address="127.0.0.1:0",
+                        security=Security.temporary(),
+                        local_directory=scratch,
+                        silence_logs=logging.CRITICAL,  # the command reports failures
+                    ),
+                    START_TIMEOUT,
+                    "the local Dask cluster (a worker that never started)",
+                )
+        except ClusterError:
+            shutil.rmtree(scratch, ignore_errors=True)
+            raise
         except Exception as e:  # noqa: BLE001 - any failure to start is one line
+            shutil.rmtree(scratch, ignore_errors=True)
             raise ClusterError(f"cannot start a local Dask cluster ({one_line(e)})") from None
         try:
             client = Client(cluster)
@@ -156,3 +282,4 @@ def connect(
         finally:
             with contextlib.suppress(Exception):
                 cluster.close(timeout=10)
+            shutil.rmtree(scratch, ignore_errors=True)

@@ -1,0 +1,275 @@
+"""Never hang, never exhaust the machine, one line for every bad input (issue 26).
+
+Each case here hung, filled the memory, printed tracebacks or ended in an internal error
+(exit 70) before the fix.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import stat
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from optdot.errors import ClusterError
+from optdot.runtime.cluster import connect, scheduler_address
+
+from .conftest import SAMPLES, one_error
+
+TINY = SAMPLES / "tiny" / "job.toml"
+LED = SAMPLES / "led" / "job.toml"
+
+
+@pytest.mark.parametrize(
+    "address, words",
+    [
+        ("not a url", "missing port"),
+        ("inproc://x", "inproc"),
+        ("tcp://host", "missing port"),
+        ("garbage:::", "invalid address"),
+    ],
+)
+def test_a_scheduler_address_that_is_not_one_is_one_line(tmp_path, address, words):
+    one_error(
+        ["generate", TINY, "-o", tmp_path / "d.parquet", "--tiles", "on", "--scheduler", address],
+        4,
+        "not a Dask scheduler address",
+        words,
+    )
+
+
+def test_a_garbage_scheduler_in_the_environment_is_named(monkeypatch):
+    monkeypatch.setenv("DASK_SCHEDULER_ADDRESS", "garbage:::")
+    with pytest.raises(ClusterError, match="DASK_SCHEDULER_ADDRESS 'garbage:::'"):
+        scheduler_address(None)
+    assert scheduler_address("tcp://10.0.0.1:8786") == "tcp://10.0.0.1:8786"
+
+
+def test_a_silent_scheduler_is_given_up_on_in_bounded_time():
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(8)
+    server.settimeout(0.2)
+    held, stop = [], threading.Event()
+
+    def accept_and_say_nothing():
+        while not stop.is_set():
+            try:
+                held.append(server.accept()[0])
+            except OSError:
+                pass
+
+    t = threading.Thread(target=accept_and_say_nothing, daemon=True)
+    t.start()
+    try:
+        t0 = time.monotonic()
+        with pytest.raises(ClusterError, match="did not answer|cannot reach"):
+            with connect(f"tcp://127.0.0.1:{server.getsockname()[1]}", timeout=1.0):
+                pass
+        assert time.monotonic() - t0 < 15  # the 10 s connect timeout never applied before
+    finally:
+        stop.set()
+        t.join(2)
+        for c in held:
+            c.close()
+        server.close()
+
+
+def test_the_embedded_cluster_is_private_loopback_tls_and_cleans_its_scratch():
+    from distributed import Client
+
+    with connect(workers=1) as cluster:
+        addr = cluster.client.scheduler.address
+        assert addr.startswith("tls://127.0.0.1:"), addr
+        assert "127.0.0.1" in cluster.dashboard
+        info = cluster.client.scheduler_info()["workers"]
+        assert all(w.startswith("tls://127.0.0.1:") for w in info)
+        dirs = cluster.client.run(lambda dask_worker: dask_worker.local_directory)
+        scratch = Path(next(iter(dirs.values())))
+        top = next(p for p in scratch.parents if p.name.startswith("optdot-dask-"))
+        assert stat.S_IMODE(top.stat().st_mode) == 0o700
+        with pytest.raises((OSError, TimeoutError)):  # no certificate: no way in
+            Client(addr.replace("tls://", "tcp://"), timeout="2s")
+    assert not top.exists()
+
+
+def test_options_that_are_not_finite_numbers_are_usage_errors(tmp_path):
+    for opt in ("--tile-size", "--worker-memory"):
+        one_error(
+            ["generate", TINY, "-o", tmp_path / "d.parquet", "--tiles", "on", opt, "nan"],
+            2,
+            opt,
+            "not a finite number",
+        )
+    pattern = tmp_path / "p.csv"
+    pattern.write_text("x_mm,y_mm,diameter_mm\n1,1,0.046\n")
+    for opt in ("--psf", "--distance", "--collision", "--close"):
+        one_error(["qa", pattern, opt, "inf"], 2, opt)
+
+
+def test_toml_nested_too_deep_and_a_huge_job_are_one_line(tmp_path):
+    deep = tmp_path / "deep.toml"
+    deep.write_text("a = " + "[" * 5000 + "]" * 5000 + "\n")
+    one_error(["generate", deep, "-o", tmp_path / "o.csv"], 2, "nested too deep")
+    huge = tmp_path / "huge.toml"
+    huge.write_text('name = "' + "x" * (3 << 20) + '"\n')
+    err = one_error(["generate", huge, "-o", tmp_path / "o.csv"], 2, "job file is")
+    assert len(err) < 300  # no 3 MB value echoed
+
+
+def test_a_device_or_fifo_as_an_input_is_refused_before_reading(tmp_path):
+    text = TINY.read_text().replace('"density.csv"', '"/dev/zero"')
+    (tmp_path / "j.toml").write_text(text)
+    one_error(["generate", tmp_path / "j.toml", "-o", tmp_path / "o.csv"], 2, "character device")
+    fifo = tmp_path / "p.csv"
+    os.mkfifo(fifo)  # reading it would block forever
+    one_error(["qa", fifo], 2, "FIFO")
+    one_error(["export", fifo, "--gds", tmp_path / "m.gds"], 2, "FIFO")
+
+
+def test_piled_up_dots_are_refused_before_qa_lists_their_pairs(tmp_path):
+    rows = "x_mm,y_mm,diameter_mm\n" + "1.0,1.0,0.046\n" * 20_000
+    (tmp_path / "dup.csv").write_text(rows)
+    t0 = time.monotonic()
+    one_error(["qa", tmp_path / "dup.csv"], 2, "199,990,000 pairs", "not a dot pattern")
+    assert time.monotonic() - t0 < 30
+
+
+def test_an_npz_bomb_is_refused_from_its_headers(tmp_path):
+    import io
+    import zipfile
+
+    fmt = np.lib.format
+    with zipfile.ZipFile(tmp_path / "bomb.npz", "w", zipfile.ZIP_DEFLATED) as zf:
+        for name, arr in (("box", np.array([0, 0, 3, 2.0])), ("diameter", np.array(0.046))):
+            b = io.BytesIO()
+            np.save(b, arr)
+            zf.writestr(name + ".npy", b.getvalue())
+        with zf.open("xy.npy", "w", force_zip64=True) as fh:
+            fmt.write_array_header_1_0(
+                fh, {"descr": "<f8", "fortran_order": False, "shape": (10**10, 2)}
+            )
+            fh.write(bytes(1 << 20))
+    assert (tmp_path / "bomb.npz").stat().st_size < 100_000
+    one_error(["qa", tmp_path / "bomb.npz"], 2, "declare", "GiB")
+
+
+def test_png_exif_orientation_is_applied_and_turned_tiffs_are_refused(tmp_path):
+    from PIL import Image
+
+    from optdot.config.images import load_image
+    from optdot.errors import JobError
+
+    a = np.zeros((20, 30), np.uint8)
+    a[:5, :10] = 200  # bright block at the stored image's top left
+    ex = Image.Exif()
+    ex[0x0112] = 6  # "turn 90 degrees clockwise to display"
+    Image.fromarray(a).save(tmp_path / "m.png", exif=ex)
+    g = load_image(tmp_path / "m.png", (0.0, 0.4))
+    assert g.shape == (30, 20)
+    bright = np.argwhere(g[::-1] > 0.1)  # back to top-down rows for the check
+    assert bright[:, 0].max() == 9 and bright[:, 1].min() == 15  # now at the top right
+    Image.fromarray(a).save(tmp_path / "m.tif", exif=ex)
+    with pytest.raises(JobError, match="orientation tag 6"):
+        load_image(tmp_path / "m.tif", (0.0, 0.4))
+
+
+def test_an_image_too_large_for_the_memory_is_refused_with_the_estimate(tmp_path, monkeypatch):
+    from PIL import Image
+
+    import optdot.config.images as images
+    from optdot.errors import ResourceError
+
+    Image.fromarray(np.zeros((400, 500), np.uint8)).save(tmp_path / "m.png")
+    monkeypatch.setattr(images, "available_bytes", lambda: 1_000_000)
+    with pytest.raises(ResourceError, match="500 x 400 pixels need about"):
+        images.load_image(tmp_path / "m.png", (0.0, 0.4))
+
+
+def _start_tiled(tmp_path, out: str, env=None) -> subprocess.Popen:
+    return subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "optdot",
+            "generate",
+            str(LED),
+            "-o",
+            str(tmp_path / out),
+            "--tiles",
+            "on",
+            "--tile-size",
+            "8",
+            "--workers",
+            "2",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,  # its own process group, as a terminal gives it
+        env={**os.environ, **(env or {})},
+    )
+
+
+def _workers_of(proc: subprocess.Popen, timeout: float = 60) -> list[int]:
+    """PIDs of the Dask worker processes under ``proc`` once they run tiles (after the
+    cluster announced itself on stderr, and a second more)."""
+    import psutil
+
+    line = proc.stderr.readline()
+    assert line.startswith("local cluster:"), line
+    time.sleep(1.0)
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        kids = [
+            k
+            for k in psutil.Process(proc.pid).children(recursive=True)
+            if "spawn_main" in " ".join(k.cmdline())  # not the resource tracker
+        ]
+        busy = [k.pid for k in kids if k.cpu_percent(0.2) > 20]
+        if len(kids) >= 2 and busy:
+            return busy
+        time.sleep(0.3)
+    raise AssertionError("no worker started")
+
+
+def test_ctrl_c_on_a_tiled_run_is_one_line_and_keeps_nothing(tmp_path):
+    proc = _start_tiled(tmp_path, "d.parquet")
+    _workers_of(proc)
+    os.killpg(proc.pid, signal.SIGINT)  # what a terminal's Ctrl-C does
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1:] == ["optdot: interrupted"], err
+    assert "Traceback" not in err and "Error" not in err, err
+    assert not (tmp_path / "d.parquet").exists()
+
+
+def test_a_frozen_worker_is_dropped_and_its_tiles_retried(tmp_path):
+    ref = _start_tiled(tmp_path, "ref.parquet")
+    assert ref.wait(timeout=180) == 0, ref.stderr.read()
+    env = {"DASK_DISTRIBUTED__SCHEDULER__WORKER_TTL": "5s"}
+    proc = _start_tiled(tmp_path, "d.parquet", env)
+    frozen = _workers_of(proc)[0]  # one that is running a tile
+    os.kill(frozen, signal.SIGSTOP)
+    try:
+        out, err = proc.communicate(timeout=150)
+    finally:
+        try:
+            os.kill(frozen, signal.SIGCONT)
+            os.kill(frozen, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    assert proc.returncode == 0, err
+    assert "Traceback" not in err and "Error" not in err, err  # no worker tracebacks
+    a = json.loads((tmp_path / "ref.parquet" / "_manifest.json").read_text())
+    b = json.loads((tmp_path / "d.parquet" / "_manifest.json").read_text())
+    assert [p["sha256"] for p in a["parts"]] == [p["sha256"] for p in b["parts"]]
