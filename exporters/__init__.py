@@ -25,9 +25,15 @@ from .options import ExportOptions
 FORMATS = ("gds", "oas", "dxf", "csv", "svg", "png", "speos")
 
 
-def write(pattern: Pattern, fmt: str, path: str | Path, opts: ExportOptions | None = None) -> None:
-    """Write ``pattern`` as ``fmt`` (one of :data:`FORMATS`) to ``path``, atomically."""
+def write(pattern: Pattern, fmt: str, path: str | Path, opts: ExportOptions | None = None) -> str:
+    """Write ``pattern`` as ``fmt`` (one of :data:`FORMATS`) to ``path``, atomically.
+
+    Returns:
+        What the file holds, for the user: ``"GDS, 111,215 dots"``, or for a preview of
+        a large pattern ``"SVG preview of a 2.00 x 2.00 mm window: 171 of 281,025 dots"``.
+    """
     opts = opts or ExportOptions()
+    whole = f"{fmt.upper()}, {pattern.n:,} dots"
     if fmt == "gds":
         from .gds import write_gds
 
@@ -49,13 +55,21 @@ def write(pattern: Pattern, fmt: str, path: str | Path, opts: ExportOptions | No
     elif fmt == "svg":
         from .preview import write_svg
 
-        write_svg(pattern, path)
+        shown, (x0, y0, x1, y1) = write_svg(pattern, path)
+        if shown < pattern.n:
+            return (
+                f"SVG preview of a {x1 - x0:.2f} x {y1 - y0:.2f} mm window at ({x0:.2f}, "
+                f"{y0:.2f}) mm: {shown:,} of {pattern.n:,} dots"
+            )
+        return whole
     elif fmt == "png":
         from .preview import write_png
 
         write_png(pattern, path)
+        return f"PNG preview: coverage of {pattern.n:,} dots and a zoomed window"
     else:
         raise ValueError(f"unknown format {fmt!r}")
+    return whole
 
 
 __all__ = ["FORMATS", "ExportOptions", "write"]

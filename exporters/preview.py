@@ -68,8 +68,13 @@ def write_png(pattern: Pattern, path: str | Path, dpi: int = 110) -> None:
     plt.close(fig)
 
 
-def write_svg(pattern: Pattern, path: str | Path) -> None:
-    """Write the SVG preview atomically (units: mm, y up as in the pattern)."""
+def write_svg(pattern: Pattern, path: str | Path) -> tuple[int, tuple[float, ...]]:
+    """Write the SVG preview atomically (units: mm, y up as in the pattern): every dot,
+    or above :data:`SVG_MAX_DOTS` the densest window only.
+
+    Returns:
+        ``(dots drawn, window (x0, y0, x1, y1) mm)``.
+    """
     x0, y0, x1, y1 = pattern.box
     window = (x0, y0, x1, y1) if pattern.n <= SVG_MAX_DOTS else zoom_tile(pattern)
     wx0, wy0, wx1, wy1 = window
@@ -81,7 +86,7 @@ def write_svg(pattern: Pattern, path: str | Path) -> None:
         f'<svg xmlns="http://www.w3.org/2000/svg" width="{wx1 - wx0:.6f}mm" '
         f'height="{wy1 - wy0:.6f}mm" '
         f'viewBox="{wx0:.6f} {-wy1:.6f} {wx1 - wx0:.6f} {wy1 - wy0:.6f}">\n',
-        f"<title>{pattern.n} dots, diameter {_diameter(pattern)} mm</title>\n",
+        f"<title>{_shown(int(sel.sum()), pattern.n)}, diameter {_diameter(pattern)} mm</title>\n",
     ]
     for ring in pattern.outline_rings():
         d = " ".join(f"{x:.6f},{-y:.6f}" for x, y in ring.tolist())
@@ -101,6 +106,11 @@ def write_svg(pattern: Pattern, path: str | Path) -> None:
     out.append("</g>\n</svg>\n")
     with atomic_path(path, expect_tail(b"</svg>\n", str(path))) as tmp:
         tmp.write_text("".join(out), encoding="utf-8")
+    return int(sel.sum()), tuple(float(v) for v in window)
+
+
+def _shown(k: int, n: int) -> str:
+    return f"{n} dots" if k == n else f"{k} of {n} dots (a window)"
 
 
 def _diameter(pattern: Pattern) -> str:

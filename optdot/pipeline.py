@@ -26,7 +26,7 @@ import numpy as np
 from .config.job import Job, QAParams
 from .errors import GeometryError, GuaranteeError, JobError, QAGateError, ResourceError
 from .geometry.morton import spatial_order
-from .io.atomic import transaction
+from .io.atomic import check_outputs, transaction
 from .io.dataset import manifest_of, write_dataset
 from .pattern import Pattern
 from .quality.gate import QAResult, run_qa, run_qa_dataset
@@ -462,6 +462,8 @@ def export(
     options=None,
     force: bool = False,
     stream=None,
+    reports: Mapping[str, str | Path] | None = None,
+    written: Callable[[str, Path, str], None] | None = None,
 ) -> QAResult:
     """Run the QA gate, then write ``pattern`` in each format of ``outputs``.
 
@@ -475,21 +477,38 @@ def export(
         stream: the :class:`~optdot.io.dataset.Dataset` the pattern is read from: the gate
             then measures it tile by tile and the masks (:data:`STREAMED`) are written
             from it tile by tile, hierarchically.
+        reports: the gate's report, ``{"html": path, "json": path}`` (either or both),
+            written with the outputs, also when the gate fails (then alone).
+        written: told ``(format, path, what the file holds)`` for each output once all
+            were put in place.
 
     Returns:
         The gate's result (check ``passed``: with ``force`` it may have failed).
 
     Raises:
         QAGateError: the gate failed and ``force`` is off; nothing was written.
-        ExportError: an output cannot be written; none was replaced (one transaction).
+        ExportError: an output cannot be written, is given twice, or is an input of the
+            export (the job's files, the pattern's or dataset's own file); none was
+            replaced (one transaction).
     """
     from . import exporters
+    from .quality.report import write_reports
 
     if pattern is None and stream is None:
         raise ValueError("export needs a pattern or a dataset")
+    reports = dict(reports or {})
+    inputs = tuple(job.inputs) if job else ()
+    source = stream.path if stream is not None else pattern.meta.get("source")
+    inputs += (Path(source),) if source else ()
+    check_outputs({**outputs, **reports}, inputs)
+    title = f"optdot QA: {Path(source).name if source else 'pattern'}"
     result = qa(pattern, job, dataset=stream)
     if not result.passed and not force:
+        if reports:
+            with transaction():
+                write_reports(result, reports, title)
         raise QAGateError(result)
+    done: list[tuple[str, Path, str]] = []
     with transaction():  # all outputs replaced together, or none
         for fmt, path in outputs.items():
             if stream is not None and fmt in STREAMED:
@@ -498,7 +517,11 @@ def export(
                 if pattern is None:
                     pattern = dataset_pattern(stream, job)
                 src = pattern
-            exporters.write(src, fmt, path, options)
+            done.append((fmt, Path(path), exporters.write(src, fmt, path, options)))
+        write_reports(result, reports, title)
+    for item in done:
+        if written is not None:
+            written(*item)
     return result
 
 

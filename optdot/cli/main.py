@@ -24,6 +24,7 @@ import click
 
 from ..config.viewing import VIEW_PRESETS
 from ..errors import OptdotError, QAGateError, one_line
+from ..io.atomic import check_outputs
 
 #: Exit code of an unexpected internal error (sysexits' EX_SOFTWARE).
 EXIT_INTERNAL = 70
@@ -318,7 +319,7 @@ def generate(
             "must end in .csv, .npz or .parquet", param_hint="'-o' / '--output'"
         )
     job = load_job_with(job_file, seed, max_iter, method, formulation)
-    _check_outputs({"output": output}, job.inputs)  # before the run, not after it
+    check_outputs({"output": output}, job.inputs)  # before the run, not after it
     if use_tiles(job, tiles):
         memory = None if worker_memory is None else int(worker_memory * 2**30)
         _generate_tiled(job, output, quiet, tile_size, scheduler, workers, memory)
@@ -399,20 +400,6 @@ def _read_with_job(path: Path, job, opts=None):
     return with_job_panel(read_any(path, opts, box=job.box if job else None), job)
 
 
-def _check_outputs(outputs: dict[str, Path], inputs: tuple = ()) -> None:
-    """Refuse, before any work, outputs given twice, unwritable, or aliasing an input."""
-    from ..errors import ExportError
-    from ..io.atomic import check_target
-
-    seen: dict[Path, str] = {}
-    for fmt, p in outputs.items():
-        rp = p.resolve()
-        if rp in seen:
-            raise ExportError(f"{p}: given for both --{seen[rp]} and --{fmt}")
-        seen[rp] = fmt
-        check_target(p, inputs)
-
-
 @main.command()
 @click.argument("source", type=click.Path(path_type=Path))
 @click.option("--gds", type=click.Path(path_type=Path), help="GDSII mask to write.")
@@ -451,6 +438,12 @@ def _check_outputs(outputs: dict[str, Path], inputs: tuple = ()) -> None:
     "--dxf-version", default="R2010", show_default=True, help="DXF release: R2010, R2000, R12, ..."
 )
 @click.option("--force", is_flag=True, help="Write masks even if the QA gate fails.")
+@click.option(
+    "--html", "html_path", type=click.Path(path_type=Path), help="QA report (HTML) to write."
+)
+@click.option(
+    "--json", "json_path", type=click.Path(path_type=Path), help="QA report (JSON) to write."
+)
 @_job_options
 @_user_errors
 def export(
@@ -472,6 +465,8 @@ def export(
     top_cell,
     dxf_version,
     force,
+    html_path,
+    json_path,
     seed,
     max_iter,
     method,
@@ -481,7 +476,8 @@ def export(
     """Write masks and previews of SOURCE (a job file, or a pattern .csv/.npz/.parquet).
 
     Existing output files are replaced (atomically: a failed run leaves them as they were).
-    Masks are written only if the QA gate passes, unless --force.
+    Masks are written only if the QA gate passes, unless --force; the verdict is printed,
+    and --html/--json keep the gate's report (written also when the gate fails).
     """
     from ..exporters.options import ExportOptions
     from ..pipeline import export as export_pattern
@@ -516,7 +512,8 @@ def export(
         inputs = (source, *job.inputs)
     else:
         job, inputs = _inputs(source, job_path)
-    _check_outputs(outputs, inputs)
+    reports = {k: v for k, v in (("html", html_path), ("json", json_path)) if v is not None}
+    check_outputs({**outputs, **reports}, inputs)
     stream = pattern = None
     if source.suffix.lower() == ".toml":
         pattern = run_job(job, quiet)
@@ -526,15 +523,26 @@ def export(
         stream = open_dataset(source)  # gate and masks tile by tile
     else:
         pattern = _read_with_job(source, job)
-    result = export_pattern(pattern, outputs, job, opts, force=force, stream=stream)
+    lines: list[str] = []
+    result = export_pattern(
+        pattern,
+        outputs,
+        job,
+        opts,
+        force=force,
+        stream=stream,
+        reports=reports,
+        written=lambda fmt, path, what: lines.append(f"{path}: {what}"),
+    )
     if not result.passed:
         click.echo(
             f"optdot: warning: QA gate failed ({result.failures()}); writing anyway (--force)",
             err=True,
         )
     if not quiet:
-        for fmt, path in outputs.items():
-            click.echo(f"{path}: {fmt.upper()}, {result.metrics['dots']} dots", err=True)
+        _print_checks(result, lambda line: click.echo(line, err=True))
+        for line in lines:
+            click.echo(line, err=True)
 
 
 @main.command()
@@ -589,7 +597,7 @@ def qa(
     """Check PATTERN_FILE (csv, npz, gds, oas, dxf) before tooling: exit 0 pass, 1 fail."""
     from ..io.atomic import transaction
     from ..pipeline import qa as run_gate
-    from ..quality.report import write_html, write_json
+    from ..quality.report import write_reports
 
     for v, name in ((collision, "--collision"), (close, "--close")):
         if v is not None and not v > 0:
@@ -612,7 +620,7 @@ def qa(
         if v is not None
     }
     job, inputs = _inputs(pattern_file, job_path)
-    _check_outputs(outs, inputs)
+    check_outputs(outs, inputs)
     if pattern_file.suffix.lower() == ".parquet":
         from ..io.dataset import open_dataset
 
@@ -625,33 +633,34 @@ def qa(
         pattern = _read_with_job(pattern_file, job, opts)
         result = run_gate(pattern, job, collision, close, close_gap=close_gap, view=looks)
     with transaction():  # both reports replaced together, or neither
-        if json_path:
-            write_json(result, json_path)
-        if html_path:
-            link = None
-            if json_path and Path(json_path).parent.resolve() == Path(html_path).parent.resolve():
-                link = Path(json_path).name
-            write_html(result, html_path, title=f"optdot QA: {pattern_file.name}", json_link=link)
+        write_reports(result, outs, title=f"optdot QA: {pattern_file.name}")
     if not quiet:
-        for c in result.checks:
-            mark = "PASS" if c.passed else "FAIL"
-            where = f"  at {c.where[:3]}" if (c.where and not c.passed) else ""
-            click.echo(f"{mark}  {c.name}: {_num(c.value)} (limit {_num(c.limit)}){where}")
-        vis = result.metrics.get("visibility")
-        if vis:
-            x, y = vis["max_jnd_at_mm"]
-            click.echo(
-                f"visibility ({vis['view']}, {vis['distance_mm']:g} mm, "
-                f"{vis['luminance_cd_m2']:g} cd/m², PSF sigma {vis['psf_sigma_mm']:g} mm): "
-                f"largest |JND| {vis['max_jnd']:.2f} at ({x:.2f}, {y:.2f}) mm, "
-                f"{vis['blobs_over_1_jnd']} blobs over 1 JND"
-            )
-        click.echo(f"verdict: {'PASS' if result.passed else 'FAIL'}")
+        _print_checks(result)
     sys.exit(0 if result.passed else 1)
 
 
-def _num(v) -> str:
-    return f"{v:.4g}" if isinstance(v, float) else str(v)
+def _print_checks(result, echo=click.echo) -> None:
+    """The gate as a user reads it: one line per check (PASS, FAIL, or WARN for an
+    advisory one over its level), the checks skipped, the visibility summary, and the
+    verdict (PASS, PASS WITH WARNINGS or FAIL) last."""
+    from ..quality.gate import number_text as _num
+
+    for c in result.checks:
+        mark = "PASS" if c.passed else ("WARN" if c.advisory else "FAIL")
+        where = f"  at {c.where[:3]}" if (c.where and not c.passed) else ""
+        echo(f"{mark}  {c.name}: {_num(c.value)} (limit {_num(c.limit)}){where}")
+    for s in result.skipped:
+        echo(f"SKIP  {s}")
+    vis = result.metrics.get("visibility")
+    if vis:
+        x, y = vis["max_jnd_at_mm"]
+        echo(
+            f"visibility ({vis['view']}, {vis['distance_mm']:g} mm, "
+            f"{vis['luminance_cd_m2']:g} cd/m², PSF sigma {vis['psf_sigma_mm']:g} mm): "
+            f"largest |JND| {vis['max_jnd']:.2f} at ({x:.2f}, {y:.2f}) mm, "
+            f"{vis['blobs_over_1_jnd']} blobs over 1 JND"
+        )
+    echo(f"verdict: {result.verdict}")
 
 
 if __name__ == "__main__":  # pragma: no cover

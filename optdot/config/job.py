@@ -132,6 +132,8 @@ class QAParams:
         view_distance, view_luminance: override the preset's distance (mm) and luminance
             (cd/m²). psf: Gaussian sigma of the stack's blur, mm.
         max_jnd: allowed largest |JND| of the visibility map (None = reported, not gated).
+        warn_jnd: advisory level of the largest |JND|: above it the verdict is PASS WITH
+            WARNINGS (the gate still passes; 1 JND = just visible).
     """
 
     collision_distance: float | None = None
@@ -149,6 +151,7 @@ class QAParams:
     view_luminance: float | None = None
     psf: float | None = None
     max_jnd: float | None = None
+    warn_jnd: float = 1.0
 
     @property
     def viewing(self) -> Viewing:
@@ -168,6 +171,9 @@ class QAParams:
                 self.collision_distance > 0, "qa.collision_distance", self.collision_distance, "> 0"
             )
         _check(self.close_distance > 0, "qa.close_distance", self.close_distance, "> 0")
+        _check(
+            math.isfinite(self.warn_jnd) and self.warn_jnd > 0, "qa.warn_jnd", self.warn_jnd, "> 0"
+        )
         _check(self.max_collisions >= 0, "qa.max_collisions", self.max_collisions, ">= 0")
         _check(
             0 <= self.max_close_fraction <= 1,

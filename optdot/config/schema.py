@@ -80,6 +80,7 @@ SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
         "view_luminance": (int, float),
         "psf": (int, float),
         "max_jnd": (int, float),
+        "warn_jnd": (int, float),
     },
 }
 _REQUIRED = {"dots": ("diameter",)}

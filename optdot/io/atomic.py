@@ -28,6 +28,7 @@ from ..runtime.stop import check_interrupt, interrupted, mark_interrupted
 
 __all__ = [
     "atomic_path",
+    "check_outputs",
     "check_target",
     "expect_size",
     "expect_tail",
@@ -103,6 +104,22 @@ def writable_target(target: str | Path) -> Path:
             f"{target}: is {kind}; optdot replaces only regular files (choose a file name)"
         )
     return target
+
+
+def check_outputs(outputs: dict[str, str | Path], inputs: tuple = ()) -> None:
+    """Refuse, before any work, a set of outputs (``{what: path}``) in which a path is
+    given twice, cannot be written (see :func:`check_target`) or is one of ``inputs``.
+
+    Raises:
+        ExportError: one line naming the file and the problem.
+    """
+    seen: dict[Path, str] = {}
+    for what, p in outputs.items():
+        rp = Path(p).resolve()
+        if rp in seen:
+            raise ExportError(f"{p}: given for both --{seen[rp]} and --{what}")
+        seen[rp] = what
+        check_target(p, inputs)
 
 
 def _refuse_read_only(target: Path) -> None:

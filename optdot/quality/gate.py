@@ -1,8 +1,18 @@
 """The QA gate: measure a pattern (:mod:`optdot.quality.measure`) and judge it against
-the job's thresholds, one :class:`Check` per line of the verdict."""
+the job's thresholds, one :class:`Check` per line of the verdict.
+
+The verdict has three values. **FAIL**: a gating check failed (collisions, protrusion,
+dots in empty cells, coverage, moiré, and the JND limit when ``qa.max_jnd`` is set);
+the command exits 1 and ``export`` writes nothing. **PASS WITH WARNINGS**: every gating
+check passed, but an advisory one did not (what a viewer will see over ``qa.warn_jnd``,
+tile seams that differ from the tile interiors) or checks were skipped (no job: no map
+to judge coverage, empty cells or visibility against); exit 0, the warnings printed and
+in the report. **PASS**: everything checked, nothing to warn about.
+"""
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -25,6 +35,7 @@ class Check:
     passed: bool
     where: list[list[float]] = field(default_factory=list)
     unit: str = ""
+    advisory: bool = False
 
 
 @dataclass
@@ -35,21 +46,45 @@ class QAResult:
     checks: list[Check]
     arrays: dict[str, Any]
 
+    skipped: list[str] = field(default_factory=list)
+
     @property
     def passed(self) -> bool:
-        """Every check passed."""
-        return all(c.passed for c in self.checks)
+        """Every gating check passed (advisory ones may not have)."""
+        return all(c.passed for c in self.checks if not c.advisory)
+
+    @property
+    def warnings(self) -> list[Check]:
+        """The advisory checks that did not pass."""
+        return [c for c in self.checks if c.advisory and not c.passed]
+
+    @property
+    def verdict(self) -> str:
+        """``"FAIL"``, ``"PASS WITH WARNINGS"`` (advisory checks over their level, or
+        checks skipped) or ``"PASS"``."""
+        if not self.passed:
+            return "FAIL"
+        return "PASS WITH WARNINGS" if self.warnings or self.skipped else "PASS"
+
+    def __repr__(self) -> str:
+        n = self.metrics.get("dots", "?")
+        bad = [c.name for c in self.checks if not c.passed]
+        return f"<QAResult {self.verdict}: {n} dots, {len(self.checks)} checks, not passed: {bad}>"
 
     def failures(self) -> str:
         """The failed checks as one line: ``name: value > limit; ...``."""
         return "; ".join(
-            f"{c.name}: {_num(c.value)} > {_num(c.limit)}" for c in self.checks if not c.passed
+            f"{c.name}: {_num(c.value)} > {_num(c.limit)}"
+            for c in self.checks
+            if not c.passed and not c.advisory
         )
 
     def to_json(self) -> dict[str, Any]:
         """The verdict, the checks and the metrics as JSON-ready data."""
         return {
-            "verdict": "PASS" if self.passed else "FAIL",
+            "verdict": self.verdict,
+            "warnings": [c.name for c in self.warnings],
+            "skipped": self.skipped,
             "checks": [c.__dict__ for c in self.checks],
             "metrics": self.metrics,
         }
@@ -173,19 +208,53 @@ def judge(
                 w["coverage"],
             )
         )
-    if params.max_jnd is not None and "visibility" in m:
+    if "visibility" in m:
         vis = m["visibility"]
+        gated = params.max_jnd is not None
+        limit = params.max_jnd if gated else params.warn_jnd
         checks.append(
             Check(
-                f"largest |JND| at {params.viewing.describe()}",
+                f"largest |JND| at {params.viewing.describe()}"
+                + ("" if gated else " (advisory: a viewer sees it)"),
                 vis["max_jnd"],
-                params.max_jnd,
-                vis["max_jnd"] <= params.max_jnd,
+                limit,
+                vis["max_jnd"] <= limit,
                 w["visibility"],
+                advisory=not gated,
             )
         )
-    return QAResult(metrics=m, checks=checks, arrays=got.arrays)
+    seams = m.get("seams") or {}
+    if seams:
+        differ = [k for k, v in seams["measures"].items() if not v["passed"]]
+        checks.append(
+            Check(
+                "tile-seam measures that differ from the tile interiors (advisory)",
+                len(differ),
+                0,
+                not differ,
+                advisory=True,
+            )
+        )
+    skipped = []
+    if density is None:
+        skipped = [
+            "coverage error (no target map: give --job)",
+            "dots in zero-density cells (no target map: give --job)",
+            "visibility (no target map: give --job)",
+        ]
+    return QAResult(metrics=m, checks=checks, arrays=got.arrays, skipped=skipped)
 
 
-def _num(v) -> str:
-    return f"{v:.4g}" if isinstance(v, float) else str(v)
+def number_text(v) -> str:
+    """A measured number for a message: 4 significant digits for floats (numpy's too,
+    never their repr such as ``np.float64(0.875)``), integers as they are."""
+    if isinstance(v, bool):
+        return str(v)
+    if isinstance(v, numbers.Integral):
+        return str(int(v))
+    if isinstance(v, numbers.Real):
+        return f"{float(v):.4g}"
+    return str(v)
+
+
+_num = number_text

@@ -21,6 +21,43 @@ def write_json(result: QAResult, path: str | Path) -> None:
         tmp.write_text(text + "\n", encoding="utf-8")
 
 
+def write_reports(result: QAResult, reports, title: str = "optdot QA") -> None:
+    """The JSON and/or HTML of ``reports`` (``{"json": path, "html": path}``); the HTML
+    links the JSON when both lie in one folder, else folds the numbers in."""
+    json_path, html_path = reports.get("json"), reports.get("html")
+    if json_path:
+        write_json(result, json_path)
+    if html_path:
+        link = None
+        if json_path and Path(json_path).parent.resolve() == Path(html_path).parent.resolve():
+            link = Path(json_path).name
+        write_html(result, html_path, title=title, json_link=link)
+
+
+def _mark(c) -> str:
+    return "✔" if c.passed else ("⚠" if c.advisory else "✘")
+
+
+def _row_class(c) -> str:
+    return "pass" if c.passed else ("warn" if c.advisory else "fail")
+
+
+def _warnings_text(result: QAResult) -> str:
+    """Under the verdict: what the warnings are, in words a user acts on."""
+    items = [
+        f"<li>{html.escape(c.name)}: {_fmt(c.value)} (level {_fmt(c.limit)})</li>"
+        for c in result.warnings
+    ]
+    items += [f"<li>not checked: {html.escape(k)}</li>" for k in result.skipped]
+    if not items:
+        return ""
+    return (
+        "<div id='warnings'><p>The gate passed, but:</p><ul>"
+        + "".join(items)
+        + "</ul><p>See <i>Will a viewer see it?</i> below for what to do.</p></div>"
+    )
+
+
 def write_html(
     result: QAResult, path: str | Path, title: str = "optdot QA", json_link: str | None = None
 ) -> None:
@@ -31,13 +68,18 @@ def write_html(
     panel of any dot count gives a report of the same size."""
     figs = _figures(result)
     seen = _visibility_section(result)
-    verdict = "PASS" if result.passed else "FAIL"
-    color = "#1a7f37" if result.passed else "#cf222e"
+    verdict = result.verdict
+    color = {"PASS": "#1a7f37", "FAIL": "#cf222e"}.get(verdict, "#9a6700")
     rows = "".join(
-        f"<tr><td>{'✔' if c.passed else '✘'}</td><td>{html.escape(c.name)}</td>"
+        f"<tr class='{_row_class(c)}'><td>{_mark(c)}</td><td>{html.escape(c.name)}</td>"
         f"<td>{_fmt(c.value)}</td><td>{_fmt(c.limit)}</td>"
         f"<td>{html.escape(', '.join(f'({x:.3f}, {y:.3f})' for x, y in c.where[:5]))}</td></tr>"
         for c in result.checks
+    )
+    rows += "".join(
+        f"<tr class='skip'><td>–</td><td>not checked: {html.escape(k)}</td>"
+        "<td></td><td></td><td></td></tr>"
+        for k in result.skipped
     )
     imgs = "".join(
         f"<figure><img alt='{html.escape(cap)}' src='data:image/png;base64,{b64}'>"
@@ -61,9 +103,11 @@ def write_html(
 <html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>
 <style>body{{font-family:sans-serif;margin:2em;max-width:1200px}}
 .verdict{{font-size:2em;color:#fff;background:{color};padding:.3em .6em;display:inline-block}}
-table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:.2em .5em}}
+table{{border-collapse:collapse}}tr.fail{{background:#ffebe9}}tr.warn{{background:#fff8c5}}
+tr.skip{{color:#666}}td,th{{border:1px solid #ccc;padding:.2em .5em}}
 figure{{display:inline-block;margin:.5em}}img{{max-width:560px}}</style></head><body>
 <h1>{html.escape(title)}</h1><div class="verdict" id="verdict">{verdict}</div>
+{_warnings_text(result)}
 <p>{m["dots"]:,} dots, diameter {_diameter_text(m["diameter_mm"])}, panel {box[2] - box[0]:.3f} × {box[3] - box[1]:.3f} mm</p>
 <h2>Gate</h2><table><tr><th></th><th>check</th><th>value</th><th>limit</th><th>where (mm, first 5)</th></tr>{rows}</table>
 {seen}

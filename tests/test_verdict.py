@@ -1,0 +1,133 @@
+"""The truth in the first hour (issue 26): PASS only when nothing is left to say, PASS
+WITH WARNINGS when a viewer will see something or checks were skipped, FAIL when the
+gate fails; ``export`` prints the verdict, says what each file holds, keeps the report;
+the library refuses to overwrite its own inputs as the CLI does.
+
+Before the fix the led sample's report said a green PASS beside 13 JND, ``qa`` without a
+job said PASS without naming what it skipped, and ``export`` printed no verdict and
+"SVG, N dots" for a window of a few hundred.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from optdot.errors import ExportError
+from optdot.io.patterns import save_pattern
+
+from .conftest import SAMPLES, cli
+
+
+@pytest.fixture(scope="module")
+def led(
+    tmp_path_factory,
+):
+    """The led sample's pattern (111k dots, 13 JND along its LED edge) and its job."""
+    from optdot.config.schema import load_job
+    from optdot.pipeline import generate
+
+    d = tmp_path_factory.mktemp("led")
+    for f in (SAMPLES / "led").iterdir():
+        shutil.copy(f, d / f.name)
+    job = load_job(d / "job.toml")
+    save_pattern(generate(job), d / "p.csv")
+    return d
+
+
+def test_a_pattern_a_viewer_sees_passes_with_warnings(led):
+    rc, err, out = cli("qa", led / "p.csv", "--job", led / "job.toml", "--json", led / "q.json")
+    assert rc == 0, err  # advisory: the gate itself passes
+    lines = out.splitlines()
+    assert lines[-1] == "verdict: PASS WITH WARNINGS"
+    assert any(x.startswith("WARN  largest |JND|") for x in lines), out
+    doc = json.loads((led / "q.json").read_text())
+    assert doc["verdict"] == "PASS WITH WARNINGS"
+    assert doc["warnings"] and "JND" in doc["warnings"][0] and doc["skipped"] == []
+
+    quiet_eye = (led / "job.toml").read_text() + "\n[qa]\nwarn_jnd = 1000\n"
+    (led / "calm.toml").write_text(quiet_eye)
+    rc, err, out = cli("qa", led / "p.csv", "--job", led / "calm.toml")
+    assert rc == 0 and out.splitlines()[-1] == "verdict: PASS", out
+
+
+def test_qa_without_a_job_names_what_it_did_not_check(led):
+    rc, err, out = cli("qa", led / "p.csv")
+    assert rc == 0
+    skips = [x for x in out.splitlines() if x.startswith("SKIP")]
+    assert len(skips) == 3 and all("give --job" in x for x in skips)
+    assert out.splitlines()[-1] == "verdict: PASS WITH WARNINGS"
+
+
+def test_a_failing_gate_is_fail_and_numbers_are_not_reprs(tmp_path):
+    (tmp_path / "p.csv").write_text(
+        "x_mm,y_mm,diameter_mm\n1.0,1.0,0.046\n1.01,1.0,0.046\n2.0,1.0,0.046\n"
+    )
+    rc, err, out = cli("qa", tmp_path / "p.csv")
+    assert rc == 1 and out.splitlines()[-1] == "verdict: FAIL"
+    assert "FAIL  pairs closer than" in out and "np.float64" not in out
+    from optdot.quality.gate import number_text
+
+    assert number_text(np.float64(0.875)) == "0.875" and number_text(np.int64(3)) == "3"
+
+
+def test_export_prints_the_verdict_each_file_and_keeps_the_report(led):
+    out_dir = led / "out"
+    out_dir.mkdir()
+    args = [
+        "export", led / "p.csv", "--job", led / "job.toml",
+        "--gds", out_dir / "m.gds", "--svg", out_dir / "m.svg",
+        "--html", out_dir / "r.html", "--json", out_dir / "r.json",
+    ]  # fmt: skip
+    rc, err, _ = cli(*args)
+    assert rc == 0, err
+    assert "verdict: PASS WITH WARNINGS" in err
+    assert f"{out_dir / 'm.gds'}: GDS, 111,215 dots" in err
+    assert f"{out_dir / 'm.svg'}: SVG, 111,215 dots" in err
+    doc = json.loads((out_dir / "r.json").read_text())
+    assert doc["verdict"] == "PASS WITH WARNINGS" and doc["metrics"]["dots"] == 111_215
+    assert "r.json" in (out_dir / "r.html").read_text()  # the HTML links its JSON
+
+
+def test_an_svg_of_a_window_says_so(tmp_path):
+    from optdot.exporters.preview import SVG_MAX_DOTS
+    from optdot.pattern import Pattern
+
+    side = 60.0
+    n = int(SVG_MAX_DOTS * 1.2)
+    g = np.arange(int(np.ceil(np.sqrt(n))))
+    xy = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)[:n] * 0.1 + 0.05
+    p = Pattern(xy=xy, diameter=0.046, box=(0.0, 0.0, side, side))
+    save_pattern(p, tmp_path / "big.csv")
+    rc, err, _ = cli("export", tmp_path / "big.csv", "--svg", tmp_path / "b.svg", "--force")
+    assert rc == 0, err
+    line = next(x for x in err if x.startswith(str(tmp_path / "b.svg")))
+    shown = (tmp_path / "b.svg").read_text().count("<circle")
+    assert f": {shown:,} of {n:,} dots" in line and "window" in line and shown < n
+
+
+def test_a_failing_gate_writes_the_report_but_no_mask(tmp_path):
+    (tmp_path / "p.csv").write_text("x_mm,y_mm,diameter_mm\n1.0,1.0,0.046\n1.01,1.0,0.046\n")
+    rc, err, _ = cli(
+        "export", tmp_path / "p.csv", "--gds", tmp_path / "m.gds", "--json", tmp_path / "r.json"
+    )
+    assert rc == 1
+    assert not (tmp_path / "m.gds").exists()
+    assert json.loads((tmp_path / "r.json").read_text())["verdict"] == "FAIL"
+
+
+def test_the_library_refuses_to_overwrite_its_inputs(tmp_path, tiny_pattern):
+    from optdot import export, load_job
+
+    shutil.copytree(SAMPLES / "tiny", tmp_path / "tiny")
+    job = load_job(tmp_path / "tiny" / "job.toml")
+    grid = tmp_path / "tiny" / "density.csv"
+    before = grid.read_bytes()
+    with pytest.raises(ExportError, match="is an input"):
+        export(tiny_pattern, {"csv": grid}, job)
+    assert grid.read_bytes() == before
+    with pytest.raises(ExportError, match="given for both"):
+        export(tiny_pattern, {"gds": tmp_path / "a.gds", "oas": tmp_path / "a.gds"}, job)
