@@ -142,7 +142,10 @@ def test_qa_clean_pattern_passes(exported, tmp_path):
         )
         assert r.exit_code == 0, (fmt, r.output)
     rep = json.loads((tmp_path / "r.json").read_text())
-    assert rep["verdict"] == "PASS" and rep["metrics"]["pairs_below_collision"] == 0
+    # the gate passes; what a viewer may see of a 3 x 2 mm sample is only advisory
+    assert rep["verdict"] in ("PASS", "PASS WITH WARNINGS")
+    assert all(c["passed"] or c["advisory"] for c in rep["checks"])
+    assert rep["metrics"]["pairs_below_collision"] == 0
     html = (tmp_path / "r.html").read_text()
     assert "PASS" in html and html.count("data:image/png;base64,") >= 4
 

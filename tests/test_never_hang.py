@@ -273,3 +273,38 @@ def test_a_frozen_worker_is_dropped_and_its_tiles_retried(tmp_path):
     a = json.loads((tmp_path / "ref.parquet" / "_manifest.json").read_text())
     b = json.loads((tmp_path / "d.parquet" / "_manifest.json").read_text())
     assert [p["sha256"] for p in a["parts"]] == [p["sha256"] for p in b["parts"]]
+
+
+def test_impossible_jobs_are_refused_before_any_work(tmp_path):
+    import shutil
+
+    shutil.copy(SAMPLES / "tiny" / "density.csv", tmp_path / "density.csv")
+    base = '[domain]\nwidth = 3.0\nheight = 2.0\n[density]\ngrid = "{grid}"\n[dots]\n'
+    base += "diameter = 0.046\n"
+    (tmp_path / "gap.toml").write_text(base.format(grid="density.csv") + "[optimize]\ngap = 5.0\n")
+    t0 = time.monotonic()
+    one_error(["generate", tmp_path / "gap.toml", "-o", tmp_path / "o.csv"], 2, "at most 6.6")
+    np.savetxt(tmp_path / "dense.csv", np.full((4, 6), 0.82), delimiter=",")
+    (tmp_path / "dense.toml").write_text(base.format(grid="dense.csv"))
+    one_error(["generate", tmp_path / "dense.toml", "-o", tmp_path / "o.csv"], 2, "0.8")
+    assert time.monotonic() - t0 < 10  # refused up front, not after the optimisation
+    np.savetxt(tmp_path / "ok.csv", np.full((4, 6), 0.78), delimiter=",")
+    (tmp_path / "ok.toml").write_text(base.format(grid="ok.csv"))
+    from optdot.config.schema import load_job
+    from optdot.pipeline import _check_fill
+
+    _check_fill(load_job(tmp_path / "ok.toml"), "ok")  # the guarantee holds at 0.78
+
+
+def test_too_many_workers_for_the_memory_are_refused_before_spawning(tmp_path):
+    import psutil
+
+    before = len(psutil.Process().children(recursive=True))
+    t0 = time.monotonic()
+    one_error(
+        ["generate", TINY, "-o", tmp_path / "d.parquet", "--tiles", "on", "--workers", "1024"],
+        2,
+        "1024 local workers",
+    )
+    assert time.monotonic() - t0 < 10
+    assert len(psutil.Process().children(recursive=True)) == before

@@ -260,7 +260,7 @@ def test_cluster_faults_are_one_line(tmp_path):
         out,
         check=False,
     )
-    assert r.returncode == 2 and "cannot" not in r.stderr and "each worker has" in r.stderr
+    assert r.returncode == 2 and "cannot" not in r.stderr and "a worker needs at least" in r.stderr
     assert not out.exists()
 
 

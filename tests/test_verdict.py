@@ -131,3 +131,24 @@ def test_the_library_refuses_to_overwrite_its_inputs(tmp_path, tiny_pattern):
     assert grid.read_bytes() == before
     with pytest.raises(ExportError, match="given for both"):
         export(tiny_pattern, {"gds": tmp_path / "a.gds", "oas": tmp_path / "a.gds"}, job)
+
+
+def test_reports_carry_what_they_judged_and_reruns_give_the_same_bytes(led, monkeypatch):
+    import hashlib
+
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")
+    for name in ("a", "b"):
+        rc, err, _ = cli(
+            "qa", led / "p.csv", "--job", led / "job.toml",
+            "--json", led / f"{name}.json", "--html", led / f"{name}.html",
+        )  # fmt: skip
+        assert rc == 0, err
+    assert (led / "a.json").read_bytes() == (led / "b.json").read_bytes()
+    prov = json.loads((led / "a.json").read_text())["provenance"]
+    sha = hashlib.sha256((led / "p.csv").read_bytes()).hexdigest()
+    assert prov["pattern"] == {"path": str(led / "p.csv"), "sha256": sha}
+    assert prov["job"]["sha256"] == hashlib.sha256((led / "job.toml").read_bytes()).hexdigest()
+    assert [e["path"] for e in prov["inputs"]] == [str(led / "density.csv")]
+    assert prov["date_utc"] == "2023-11-14T22:13:20Z" and prov["optdot"] != ""
+    html_text = (led / "a.html").read_text()
+    assert "id='provenance'" in html_text and sha[:16] in html_text

@@ -333,4 +333,4 @@ def _validated(path, xy, diam, box, meta) -> Pattern:
         box = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
     if not (box[2] > box[0] and box[3] > box[1]):
         raise PatternFileError(f"{path}: empty panel box {box}")
-    return Pattern(xy=xy, diameter=diam, box=box, meta=meta)
+    return Pattern(xy=xy, diameter=diam, box=box, meta={**meta, "source": str(path)})

@@ -47,6 +47,7 @@ class QAResult:
     arrays: dict[str, Any]
 
     skipped: list[str] = field(default_factory=list)
+    provenance: dict[str, Any] = field(default_factory=dict)
 
     @property
     def passed(self) -> bool:
@@ -83,6 +84,7 @@ class QAResult:
         """The verdict, the checks and the metrics as JSON-ready data."""
         return {
             "verdict": self.verdict,
+            "provenance": self.provenance,
             "warnings": [c.name for c in self.warnings],
             "skipped": self.skipped,
             "checks": [c.__dict__ for c in self.checks],

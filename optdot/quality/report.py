@@ -34,6 +34,30 @@ def write_reports(result: QAResult, reports, title: str = "optdot QA") -> None:
         write_html(result, html_path, title=title, json_link=link)
 
 
+def _provenance_text(result: QAResult) -> str:
+    """The traceability block: what was judged, against what, by which optdot, when."""
+    p = result.provenance
+    if not p:
+        return ""
+
+    def file(e) -> str:
+        if not e:
+            return "—"
+        digest = e.get("sha256") or "unreadable"
+        return f"<code>{html.escape(e['path'])}</code> (SHA-256 <code>{digest[:16]}…</code>)"
+
+    rows = [
+        ("pattern", file(p.get("pattern")) if p.get("pattern") else "in memory"),
+        ("job", file(p.get("job")) if p.get("job") else "none (defaults)"),
+        ("seed", html.escape(str(p.get("seed")))),
+        ("optdot", html.escape(str(p.get("optdot")))),
+        ("date (UTC)", html.escape(str(p.get("date_utc")))),
+    ]
+    rows += [("input", file(e)) for e in p.get("inputs", [])]
+    body = "".join(f"<tr><th>{k}</th><td>{v}</td></tr>" for k, v in rows)
+    return f"<table id='provenance' class='prov'>{body}</table>"
+
+
 def _mark(c) -> str:
     return "✔" if c.passed else ("⚠" if c.advisory else "✘")
 
@@ -108,6 +132,7 @@ tr.skip{{color:#666}}td,th{{border:1px solid #ccc;padding:.2em .5em}}
 figure{{display:inline-block;margin:.5em}}img{{max-width:560px}}</style></head><body>
 <h1>{html.escape(title)}</h1><div class="verdict" id="verdict">{verdict}</div>
 {_warnings_text(result)}
+{_provenance_text(result)}
 <p>{m["dots"]:,} dots, diameter {_diameter_text(m["diameter_mm"])}, panel {box[2] - box[0]:.3f} × {box[3] - box[1]:.3f} mm</p>
 <h2>Gate</h2><table><tr><th></th><th>check</th><th>value</th><th>limit</th><th>where (mm, first 5)</th></tr>{rows}</table>
 {seen}

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..errors import ClusterError, one_line
+from ..errors import ClusterError, ResourceError, one_line
 from .memory import available_bytes
 from .stop import check_interrupt
 
@@ -157,6 +157,28 @@ def _within(fn: Callable[[], Any], seconds: float, what: str) -> Any:
     return box["value"]
 
 
+#: Least memory an embedded worker process needs to start and run a small tile (the
+#: interpreter, numpy, numba, distributed: ~250 MB resident), bytes.
+MIN_WORKER_BYTES = 400 * 2**20
+
+
+def embedded_workers(workers: int | None, memory_per_worker: int | None) -> tuple[int, int]:
+    """``(processes, memory limit each in bytes)`` of the embedded cluster, checked before
+    any process is spawned: by default one per core sharing 85 % of the available memory.
+
+    Raises:
+        ResourceError: the workers would get less than :data:`MIN_WORKER_BYTES` each.
+    """
+    n = workers or os.cpu_count() or 1
+    mem = memory_per_worker or int(0.85 * available_bytes() / n)
+    if mem < MIN_WORKER_BYTES:
+        raise ResourceError(
+            f"{n} local workers would have {mem / 2**20:,.0f} MiB each; a worker needs at "
+            f"least {MIN_WORKER_BYTES / 2**20:.0f} MiB: use fewer (--workers)"
+        )
+    return n, mem
+
+
 @contextlib.contextmanager
 def _workers_deaf_to_ctrl_c() -> Iterator[None]:
     """SIGINT ignored in this process while the workers are spawned: a new process
@@ -234,8 +256,7 @@ def connect(
             with contextlib.suppress(Exception):
                 client.close(timeout=5)
         return
-    n = workers or os.cpu_count() or 1
-    mem = memory_per_worker or int(0.85 * available_bytes() / n)
+    n, mem = embedded_workers(workers, memory_per_worker)
     ttl = dask.config.get("distributed.scheduler.worker-ttl")
     config = {
         "distributed.nanny.pre-spawn-environ": worker_environment(),

@@ -1,0 +1,81 @@
+"""What a QA result is a result of: the sign-off sheet's traceability block.
+
+A report that goes to tooling must say which pattern it judged, against which job, made by
+which optdot: the optdot version, the date, the job file and every file it reads (path and
+SHA-256), the seed, and the judged pattern file (SHA-256; a dataset by its manifest, which
+holds every part's checksum). The date is now, in UTC, or ``SOURCE_DATE_EPOCH`` when set
+(the reproducible-builds convention), so that a rerun can give the same bytes.
+"""
+
+from __future__ import annotations
+
+import datetime
+import hashlib
+import os
+from pathlib import Path
+from typing import Any
+
+
+def sha256_of(path: str | Path) -> str | None:
+    """SHA-256 of a file (a dataset directory: of its manifest), or None if unreadable."""
+    p = Path(path)
+    if p.is_dir():
+        p = p / "_manifest.json"
+    h = hashlib.sha256()
+    try:
+        with open(p, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+    except OSError:
+        return None
+    return h.hexdigest()
+
+
+def version() -> str:
+    """The installed optdot's version ("unknown" when run from a bare checkout)."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as _version
+
+    try:
+        return _version("optdot")
+    except PackageNotFoundError:
+        return "unknown"
+
+
+def now_utc() -> str:
+    """ISO 8601 UTC time of the report: ``SOURCE_DATE_EPOCH`` when set, else now."""
+    epoch = os.environ.get("SOURCE_DATE_EPOCH")
+    try:
+        t = datetime.datetime.fromtimestamp(int(epoch), datetime.UTC) if epoch else None
+    except (ValueError, OverflowError, OSError):
+        t = None
+    t = t or datetime.datetime.now(datetime.UTC)
+    return t.replace(microsecond=0).isoformat().replace("+00:00", "Z")
+
+
+def provenance(job, pattern_path: str | Path | None, seed: int | None) -> dict[str, Any]:
+    """The traceability block of a QA result.
+
+    Args:
+        job: the :class:`~optdot.config.job.Job` judged against, or None.
+        pattern_path: the file (or dataset) judged, or None for a pattern in memory.
+        seed: the seed that made the pattern, when known.
+
+    Returns:
+        ``{"optdot", "date_utc", "seed", "pattern": {"path", "sha256"} | None, "job":
+        {"path", "sha256"} | None, "inputs": [{"path", "sha256"}]}``.
+    """
+
+    def entry(p) -> dict[str, Any]:
+        return {"path": str(p), "sha256": sha256_of(p)}
+
+    source = getattr(job, "source", None) if job is not None else None
+    inputs = [entry(p) for p in (job.inputs if job is not None else ()) if Path(p) != source]
+    return {
+        "optdot": version(),
+        "date_utc": now_utc(),
+        "seed": seed,
+        "pattern": entry(pattern_path) if pattern_path else None,
+        "job": entry(source) if source else None,
+        "inputs": inputs,
+    }
