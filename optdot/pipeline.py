@@ -17,7 +17,7 @@ from __future__ import annotations
 import contextlib
 import time
 from collections.abc import Callable, Iterator, Mapping
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -38,6 +38,7 @@ from .relax.md import MDForce, md_relax
 from .relax.optdot import Progress, relax_staged
 from .relax.resize import fit_sizes
 from .runtime.cluster import connect, embedded_workers, scheduler_address
+from .runtime.cost import Cost, estimate_cost
 from .runtime.memory import BASE_BYTES, available_bytes, check_memory, estimate_bytes
 from .sampling.initial import initial_dots, initial_dots_in
 from .tiling.plan import TilePlan, plan_tiles
@@ -255,6 +256,54 @@ def use_tiles(job: Job, mode: str = "auto") -> bool:
     return n >= TILE_BREAK_EVEN or estimate_bytes(n, job.optimize.lbfgs_memory) > 0.9 * (
         available_bytes()
     )
+
+
+@dataclass(frozen=True)
+class JobCheck:
+    """What :func:`check_job` found: the job would run, and what it would cost.
+
+    Attributes:
+        n_dots: dots the map asks for. plan: the tiling, or None for one process.
+        workers: processes the tiles would run on (1 for one process).
+        cost: the estimate (:class:`optdot.runtime.cost.Cost`).
+        available_bytes: memory available now, bytes.
+    """
+
+    n_dots: int
+    plan: TilePlan | None
+    workers: int
+    cost: Cost
+    available_bytes: int
+
+
+def check_job(
+    job: Job,
+    tiles: str = "auto",
+    tile_size: float | None = None,
+    workers: int | None = None,
+    formats: tuple[str, ...] = ("parquet", "gds", "oas", "dxf"),
+) -> JobCheck:
+    """Every check :func:`generate` and :func:`generate_tiled` make before they start
+    (room, fill, memory, tile size, workers), without running anything, and the cost.
+
+    Raises:
+        JobError, GeometryError, ResourceError: what the run itself would refuse.
+    """
+    where = str(job.source) if job.source else job.name
+    n = job.n_dots
+    _check_room(job, n, where)
+    opt = job.optimize
+    if not use_tiles(job, tiles):
+        check_memory(n, opt.lbfgs_memory, where)
+        cost = estimate_cost(n, opt.max_iter, opt.lbfgs_memory, formats=formats)
+        return JobCheck(n, None, 1, cost, available_bytes())
+    plan = plan_tiles(job, tile_size)
+    k, per_worker = embedded_workers(workers, None)
+    k = min(k, plan.count)
+    _check_tile_memory(job, plan, per_worker)
+    biggest = int(plan.quotas.max())
+    cost = estimate_cost(n, opt.max_iter, opt.lbfgs_memory, biggest, k, formats)
+    return JobCheck(n, plan, k, cost, available_bytes())
 
 
 def _tiled_meta(job: Job, plan: TilePlan) -> dict:

@@ -152,3 +152,28 @@ def test_reports_carry_what_they_judged_and_reruns_give_the_same_bytes(led, monk
     assert prov["date_utc"] == "2023-11-14T22:13:20Z" and prov["optdot"] != ""
     html_text = (led / "a.html").read_text()
     assert "id='provenance'" in html_text and sha[:16] in html_text
+
+
+def test_check_tells_the_cost_and_refuses_what_generate_refuses(tmp_path):
+    import time
+
+    shutil.copytree(SAMPLES / "tiny", tmp_path / "tiny")
+    job = tmp_path / "tiny" / "job.toml"
+    t0 = time.monotonic()
+    rc, err, out = cli("check", job)
+    assert rc == 0, err
+    assert time.monotonic() - t0 < 10
+    lines = out.splitlines()
+    assert lines[0] == f"{job}: valid" and lines[3] == "run: one process"
+    rc, _, _ = cli("generate", job, "-o", tmp_path / "p.csv", "-q")
+    n = len((tmp_path / "p.csv").read_text().splitlines()) - 1
+    assert f"dots: {n:,} of 46 µm" in out
+    assert "estimate: about" in out and "GiB peak memory" in out and "GDS" in out
+    rc, _, out = cli("check", SAMPLES / "led" / "job.toml", "--tiles", "on", "--tile-size", "12")
+    assert rc == 0 and "3 tiles (3 x 1)" in out  # 36 x 15 mm in 12 mm tiles
+    assert sorted(p.name for p in (tmp_path / "tiny").iterdir()) == ["density.csv", "job.toml"]
+    text = job.read_text().replace("[optimize]", "[optimize]\ngap = 5.0")
+    (tmp_path / "tiny" / "gap.toml").write_text(text)
+    _, err_check = cli("check", tmp_path / "tiny" / "gap.toml")[:2]
+    _, err_run = cli("generate", tmp_path / "tiny" / "gap.toml", "-o", tmp_path / "q.csv")[:2]
+    assert err_check == err_run and "effective fill" in err_check[0]

@@ -286,6 +286,79 @@ def _tile_options(fn):
 
 @main.command()
 @click.argument("job_file", type=click.Path(path_type=Path))
+@_job_options
+@_tile_options
+@_user_errors
+def check(
+    job_file,
+    seed,
+    max_iter,
+    method,
+    formulation,
+    quiet,
+    tiles,
+    tile_size,
+    scheduler,
+    workers,
+    worker_memory,
+):
+    """Check JOB_FILE without running it: is it valid, how many dots, one process or
+    tiles, and about how long, how much memory and disk it will take (exit 0: it would
+    run; otherwise the one-line reason the run itself would give)."""
+    from ..pipeline import check_job
+
+    job = load_job_with(job_file, seed, max_iter, method, formulation)
+    got = check_job(job, tiles, tile_size, workers)
+    d = job.density.grid
+    x0, y0, x1, y1 = job.box
+    opt = job.optimize
+    gib = 2**30
+    if got.plan is None:
+        how = "one process"
+    else:
+        p = got.plan
+        how = (
+            f"{p.count} tiles ({p.nx} x {p.ny}) of ~{int(p.quotas.mean()):,} dots "
+            f"on {got.workers} local workers"
+        )
+    click.echo(f"{job_file}: valid")
+    click.echo(
+        f"panel {x1 - x0:g} x {y1 - y0:g} mm"
+        + ("" if job.domain.rectangle else " (outline)")
+        + f", map {d.shape[1]} x {d.shape[0]} cells, fill {d.min():.3g}..{d.max():.3g}"
+    )
+    click.echo(
+        f"dots: {got.n_dots:,} of {_diameter_text(job)} ({opt.method}, seed {opt.seed}, "
+        f"{opt.max_iter} iterations)"
+    )
+    click.echo(f"run: {how}")
+    c = got.cost
+    click.echo(
+        f"estimate: {_duration(c.seconds)}, {c.peak_bytes / gib:.2f} GiB peak memory "
+        f"({got.available_bytes / gib:.1f} GiB available)"
+    )
+    click.echo(
+        "disk: "
+        + ", ".join(f"{fmt.upper()} {size / 1e6:,.1f} MB" for fmt, size in c.disk_bytes.items())
+    )
+
+
+def _diameter_text(job) -> str:
+    if job.sizes is None:
+        return f"{job.diameter * 1e3:.4g} µm"
+    return f"{job.sizes.low * 1e3:.4g}..{job.sizes.high * 1e3:.4g} µm"
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 90:
+        return f"about {seconds:.0f} s"
+    if seconds < 5400:
+        return f"about {seconds / 60:.0f} min"
+    return f"about {seconds / 3600:.1f} h"
+
+
+@main.command()
+@click.argument("job_file", type=click.Path(path_type=Path))
 @click.option(
     "-o",
     "--output",
