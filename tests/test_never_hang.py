@@ -253,6 +253,7 @@ def test_ctrl_c_on_a_tiled_run_is_one_line_and_keeps_nothing(tmp_path):
     assert not (tmp_path / "d.parquet").exists()
 
 
+@pytest.mark.slow
 def test_a_frozen_worker_is_dropped_and_its_tiles_retried(tmp_path):
     ref = _start_tiled(tmp_path, "ref.parquet")
     assert ref.wait(timeout=180) == 0, ref.stderr.read()

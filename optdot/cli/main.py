@@ -402,7 +402,7 @@ def generate(
     m = pattern.meta
     if not quiet:
         click.echo(
-            f"{output}: {pattern.n} dots, {m['iterations']} iterations, "
+            f"{output}: {pattern.n:,} dots, {m['iterations']} iterations, "
             f"{pattern.stats['total_s']:.1f} s",
             err=True,
         )
@@ -452,7 +452,7 @@ def _generate_tiled(
     else:
         n = sum(result.counts.values())
     if not quiet:
-        click.echo(f"{output}: {n} dots in tiles, {time.perf_counter() - t0:.1f} s", err=True)
+        click.echo(f"{output}: {n:,} dots in tiles, {time.perf_counter() - t0:.1f} s", err=True)
 
 
 def _inputs(source: Path, job_path) -> tuple:
