@@ -309,3 +309,15 @@ def test_too_many_workers_for_the_memory_are_refused_before_spawning(tmp_path):
     )
     assert time.monotonic() - t0 < 10
     assert len(psutil.Process().children(recursive=True)) == before
+
+
+def test_a_histogram_over_a_range_too_narrow_for_numpy_still_has_its_bins():
+    from optdot.quality.measure import _histogram
+
+    values = np.array([3e9, 3e9 + 1e-6, 3e9])  # numpy: "Too many bins for data range"
+    with pytest.raises(ValueError):
+        np.histogram(values, bins=100)
+    counts, edges = _histogram(values)
+    assert counts.sum() == 3 and len(edges) == 101 and np.all(np.diff(edges) > 0)
+    counts, edges = _histogram(np.array([46.0, 60.0, 50.0]))
+    assert counts.sum() == 3 and edges[0] == 46.0 and edges[-1] == 60.0

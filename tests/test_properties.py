@@ -12,6 +12,7 @@ import io
 import json
 import math
 import os
+import re
 import tempfile
 import zipfile
 from pathlib import Path
@@ -19,7 +20,8 @@ from pathlib import Path
 import ezdxf
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, assume, given, settings
+import shapely
+from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
@@ -28,6 +30,7 @@ from optdot.config.schema import SCHEMA, load_job
 from optdot.errors import OptdotError
 from optdot.exporters import write
 from optdot.exporters.readback import read_any
+from optdot.geometry.limits import DIAMETER_RANGE_MM, MAX_EXTENT_MM
 from optdot.geometry.outline_io import load_outline
 from optdot.pipeline import _check_room, qa
 
@@ -42,14 +45,40 @@ SETTINGS = settings(
 WORK = Path(tempfile.mkdtemp(prefix="optdot-props-"))
 
 
-def outcome(fn, *args):
-    """Call ``fn``; an OptdotError is a fine answer, anything else fails the test."""
+def outcome(fn, *args, valid: bool = False):
+    """Call ``fn``; an OptdotError is a fine answer, anything else fails the test. With
+    ``valid`` (the input is good by construction) a refusal fails the test too: refusing
+    everything must not pass these suites."""
     try:
         return fn(*args)
     except OptdotError as e:
         text = str(e)
         assert text and "\n" not in text, repr(text)
+        assert not valid, f"a valid input was refused: {text}"
         return None
+
+
+NUMBER = re.compile(r"\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*")
+
+
+def _numbers(rows) -> list[list[float]] | None:
+    """The rows as numbers when every cell is a plain finite number (else None)."""
+    out = []
+    for r in rows:
+        if not r or not all(NUMBER.fullmatch(c) for c in r):
+            return None
+        vals = [float(c) for c in r]
+        if not all(math.isfinite(v) for v in vals):
+            return None
+        out.append(vals)
+    return out
+
+
+def _valid_fills(values) -> bool:
+    a = np.asarray(values, dtype=np.float64)
+    return bool(
+        a.size and np.isfinite(a).all() and (a >= 0).all() and (a < 0.9069).all() and (a > 0).any()
+    )
 
 
 # --- values -------------------------------------------------------------------------------
@@ -148,6 +177,7 @@ csv_cells = st.one_of(
 
 @SETTINGS
 @given(st.lists(st.lists(csv_cells, min_size=0, max_size=5), max_size=6))
+@example([["0.1", "0.2", "0"], ["0.3", "0.45", " 1e-1"]])  # a good map is read as it is
 def test_any_grid_csv_loads_or_is_refused(rows):
     path = WORK / "grid.csv"
     path.write_text("\n".join(",".join(r) for r in rows), errors="surrogatepass")
@@ -157,7 +187,11 @@ def test_any_grid_csv_loads_or_is_refused(rows):
         validate_grid(g, str(path))
         return g
 
-    outcome(load)
+    nums = _numbers(rows)
+    valid = bool(nums) and len({len(r) for r in nums}) == 1 and _valid_fills(nums)
+    g = outcome(load, valid=valid)
+    if valid:
+        np.testing.assert_array_equal(g, np.array(nums))
 
 
 npy_dtypes = st.one_of(
@@ -176,6 +210,8 @@ npy_dtypes = st.one_of(
     st.integers(0, 4),
     st.integers(0, 400),
 )
+@example(np.full((2, 3), 0.2), 0, 0)
+@example(np.array([[0, 1], [2, 0]], dtype=np.uint8) * 0, 0, 0)  # all zero: refused
 def test_any_npy_grid_loads_or_is_refused(arr, damage, cut):
     buf = io.BytesIO()
     np.save(buf, arr, allow_pickle=False)
@@ -192,7 +228,14 @@ def test_any_npy_grid_loads_or_is_refused(arr, damage, cut):
         validate_grid(g, str(path))
         return g
 
-    outcome(load)
+    valid = (
+        damage == 0
+        and arr.ndim == 2
+        and 0 not in arr.shape
+        and arr.dtype.kind in "biuf"
+        and _valid_fills(arr.astype(np.float64))
+    )
+    outcome(load, valid=valid)
 
 
 # --- outlines -----------------------------------------------------------------------------
@@ -210,14 +253,30 @@ def wkt_ring(r) -> str:
     st.sampled_from(["POLYGON", "MULTIPOLYGON", "LINESTRING", "POINT", "GEOMETRYCOLLECTION", "X"]),
     st.lists(rings, min_size=0, max_size=3),
     st.text(max_size=5),
+    st.booleans(),
 )
-def test_any_wkt_outline_loads_or_is_refused(kind, rs, junk):
+@example("POLYGON", [[(0.0, 0.0), (3.0, 0.0), (3.0, 2.0), (0.0, 2.0)]], "", True)
+def test_any_wkt_outline_loads_or_is_refused(kind, rs, junk, close):
+    if close:  # as a CAD program writes them: each ring ends where it starts
+        rs = [[*r, r[0]] for r in rs if r]
     body = "(" + ", ".join(wkt_ring(r) for r in rs) + ")" if rs else "EMPTY"
     if kind == "MULTIPOLYGON" and rs:
         body = "(" + body + ")"
     path = WORK / "o.wkt"
     path.write_text(f"{kind} {body}{junk}", errors="surrogatepass")
-    outcome(load_outline, path)
+    valid = False
+    if (
+        kind == "POLYGON"
+        and rs
+        and not junk.strip()
+        and all(
+            len(r) >= 4 and r[0] == r[-1] and all(math.isfinite(v) for xy in r for v in xy)
+            for r in rs
+        )
+    ):
+        poly = shapely.Polygon(rs[0], rs[1:])
+        valid = bool(poly.is_valid and poly.area > 0)
+    outcome(load_outline, path, valid=valid)
 
 
 json_leaf = st.one_of(st.none(), st.booleans(), st.integers(-5, 5), coords, st.text(max_size=8))
@@ -306,12 +365,20 @@ def test_any_dxf_outline_loads_or_is_refused(entities, flip, damage, cut):
     st.sampled_from(["x_mm,y_mm,diameter_mm", "x,y", "", "\ufeffx_mm,y_mm,diameter_mm"]),
     st.lists(st.lists(csv_cells, min_size=0, max_size=4), max_size=6),
 )
+@example("x_mm,y_mm,diameter_mm", [["1.0", "1.0", "0.046"], ["1.2", "1.0", "0.046"]])
 def test_any_pattern_csv_reads_or_is_refused(header, rows):
     path = WORK / "p.csv"
     path.write_text(header + "\n" + "\n".join(",".join(r) for r in rows), errors="surrogatepass")
-    p = outcome(read_any, path)
+    nums = _numbers([r for r in rows if r])
+    valid = header.lstrip("\ufeff") == "x_mm,y_mm,diameter_mm" and bool(nums)
+    if valid:
+        a = np.array(nums) if all(len(r) == 3 for r in nums) else None
+        lo, hi = DIAMETER_RANGE_MM
+        valid = a is not None and bool((a[:, 2] >= lo).all() and (a[:, 2] <= hi).all())
+        valid = valid and float(np.ptp(a[:, :2], axis=0).max()) <= MAX_EXTENT_MM
+    p = outcome(read_any, path, valid=valid)
     if p is not None:
-        outcome(qa, p)
+        outcome(qa, p, valid=valid)
 
 
 small_arrays = hnp.arrays(
@@ -329,7 +396,10 @@ small_arrays = hnp.arrays(
     ),
     st.booleans(),
 )
+@example({}, True)
+@example({"other": np.zeros(2)}, True)
 def test_any_pattern_npz_reads_or_is_refused(arrays, good_core):
+    valid = good_core and set(arrays) <= {"other"}
     if good_core:  # a plausible core so the readers get past the first key
         arrays.setdefault("xy", np.array([[0.5, 0.5], [1.0, 1.0], [1.5, 0.5]]))
         arrays.setdefault("diameter", np.array(0.046))
@@ -340,9 +410,9 @@ def test_any_pattern_npz_reads_or_is_refused(arrays, good_core):
             buf = io.BytesIO()
             np.lib.format.write_array(buf, np.asarray(arr), allow_pickle=False)
             zf.writestr(f"{name}.npy", buf.getvalue())
-    p = outcome(read_any, path)
+    p = outcome(read_any, path, valid=valid)
     if p is not None:
-        outcome(qa, p)
+        outcome(qa, p, valid=valid)
 
 
 @pytest.fixture(scope="module")
@@ -364,6 +434,9 @@ def masks(tiny_pattern):
     st.lists(st.tuples(st.integers(0, 10**7), st.integers(0, 255)), max_size=4),
     st.one_of(st.none(), st.integers(0, 10**7)),
 )
+@example(fmt="gds", flips=[], cut=None)
+@example(fmt="oas", flips=[], cut=None)
+@example(fmt="dxf", flips=[], cut=None)
 def test_any_damaged_mask_reads_or_is_refused(masks, fmt, flips, cut):
     data = bytearray(masks[fmt])
     for pos, val in flips:
@@ -372,4 +445,7 @@ def test_any_damaged_mask_reads_or_is_refused(masks, fmt, flips, cut):
         data = data[: cut % (len(data) + 1)]
     path = WORK / f"m.{fmt}"
     path.write_bytes(bytes(data))
-    outcome(read_any, path)
+    intact = bytes(data) == masks[fmt]
+    p = outcome(read_any, path, valid=intact)
+    if intact:
+        assert p.n == 869

@@ -126,10 +126,16 @@ _WKT_KINDS = (
 
 
 def _parse(fn, path: Path, kind: str):
-    """The geometry ``fn`` reads, in x-y (a 3-D outline's z is dropped: panels are flat)."""
+    """The geometry ``fn`` reads, in x-y (a 3-D outline's z is dropped: panels are flat);
+    NaN or infinite coordinates are refused here, before GEOS sees them."""
     try:
         geom = fn()
-        return None if geom is None else shapely.force_2d(geom)
+        if geom is None:
+            return None
+        geom = shapely.force_2d(geom)
+        if not np.isfinite(shapely.get_coordinates(geom)).all():
+            raise GeometryError(f"{path}: NaN or infinite coordinate in the {kind} outline")
+        return geom
     except UnicodeDecodeError:
         raise GeometryError(f"{path}: not UTF-8 text") from None
     except OSError as e:

@@ -484,6 +484,18 @@ def _nearest(
 PAIR_BYTES = 96
 
 
+def _histogram(values: np.ndarray, bins: int = 100) -> tuple[np.ndarray, np.ndarray]:
+    """``np.histogram`` of ``values`` over bins that always exist: numpy refuses 100 bins
+    over a range too narrow for its floats (two dots 3 m apart, nearest-neighbour
+    distances equal to 1 part in 10¹⁵), so the range is widened to at least a part in
+    10⁹ of its magnitude."""
+    lo, hi = float(values.min()), float(values.max())
+    width = max(hi - lo, 1e-9 * max(abs(lo), abs(hi), 1.0))
+    edges = np.linspace(lo, lo + width, bins + 1)
+    counts, _ = np.histogram(np.clip(values, lo, edges[-1]), bins=edges)
+    return counts, edges
+
+
 def _check_pair_count(src, k: int, tree: cKDTree, reach: float) -> None:
     """Count the pairs within ``reach`` before listing them (counting takes no memory):
     a file of duplicated or piled-up dots has pairs quadratic in its dots (20,000
@@ -587,7 +599,7 @@ def _finish(
     ok = n > 1
     m["nn_min_mm"] = float(nn.min()) if ok else None
     m["nn_percentiles_mm"] = _percentiles(nn) if ok else {}
-    arrays["nn_hist"] = np.histogram(nn * 1e3, bins=100) if ok and np.isfinite(nn).all() else None
+    arrays["nn_hist"] = _histogram(nn * 1e3) if ok and np.isfinite(nn).all() else None
     if src.outline is not None:
         m["outside_outline_or_in_holes"] = f.outside
         m["edge_margin_mm"] = src.outline.edge_margin
