@@ -101,6 +101,7 @@ def generate(
     progress: Progress | None = None,
     keep_stages: bool = False,
     formulation: Formulation | None = None,
+    stage: Callable[[str], None] | None = None,
 ) -> Pattern:
     """Generate the dot pattern of ``job``.
 
@@ -111,6 +112,8 @@ def generate(
         keep_stages: also put ``initial_xy`` and ``relaxed_xy`` (``[n, 2]``, generation
             order, before the guarantee pass) in ``pattern.stats``, for comparisons.
         formulation: overrides the job's (benchmarks try variants this way).
+        stage: told the name of each stage as it starts (``"throwing darts"``,
+            ``"relaxing"``, ``"guarantee pass"``), for the user's display.
 
     Returns:
         The pattern, dots in generation order, positions rounded to 1 nm.
@@ -126,7 +129,9 @@ def generate(
     check_memory(n, opt.lbfgs_memory, where)
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
+    stage = stage or (lambda name: None)
 
+    stage("throwing darts")
     weights = job.dart_weights  # None for one size: darts in proportion to the fill
     if job.domain.rectangle:
         xy_init = initial_dots(job.density, n, opt.seed, weights)
@@ -146,6 +151,7 @@ def generate(
     timings["initial_s"] = time.perf_counter() - t0
 
     t1 = time.perf_counter()
+    stage("relaxing")
     box = job.box
     r0 = 0.5 * job.diameter
     if opt.method == "md":
@@ -177,6 +183,7 @@ def generate(
     timings["relax_s"] = time.perf_counter() - t1
 
     t2 = time.perf_counter()
+    stage("guarantee pass")
     radius, dmin = r0, job.min_distance
     if sized is not None:  # per dot: own radius, own diameter + gap
         if job.sizes.rule != "grid":  # sizes fitted to the coverage where the dots stand

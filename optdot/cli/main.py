@@ -242,7 +242,7 @@ def run_job(job, quiet: bool):
             raise KeyboardInterrupt
 
     try:
-        pattern = generate(job, progress=progress)
+        pattern = generate(job, progress=progress, stage=bar.stage)
     finally:
         bar.close()
     return pattern

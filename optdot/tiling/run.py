@@ -175,10 +175,11 @@ def run_tiles(
         seams.clear(),
         merged.clear(),
     )  # the graph holds what it still needs
-    n_done = 0
+    n_done = n_relaxed = 0
     for h in executor.finished(watched):
         kind = kind_of[id(h)]
         done += _WEIGHTS[kind] + (_WEIGHTS["seams"] if kind == "relax" else 0.0)
+        n_relaxed += kind == "relax"
         if kind == "legal":
             t = tile_of[id(h)]
             xy = executor.result(h)
@@ -189,7 +190,11 @@ def run_tiles(
             elapsed = time.perf_counter() - t0
             frac = min(done / total, 1.0)
             eta = elapsed * (1 - frac) / frac if frac > 0 else float("nan")
-            progress(frac, f"tiles {n_done}/{len(tiles)} done, ETA {eta:.0f} s")
+            progress(
+                frac,
+                f"tiles: {n_relaxed}/{len(tiles)} relaxed, {n_done}/{len(tiles)} finished, "
+                f"ETA {eta:.0f} s",
+            )
     return TiledRun(plan, counts, time.perf_counter() - t0)
 
 
