@@ -36,7 +36,9 @@ _MARK_X, _MARK_Y = 123456.654321, 654321.123456  # template circle, found by its
 _MARK_R = 0.123456  # its radius when the sizes vary (replaced per dot)
 
 
-def _template(pattern: Pattern, version: str) -> tuple[str, str, str, int]:
+def _template(
+    pattern: Pattern, version: str, provenance: tuple[str, ...] = ()
+) -> tuple[str, str, str, int]:
     """(head, circle format, tail, first free handle) of a document for ``pattern``.
 
     The circle format takes ``(handle, x, y)`` (R12: ``(x, y)``), plus the radius last
@@ -47,6 +49,9 @@ def _template(pattern: Pattern, version: str) -> tuple[str, str, str, int]:
     if version != "R12":  # R12 has no $INSUNITS: drawing units are mm by convention
         doc.header["$INSUNITS"] = 4  # millimetres
         doc.header["$MEASUREMENT"] = 1  # metric
+        for line in provenance:  # what made this drawing: custom drawing properties
+            key, value = line.split(": ", 1)
+            doc.header.custom_vars.append(key, value)
     doc.layers.add("DOTS", color=7)
     doc.layers.add("OUTLINE", color=1)
     msp = doc.modelspace()
@@ -129,7 +134,7 @@ def _find_float(lines: list[str], value: float) -> int:
 def write_dxf(pattern: Pattern | Dataset, path: str | Path, opts: ExportOptions) -> None:
     """Write the DXF atomically (R2010 by default, ``opts.dxf_version`` otherwise); a
     dataset is streamed part by part (memory: one part)."""
-    head, fmt, tail, seed = _template(pattern, opts.dxf_version)
+    head, fmt, tail, seed = _template(pattern, opts.dxf_version, opts.provenance)
     has_handle = "%X" in fmt
     varying = pattern.uniform_diameter is None
     n = pattern.n

@@ -59,15 +59,24 @@ def _check_extent(box, xy: np.ndarray | None = None, diameter=None) -> None:
         )
 
 
-def _outline_polygons(rings: list[np.ndarray], opts: ExportOptions) -> list[gdstk.Polygon]:
+def _outline_polygons(
+    rings: list[np.ndarray], opts: ExportOptions, oasis: bool = False
+) -> list[gdstk.Polygon]:
     """The panel as filled polygon(s); GDSII has no holes, so gdstk cuts each hole open
     with a zero-width keyhole, which KLayout and mask tools read as a hole."""
     shells = [gdstk.Polygon(r * 1e3) for r in rings if _ccw(r)]
     holes = [gdstk.Polygon(r * 1e3) for r in rings if not _ccw(r)]
     lay = {"layer": opts.outline_layer, "datatype": opts.outline_datatype}
     if holes:
-        return gdstk.boolean(shells, holes, "not", precision=1e-3, **lay)
-    return [gdstk.Polygon(p.points, **lay) for p in shells]
+        polys = gdstk.boolean(shells, holes, "not", precision=1e-3, **lay)
+    else:
+        polys = [gdstk.Polygon(p.points, **lay) for p in shells]
+    # what made this mask: GDSII holds at most 128 bytes of properties per element, so
+    # only the first line (version, seed and the digest of the full record); OASIS all
+    lines = opts.provenance if oasis else opts.provenance[:1]
+    for i, line in enumerate(lines):
+        polys[0].set_gds_property(i + 1, line)
+    return polys
 
 
 def _placed(dot: gdstk.Cell | str, xy_um: np.ndarray) -> gdstk.Reference:
@@ -85,7 +94,7 @@ def build_library(pattern: Pattern, opts: ExportOptions, oasis: bool = False) ->
     lib = gdstk.Library("OPTDOT", unit=1e-6, precision=1e-9)
     groups = _size_groups(pattern, opts)
     top = gdstk.Cell(opts.top_cell)
-    top.add(*_outline_polygons(pattern.outline_rings(), opts))
+    top.add(*_outline_polygons(pattern.outline_rings(), opts, oasis))
     for dot, sel in groups:
         xy = pattern.xy[sel] * 1e3
         if oasis and len(xy) > 1:
@@ -185,9 +194,11 @@ def _dot_cells(ds: Dataset, sizes: dict[int, str], opts: ExportOptions) -> list[
     ]
 
 
-def _tiled_top(ds: Dataset, tiles: list[str], opts: ExportOptions) -> gdstk.Cell:
+def _tiled_top(
+    ds: Dataset, tiles: list[str], opts: ExportOptions, oasis: bool = False
+) -> gdstk.Cell:
     top = gdstk.Cell(opts.top_cell)
-    top.add(*_outline_polygons(ds.outline_rings(), opts))
+    top.add(*_outline_polygons(ds.outline_rings(), opts, oasis))
     for name in tiles:
         top.add(gdstk.Reference(name))
     return top
@@ -246,7 +257,7 @@ def write_oas_tiles(ds: Dataset, path: str | Path, opts: ExportOptions) -> None:
     for cell, _ in _tile_cells(ds, opts, sizes):
         lib.add(cell)
         tiles.append(cell.name)
-    lib.add(*_dot_cells(ds, sizes, opts), _tiled_top(ds, tiles, opts))
+    lib.add(*_dot_cells(ds, sizes, opts), _tiled_top(ds, tiles, opts, oasis=True))
     _write_oas_lib(lib, path, opts)
 
 

@@ -23,6 +23,9 @@ class ExportOptions:
         dxf_version: DXF release (R2010 default; R12 for older CAM).
         speos_reference_mm: the diameter a Speos texture element stands for, mm (scale
             1); None: the pattern's nominal diameter.
+        provenance: ``"key: value"`` lines a mask carries where its format has a place
+            for them (GDSII/OASIS: properties 1, 2, ... of the outline's first polygon;
+            DXF R2000+: custom header properties), each at most 126 bytes.
     """
 
     tolerance_um: float = 0.01
@@ -35,6 +38,7 @@ class ExportOptions:
     dot_cell: str = "DOT"
     dxf_version: str = "R2010"
     speos_reference_mm: float | None = None
+    provenance: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if not 1e-4 <= self.tolerance_um <= 10:
@@ -57,5 +61,8 @@ class ExportOptions:
         ref = self.speos_reference_mm
         if ref is not None and not (0 < ref < float("inf")):
             raise ExportError(f"--speos-reference-diameter {ref} must be > 0 mm")
+        for line in self.provenance:
+            if ": " not in line or len(line.encode()) > 126:
+                raise ExportError(f"provenance line {line[:40]!r}...: 'key: value', 126 bytes")
         if self.dxf_version not in DXF_VERSIONS:
             raise ExportError(f"--dxf-version {self.dxf_version!r}: use one of {DXF_VERSIONS}")

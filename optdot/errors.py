@@ -17,6 +17,21 @@ def one_line(e: BaseException, with_type: bool = False) -> str:
     return f"{type(e).__name__}: {text}" if with_type else text
 
 
+#: Longest message printed: a value echoed from a hostile file is cut in the middle.
+MAX_MESSAGE = 600
+
+
+def shorten(text: str, limit: int = MAX_MESSAGE) -> str:
+    """``text`` as one line (whitespace runs made one space) of at most ``limit``
+    characters, its middle replaced by `` ... `` when longer (the file name at the start
+    and the reason at the end survive)."""
+    text = " ".join(text.split())
+    if len(text) <= limit:
+        return text
+    keep = (limit - 5) // 2
+    return f"{text[:keep]} ... {text[-keep:]}"
+
+
 class OptdotError(Exception):
     """Base class of every error optdot raises on purpose."""
 

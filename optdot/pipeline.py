@@ -30,7 +30,7 @@ from .io.atomic import check_outputs, transaction
 from .io.dataset import manifest_of, write_dataset
 from .pattern import Pattern
 from .quality.gate import QAResult, run_qa, run_qa_dataset
-from .quality.provenance import provenance
+from .quality.provenance import mask_lines, provenance
 from .relax.circles import hex_radius
 from .relax.formulation import Formulation
 from .relax.legalize import check_guarantee, legalize
@@ -604,6 +604,9 @@ def export(
             with transaction():
                 write_reports(result, reports, title)
         raise QAGateError(result)
+    from .exporters import ExportOptions
+
+    options = replace(options or ExportOptions(), provenance=mask_lines(result.provenance))
     done: list[tuple[str, Path, str]] = []
     with transaction():  # all outputs replaced together, or none
         for fmt, path in outputs.items():

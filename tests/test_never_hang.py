@@ -321,3 +321,16 @@ def test_a_histogram_over_a_range_too_narrow_for_numpy_still_has_its_bins():
     assert counts.sum() == 3 and len(edges) == 101 and np.all(np.diff(edges) > 0)
     counts, edges = _histogram(np.array([46.0, 60.0, 50.0]))
     assert counts.sum() == 3 and edges[0] == 46.0 and edges[-1] == 60.0
+
+
+def test_a_huge_value_is_not_echoed_whole(tmp_path):
+    import shutil
+
+    shutil.copy(SAMPLES / "tiny" / "density.csv", tmp_path / "density.csv")
+    big = "w" * 500_000
+    (tmp_path / "j.toml").write_text(
+        f'[domain]\nwidth = "{big}"\nheight = 2.0\n[density]\ngrid = "density.csv"\n'
+        "[dots]\ndiameter = 0.046\n"
+    )
+    err = one_error(["generate", tmp_path / "j.toml", "-o", tmp_path / "o.csv"], 2, "width")
+    assert len(err) < 700 and " ... " in err

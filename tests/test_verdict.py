@@ -177,3 +177,30 @@ def test_check_tells_the_cost_and_refuses_what_generate_refuses(tmp_path):
     _, err_check = cli("check", tmp_path / "tiny" / "gap.toml")[:2]
     _, err_run = cli("generate", tmp_path / "tiny" / "gap.toml", "-o", tmp_path / "q.csv")[:2]
     assert err_check == err_run and "effective fill" in err_check[0]
+
+
+def test_masks_carry_the_digest_of_their_sign_off_sheet(led, tmp_path):
+    import ezdxf
+    import klayout.db as kdb
+
+    outs = {f: tmp_path / f"m.{f}" for f in ("gds", "oas", "dxf")}
+    args = ["export", led / "p.csv", "--job", led / "job.toml", "--json", tmp_path / "r.json"]
+    for f, p in outs.items():
+        args += [f"--{f}", p]
+    assert cli(*args)[0] == 0
+    first = {f: p.read_bytes() for f, p in outs.items()}
+    assert cli(*args)[0] == 0  # no date in a mask: the same job and seed, the same bytes
+    assert all(p.read_bytes() == first[f] for f, p in outs.items())
+    prov = json.loads((tmp_path / "r.json").read_text())["provenance"]
+    head = f"provenance: optdot {prov['optdot']} seed {prov['seed']} sha256:{prov['mask_digest']}"
+    for f in ("gds", "oas"):
+        ly = kdb.Layout()
+        ly.read(str(outs[f]))
+        shapes = ly.top_cell().shapes(ly.layer(2, 0))
+        props = [ly.properties(s.prop_id) for s in shapes.each() if s.prop_id]
+        assert props and props[0][0] == [1, head], (f, props)
+        if f == "oas":  # OASIS has room for the whole record
+            assert any("density.csv sha256:" in v for _, v in props[0])
+    custom = dict(ezdxf.readfile(outs["dxf"]).header.custom_vars)
+    assert custom["provenance"] == head.removeprefix("provenance: ")
+    assert custom["job"].startswith("job.toml sha256:" + prov["job"]["sha256"][:8])

@@ -23,7 +23,7 @@ from pathlib import Path
 import click
 
 from ..config.viewing import VIEW_PRESETS
-from ..errors import OptdotError, QAGateError, one_line
+from ..errors import OptdotError, QAGateError, one_line, shorten
 from ..io.atomic import check_outputs
 
 #: Exit code of an unexpected internal error (sysexits' EX_SOFTWARE).
@@ -47,7 +47,7 @@ def _user_errors(fn):
             click.echo(f"optdot: {one_line(e)}", err=True)
             sys.exit(e.exit_code)
         except OptdotError as e:
-            click.echo(f"optdot: error: {' '.join(str(e).split())}", err=True)
+            click.echo(f"optdot: error: {shorten(str(e))}", err=True)
             sys.exit(e.exit_code)
         except KeyboardInterrupt:
             click.echo("optdot: interrupted", err=True)
@@ -106,7 +106,7 @@ class _Command(click.Group):
             click.echo(e.ctx.get_help() if e.ctx else str(e), err=True)
             sys.exit(e.exit_code)
         except click.ClickException as e:
-            click.echo(f"optdot: error: {_usage_line(e)}", err=True)
+            click.echo(f"optdot: error: {shorten(_usage_line(e))}", err=True)
             sys.exit(e.exit_code)
         except (click.Abort, KeyboardInterrupt):
             click.echo("optdot: interrupted", err=True)

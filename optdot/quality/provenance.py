@@ -53,6 +53,36 @@ def now_utc() -> str:
     return t.replace(microsecond=0).isoformat().replace("+00:00", "Z")
 
 
+def mask_lines(prov: dict[str, Any]) -> tuple[str, ...]:
+    """The provenance a mask carries (``"key: value"``, each under 126 bytes, GDSII's
+    property limit). The first line, ``provenance: optdot 0.2.0 seed 1 sha256:<digest>``,
+    fits where only one does (GDSII: 128 bytes per element); the digest is the SHA-256 of
+    the lines after it, which name the job, its inputs and the judged pattern by file
+    name and SHA-256, and it is in the QA report too (``provenance.mask_digest``). No date
+    and no directories: the same job and seed give the same mask bytes wherever and
+    whenever they run."""
+    lines = [f"optdot: {prov.get('optdot')}"]
+    if prov.get("seed") is not None:
+        lines.append(f"seed: {prov['seed']}")
+
+    def named(key: str, e) -> None:
+        if e and e.get("sha256"):
+            lines.append(f"{key}: {Path(e['path']).name[:40]} sha256:{e['sha256']}")
+
+    named("job", prov.get("job"))
+    for e in prov.get("inputs", []):
+        named("input", e)
+    named("pattern", prov.get("pattern"))
+    digest = hashlib.sha256("\n".join(lines).encode()).hexdigest()
+    head = f"provenance: optdot {prov.get('optdot')} seed {prov.get('seed')} sha256:{digest}"
+    return (head[:126], *lines)
+
+
+def mask_digest(prov: dict[str, Any]) -> str:
+    """The digest a mask's first provenance line carries (see :func:`mask_lines`)."""
+    return mask_lines(prov)[0].rsplit("sha256:", 1)[1]
+
+
 def provenance(job, pattern_path: str | Path | None, seed: int | None) -> dict[str, Any]:
     """The traceability block of a QA result.
 
@@ -71,7 +101,7 @@ def provenance(job, pattern_path: str | Path | None, seed: int | None) -> dict[s
 
     source = getattr(job, "source", None) if job is not None else None
     inputs = [entry(p) for p in (job.inputs if job is not None else ()) if Path(p) != source]
-    return {
+    out = {
         "optdot": version(),
         "date_utc": now_utc(),
         "seed": seed,
@@ -79,3 +109,5 @@ def provenance(job, pattern_path: str | Path | None, seed: int | None) -> dict[s
         "job": entry(source) if source else None,
         "inputs": inputs,
     }
+    out["mask_digest"] = mask_digest(out)
+    return out
