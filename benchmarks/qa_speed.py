@@ -46,7 +46,7 @@ def main() -> None:
         write_html(r, Path(tmp) / "r.html")
         t_rep = time.perf_counter() - t
     print("dots | qa seconds | report seconds | verdict | peak RSS MB")
-    verdict = "PASS" if r.passed else "FAIL"
+    verdict = r.verdict
     print(f"{p.n} | {t_qa:.1f} | {t_rep:.1f} | {verdict} | {peak_rss_mb():.0f}")
 
 
