@@ -406,7 +406,8 @@ def _polygon_from_loops(
         pts = rough_points(segs, tolerance)
         if len(pts) < 4:
             raise GeometryError(
-                f"{path}: a loop at ({pts[0, 0]:.4g}, {pts[0, 1]:.4g}) mm has fewer than 3 vertices"
+                f"{path}: a loop at ({pts[0, 0]:.4g}, {pts[0, 1]:.4g}) mm has fewer than 3 "
+                "distinct vertices (repeated points are merged): it encloses no area"
             )
         rough.append((Polygon(pts), segs))
     rough.sort(key=lambda item: -abs(item[0].area))
