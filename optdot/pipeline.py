@@ -560,6 +560,7 @@ def export(
     stream=None,
     reports: Mapping[str, str | Path] | None = None,
     written: Callable[[str, Path, str], None] | None = None,
+    stage: Callable[[str], None] | None = None,
 ) -> QAResult:
     """Run the QA gate, then write ``pattern`` in each format of ``outputs``.
 
@@ -577,6 +578,7 @@ def export(
             written with the outputs, also when the gate fails (then alone).
         written: told ``(format, path, what the file holds)`` for each output once all
             were put in place.
+        stage: told ``"QA gate"`` and ``"writing"`` as they start.
 
     Returns:
         The gate's result (check ``passed``: with ``force`` it may have failed).
@@ -598,6 +600,8 @@ def export(
     inputs += (Path(source),) if source else ()
     check_outputs({**outputs, **reports}, inputs)
     title = f"optdot QA: {Path(source).name if source else 'pattern'}"
+    stage = stage or (lambda name: None)
+    stage("QA gate")
     result = qa(pattern, job, dataset=stream)
     if not result.passed and not force:
         if reports:
@@ -608,6 +612,7 @@ def export(
 
     options = replace(options or ExportOptions(), provenance=mask_lines(result.provenance))
     done: list[tuple[str, Path, str]] = []
+    stage("writing")
     with transaction():  # all outputs replaced together, or none
         for fmt, path in outputs.items():
             if stream is not None and fmt in STREAMED:

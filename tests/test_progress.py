@@ -65,3 +65,11 @@ def test_nothing_is_drawn_when_stderr_is_not_a_terminal():
     bar(5, 1.0)
     bar.close()
     assert out.getvalue() == ""
+
+
+def test_export_names_its_stages(tiny_pattern, tiny_job, tmp_path):
+    from optdot.pipeline import export
+
+    seen: list[str] = []
+    export(tiny_pattern, {"gds": tmp_path / "m.gds"}, tiny_job, stage=seen.append)
+    assert seen == ["QA gate", "writing"]

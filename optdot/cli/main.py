@@ -597,16 +597,23 @@ def export(
     else:
         pattern = _read_with_job(source, job)
     lines: list[str] = []
-    result = export_pattern(
-        pattern,
-        outputs,
-        job,
-        opts,
-        force=force,
-        stream=stream,
-        reports=reports,
-        written=lambda fmt, path, what: lines.append(f"{path}: {what}"),
-    )
+    from .progress import ProgressBar
+
+    bar = ProgressBar(1, label="optdot", enabled=False if quiet else None)
+    try:
+        result = export_pattern(
+            pattern,
+            outputs,
+            job,
+            opts,
+            force=force,
+            stream=stream,
+            reports=reports,
+            written=lambda fmt, path, what: lines.append(f"{path}: {what}"),
+            stage=bar.stage,
+        )
+    finally:
+        bar.close()
     if not result.passed:
         click.echo(
             f"optdot: warning: QA gate failed ({result.failures()}); writing anyway (--force)",
