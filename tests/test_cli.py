@@ -62,21 +62,14 @@ def test_klayout_reads_masks(exported, fmt):
     ly.read(str(exported[fmt]))
     assert ly.dbu == pytest.approx(0.001)  # 1 nm database unit in µm
     top = ly.top_cell()
-    centres = []
-    for inst in top.each_inst():
-        for arr in (
-            inst.cell_inst.each_trans() if inst.is_regular_array() else [inst.cell_inst.trans]
-        ):
-            centres.append([arr.disp.x * 1e-6, arr.disp.y * 1e-6])
-    centres = np.array(centres)
-    if len(centres) != ref.n:  # OASIS repetitions may come as one instance array
-        it = top.begin_shapes_rec(ly.layer(1, 0))
-        pts = []
-        while not it.at_end():
-            b = it.shape().bbox().transformed(it.trans())
-            pts.append([b.center().x * 1e-6, b.center().y * 1e-6])
-            it.next()
-        centres = np.array(pts)
+    # every dot as KLayout places it, through the hierarchy and any repetition
+    it = top.begin_shapes_rec(ly.layer(1, 0))
+    pts = []
+    while not it.at_end():
+        b = it.shape().bbox().transformed(it.trans())
+        pts.append([b.center().x * 1e-6, b.center().y * 1e-6])
+        it.next()
+    centres = np.array(pts)
     assert len(centres) == ref.n
     assert np.abs(_sorted(centres) - _sorted(ref.xy)).max() <= 1e-6 + 1e-12
     dot = ly.cell("DOT")
@@ -181,12 +174,17 @@ def test_qa_finds_planted_defects(exported, tmp_path):
 
 
 def test_qa_pair_counts_match_brute_force():
-    from optdot.quality.gate import close_pairs
-    from optdot.spatial.cellgrid import pairs_brute_force
+    """QA's own pair counts (the cKDTree path of quality/measure.py) against all pairs."""
+    from optdot.config.job import QAParams
+    from optdot.pattern import Pattern
+    from optdot.quality.gate import run_qa
 
     xy = np.random.default_rng(4).random((700, 2)) * 0.6
-    for d in (0.046, 0.060):
-        assert np.array_equal(close_pairs(xy, d), pairs_brute_force(xy, d / 2))
+    d = np.hypot(*(xy[:, None, :] - xy[None, :, :]).T)[np.triu_indices(len(xy), 1)]
+    p = Pattern(xy=xy, diameter=0.046, box=(0.0, 0.0, 0.6, 0.6))
+    m = run_qa(p, None, QAParams(close_distance=0.060), 0.046).metrics
+    assert m["pairs_below_collision"] == int((d < 0.046).sum()) > 0
+    assert m["pairs_below_close"] == int((d < 0.060).sum())
 
 
 # ----------------------------------------------------------------- bad input
