@@ -64,6 +64,21 @@ def cli(*args):
     return r.exit_code, r.stderr.strip().splitlines(), r.stdout
 
 
+def optdot(*args, check: bool = False):
+    """``python -m optdot *args`` in a child process, as a user runs it (signals, exit
+    codes and stderr of the real process): the ``CompletedProcess``; with ``check`` its
+    exit code must be 0."""
+    import subprocess
+    import sys
+
+    r = subprocess.run(
+        [sys.executable, "-m", "optdot", *map(str, args)], capture_output=True, text=True
+    )
+    if check:
+        assert r.returncode == 0, r.stderr
+    return r
+
+
 def one_error(args, code: int, *words: str) -> str:
     """Run ``optdot *args``: it must end with exit ``code`` and one line on stderr,
     ``optdot: error: ...`` holding each of ``words``; that line is returned."""

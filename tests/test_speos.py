@@ -3,8 +3,6 @@ Speos user guide's description (count line, then ``x y z ix iy iz jx jy jz kx ky
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from dataclasses import replace
 
 import numpy as np
@@ -13,7 +11,7 @@ import pytest
 from optdot.io.dataset import save_dataset
 from optdot.io.patterns import save_pattern
 
-from .conftest import SAMPLES
+from .conftest import SAMPLES, optdot
 
 
 def parse(path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -26,10 +24,7 @@ def parse(path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return a[:, :3], a[:, 3:9], a[:, 9:]
 
 
-def run(*args) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "optdot", *map(str, args)], capture_output=True, text=True
-    )
+run = optdot  # the command in a child process (tests/conftest.py)
 
 
 def test_fixed_size_dots_map_to_their_centres_at_scale_one(tmp_path, tiny_pattern):

@@ -26,6 +26,7 @@ from optdot.tiling.run import InProcess
 from optdot.tiling.tasks import initial_tile
 
 from .conftest import SAMPLES
+from .conftest import optdot as _optdot
 
 LED = SAMPLES / "led" / "job.toml"
 #: The led sample in 8 tiles of 10 mm.
@@ -33,12 +34,8 @@ TILED = ("--tiles", "on", "--tile-size", "10")
 
 
 def optdot(*args, check=True) -> subprocess.CompletedProcess:
-    r = subprocess.run(
-        [sys.executable, "-m", "optdot", *map(str, args)], capture_output=True, text=True
-    )
-    if check:
-        assert r.returncode == 0, r.stderr
-    return r
+    """The command in a child process (tests/conftest.py), checked by default."""
+    return _optdot(*args, check=check)
 
 
 @pytest.mark.parametrize("sample,side", [("led", 10.0), ("led", 7.0), ("outline", 8.0)])

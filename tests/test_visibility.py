@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 from dataclasses import replace
 
 import numpy as np
@@ -25,7 +23,7 @@ from optdot.quality.csf import (
 )
 from optdot.quality.visibility import FIELD_DEG, LuminanceGrid, visibility
 
-from .conftest import SAMPLES
+from .conftest import SAMPLES, optdot
 
 LED = SAMPLES / "led" / "job.toml"
 CENTRE = np.array([18.0, 7.5])  # middle of the 36 x 15 mm LED sample, mm
@@ -226,11 +224,7 @@ def test_cli_view_options_and_the_jnd_gate(tiny_pattern, tmp_path):
     job = SAMPLES / "tiny" / "job.toml"
 
     def run(*args):
-        return subprocess.run(
-            [sys.executable, "-m", "optdot", "qa", str(src), "--job", str(job), *args],
-            capture_output=True,
-            text=True,
-        )
+        return optdot("qa", src, "--job", job, *args)
 
     ok = run("--view", "tv", "--psf", "0.3", "--json", str(tmp_path / "r.json"))
     assert ok.returncode == 0, ok.stderr
