@@ -40,6 +40,7 @@ from .relax.resize import fit_sizes
 from .runtime.cluster import connect, embedded_workers, scheduler_address
 from .runtime.cost import Cost, estimate_cost
 from .runtime.memory import BASE_BYTES, available_bytes, check_memory, estimate_bytes
+from .runtime.stop import check_interrupt
 from .sampling.initial import initial_dots, initial_dots_in
 from .tiling.plan import TilePlan, plan_tiles
 from .tiling.run import InProcess, OnDask, TiledRun, TileProgress, run_tiles, warm_up
@@ -428,7 +429,11 @@ def _on_cluster(job, plan, scheduler, workers, worker_memory, announce) -> Itera
                 f"{kind}: {cluster.workers} workers, dashboard {cluster.dashboard or 'n/a'}; "
                 f"{plan.count} tiles ({plan.nx} x {plan.ny}) of ~{int(plan.quotas.mean()):,} dots"
             )
-        cluster.client.submit(_warm, pure=False).result()  # compile once, not per worker
+        warm = cluster.client.submit(_warm, pure=False)  # compile once, not per worker
+        while not warm.done():  # a first run compiles for a minute: stay stoppable
+            check_interrupt()
+            time.sleep(0.1)
+        warm.result()
         yield OnDask(cluster.client)
 
 

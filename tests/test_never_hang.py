@@ -87,7 +87,17 @@ def test_a_silent_scheduler_is_given_up_on_in_bounded_time():
 def test_the_embedded_cluster_is_private_loopback_tls_and_cleans_its_scratch():
     from distributed import Client
 
+    before = {k: os.environ.get(k) for k in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS")}
     with connect(workers=1) as cluster:
+        # the workers run numba on one thread, the command's own environment is untouched
+        # (Dask's pre-spawn-environ would set it, and numba here then refuses to compile)
+        def numba_threads():
+            import numba
+
+            return numba.config.NUMBA_NUM_THREADS
+
+        assert set(cluster.client.run(numba_threads).values()) == {1}
+        assert {k: os.environ.get(k) for k in before} == before
         addr = cluster.client.scheduler.address
         assert addr.startswith("tls://127.0.0.1:"), addr
         assert "127.0.0.1" in cluster.dashboard

@@ -3,9 +3,13 @@
 * **Embedded** (default): a ``distributed.LocalCluster`` of single-threaded worker
   processes, one per core (at most one per tile), each with an even share of the memory
   available now. Workers get ``NUMBA_NUM_THREADS=1`` (and the BLAS/OpenMP equivalents)
-  through Dask's ``distributed.nanny.pre-spawn-environ``, so numba's threads do not fight
-  Dask's processes, and ``NUMBA_CACHE_DIR`` in the user's cache directory, so compiled
-  kernels are cached without writing into site-packages.
+  through Dask's ``distributed.nanny.environ``, set in each worker process as it starts
+  (before numba is imported there), so numba's threads do not fight Dask's processes, and
+  ``NUMBA_CACHE_DIR`` in the user's cache directory, so compiled kernels are cached
+  without writing into site-packages. Not ``pre-spawn-environ``: Dask applies that to the
+  *command's own* environment and never restores it, and numba in the command then
+  refuses to compile anything ("Cannot set NUMBA_NUM_THREADS to a different value once
+  the threads have been launched": exit 70 on a cold cache after a tiled run).
 * **Existing** (``--scheduler tcp://HOST:8786`` or ``DASK_SCHEDULER_ADDRESS``): a
   ``distributed.Client`` to it; its workers must have optdot installed. Every task sets
   numba to one thread per Dask thread itself (:func:`single_threaded`).
@@ -179,6 +183,17 @@ def embedded_workers(workers: int | None, memory_per_worker: int | None) -> tupl
     return n, mem
 
 
+def _restore_environment(saved: dict[str, str]) -> None:
+    """Put this process's environment back as it was: Dask's nannies set their
+    ``pre-spawn-environ`` (OMP_NUM_THREADS=1, MALLOC_TRIM_THRESHOLD_, ...) in the spawning
+    process and leave it there."""
+    for key in set(os.environ) - set(saved):
+        del os.environ[key]
+    for key, value in saved.items():
+        if os.environ.get(key) != value:
+            os.environ[key] = value
+
+
 @contextlib.contextmanager
 def _workers_deaf_to_ctrl_c() -> Iterator[None]:
     """SIGINT ignored in this process while the workers are spawned: a new process
@@ -259,13 +274,14 @@ def connect(
     n, mem = embedded_workers(workers, memory_per_worker)
     ttl = dask.config.get("distributed.scheduler.worker-ttl")
     config = {
-        "distributed.nanny.pre-spawn-environ": worker_environment(),
+        "distributed.nanny.environ": worker_environment(),
         "distributed.worker.daemon": False,
         "distributed.scheduler.work-stealing": True,
         "distributed.scheduler.worker-ttl": WORKER_TTL if ttl == "5 minutes" else ttl,
         "distributed.worker.preload": ["optdot.runtime.worker_init"],
         "logging.distributed": "critical",
     }
+    saved_env = dict(os.environ)  # Dask's nannies write into it (pre-spawn-environ)
     scratch = tempfile.mkdtemp(prefix="optdot-dask-")  # mode 0700: ours alone
     config["temporary-directory"] = scratch  # the scheduler's scratch space too
     with dask.config.set(config):
@@ -290,10 +306,13 @@ def connect(
                 )
         except ClusterError:
             shutil.rmtree(scratch, ignore_errors=True)
+            _restore_environment(saved_env)
             raise
         except Exception as e:  # noqa: BLE001 - any failure to start is one line
             shutil.rmtree(scratch, ignore_errors=True)
+            _restore_environment(saved_env)
             raise ClusterError(f"cannot start a local Dask cluster ({one_line(e)})") from None
+        _restore_environment(saved_env)
         try:
             client = Client(cluster)
             try:
@@ -304,3 +323,4 @@ def connect(
             with contextlib.suppress(Exception):
                 cluster.close(timeout=10)
             shutil.rmtree(scratch, ignore_errors=True)
+            _restore_environment(saved_env)

@@ -21,6 +21,7 @@ import numpy as np
 from ..config.job import Job, OptimizeParams
 from ..geometry.density import DensityMap
 from ..runtime.cluster import single_threaded
+from ..runtime.stop import check_interrupt
 from .plan import TilePlan, plan_tiles
 from .tasks import (
     TileDots,
@@ -87,9 +88,17 @@ class OnDask:
         )
 
     def finished(self, handles: list[Any]):
+        """The handles as they finish; the wait wakes every 0.1 s, so a stop asked for
+        by a signal is honoured within that, not after the running tile."""
         from distributed import as_completed
 
-        yield from as_completed(handles)
+        done = as_completed(handles)
+        while not done.is_empty():
+            batch = done.next_batch(block=False)
+            if not batch:
+                check_interrupt()
+                time.sleep(0.1)
+            yield from batch
 
     def result(self, handle: Any) -> Any:
         return handle.result()
