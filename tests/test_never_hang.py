@@ -252,8 +252,11 @@ def _workers_of(proc: subprocess.Popen, timeout: float = 60) -> list[int]:
     raise AssertionError("no worker started")
 
 
-def test_ctrl_c_on_a_tiled_run_is_one_line_and_keeps_nothing(tmp_path):
-    proc = _start_tiled(tmp_path, "d.parquet")
+@pytest.mark.parametrize("cache", ["warm", "cold"])
+def test_ctrl_c_on_a_tiled_run_is_one_line_and_keeps_nothing(tmp_path, cache):
+    # cold: the workers compile the kernels first (a minute), the Ctrl-C lands in that wait
+    env = {"NUMBA_CACHE_DIR": str(tmp_path / "numba")} if cache == "cold" else None
+    proc = _start_tiled(tmp_path, "d.parquet", env)
     _workers_of(proc)
     os.killpg(proc.pid, signal.SIGINT)  # what a terminal's Ctrl-C does
     out, err = proc.communicate(timeout=60)

@@ -129,6 +129,10 @@ def scheduler_address(option: str | None) -> str | None:
 #: frozen one: stopped, swapped out, deadlocked) and gives its tasks to the others; Dask's
 #: own default is 5 minutes. ``DASK_DISTRIBUTED__SCHEDULER__WORKER_TTL`` overrides it.
 WORKER_TTL = "60s"
+#: Log level of Dask's loggers: above CRITICAL, so nothing. The scheduler runs in the
+#: command's process and logs a CRITICAL "Closed comm" traceback per pending result when a
+#: Ctrl-C closes the client; the command says what happened in one line of its own.
+SILENT = logging.CRITICAL + 1
 #: Seconds the embedded cluster may take to start its workers.
 START_TIMEOUT = 120.0
 
@@ -243,7 +247,7 @@ def connect(
     import dask
     from distributed import Client, LocalCluster
 
-    logging.getLogger("distributed").setLevel(logging.CRITICAL)
+    logging.getLogger("distributed").setLevel(SILENT)
     if address:
         with dask.config.set({"distributed.comm.timeouts.connect": f"{timeout}s"}):
             try:
@@ -279,7 +283,7 @@ def connect(
         "distributed.scheduler.work-stealing": True,
         "distributed.scheduler.worker-ttl": WORKER_TTL if ttl == "5 minutes" else ttl,
         "distributed.worker.preload": ["optdot.runtime.worker_init"],
-        "logging.distributed": "critical",
+        "logging.distributed": SILENT,
     }
     saved_env = dict(os.environ)  # Dask's nannies write into it (pre-spawn-environ)
     scratch = tempfile.mkdtemp(prefix="optdot-dask-")  # mode 0700: ours alone
@@ -299,7 +303,7 @@ def connect(
                         dashboard_address="127.0.0.1:0",
                         security=Security.temporary(),
                         local_directory=scratch,
-                        silence_logs=logging.CRITICAL,  # the command reports failures
+                        silence_logs=SILENT,  # the command reports failures itself
                     ),
                     START_TIMEOUT,
                     "the local Dask cluster (a worker that never started)",
