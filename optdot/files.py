@@ -9,6 +9,7 @@ answer (one line naming the file).
 
 from __future__ import annotations
 
+import hashlib
 import os
 import stat
 from pathlib import Path
@@ -25,6 +26,15 @@ KINDS = {
 #: Parsing text (CSV, WKT, GeoJSON, DXF) takes up to this many bytes of memory per byte
 #: of file (Python floats and lists; ezdxf's entity objects).
 TEXT_EXPANSION = 16
+
+
+def sha256_file(path: str | Path) -> str:
+    """SHA-256 of a file's bytes, read in 1 MiB blocks (hex)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
 
 
 def input_problem(path: str | Path, max_bytes: int | None = None) -> str | None:

@@ -31,7 +31,7 @@ ALLOWED = {
     "relax": {"errors", "geometry", "spatial"},
     "tiling": {"config", "errors", "geometry", "relax", "runtime", "sampling", "spatial"},
     "pattern": {"geometry", "io", "_imports"},
-    "quality": {"config", "errors", "geometry", "pattern", "io", "runtime"},
+    "quality": {"config", "errors", "files", "geometry", "pattern", "io", "runtime"},
     "exporters": {"errors", "files", "geometry", "io", "pattern", "runtime"},
     "pipeline": {
         "io",

@@ -679,9 +679,6 @@ def qa(
     from ..pipeline import qa as run_gate
     from ..quality.report import write_reports
 
-    for v, name in ((collision, "--collision"), (close, "--close")):
-        if v is not None and not v > 0:
-            raise click.BadParameter("must be > 0 mm", param_hint=name)
     if close_gap is not None and not 0 <= close_gap < 10:
         raise click.BadParameter("must be an edge gap in mm, 0 <= x < 10", param_hint="--close-gap")
     from ..exporters.options import ExportOptions

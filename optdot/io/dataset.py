@@ -27,7 +27,6 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import ctypes.util
-import hashlib
 import json
 import math
 import os
@@ -43,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ExportError, PatternFileError, one_line
+from ..files import sha256_file
 from ..runtime.stop import check_interrupt
 from .atomic import _fsync_dir, _short
 
@@ -73,14 +73,6 @@ def _table(xy: np.ndarray, diameter: np.ndarray):
     )
 
 
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
 @dataclass
 class DatasetWriter:
     """Writes the parts of one dataset into a temporary directory; :meth:`commit` puts it
@@ -109,7 +101,7 @@ class DatasetWriter:
             "file": path.name,
             "tile": list(tile),
             "count": len(xy),
-            "sha256": _sha256(path),
+            "sha256": sha256_file(path),
         }
 
 
@@ -307,7 +299,7 @@ class Dataset:
             path = self.path / part["file"]
             if not path.is_file():
                 raise PatternFileError(f"{path}: part listed in the manifest is missing")
-            if _sha256(path) != part["sha256"]:
+            if sha256_file(path) != part["sha256"]:
                 raise PatternFileError(f"{path}: checksum differs from the manifest")
 
 

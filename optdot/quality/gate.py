@@ -75,7 +75,7 @@ class QAResult:
     def failures(self) -> str:
         """The failed checks as one line: ``name: value > limit; ...``."""
         return "; ".join(
-            f"{c.name}: {_num(c.value)} > {_num(c.limit)}"
+            f"{c.name}: {number_text(c.value)} > {number_text(c.limit)}"
             for c in self.checks
             if not c.passed and not c.advisory
         )
@@ -257,6 +257,3 @@ def number_text(v) -> str:
     if isinstance(v, numbers.Real):
         return f"{float(v):.4g}"
     return str(v)
-
-
-_num = number_text

@@ -15,20 +15,18 @@ import os
 from pathlib import Path
 from typing import Any
 
+from ..files import sha256_file
+
 
 def sha256_of(path: str | Path) -> str | None:
     """SHA-256 of a file (a dataset directory: of its manifest), or None if unreadable."""
     p = Path(path)
     if p.is_dir():
         p = p / "_manifest.json"
-    h = hashlib.sha256()
     try:
-        with open(p, "rb") as fh:
-            for block in iter(lambda: fh.read(1 << 20), b""):
-                h.update(block)
+        return sha256_file(p)
     except OSError:
         return None
-    return h.hexdigest()
 
 
 def version() -> str:
