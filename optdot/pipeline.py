@@ -23,33 +23,23 @@ from typing import Any
 
 import numpy as np
 
+from . import stages
 from .config.job import Job, QAParams
-from .errors import GeometryError, GuaranteeError, JobError, QAGateError, ResourceError
+from .errors import JobError, QAGateError, ResourceError
 from .geometry.morton import spatial_order
 from .io.atomic import check_outputs, transaction
 from .io.dataset import manifest_of, write_dataset
 from .pattern import Pattern
 from .quality.gate import QAResult, run_qa, run_qa_dataset
 from .quality.provenance import mask_lines, provenance
-from .relax.circles import hex_radius
 from .relax.formulation import Formulation
-from .relax.legalize import check_guarantee, legalize
-from .relax.md import MDForce, md_relax
-from .relax.optdot import Progress, relax_staged
-from .relax.resize import fit_sizes
+from .relax.optdot import Progress
 from .runtime.cluster import connect, embedded_workers, scheduler_address
 from .runtime.cost import Cost, estimate_cost
 from .runtime.memory import BASE_BYTES, available_bytes, check_memory, estimate_bytes
 from .runtime.stop import check_interrupt
-from .sampling.initial import initial_dots, initial_dots_in
 from .tiling.plan import TilePlan, plan_tiles
 from .tiling.run import InProcess, OnDask, TiledRun, TileProgress, run_tiles, warm_up
-from .tiling.steps import formulation_for, problem_of, settings_for
-
-#: Width of the blur the dot sizes are fitted under, as a share of ``qa.smoothing``
-#: (:mod:`optdot.relax.resize`).
-FIT_SHARE = 0.5
-
 
 #: Densest fill a random non-overlapping pattern reaches in practice, counting the gap
 #: (fill x ((diameter + gap) / diameter)²): OptDot's guarantee holds at 0.78 and fails at
@@ -133,83 +123,29 @@ def generate(
     stage = stage or (lambda name: None)
 
     stage("throwing darts")
-    weights = job.dart_weights  # None for one size: darts in proportion to the fill
-    if job.domain.rectangle:
-        xy_init = initial_dots(job.density, n, opt.seed, weights)
-    else:
-        xy_init = initial_dots_in(job.density, n, opt.seed, job.domain.contains, weights)
-        if len(xy_init) < n:
-            raise GeometryError(
-                f"{where}: could only place {len(xy_init)} of {n} dots inside the outline; "
-                "the map is zero over most of it"
-            )
-    home = job.density.cell_index(xy_init)
-    rho = job.density.grid.ravel()[home]
-    diameter = job.diameters_at(home)  # one number, or [n] when sizes vary
+    xy_init = stages.throw(job, n, opt.seed, None, where)
     order = spatial_order(xy_init)
-    sized = None if np.ndim(diameter) == 0 else diameter[order]
     xy0 = np.ascontiguousarray(xy_init[order])
     timings["initial_s"] = time.perf_counter() - t0
 
     t1 = time.perf_counter()
     stage("relaxing")
-    box = job.box
-    r0 = 0.5 * job.diameter
-    if opt.method == "md":
-        law = MDForce(
-            core=job.min_distance,
-            spacing=2.0 * hex_radius(rho[order], r0),
-            decay=opt.md_decay,
-            cutoff=opt.md_cutoff,
-        )
-        md = md_relax(
-            xy0,
-            law,
-            box,
-            r0,
-            steps=opt.max_iter,
-            step=opt.md_step,
-            skin=opt.skin,
-            callback=progress,
-        )
-        relaxed = md.xy
-        info = {"iterations": md.steps, "evaluations": md.steps, "neighbor_builds": md.rebuilds}
-        info.update(md_step_mm=md.eta, message=f"ran {md.steps} MD steps")
-        history = md.history
-    else:
-        form = formulation_for(job) if formulation is None else formulation
-        relaxed, info, history = relax_staged(
-            problem_of(job), form, xy0, rho[order], settings_for(job), progress, diameters=sized
-        )
+    relaxed = stages.relax(job, xy0, progress=progress, formulation=formulation)
+    info, history = relaxed.info, relaxed.history
     timings["relax_s"] = time.perf_counter() - t1
 
     t2 = time.perf_counter()
     stage("guarantee pass")
-    radius, dmin = r0, job.min_distance
-    if sized is not None:  # per dot: own radius, own diameter + gap
-        if job.sizes.rule != "grid":  # sizes fitted to the coverage where the dots stand
-            sigma = FIT_SHARE * job.qa.smoothing
-            sized = fit_sizes(relaxed, sized, job.sizes, job.density, job.domain, sigma)
-            diameter = np.empty_like(sized)
-            diameter[order] = sized
-        radius, dmin = 0.5 * sized, sized + opt.gap
-    leg = legalize(relaxed, job.density, home[order], job.domain, radius, dmin)
-    viol = check_guarantee(leg.xy, job.density, job.domain, radius, dmin)
-    if not viol.ok:
-        closer = (
-            "closer than their radii + gap"
-            if sized is not None
-            else (f"closer than {job.min_distance * 1e3:.1f} um")
-        )
-        raise GuaranteeError(
-            f"{where}: could not meet the guarantee after {leg.sweeps} sweeps: "
-            f"{viol.collisions} pairs {closer}, "
-            f"{viol.protruding} dots protruding, {viol.in_empty} dots in zero-density cells"
-        )
+    done = stages.finish(job, relaxed.xy, xy0, where)
+    leg = done.legalize
     timings["legalize_s"] = time.perf_counter() - t2
 
-    xy = np.empty_like(leg.xy)
-    xy[order] = leg.xy
+    xy = np.empty_like(done.xy)
+    xy[order] = done.xy
+    diameter = done.diameter
+    if np.ndim(diameter):
+        diameter = np.empty_like(done.diameter)
+        diameter[order] = done.diameter
     timings["total_s"] = time.perf_counter() - t0
     meta = {
         "job": job.name,
@@ -230,10 +166,10 @@ def generate(
     stats: dict = {**timings, "history": history}
     if keep_stages:
         stats["initial_xy"] = xy_init
-        stats["relaxed_xy"] = np.empty_like(relaxed)
-        stats["relaxed_xy"][order] = relaxed
+        stats["relaxed_xy"] = np.empty_like(relaxed.xy)
+        stats["relaxed_xy"][order] = relaxed.xy
     outline = None if job.domain.rectangle else job.domain
-    return Pattern(xy=xy, diameter=diameter, box=box, meta=meta, stats=stats, outline=outline)
+    return Pattern(xy=xy, diameter=diameter, box=job.box, meta=meta, stats=stats, outline=outline)
 
 
 #: ``tiles="auto"`` tiles a job of at least this many dots even when one process would
@@ -247,13 +183,6 @@ Announce = Callable[[str], None]
 def use_tiles(job: Job, mode: str = "auto") -> bool:
     """Whether ``job`` runs tiled: ``on``, ``off``, or ``auto`` (when one process would
     not fit, or from :data:`TILE_BREAK_EVEN` dots; the MD baseline never tiles)."""
-    if job.sizes is not None:
-        if mode == "on":
-            raise JobError(
-                f"{job.name}: tiles take one dot size for now; a job with dots.diameter = "
-                "[low, high] runs in one process (--tiles off)"
-            )
-        return False
     if mode == "on":
         if job.optimize.method != "optdot":
             raise JobError(f"{job.name}: tiles need optimize.method = 'optdot' (MD is a baseline)")
@@ -449,35 +378,27 @@ def _run_tiled(job, plan, executor_cm, output, progress) -> Pattern | TiledRun:
     after the executor was closed (a cluster shut down): a signal during the shutdown
     stops the run before the commit, never after it."""
     meta = _tiled_meta(job, plan)
+    outline = None if job.domain.rectangle else job.domain
+    one = job.diameter if job.sizes is None else None  # sizes: known once written
     if output is not None:
-        outline = None if job.domain.rectangle else job.domain
         manifest = manifest_of(
-            job.name,
-            job.optimize.seed,
-            job.diameter,
-            job.diameter,
-            job.box,
-            meta,
-            outline,
-            plan.to_json(),
+            job.name, job.optimize.seed, one, one, job.box, meta, outline, plan.to_json()
         )
         with write_dataset(output, manifest) as w:
 
-            def to_part(tile, xy):
-                w.write_part(plan.index(*tile), tile, xy, job.diameter)
+            def to_part(tile, xy, diameter):
+                w.write_part(plan.index(*tile), tile, xy, diameter)
 
             with executor_cm as executor:
                 run = run_tiles(job, plan, executor, to_part, progress)
         return run
     got: dict = {}
     with executor_cm as executor:
-        run = run_tiles(job, plan, executor, got.__setitem__, progress)
-    xy = np.concatenate([got[t] for t in plan.tiles()])
-    outline = None if job.domain.rectangle else job.domain
+        run = run_tiles(job, plan, executor, lambda t, xy, d: got.__setitem__(t, (xy, d)), progress)
+    xy = np.concatenate([got[t][0] for t in plan.tiles()])
+    d = np.concatenate([np.broadcast_to(got[t][1], (len(got[t][0]),)) for t in plan.tiles()])
     stats = {"total_s": run.seconds, "history": []}
-    return Pattern(
-        xy=xy, diameter=job.diameter, box=job.box, meta=meta, stats=stats, outline=outline
-    )
+    return Pattern(xy=xy, diameter=d, box=job.box, meta=meta, stats=stats, outline=outline)
 
 
 def with_job_panel(pattern: Pattern, job: Job | None) -> Pattern:

@@ -258,13 +258,45 @@ def test_diameter_grid_out_of_range_names_the_cell(tmp_path):
         load_job(path)
 
 
-def test_tiles_refuse_varying_sizes(sized):
-    from optdot.pipeline import use_tiles
+def _mixed_pairs_too_close(xy, d, gap):
+    """Pairs whose centres are closer than their mean diameter + gap (brute force)."""
+    dist = squareform(pdist(xy))
+    limit = 0.5 * (d[:, None] + d[None, :]) + gap
+    np.fill_diagonal(dist, np.inf)
+    return int((dist < limit - 1e-9).sum() // 2)
 
-    job, _, _ = sized
-    assert not use_tiles(job, "auto")
-    with pytest.raises(JobError, match="one dot size"):
-        use_tiles(job, "on")
+
+def test_tiled_run_with_varying_sizes_calls_the_same_stages(tmp_path):
+    """Size-modulated jobs tile (they were refused): the tiles hold exactly the job's dot
+    count, no pair is closer than its mixed-pair limit (brute force), the sizes are
+    fitted (not the rule's cell sizes) within the range, and the coverage is as good as
+    one process's."""
+    from optdot.pipeline import generate_tiled, use_tiles
+    from optdot.tiling.plan import plan_tiles
+    from optdot.tiling.run import InProcess
+
+    path = write_job(
+        tmp_path,
+        np.tile(_gradient(), (1, 3)),
+        domain={"width": 9.0, "height": 2.6},
+        dots={**RANGE, "spacing": 0.150},
+        optimize={"max_iter": 60, "seed": 3},
+    )
+    job = load_job(path)
+    assert use_tiles(job, "on")
+    plan = plan_tiles(job, side=3.0)
+    assert plan.count == 3
+    p = generate_tiled(job, plan=plan, executor=InProcess())
+    assert p.n == job.n_dots and p.uniform_diameter is None
+    assert _mixed_pairs_too_close(p.xy, p.diameter, job.optimize.gap) == 0
+    assert p.diameter.min() >= 0.030 and p.diameter.max() <= 0.120
+    rule = job.diameters_at(job.density.cell_index(p.xy))
+    assert np.mean(p.diameter != rule) > 0.3  # fitted, also in the tiles
+    one = generate(job)
+    r_tiled, r_one = qa(p, job), qa(one, job)
+    assert r_tiled.passed, r_tiled.failures
+    tiled, single = (r.metrics["coverage_rel_rms_smoothed"] for r in (r_tiled, r_one))
+    assert tiled < 1.5 * single, (tiled, single)
 
 
 # --- the whole chain --------------------------------------------------------------------

@@ -81,6 +81,8 @@ class DatasetWriter:
     tmp: Path
     target: Path
     parts: dict[int, dict[str, Any]] = field(default_factory=dict)
+    #: dots written per diameter, ``{diameter mm: count}`` (sizes are quantised: few keys).
+    sizes: dict[float, int] = field(default_factory=dict)
 
     def write_part(self, k: int, tile: tuple[int, int], xy: np.ndarray, diameter) -> None:
         """Write tile ``tile`` (part ``k``): ``xy`` ``[n, 2]`` mm, ``diameter`` mm (one or
@@ -97,6 +99,8 @@ class DatasetWriter:
             raise ExportError(f"{self.target}: cannot write ({one_line(e)})") from None
         if rows != len(xy):
             raise ExportError(f"{self.target}: part {k} holds {rows} of {len(xy)} rows")
+        for v, c in zip(*np.unique(d, return_counts=True), strict=True):
+            self.sizes[float(v)] = self.sizes.get(float(v), 0) + int(c)
         self.parts[k] = {
             "file": path.name,
             "tile": list(tile),
@@ -160,6 +164,8 @@ def write_dataset(target: str | Path, manifest: dict[str, Any]) -> Iterator[Data
         yield writer
         parts = [writer.parts[k] for k in sorted(writer.parts)]
         doc = {"format": FORMAT, "version": VERSION, **manifest, "parts": parts}
+        if doc["diameter_mm"] is None:  # sizes known once written: uniform, median
+            doc.update(_size_fields(writer.sizes))
         doc["n"] = sum(p["count"] for p in parts)
         data = json.dumps(doc, indent=1, sort_keys=True).encode() + b"\n"
         try:
@@ -193,6 +199,20 @@ def write_dataset(target: str | Path, manifest: dict[str, Any]) -> Iterator[Data
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+def _size_fields(sizes: dict[float, int]) -> dict[str, Any]:
+    """``diameter_mm`` (the median, as ``np.median`` of every dot's) and
+    ``uniform_diameter_mm`` (the one diameter, or None) of dots counted per diameter."""
+    if not sizes:
+        return {"diameter_mm": 0.0, "uniform_diameter_mm": None}
+    values = np.array(sorted(sizes))
+    cum = np.cumsum([sizes[v] for v in values])
+    n = int(cum[-1])
+    lo = values[np.searchsorted(cum, (n - 1) // 2, side="right")]
+    hi = values[np.searchsorted(cum, n // 2, side="right")]
+    uniform = float(values[0]) if len(values) == 1 else None
+    return {"diameter_mm": float(0.5 * (lo + hi)), "uniform_diameter_mm": uniform}
 
 
 @dataclass(frozen=True, eq=False)
@@ -463,18 +483,20 @@ def load_dataset(path: str | Path, box=None):
 def manifest_of(
     job: str | None,
     seed: int | None,
-    diameter: float,
+    diameter: float | None,
     uniform: float | None,
     box,
     meta: dict[str, Any],
     outline=None,
     tiles: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """The manifest fields of a dataset besides its parts (one tile = the box by default)."""
+    """The manifest fields of a dataset besides its parts (one tile = the box by default).
+    ``diameter`` None: the nominal and uniform diameters are taken from the parts as
+    they are written (:class:`DatasetWriter`)."""
     return {
         "job": job,
         "seed": seed,
-        "diameter_mm": float(diameter),
+        "diameter_mm": None if diameter is None else float(diameter),
         "uniform_diameter_mm": uniform,
         "box": [float(v) for v in box],
         "meta": meta,

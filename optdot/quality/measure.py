@@ -48,6 +48,7 @@ from ..geometry.density import DensityMap
 from ..geometry.domain import Domain, box_protruding
 from ..pattern import coverage_pixels
 from ..runtime.memory import available_bytes
+from ..spatial.window import grown, in_rect
 from .metrics import (
     PatchGrid,
     SquareGrid,
@@ -395,7 +396,7 @@ def _second_pass(
                 _keep(mids, 0.5 * (pts[pr[sel, 0]] + pts[pr[sel, 1]]), MAX_MARKS)
             seg = near & mine
             a = pts[pr[seg, 0]]
-            inz = _in_rect(a, zoom, closed=False)
+            inz = in_rect(a, zoom, closed=False)
             _keep(s.segments, np.stack([a[inz], pts[pr[seg, 1]][inz]], axis=1), MAX_SEGMENTS)
         s.close_dots += int(flag.sum())
         nn, psi, again = _nearest(src, boxes, k, own, pts, tree, halo)
@@ -421,8 +422,8 @@ def _second_pass(
                 nn_n,
             )
             s.seams = part if s.seams is None else _add(s.seams, part)
-        s.window_xy.append(own[_in_rect(own, window)])
-        inz = _in_rect(own, zoom, closed=False)
+        s.window_xy.append(own[in_rect(own, window)])
+        inz = in_rect(own, zoom, closed=False)
         s.zoom_xy.append(own[inz])
         s.zoom_d.append(d[inz])
     s.patches = (patches, p_cnt, p_re, p_im)
@@ -532,8 +533,7 @@ def _gather(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Dots of the other parts within the box of part ``k`` grown by ``halo``:
     ``(xy [h, 2], part index [h], diameter [h])``."""
-    b = boxes[k]
-    g = (b[0] - halo, b[1] - halo, b[2] + halo, b[3] + halo)
+    g = grown(tuple(boxes[k]), halo)
     ok = ~np.isnan(boxes[:, 0])
     ok &= (
         (boxes[:, 0] <= g[2])
@@ -545,7 +545,7 @@ def _gather(
     xys, parts, ds = [], [], []
     for j in np.flatnonzero(ok):
         xy, d = src.part(int(j))
-        sel = _in_rect(xy, g)
+        sel = in_rect(xy, g)
         xys.append(xy[sel])
         parts.append(np.full(int(sel.sum()), j, np.int64))
         ds.append(np.broadcast_to(d, (len(xy),))[sel])
@@ -654,15 +654,6 @@ def _finish(
             float(power[lo].max() / np.median(power[lo])) if lo.any() else None
         )
     return Measured(metrics=m, where=where, arrays=arrays)
-
-
-def _in_rect(xy: np.ndarray, r, closed: bool = True) -> np.ndarray:
-    """``[n]`` bool: the point lies in rectangle ``r = (x0, y0, x1, y1)`` (edges included
-    when ``closed``)."""
-    x, y = xy[:, 0], xy[:, 1]
-    if closed:
-        return (x >= r[0]) & (x <= r[2]) & (y >= r[1]) & (y <= r[3])
-    return (x > r[0]) & (x < r[2]) & (y > r[1]) & (y < r[3])
 
 
 def _percentiles(v: np.ndarray) -> dict[str, float]:

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+from ..errors import GuaranteeError
 from ..geometry.density import DensityMap
 from ..geometry.domain import Domain, box_protruding
 from ..geometry.edges import NO_EDGES, EdgeIndex, edge_args, edge_signed_distance
@@ -171,6 +172,17 @@ class Violations:
     def ok(self) -> bool:
         return self.collisions == 0 and self.protruding == 0 and self.in_empty == 0
 
+    def text(self, dmin: float | np.ndarray) -> str:
+        """The counts in words (``dmin`` as in :func:`check_guarantee`)."""
+        if np.ndim(dmin) == 0:
+            closer = f"closer than {float(dmin) * 1e3:.1f} um"
+        else:
+            closer = "closer than their radii + gap"
+        return (
+            f"{self.collisions} pairs {closer}, {self.protruding} dots protruding, "
+            f"{self.in_empty} dots in zero-density cells"
+        )
+
 
 def check_guarantee(
     xy: np.ndarray,
@@ -178,23 +190,56 @@ def check_guarantee(
     domain: Domain,
     dot_radius: float | np.ndarray,
     dmin: float | np.ndarray,
+    frozen: np.ndarray | None = None,
 ) -> Violations:
-    """Count violations of the final positions (``dot_radius`` and ``dmin`` as in
-    :func:`legalize`).
+    """Count violations of the final positions (``dot_radius``, ``dmin`` and ``frozen``
+    as in :func:`legalize`: pairs of two frozen dots, and frozen dots themselves, are
+    someone else's to check).
 
     Pairs come from the cell-grid search (property-tested against brute force); the
     independent cross-check is QA's shapely/GEOS count, which ``optdot export`` and
     ``optdot qa`` run on every pattern before it reaches a mask.
     """
     if np.ndim(dmin) == 0:
-        collisions = len(pairs_within(xy, dmin))
+        pr = pairs_within(xy, float(dmin))
     else:
         pr = pairs_within(xy, float(np.max(dmin, initial=0.0)))
         dist = np.hypot(*(xy[pr[:, 0]] - xy[pr[:, 1]]).T)
-        collisions = int((dist < 0.5 * (dmin[pr[:, 0]] + dmin[pr[:, 1]])).sum())
+        pr = pr[dist < 0.5 * (dmin[pr[:, 0]] + dmin[pr[:, 1]])]
+    own = slice(None)
+    if frozen is not None:
+        pr = pr[~(frozen[pr[:, 0]] & frozen[pr[:, 1]])]
+        own = ~frozen
+    radius = dot_radius if np.ndim(dot_radius) == 0 else dot_radius[own]
+    mine = xy[own]
     if domain.rectangle:
-        out = box_protruding(xy, domain.box, dot_radius + domain.edge_margin)
+        out = box_protruding(mine, domain.box, radius + domain.edge_margin)
     else:
-        out = domain.protruding(xy, dot_radius)
-    empty = density.empty_mask(xy)
-    return Violations(collisions, int(out.sum()), int(empty.sum()))
+        out = domain.protruding(mine, radius)
+    empty = density.empty_mask(mine)
+    return Violations(len(pr), int(out.sum()), int(empty.sum()))
+
+
+def make_legal(
+    xy: np.ndarray,
+    density: DensityMap,
+    home_cell: np.ndarray,
+    domain: Domain,
+    dot_radius: float | np.ndarray,
+    dmin: float | np.ndarray,
+    where: str,
+    frozen: np.ndarray | None = None,
+) -> LegalizeResult:
+    """:func:`legalize`, then :func:`check_guarantee` of its result (arguments as there).
+
+    Raises:
+        GuaranteeError: a violation is left; the message starts with ``where`` (the job,
+            or a tile of it).
+    """
+    leg = legalize(xy, density, home_cell, domain, dot_radius, dmin, frozen=frozen)
+    viol = check_guarantee(leg.xy, density, domain, dot_radius, dmin, frozen)
+    if not viol.ok:
+        raise GuaranteeError(
+            f"{where}: could not meet the guarantee after {leg.sweeps} sweeps: {viol.text(dmin)}"
+        )
+    return leg

@@ -52,6 +52,8 @@ def fit_sizes(
     density: DensityMap,
     domain: Domain,
     sigma: float,
+    fit: np.ndarray | None = None,
+    window: tuple[float, float, float, float] | None = None,
 ) -> np.ndarray:
     """Diameters that make the ``sigma``-blurred coverage equal the blurred map.
 
@@ -62,11 +64,22 @@ def fit_sizes(
         density: the target fill map.
         domain: the panel.
         sigma: Gaussian width of the blur, mm (> 0).
+        fit: ``[n]`` bool, the dots whose size is fitted (default all); the others keep
+            theirs and count in the coverage (a tile's neighbours).
+        window: ``(x0, y0, x1, y1)`` mm, the part of the panel the blur covers (default
+            the panel's box): a tile grown by :func:`reach` of the blur, holding the
+            tile's dots and every neighbour within that reach. Blurs are truncated at
+            the window's sides for the target and the coverage alike, and the fitted dots
+            lie a reach inside them, where the truncation does not show.
 
     Returns:
-        ``[n]`` diameters, mm, in ``[sizes.low, sizes.high]``, quantised.
+        ``[n]`` diameters, mm: the fitted ones in ``[sizes.low, sizes.high]``, quantised;
+        the others as given.
     """
     x0, y0, x1, y1 = domain.box
+    if window is not None:
+        x0, y0 = max(x0, window[0]), max(y0, window[1])
+        x1, y1 = min(x1, window[2]), min(y1, window[3])
     px = sigma / PIXELS_PER_SIGMA
     nx, ny = max(1, math.ceil((x1 - x0) / px)), max(1, math.ceil((y1 - y0) / px))
     cw, ch = (x1 - x0) / nx, (y1 - y0) / ny
@@ -83,6 +96,8 @@ def fit_sizes(
     d = np.asarray(diameters, dtype=np.float64).copy()
     f = np.minimum(np.minimum(1.0 + FREEDOM, sizes.high / d), d / sizes.low)
     f = np.maximum(f, 1.0)
+    if fit is not None:
+        f[~fit] = 1.0  # held: a band of width zero
     lo, hi = d / f, d * f
     for _ in range(ROUNDS):
         area = 0.25 * math.pi * d * d
@@ -93,9 +108,20 @@ def fit_sizes(
         at = map_coordinates(ratio, coords, order=1, mode="nearest")
         d = np.clip(d * np.sqrt(np.maximum(at, 0.0)), lo, hi)
     free = hi > lo
-    before = float(np.sum(np.square(diameters)))
-    pinned = float(np.sum(np.square(d[~free])))
+    mine = slice(None) if fit is None else fit
+    before = float(np.sum(np.square(diameters[mine])))
+    pinned = float(np.sum(np.square(d[mine][~free[mine]])))
     moved = float(np.sum(np.square(d[free])))
     if moved > 0:
         d[free] *= math.sqrt(max(before - pinned, 0.0) / moved)
-    return sizes.quantise(d)
+    if fit is None:
+        return sizes.quantise(d)
+    out = np.asarray(diameters, dtype=np.float64).copy()
+    out[fit] = sizes.quantise(d[fit])
+    return out
+
+
+def reach(sigma: float) -> float:
+    """How far the blur of :func:`fit_sizes` carries a dot's coverage, mm (4 sigma and
+    a pixel): a tile's fit needs its neighbours' dots within this."""
+    return 4.0 * sigma + sigma / PIXELS_PER_SIGMA

@@ -133,10 +133,14 @@ class TilePlan:
 
 
 def max_spacing(job: Job) -> float:
-    """Largest hexagonal spacing of the map's non-zero cells, mm (2 r' at the lowest fill)."""
+    """Largest hexagonal spacing of the map's non-zero cells, mm (2 r' at the lowest fill;
+    when sizes vary, of each cell's fill at its own diameter)."""
     g = job.density.grid
-    low = float(g[g > 0].min()) if (g > 0).any() else 1.0
-    return float(2.0 * hex_radius(np.array([low]), 0.5 * job.diameter)[0])
+    if not (g > 0).any():
+        return float(2.0 * hex_radius(np.array([1.0]), 0.5 * job.diameter)[0])
+    d = job.cell_diameters
+    r0 = 0.5 * (job.diameter if d is None else d[g > 0])
+    return float(2.0 * np.max(hex_radius(g[g > 0], r0)))
 
 
 def tile_side(job: Job, tile_dots: int) -> float:
@@ -167,15 +171,18 @@ def plan_tiles(job: Job, side: float | None = None, tile_dots: int = DEFAULT_TIL
     if (nx > 1 or ny > 1) and smallest < need:
         raise JobError(
             f"tiles of {smallest:.3g} mm are too small: the seam bands need at least "
-            f"{need:.3g} mm (12 hexagonal spacings of {spacing * 1e3:.4g} µm); use larger tiles"
+            f"{need:.3g} mm ({2 * (BAND_SPACINGS + HALO_SPACINGS):g} hexagonal spacings of {spacing * 1e3:.4g} µm); use larger tiles"
         )
     return TilePlan(xs=xs, ys=ys, quotas=tile_quotas(job, xs, ys), band=band, halo=halo)
 
 
 def tile_integrals(job: Job, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
-    """``[ny, nx]`` integral of the fill fraction over each tile (inside the outline), mm²."""
+    """``[ny, nx]`` integral of the fill fraction over each tile (inside the outline), mm²;
+    when sizes vary, weighted by the dart weights (in proportion to the dot count)."""
     d = job.density
     g = d.grid if job.cell_weights is None else d.grid * job.cell_weights
+    if job.dart_weights is not None:
+        g = g * job.dart_weights
     cw, ch = d.cell_size
     fx = axis_overlap(xs, d.x0, cw, d.shape[1])  # [nx_t, nx_c]
     fy = axis_overlap(ys, d.y0, ch, d.shape[0])  # [ny_t, ny_c]

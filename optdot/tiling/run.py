@@ -24,16 +24,19 @@ from ..runtime.cluster import single_threaded
 from ..runtime.stop import check_interrupt
 from .plan import TilePlan, plan_tiles
 from .tasks import (
+    FinalDots,
     TileDots,
     apply_seams,
+    held_dots,
     initial_task,
     legalize_tile,
     relax_seams,
     relax_tile,
 )
 
-#: ``sink(tile, xy)``: a finished tile's final positions ``[n, 2]``, mm.
-Sink = Callable[[tuple[int, int], np.ndarray], None]
+#: ``sink(tile, xy, diameter)``: a finished tile's final positions ``[n, 2]`` mm and
+#: diameters (one, or ``[n]``), mm.
+Sink = Callable[[tuple[int, int], np.ndarray, Any], None]
 #: ``progress(fraction done, line)``.
 TileProgress = Callable[[float, str], None]
 
@@ -47,12 +50,8 @@ def _run(fn: Callable, *args: Any) -> Any:
     return fn(*args)
 
 
-def _positions(dots: TileDots | np.ndarray) -> np.ndarray:
-    return dots.xy if isinstance(dots, TileDots) else dots
-
-
-def _legal(job: Job, plan: TilePlan, dots: TileDots, *neighbours: TileDots | np.ndarray):
-    return legalize_tile(job, plan, dots, [_positions(n) for n in neighbours])
+def _legal(job: Job, plan: TilePlan, dots: TileDots, *neighbours: TileDots | FinalDots):
+    return legalize_tile(job, plan, dots, [held_dots(job, n) for n in neighbours])
 
 
 class InProcess:
@@ -191,9 +190,9 @@ def run_tiles(
         n_relaxed += kind == "relax"
         if kind == "legal":
             t = tile_of[id(h)]
-            xy = executor.result(h)
-            sink(t, xy)
-            counts[t] = len(xy)
+            fin = executor.result(h)
+            sink(t, fin.xy, fin.diameter)
+            counts[t] = len(fin.xy)
             n_done += 1
         if progress is not None:
             elapsed = time.perf_counter() - t0
@@ -217,5 +216,5 @@ def warm_up() -> int:
     """Compile (and cache) every kernel of a tiled run in this process; returns dots."""
     job = tiny_job()
     out: list[int] = []
-    run_tiles(job, plan_tiles(job, side=3.0), InProcess(), lambda t, xy: out.append(len(xy)))
+    run_tiles(job, plan_tiles(job, side=3.0), InProcess(), lambda t, xy, d: out.append(len(xy)))
     return sum(out)

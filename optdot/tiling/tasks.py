@@ -10,14 +10,19 @@ side were relaxed without the other side, so along the border the pairs are too 
 The design, in four kinds of task, each a pure function of the job, the plan and the
 results it is handed (so any worker count and any schedule give the same bytes):
 
+Every task calls the stages of :mod:`optdot.stages`, the functions the single process
+runs over the whole panel; a task only chooses which dots are mobile and which are held.
+
 1. **initial** (:func:`initial_task`). A tile's initial dots are computable from the
-   job, the seed and the tile index alone: its quota (the map's integral over the tile,
+   job, the seed and the tile index alone: its quota (the map's dot count over the tile,
    apportioned to the job's dot count by largest remainders: the tiles hold exactly
-   ``job.n_dots``), thrown by the paper's dart throwing (§2.1) restricted to the tile —
+   ``job.n_dots``), thrown by :func:`optdot.stages.throw` with the tile as the window —
    cell chosen in proportion to ρ × (area of the cell inside the tile), position uniform
    in that part of the cell — with a Sobol sequence scrambled by ``(seed, tile index)``.
-   The single-process throw is the special case "one tile = the panel" (same cumulative
-   law), so a tile's dots follow ρ exactly as the panel's do.
+   The single-process throw is the window = the panel, so a tile's dots follow ρ exactly
+   as the panel's do. When sizes vary, darts follow the dot count (fill over dot area)
+   and every dot's rule diameter follows from its start cell, so no task carries sizes
+   until the last one fits them.
 
 2. **relax** (:func:`relax_tile`, phase 1). Each tile relaxes its own dots with the job's
    formulation (all stages, ``max_iter`` iterations), containers on the initial dots, the
@@ -39,14 +44,17 @@ results it is handed (so any worker count and any schedule give the same bytes):
    patch of ~band² — a few dozen dots per tile border, which the guarantee pass then makes
    legal and which the seam metrics of QA measure.
 
-4. **guarantee** (:func:`legalize_tile`). The guarantee pass (projection, then 1 nm
-   rounding) per tile, with the dots of the 8 neighbouring tiles within a halo frozen. Tiles
+4. **guarantee** (:func:`legalize_tile`). :func:`optdot.stages.finish` per tile: sizes
+   fitted to the coverage (when they vary by a rule), then the guarantee pass (projection,
+   1 nm rounding) and its check, with the dots of the 8 neighbouring tiles within a halo
+   (:func:`optdot.stages.halo_width`: the size fit's blur reach when sizes are fitted)
+   held still, at their final sizes when final, else their rule sizes. Tiles
    are legalised in four checkerboard colours: a tile of colour c waits for its neighbours
    of colours < c and holds their final positions still, so a pair across a border is fixed
    by the later tile, against the earlier's final dots; tiles of one colour never touch, so
    they run in parallel. After the fourth colour every pair across every border has been
-   checked against final positions, and each tile's check (:func:`check_tile`) counts
-   collisions with its frozen neighbours as well as inside it.
+   checked against final positions, and each tile's check counts collisions with its
+   frozen neighbours as well as inside it.
 
 Dots belong to the tile they were thrown in (their index never changes); a dot may end a
 little outside its tile (containers bound it to ~2 circle radii), which the halos allow for.
@@ -58,17 +66,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import stages
 from ..config.job import Job
-from ..errors import GeometryError, GuaranteeError
-from ..geometry.density import axis_overlap
-from ..geometry.domain import box_protruding
 from ..geometry.morton import spatial_order
-from ..relax.legalize import legalize
-from ..relax.optdot import relax_staged
-from ..sampling.sobol import sobol_points
-from ..spatial.cellgrid import pairs_within
+from ..spatial.window import bounds, grown, in_rect
 from .plan import TilePlan
-from .steps import formulation_for, problem_of, settings_for
 
 #: Salt of a tile's Sobol scrambling seed: ``[seed, SALT, tile index]``.
 SALT = 0x711E
@@ -80,7 +82,8 @@ class TileDots:
 
     Attributes:
         tile: ``(i, j)``.
-        xy0: ``[n, 2]`` initial positions (container centres), mm, in Morton order.
+        xy0: ``[n, 2]`` initial positions (container centres, start cells), mm, in Morton
+            order.
         xy: ``[n, 2]`` current positions, mm.
     """
 
@@ -89,56 +92,31 @@ class TileDots:
     xy: np.ndarray
 
 
+@dataclass
+class FinalDots:
+    """A tile's final dots: ``xy`` ``[n, 2]`` mm (1 nm), ``diameter`` mm (one, or ``[n]``)."""
+
+    xy: np.ndarray
+    diameter: float | np.ndarray
+
+
+def _where(i: int, j: int) -> str:
+    return f"tile {i},{j}"
+
+
 def initial_tile(job: Job, plan: TilePlan, i: int, j: int) -> np.ndarray:
     """The initial dots of tile ``(i, j)``: ``[quota, 2]`` positions, mm, generation order."""
     n = int(plan.quotas[j, i])
     if n == 0:
         return np.zeros((0, 2))
-    d = job.density
-    x0, y0, x1, y1 = plan.rect(i, j)
-    cw, ch = d.cell_size
-    fx = axis_overlap(np.array([x0, x1]), d.x0, cw, d.shape[1])[0]
-    fy = axis_overlap(np.array([y0, y1]), d.y0, ch, d.shape[0])[0]
-    cols = np.flatnonzero(fx > 0)
-    rows = np.flatnonzero(fy > 0)
-    w = (d.grid[np.ix_(rows, cols)] * fy[rows, None] * fx[None, cols]).ravel()
-    if not (w > 0).any():
-        raise GeometryError(f"tile {i},{j}: quota of {n} dots but the map is zero there")
-    cum = np.cumsum(w)
-    cum /= cum[-1]
-    last = int(np.flatnonzero(w > 0)[-1])
     seed = [job.optimize.seed, SALT, plan.index(i, j)]
-    m = n
-    while True:
-        u = sobol_points(m, seed)
-        k = np.minimum(np.searchsorted(cum, u[:, 0], side="right"), last)
-        r, c = np.divmod(k, len(cols))
-        ax = np.maximum(d.x0 + cols[c] * cw, x0)
-        bx = np.minimum(d.x0 + (cols[c] + 1) * cw, x1)
-        ay = np.maximum(d.y0 + rows[r] * ch, y0)
-        by = np.minimum(d.y0 + (rows[r] + 1) * ch, y1)
-        xy = np.column_stack([ax + u[:, 1] * (bx - ax), ay + u[:, 2] * (by - ay)])
-        if job.domain.rectangle:
-            return xy
-        keep = xy[job.domain.contains(xy)]
-        if len(keep) >= n:
-            return keep[:n]
-        if m > 64 * max(n, 16):
-            raise GeometryError(
-                f"tile {i},{j}: could only place {len(keep)} of {n} dots inside the outline"
-            )
-        m = int(m * 1.25 * n / max(len(keep), 1)) + 16
+    return stages.throw(job, n, seed, plan.rect(i, j), _where(i, j))
 
 
 def initial_task(job: Job, plan: TilePlan, i: int, j: int) -> np.ndarray:
     """The initial dots of tile ``(i, j)`` in Morton order, ``[quota, 2]`` mm."""
     xy = initial_tile(job, plan, i, j)
     return np.ascontiguousarray(xy[spatial_order(xy)])
-
-
-def _near_rect(xy: np.ndarray, rect: tuple[float, float, float, float], h: float) -> np.ndarray:
-    x0, y0, x1, y1 = rect
-    return (xy[:, 0] >= x0 - h) & (xy[:, 0] <= x1 + h) & (xy[:, 1] >= y0 - h) & (xy[:, 1] <= y1 + h)
 
 
 def relax_tile(
@@ -149,23 +127,15 @@ def relax_tile(
     density across the border and do not spill into it)."""
     if len(xy0) == 0:
         return TileDots((i, j), xy0, xy0.copy())
-    rect = plan.rect(i, j)
-    halo = [a[_near_rect(a, rect, plan.halo)] for a in around]
+    box = grown(plan.rect(i, j), plan.halo)
+    halo = [a[in_rect(a, box)] for a in around]
     halo_xy = np.concatenate(halo) if halo else np.zeros((0, 2))
     n = len(xy0)
     both = np.ascontiguousarray(np.concatenate([xy0, halo_xy]))
     frozen = np.zeros(len(both), bool)
     frozen[n:] = True
-    rho = job.density.at(both)
-    xy, _, _ = relax_staged(
-        problem_of(job),
-        formulation_for(job),
-        both,
-        rho,
-        settings_for(job),
-        frozen=frozen if len(halo_xy) else None,
-    )
-    return TileDots((i, j), xy0, np.ascontiguousarray(xy[:n]))
+    run = stages.relax(job, both, frozen=frozen if len(halo_xy) else None)
+    return TileDots((i, j), xy0, np.ascontiguousarray(run.xy[:n]))
 
 
 def _gather(parts: list[TileDots]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -214,18 +184,14 @@ def relax_seams(job: Job, plan: TilePlan, i: int, j: int, parts: list[TileDots])
     )
     sel = np.flatnonzero(near | mobile)
     frozen = ~mobile[sel]
-    rho = job.density.at(xy0[sel])
-    new, _, _ = relax_staged(
-        problem_of(job),
-        formulation_for(job),
+    run = stages.relax(
+        job,
         np.ascontiguousarray(xy0[sel]),
-        rho,
-        settings_for(job),
         start=np.ascontiguousarray(xy[sel]),
         frozen=frozen,
     )
     moved = sel[~frozen]
-    new_mobile = new[~frozen]
+    new_mobile = run.xy[~frozen]
     starts = np.cumsum([0] + [len(p.xy) for p in parts])
     moves = {}
     for k, p in enumerate(parts):
@@ -245,66 +211,36 @@ def apply_seams(dots: TileDots, results: list[SeamMoves]) -> TileDots:
     return TileDots(dots.tile, dots.xy0, xy)
 
 
-def _halo_of(dots: TileDots, neighbours: list[np.ndarray], width: float) -> np.ndarray:
-    """Neighbour positions within ``width`` of the tile's own dots' bounding box."""
-    if len(dots.xy) == 0 or not neighbours:
-        return np.zeros((0, 2))
-    lo = dots.xy.min(axis=0) - width
-    hi = dots.xy.max(axis=0) + width
-    out = [n[np.all((n >= lo) & (n <= hi), axis=1)] for n in neighbours]
-    return np.concatenate(out) if out else np.zeros((0, 2))
+def held_dots(job: Job, dots: TileDots | FinalDots) -> tuple[np.ndarray, np.ndarray | float]:
+    """A neighbour as the guarantee pass holds it: ``(positions [k, 2] mm, diameters)``,
+    final ones when it is final, else its current positions at their rule sizes."""
+    if isinstance(dots, FinalDots):
+        return dots.xy, dots.diameter
+    d = stages.rule_diameters(job, dots.xy0)
+    return dots.xy, job.diameter if d is None else d
 
 
-def legalize_tile(job: Job, plan: TilePlan, dots: TileDots, neighbours: list[np.ndarray]):
-    """The guarantee pass for one tile; ``neighbours``: positions ``[k, 2]`` of the dots of
-    the surrounding tiles (final for earlier colours), held still.
-
-    Returns:
-        ``[n, 2]`` final positions of the tile's dots, mm, rounded to 1 nm.
+def legalize_tile(
+    job: Job, plan: TilePlan, dots: TileDots, neighbours: list[tuple[np.ndarray, object]]
+) -> FinalDots:
+    """:func:`optdot.stages.finish` for one tile; ``neighbours``: ``(positions [k, 2],
+    diameters)`` of the surrounding tiles (:func:`held_dots`; final for earlier colours),
+    held still within :func:`optdot.stages.halo_width` of the tile's dots.
 
     Raises:
         GuaranteeError: the tile could not be made legal.
     """
-    r0 = 0.5 * job.diameter
-    dmin = job.min_distance
-    halo = _halo_of(dots, neighbours, 2.0 * dmin)
     n = len(dots.xy)
     if n == 0:
-        return dots.xy
-    xy = np.concatenate([dots.xy, halo])
-    frozen = np.zeros(len(xy), bool)
-    frozen[n:] = True
-    home = np.zeros(len(xy), np.int64)
-    home[:n] = job.density.cell_index(dots.xy0)
-    leg = legalize(xy, job.density, home, job.domain, r0, dmin, frozen=frozen)
-    final = np.ascontiguousarray(leg.xy[:n])
-    bad = check_tile(job, final, np.round(halo, 6))
-    if bad:
-        i, j = dots.tile
-        raise GuaranteeError(
-            f"tile {i},{j}: could not meet the guarantee after {leg.sweeps} sweeps: {bad}"
-        )
-    return final
-
-
-def check_tile(job: Job, xy: np.ndarray, halo: np.ndarray) -> str:
-    """What is wrong with a tile's final dots (empty if nothing): pairs closer than the
-    minimum distance among them or with the halo, dots out of the panel, dots in zero
-    cells."""
-    r0 = 0.5 * job.diameter
-    both = np.concatenate([xy, halo])
-    pairs = pairs_within(both, job.min_distance)
-    n = len(xy)
-    collisions = int((pairs[:, 0] < n).sum()) if len(pairs) else 0
-    dom = job.domain
-    if dom.rectangle:
-        out = int(box_protruding(xy, dom.box, r0 + dom.edge_margin).sum())
-    else:
-        out = int(dom.protruding(xy, r0).sum())
-    empty = int(job.density.empty_mask(xy).sum())
-    if collisions or out or empty:
-        return (
-            f"{collisions} pairs closer than {job.min_distance * 1e3:.1f} um, "
-            f"{out} dots protruding, {empty} dots in zero-density cells"
-        )
-    return ""
+        return FinalDots(dots.xy, job.diameter if job.sizes is None else np.zeros(0))
+    width = stages.halo_width(job)
+    box = grown(bounds(dots.xy), width)
+    xs, ds = [], []
+    for xy, d in neighbours:
+        sel = in_rect(xy, box)
+        xs.append(xy[sel])
+        ds.append(np.broadcast_to(d, (len(xy),))[sel])
+    held = (np.concatenate(xs), np.concatenate(ds)) if xs else None
+    window = grown(plan.rect(*dots.tile), width)
+    done = stages.finish(job, dots.xy, dots.xy0, _where(*dots.tile), held, window)
+    return FinalDots(done.xy, done.diameter)

@@ -1,0 +1,224 @@
+"""The stages of generation as functions of a job and a set of dots: one path for every dot.
+
+:func:`optdot.pipeline.generate` runs them once over the whole panel; the tiles of
+:mod:`optdot.tiling.tasks` run the same functions over a tile, with the neighbouring
+tiles' dots held still around it. Nothing here knows whether it sees a panel or a tile:
+
+* :func:`throw`: the initial dots of a window (the panel, or a tile), §2.1.
+* :func:`relax`: circles and containers on the initial dots, then OptDot (L-BFGS through
+  the formulation's stages) or the MD baseline of §2.2.
+* :func:`finish`: dot sizes fitted to the coverage where the dots stand (when sizes
+  vary, :mod:`optdot.relax.resize`), then the guarantee pass and its check.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .config.job import Job
+from .relax.circles import hex_radius
+from .relax.formulation import Formulation, Problem, formulation_of
+from .relax.legalize import LegalizeResult, make_legal
+from .relax.md import MDForce, md_relax
+from .relax.optdot import Progress, RelaxSettings, relax_staged
+from .relax.resize import fit_sizes, reach
+from .sampling.initial import Rect, initial_dots_in
+
+#: Width of the blur the dot sizes are fitted under, as a share of ``qa.smoothing``
+#: (:mod:`optdot.relax.resize`): what a diffuser or the eye blurs at least.
+FIT_SHARE = 0.5
+
+
+def problem_of(job: Job) -> Problem:
+    """The fields of ``job`` a formulation builds its penalty terms from."""
+    return Problem(
+        domain=job.domain,
+        density=job.density,
+        dot_radius=0.5 * job.diameter,
+        min_distance=job.min_distance,
+        close_target=job.close_target,
+        seed=job.optimize.seed,
+    )
+
+
+def formulation_for(job: Job) -> Formulation:
+    """The job's formulation with its radius and container factors."""
+    opt = job.optimize
+    return formulation_of(opt.formulation, opt.radius_factor, opt.container_factor)
+
+
+def settings_for(job: Job) -> RelaxSettings:
+    """The job's L-BFGS settings."""
+    opt = job.optimize
+    return RelaxSettings(opt.max_iter, opt.lbfgs_memory, opt.ftol, opt.skin)
+
+
+def fit_sigma(job: Job) -> float:
+    """Gaussian width the dot sizes are fitted under, mm."""
+    return FIT_SHARE * job.qa.smoothing
+
+
+def fitted(job: Job) -> bool:
+    """Whether ``job``'s dot sizes are fitted after relaxation (sizes vary by a rule; an
+    explicit diameter grid is the user's choice and kept)."""
+    return job.sizes is not None and job.sizes.rule != "grid"
+
+
+def halo_width(job: Job) -> float:
+    """How far around a set of dots :func:`finish` needs the dots held still, mm: the
+    size fit's blur reach when sizes are fitted, else two of the largest spacings."""
+    widest = job.diameter if job.sizes is None else job.sizes.high
+    width = 2.0 * (widest + job.optimize.gap)
+    return max(width, reach(fit_sigma(job))) if fitted(job) else width
+
+
+def rule_diameters(job: Job, xy0: np.ndarray) -> np.ndarray | None:
+    """``[n]`` diameter the size rule gives the dots thrown at ``xy0`` (their start
+    cells'), mm; None for dots of one size."""
+    if job.sizes is None:
+        return None
+    return np.asarray(job.diameters_at(job.density.cell_index(xy0)), dtype=np.float64)
+
+
+def throw(job: Job, n: int, seed: int | Sequence[int], rect: Rect | None, where: str):
+    """``[n, 2]`` initial dots of the window ``rect`` (None: the panel), mm, generation
+    order: darts in proportion to the fill (to the dot count when sizes vary), only
+    those inside the outline kept.
+
+    Raises:
+        GeometryError: the map is zero over (most of) the window's part of the panel.
+    """
+    inside = None if job.domain.rectangle else job.domain.contains
+    return initial_dots_in(job.density, n, seed, inside, job.dart_weights, rect, where)
+
+
+@dataclass
+class Relaxed:
+    """What :func:`relax` did.
+
+    Attributes:
+        xy: ``[n, 2]`` relaxed positions, mm (frozen dots where they were).
+        info: run facts for the pattern's metadata (iterations, evaluations,
+            neighbour builds, final penalty or MD step, why it stopped).
+        history: penalty (OptDot) or largest force (MD) after each iteration.
+    """
+
+    xy: np.ndarray
+    info: dict
+    history: list[float]
+
+
+def relax(
+    job: Job,
+    xy0: np.ndarray,
+    start: np.ndarray | None = None,
+    frozen: np.ndarray | None = None,
+    progress: Progress | None = None,
+    formulation: Formulation | None = None,
+) -> Relaxed:
+    """Relax the dots thrown at ``xy0`` (``[n, 2]`` mm, Morton order for speed).
+
+    Args:
+        start: ``[n, 2]`` positions to start from (default ``xy0``; containers stay on
+            ``xy0``).
+        frozen: ``[n]`` bool, dots held still (a tile's neighbours).
+        progress: ``progress(iteration, value)``; a true return halts.
+        formulation: overrides the job's (benchmarks try variants).
+    """
+    opt = job.optimize
+    rho = job.density.at(xy0)
+    if opt.method == "md":
+        if start is not None or frozen is not None:
+            raise ValueError("the MD baseline relaxes a whole panel, not a tile")
+        r0 = 0.5 * job.diameter
+        law = MDForce(
+            core=job.min_distance,
+            spacing=2.0 * hex_radius(rho, r0),
+            decay=opt.md_decay,
+            cutoff=opt.md_cutoff,
+        )
+        md = md_relax(
+            xy0, law, job.box, r0, steps=opt.max_iter, step=opt.md_step, skin=opt.skin,
+            callback=progress,
+        )  # fmt: skip
+        info = {"iterations": md.steps, "evaluations": md.steps, "neighbor_builds": md.rebuilds}
+        info.update(md_step_mm=md.eta, message=f"ran {md.steps} MD steps")
+        return Relaxed(md.xy, info, md.history)
+    form = formulation_for(job) if formulation is None else formulation
+    xy, info, history = relax_staged(
+        problem_of(job),
+        form,
+        xy0,
+        rho,
+        settings_for(job),
+        progress,
+        start=start,
+        frozen=frozen,
+        diameters=rule_diameters(job, xy0),
+    )
+    return Relaxed(xy, info, history)
+
+
+@dataclass
+class Finished:
+    """What :func:`finish` made of a set of dots.
+
+    Attributes:
+        xy: ``[n, 2]`` final positions, mm, rounded to 1 nm.
+        diameter: the one diameter, mm, or ``[n]`` per dot.
+        legalize: the guarantee pass's facts (sweeps, fixes).
+    """
+
+    xy: np.ndarray
+    diameter: float | np.ndarray
+    legalize: LegalizeResult
+
+
+def finish(
+    job: Job,
+    xy: np.ndarray,
+    xy0: np.ndarray,
+    where: str,
+    held: tuple[np.ndarray, np.ndarray | float] | None = None,
+    window: Rect | None = None,
+) -> Finished:
+    """Sizes fitted (when they vary by a rule), then the guarantee pass and its check.
+
+    Args:
+        xy: ``[n, 2]`` relaxed positions, mm.
+        xy0: ``[n, 2]`` where they were thrown (their start cells: size and the cell a
+            dot returns to if it drifted into a zero cell).
+        where: the job or tile, for the error message.
+        held: ``(positions [h, 2] mm, diameters [h] or one, mm)`` of dots held still
+            around these (a tile's neighbours within :func:`halo_width`): they count in
+            the coverage and the spacing, and someone else fixes them.
+        window: the part of the panel the size fit covers (a tile grown by the fit's
+            reach; None: the panel).
+
+    Raises:
+        GuaranteeError: a violation is left after the pass.
+    """
+    n = len(xy)
+    d = rule_diameters(job, xy0)
+    home = job.density.cell_index(xy0)
+    frozen = None
+    if held is not None and len(held[0]):
+        xy = np.concatenate([xy, held[0]])
+        home = np.concatenate([home, np.zeros(len(held[0]), np.int64)])
+        frozen = np.zeros(len(xy), bool)
+        frozen[n:] = True
+        if d is not None:
+            d = np.concatenate([d, np.broadcast_to(held[1], (len(held[0]),))])
+    if d is None:
+        radius, dmin = 0.5 * job.diameter, job.min_distance
+    else:
+        if fitted(job):
+            fit = None if frozen is None else ~frozen
+            d = fit_sizes(xy, d, job.sizes, job.density, job.domain, fit_sigma(job), fit, window)
+        radius, dmin = 0.5 * d, d + job.optimize.gap
+    leg = make_legal(xy, job.density, home, job.domain, radius, dmin, where, frozen)
+    diameter = job.diameter if d is None else d[:n]
+    return Finished(np.ascontiguousarray(leg.xy[:n]), diameter, leg)
