@@ -10,6 +10,9 @@ summary and the seam table (bands along tile borders against tile interiors).
     python benchmarks/panels.py notebook monitor tv      # tiled only
     python benchmarks/panels.py notebook --tile-size 20 --tile-size 30   # sweep tile size
     python benchmarks/panels.py tv --reuse --qa --masks   # QA and GDSII/OASIS of a run
+    python benchmarks/panels.py notebook --sizes --workers 2 --workers 1 --check
+                                  # 30-120 µm dots, tiled on 2 and 1 workers, bytes compared
+    python benchmarks/panels.py monitor --max-iter 200   # at the default iterations
 
 ``--qa`` times ``optdot qa`` (JSON + HTML report; a dataset is measured tile by tile),
 ``--masks`` times ``optdot export`` to GDSII and to OASIS (each gated by QA), both as
@@ -56,17 +59,45 @@ def edge_lit_map(width: float, height: float, cell: float = 1.0) -> np.ndarray:
     return np.clip(f, 0.08, 0.42)
 
 
-def write_panel(name: str) -> Path:
+#: Dot diameters of ``--sizes``: the range of the issue's size-modulated notebook, mm.
+SIZES = "[0.030, 0.120]"
+
+
+def write_panel(name: str, sizes: bool = False, max_iter: int = 80) -> Path:
+    """The panel's job and map under ``OUT/<name>[-sizes][-i<max_iter>]``."""
     w, h = PANELS[name]
-    d = OUT / name
+    d = OUT / (name + ("-sizes" if sizes else "") + ("" if max_iter == 80 else f"-i{max_iter}"))
     d.mkdir(parents=True, exist_ok=True)
     np.save(d / "density.npy", edge_lit_map(w, h))
     (d / "job.toml").write_text(
-        f'name = "{name}"\n[domain]\nwidth = {w}\nheight = {h}\n'
-        '[density]\ngrid = "density.npy"\n[dots]\ndiameter = 0.046\n'
-        '[optimize]\nmethod = "optdot"\nmax_iter = 80\nseed = 1\n'
+        f'name = "{d.name}"\n[domain]\nwidth = {w}\nheight = {h}\n'
+        f'[density]\ngrid = "density.npy"\n[dots]\ndiameter = {SIZES if sizes else 0.046}\n'
+        f'[optimize]\nmethod = "optdot"\nmax_iter = {max_iter}\nseed = 1\n'
     )
     return d / "job.toml"
+
+
+def same_parts(a: Path, b: Path) -> bool:
+    """Whether two datasets hold the same files with the same bytes."""
+    names = sorted(p.name for p in a.iterdir())
+    if names != sorted(p.name for p in b.iterdir()):
+        return False
+    return all((a / n).read_bytes() == (b / n).read_bytes() for n in names)
+
+
+def mixed_pairs_too_close(dataset: Path, gap: float) -> tuple[int, int]:
+    """``(pairs checked, pairs closer than their mean diameter + gap)`` over the whole
+    dataset, by cKDTree (independent of optdot's cell grid)."""
+    from scipy.spatial import cKDTree
+
+    from optdot.io.dataset import load_dataset
+
+    p = load_dataset(dataset)
+    tree = cKDTree(p.xy)
+    pairs = tree.query_pairs(float(p.diameter.max()) + gap, output_type="ndarray")
+    dist = np.hypot(*(p.xy[pairs[:, 0]] - p.xy[pairs[:, 1]]).T)
+    limit = 0.5 * (p.diameter[pairs[:, 0]] + p.diameter[pairs[:, 1]]) + gap
+    return len(pairs), int((dist < limit - 1e-9).sum())
 
 
 def run(cmd: list[str]) -> tuple[float, float, int, str]:
@@ -129,14 +160,20 @@ def main() -> None:
     ap.add_argument("--qa", action="store_true", help="QA every pattern (JSON + HTML)")
     ap.add_argument("--masks", action="store_true", help="export GDSII and OASIS, timed")
     ap.add_argument("--reuse", action="store_true", help="keep patterns already generated")
+    ap.add_argument("--sizes", action="store_true", help=f"dots.diameter = {SIZES}")
+    ap.add_argument("--max-iter", type=int, default=80, help="optimize.max_iter (default 80)")
+    ap.add_argument("--workers", type=int, action="append", help="local workers (repeatable)")
+    ap.add_argument(
+        "--check", action="store_true", help="count mixed-pair violations; compare worker runs"
+    )
     args = ap.parse_args()
     print("| run | dots | s | dots/s | peak GiB (all processes) |\n|---|---|---|---|---|")
     sys.stdout.flush()
     for name in args.panels:
-        job = write_panel(name)
+        job = write_panel(name, args.sizes, args.max_iter)
         outs = []
         if args.single:
-            out = OUT / name / "single.npz"
+            out = job.parent / "single.npz"
             if not (args.reuse and out.exists()):
                 secs, gib, rc, err = run(optdot("generate", job, "-o", out, "--tiles", "off", "-q"))
                 if rc:
@@ -146,19 +183,36 @@ def main() -> None:
                 report(f"{name} single process", n, secs, gib)
             outs.append(("single", out))
         for side in args.tile_size or [None]:
-            out = OUT / name / f"tiled{'' if side is None else f'-{side:g}'}.parquet"
-            cmd = ["generate", job, "-o", out, "--tiles", "on"]
-            if side is not None:
-                cmd += ["--tile-size", side]
-            if not (args.reuse and out.exists()):
-                secs, gib, rc, err = run(optdot(*cmd))
-                if rc:
-                    print(err, file=sys.stderr)
-                    continue
-                n = json.loads((out / "_manifest.json").read_text())["n"]
-                tiles = [ln for ln in err.splitlines() if "tiles (" in ln]
-                report(f"{name} tiled {tiles[0].split('; ')[-1] if tiles else ''}", n, secs, gib)
-            outs.append((f"tiled {side or 'auto'}", out))
+            by_workers = []
+            for k in args.workers or [None]:
+                tag = ("" if side is None else f"-{side:g}") + ("" if k is None else f"-w{k}")
+                out = job.parent / f"tiled{tag}.parquet"
+                cmd = ["generate", job, "-o", out, "--tiles", "on"]
+                if side is not None:
+                    cmd += ["--tile-size", side]
+                if k is not None:
+                    cmd += ["--workers", k]
+                if not (args.reuse and out.exists()):
+                    secs, gib, rc, err = run(optdot(*cmd))
+                    if rc:
+                        print(err, file=sys.stderr)
+                        continue
+                    n = json.loads((out / "_manifest.json").read_text())["n"]
+                    tiles = [ln for ln in err.splitlines() if "tiles (" in ln]
+                    what = tiles[0].split("; ")[-1] if tiles else ""
+                    label = f"{job.parent.name} tiled {what}" + ("" if k is None else f", {k} w")
+                    report(label, n, secs, gib)
+                outs.append((f"tiled {side or 'auto'}{'' if k is None else f' {k}w'}", out))
+                by_workers.append(out)
+            if args.check and by_workers:
+                from optdot import load_job
+
+                gap = load_job(job).optimize.gap
+                checked, bad = mixed_pairs_too_close(by_workers[0], gap)
+                print(f"\n{by_workers[0].name}: {bad} of {checked:,} near pairs too close")
+                for other in by_workers[1:]:
+                    same = same_parts(by_workers[0], other)
+                    print(f"{other.name}: {'same bytes' if same else 'DIFFERENT bytes'}")
         if args.masks:
             print("\n| pattern | mask | s | peak GiB | file GB |\n|---|---|---|---|---|")
             for label, out in outs:

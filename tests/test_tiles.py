@@ -128,6 +128,39 @@ def test_two_workers_and_one_give_the_same_bytes(tiled):
     assert "8 tiles (4 x 2)" in r2.stderr
 
 
+@pytest.fixture(scope="module")
+def tiled_sizes(tmp_path_factory):
+    """The led_sizes sample (30-120 µm dots) tiled on a 2-worker and a 1-worker cluster."""
+    d = tmp_path_factory.mktemp("tiled_sizes")
+    job = SAMPLES / "led_sizes" / "job.toml"
+    common = ["generate", job, *TILED, "--max-iter", "60", "-q"]
+    optdot(*common, "--workers", "2", "-o", d / "two.parquet")
+    optdot(*common, "--workers", "1", "-o", d / "one.parquet")
+    return d, load_job(job).with_overrides(max_iter=60)
+
+
+def test_varying_sizes_tile_with_the_same_bytes_on_two_workers_and_one(tiled_sizes):
+    d, job = tiled_sizes
+    two, one = d / "two.parquet", d / "one.parquet"
+    names = sorted(p.name for p in two.iterdir())
+    assert len(names) == 9
+    for name in names:
+        assert (two / name).read_bytes() == (one / name).read_bytes(), name
+    p = load_dataset(two)
+    assert p.n == job.n_dots and p.uniform_diameter is None
+    # no pair closer than its mixed-pair limit: mean diameter + gap (cKDTree, all pairs)
+    pairs = cKDTree(p.xy).query_pairs(float(p.diameter.max()) + job.optimize.gap, output_type="ndarray")
+    dist = np.hypot(*(p.xy[pairs[:, 0]] - p.xy[pairs[:, 1]]).T)
+    limit = 0.5 * (p.diameter[pairs[:, 0]] + p.diameter[pairs[:, 1]]) + job.optimize.gap
+    assert len(pairs) > 500 and (dist >= limit - 1e-9).all()
+    manifest = open_dataset(two).manifest
+    assert manifest["diameter_mm"] == float(np.median(p.diameter))
+    assert manifest["uniform_diameter_mm"] is None
+    r = qa(p, job)
+    assert r.passed, r.failures()
+    assert r.metrics["seams"]["passed"], r.metrics["seams"]
+
+
 def test_the_tiled_pattern_passes_qa_and_its_seams_are_not_found(tiled):
     d, _ = tiled
     job = load_job(LED)
