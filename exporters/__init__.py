@@ -18,15 +18,19 @@ from __future__ import annotations
 from pathlib import Path
 
 from optdot.io.patterns import write_csv
-from optdot.pattern import Pattern
+from optdot.pattern import DotSource
 
 from .options import ExportOptions
 
 FORMATS = ("gds", "oas", "dxf", "csv", "svg", "png", "speos")
 
 
-def write(pattern: Pattern, fmt: str, path: str | Path, opts: ExportOptions | None = None) -> str:
+def write(pattern: DotSource, fmt: str, path: str | Path, opts: ExportOptions | None = None) -> str:
     """Write ``pattern`` as ``fmt`` (one of :data:`FORMATS`) to ``path``, atomically.
+
+    Masks (GDSII, OASIS, DXF) and Speos files take any :class:`~optdot.pattern.DotSource`
+    (a pattern, or a dataset streamed tile by tile); CSV and previews need a
+    :class:`~optdot.pattern.Pattern` in memory.
 
     Returns:
         What the file holds, for the user: ``"GDS, 111,215 dots"``, or for a preview of

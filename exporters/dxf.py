@@ -16,8 +16,7 @@ from pathlib import Path
 import ezdxf
 
 from optdot.io.atomic import atomic_path, expect_tail
-from optdot.io.dataset import Dataset
-from optdot.pattern import Pattern
+from optdot.pattern import DotSource, Pattern
 
 from .options import ExportOptions
 
@@ -131,7 +130,7 @@ def _find_float(lines: list[str], value: float) -> int:
     raise RuntimeError("template circle not found in ezdxf output")  # pragma: no cover
 
 
-def write_dxf(pattern: Pattern | Dataset, path: str | Path, opts: ExportOptions) -> None:
+def write_dxf(pattern: DotSource, path: str | Path, opts: ExportOptions) -> None:
     """Write the DXF atomically (R2010 by default, ``opts.dxf_version`` otherwise); a
     dataset is streamed part by part (memory: one part)."""
     head, fmt, tail, seed = _template(pattern, opts.dxf_version, opts.provenance)

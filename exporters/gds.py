@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime
+import itertools
 import math
 import os
 import tempfile
@@ -23,8 +24,7 @@ import numpy as np
 from optdot.errors import ExportError
 from optdot.geometry.morton import spatial_order
 from optdot.io.atomic import atomic_path, expect_tail
-from optdot.io.dataset import Dataset
-from optdot.pattern import Pattern
+from optdot.pattern import DotSource
 
 from .options import ExportOptions
 
@@ -88,43 +88,6 @@ def _placed(dot: gdstk.Cell | str, xy_um: np.ndarray) -> gdstk.Reference:
     return ref
 
 
-def build_library(pattern: Pattern, opts: ExportOptions, oasis: bool = False) -> gdstk.Library:
-    """The gdstk library of a pattern (µm user unit, nm database unit)."""
-    _check_extent(pattern.box, pattern.xy, pattern.diameter)
-    lib = gdstk.Library("OPTDOT", unit=1e-6, precision=1e-9)
-    groups = _size_groups(pattern, opts)
-    top = gdstk.Cell(opts.top_cell)
-    top.add(*_outline_polygons(pattern.outline_rings(), opts, oasis))
-    for dot, sel in groups:
-        xy = pattern.xy[sel] * 1e3
-        if oasis and len(xy) > 1:
-            xy = xy[spatial_order(xy)]  # small deltas: compact OASIS repetition
-        top.add(_placed(dot, xy))
-    if opts.flatten:
-        top.flatten()
-        lib.add(top)
-    else:
-        lib.add(*(dot for dot, _ in groups), top)
-    return lib
-
-
-def _size_groups(pattern: Pattern, opts: ExportOptions) -> list[tuple[gdstk.Cell, np.ndarray]]:
-    """One dot cell per diameter (rounded to the 1 nm database unit) and the ``[n]`` bool
-    mask of its dots, smallest diameter first."""
-    if pattern.n == 0:
-        raise ExportError("the pattern has no dots")
-    d_nm = np.round(pattern.diameter * 1e6).astype(np.int64)
-    sizes = np.unique(d_nm)
-    groups = []
-    names = {opts.top_cell: "the top cell"}
-    for size in sizes:
-        r_um = 0.5 * float(size) * 1e-3 if len(sizes) > 1 else float(pattern.radius[0]) * 1e3
-        name = opts.dot_cell if len(sizes) == 1 else f"{opts.dot_cell}_{size}"
-        dot = dot_cell(_unique(name, f"the {size} nm dot", names), r_um, opts)
-        groups.append((dot, d_nm == size if len(sizes) > 1 else np.ones(pattern.n, bool)))
-    return groups
-
-
 def dot_cell(name: str, r_um: float, opts: ExportOptions) -> gdstk.Cell:
     """The cell of one dot: a circle polygon of radius ``r_um`` centred on the origin.
 
@@ -155,25 +118,6 @@ def _ccw(ring: np.ndarray) -> bool:
     return float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))) > 0
 
 
-def _tile_cells(ds: Dataset, opts: ExportOptions, sizes: dict[int, str]):
-    """``(tile cell, dots in it)`` per part of a dataset, one at a time: each tile a cell
-    ``T<i>_<j>`` placing the dot cells by name (one reference per size, explicit
-    repetition). ``sizes`` collects ``{diameter nm: dot cell name}`` as they appear."""
-    uniform = ds.uniform_diameter
-    names = {opts.top_cell: "the top cell"}
-    for (i, j), xy, d in ds.chunks():
-        _check_extent(ds.box, xy, d)
-        cell = gdstk.Cell(_unique(f"T{i}_{j}", f"tile ({i}, {j})", names))
-        d_nm = np.round(d * 1e6).astype(np.int64)
-        for size in np.unique(d_nm):
-            name = opts.dot_cell if uniform is not None else f"{opts.dot_cell}_{size}"
-            if int(size) not in sizes:
-                sizes[int(size)] = _unique(name, f"the {size} nm dot", names)
-            sel = xy[d_nm == size] * 1e3
-            cell.add(_placed(name, sel[spatial_order(sel)]))
-        yield cell, len(xy)
-
-
 def _unique(name: str, what: str, names: dict[str, str]) -> str:
     """``name``, recorded in ``names`` (cell name -> what it holds), or refuse a second
     cell of that name: a library with two structures of one name is a broken mask."""
@@ -186,33 +130,84 @@ def _unique(name: str, what: str, names: dict[str, str]) -> str:
     return name
 
 
-def _dot_cells(ds: Dataset, sizes: dict[int, str], opts: ExportOptions) -> list[gdstk.Cell]:
-    uniform = ds.uniform_diameter
-    return [
-        dot_cell(name, (0.5 * uniform if uniform is not None else 0.5e-6 * size) * 1e3, opts)
-        for size, name in sorted(sizes.items())
-    ]
+class _Cells:
+    """The cells of a mask as a dot source's chunks come in: one dot cell per diameter
+    (rounded to the 1 nm database unit), created on first use, and the dots of each
+    chunk as references (one per size, an explicit repetition in Morton order: small
+    deltas) or, flattened, as plain polygons.
+
+    Args:
+        uniform: the one diameter of every dot, mm, or None when sizes vary.
+    """
+
+    def __init__(self, uniform: float | None, opts: ExportOptions) -> None:
+        self.uniform = uniform
+        self.opts = opts
+        self.dots: dict[int, gdstk.Cell] = {}
+        self.names = {opts.top_cell: "the top cell"}
+
+    def dot(self, size_nm: int) -> gdstk.Cell:
+        if size_nm not in self.dots:
+            if self.uniform is not None:
+                name, r_um = self.opts.dot_cell, 0.5 * self.uniform * 1e3
+            else:
+                name, r_um = f"{self.opts.dot_cell}_{size_nm}", 0.5 * size_nm * 1e-3
+            name = _unique(name, f"the {size_nm} nm dot", self.names)
+            self.dots[size_nm] = dot_cell(name, r_um, self.opts)
+        return self.dots[size_nm]
+
+    def fill(self, cell: gdstk.Cell, xy: np.ndarray, diameter: np.ndarray) -> int:
+        """Put the dots ``xy`` (``[n, 2]`` mm, diameters ``[n]`` mm) into ``cell``;
+        returns the number of elements a GDSII file holds for them."""
+        d_nm = np.round(np.broadcast_to(diameter, (len(xy),)) * 1e6).astype(np.int64)
+        for size in np.unique(d_nm):
+            sel = xy[d_nm == size] * 1e3
+            cell.add(_placed(self.dot(int(size)), sel[spatial_order(sel)]))
+        if self.opts.flatten:
+            cell.flatten()
+        return len(xy)
+
+    def tile(self, label: tuple[int, int]) -> gdstk.Cell:
+        i, j = label
+        return gdstk.Cell(_unique(f"T{i}_{j}", f"tile ({i}, {j})", self.names))
+
+    def library_cells(self) -> list[gdstk.Cell]:
+        """The dot cells (none when flattened), smallest diameter first."""
+        return [] if self.opts.flatten else [self.dots[k] for k in sorted(self.dots)]
 
 
-def _tiled_top(
-    ds: Dataset, tiles: list[str], opts: ExportOptions, oasis: bool = False
-) -> gdstk.Cell:
+def _chunks(src: DotSource):
+    """``(label, xy, diameter, alone)`` per chunk of ``src``, ``alone`` when it is the
+    only one (its dots then go straight into the top cell), extents checked."""
+    if src.n == 0:
+        raise ExportError("the pattern has no dots")
+    _check_extent(src.box)
+    it = iter(src.chunks())
+    first = next(it)
+    second = next(it, None)
+    if second is None:
+        _check_extent(src.box, first[1], first[2])
+        yield (*first, True)
+        return
+    for label, xy, d in itertools.chain([first, second], it):
+        _check_extent(src.box, xy, d)
+        yield label, xy, d, False
+
+
+def _top(src: DotSource, opts: ExportOptions, oasis: bool) -> gdstk.Cell:
     top = gdstk.Cell(opts.top_cell)
-    top.add(*_outline_polygons(ds.outline_rings(), opts, oasis))
-    for name in tiles:
-        top.add(gdstk.Reference(name))
+    top.add(*_outline_polygons(src.outline_rings(), opts, oasis))
     return top
 
 
-def write_gds_tiles(ds: Dataset, path: str | Path, opts: ExportOptions) -> None:
-    """Stream a dataset into a hierarchical GDSII file with ``gdstk.GdsWriter``: one cell
-    per tile referencing the dot cell, a top cell placing the tiles and the outline.
-    Memory: one tile."""
-    _check_extent(ds.box)
-    if ds.n == 0:
-        raise ExportError("the pattern has no dots")
-    sizes: dict[int, str] = {}
-    tiles: list[str] = []
+def write_gds(src: DotSource, path: str | Path, opts: ExportOptions) -> None:
+    """Stream a dot source (a pattern, a dataset) into a GDSII file with
+    ``gdstk.GdsWriter``, one chunk in memory at a time: a pattern's dots go into the top
+    cell, a tiled dataset's into one cell ``T<i>_<j>`` per tile that the top cell places;
+    the top cell also holds the outline. Written atomically, verified before it replaces
+    anything (ENDLIB, the whole record stream, the reference and polygon counts)."""
+    cells = _Cells(src.uniform_diameter, opts)
+    top = _top(src, opts, oasis=False)
     counts = {"refs": 0, "polys": 0}
 
     def check(tmp: Path) -> None:
@@ -228,36 +223,38 @@ def write_gds_tiles(ds: Dataset, path: str | Path, opts: ExportOptions) -> None:
             timestamp=TIMESTAMP,
         )
         try:
-            for cell, n in _tile_cells(ds, opts, sizes):
-                writer.write(cell)
-                tiles.append(cell.name)
-                counts["refs"] += n
-            dots = _dot_cells(ds, sizes, opts)
-            top = _tiled_top(ds, tiles, opts)
+            for label, xy, d, alone in _chunks(src):
+                cell = top if alone else cells.tile(label)
+                counts["polys" if opts.flatten else "refs"] += cells.fill(cell, xy, d)
+                if not alone:
+                    writer.write(cell)
+                    top.add(gdstk.Reference(cell))
+                    counts["refs"] += 1
+            dots = cells.library_cells()
             writer.write(*dots, top)
         finally:
             writer.close()
-        counts["refs"] += len(tiles)
-        counts["polys"] = len(dots) + len(top.polygons)
+        counts["polys"] += len(dots) + len(_outline_polygons(src.outline_rings(), opts))
 
 
-def write_oas_tiles(ds: Dataset, path: str | Path, opts: ExportOptions) -> None:
-    """A dataset as a hierarchical OASIS file (tile cells as in :func:`write_gds_tiles`).
+def write_oas(src: DotSource, path: str | Path, opts: ExportOptions) -> None:
+    """A dot source as an OASIS file, cells as in :func:`write_gds`, with a CRC32 in its
+    END record, checked before it replaces anything (circles stored as CIRCLE records).
 
-    gdstk has no streaming OASIS writer: the library is built whole, each tile one
-    reference with an explicit repetition (16 B per dot: 1.9 GB at 1.2·10⁸ dots), and
-    written with a CRC32. Offsets are relative to the tile's first dot in Morton order, so
-    the deltas gdstk rounds to the 1 nm grid are each exact (no drift across a tile)."""
-    _check_extent(ds.box)
-    if ds.n == 0:
-        raise ExportError("the pattern has no dots")
-    sizes: dict[int, str] = {}
+    gdstk has no streaming OASIS writer: the library is built whole, each chunk's dots
+    one reference per size with an explicit repetition (16 B per dot: 1.9 GB at 1.2·10⁸
+    dots). Offsets are relative to the chunk's first dot in Morton order, so the deltas
+    gdstk rounds to the 1 nm grid are each exact (no drift across a tile)."""
+    cells = _Cells(src.uniform_diameter, opts)
+    top = _top(src, opts, oasis=True)
     lib = gdstk.Library("OPTDOT", unit=1e-6, precision=1e-9)
-    tiles = []
-    for cell, _ in _tile_cells(ds, opts, sizes):
-        lib.add(cell)
-        tiles.append(cell.name)
-    lib.add(*_dot_cells(ds, sizes, opts), _tiled_top(ds, tiles, opts, oasis=True))
+    for label, xy, d, alone in _chunks(src):
+        cell = top if alone else cells.tile(label)
+        cells.fill(cell, xy, d)
+        if not alone:
+            lib.add(cell)
+            top.add(gdstk.Reference(cell))
+    lib.add(*cells.library_cells(), top)
     _write_oas_lib(lib, path, opts)
 
 
@@ -275,25 +272,6 @@ def _check_counts(path, tmp: Path, refs: int, polys: int) -> None:
         )
 
 
-def write_gds(pattern: Pattern, path: str | Path, opts: ExportOptions) -> None:
-    """Write a GDSII file atomically, verified before it replaces anything."""
-    if isinstance(pattern, Dataset):
-        write_gds_tiles(pattern, path, opts)
-        return
-    lib = build_library(pattern, opts)
-    with atomic_path(path, _verify_gds(path, lib, opts)) as tmp:
-        lib.write_gds(tmp, max_points=MAX_POINTS, timestamp=TIMESTAMP)
-
-
-def write_oas(pattern: Pattern, path: str | Path, opts: ExportOptions) -> None:
-    """Write an OASIS file atomically (cells compressed; circles detected as CIRCLE
-    records) with a CRC32 in its END record, checked before it replaces anything."""
-    if isinstance(pattern, Dataset):
-        write_oas_tiles(pattern, path, opts)
-        return
-    _write_oas_lib(build_library(pattern, opts, oasis=True), path, opts)
-
-
 def _write_oas_lib(lib: gdstk.Library, path: str | Path, opts: ExportOptions) -> None:
     with atomic_path(path, _verify_oas(path)) as tmp:
         lib.write_oas(
@@ -303,22 +281,6 @@ def _write_oas_lib(lib: gdstk.Library, path: str | Path, opts: ExportOptions) ->
 
 #: The GDSII ENDLIB record: length 4, type 0x04, no data.
 ENDLIB = b"\x00\x04\x04\x00"
-
-
-def _verify_gds(path, lib: gdstk.Library, opts: ExportOptions):
-    """Check a written GDSII file: it ends with ENDLIB, gdstk reads its whole record
-    stream, and it holds the references and polygons the library had.
-
-    gdstk's writer ignores write errors (a full disk gave a truncated file and no error),
-    so this is what stands between a full disk and a mask that looks finished."""
-    # GDSII has no repetitions: each repeated instance is written as its own record
-    refs = sum(max(r.repetition.size, 1) for c in lib.cells for r in c.references)
-    polys = sum(max(q.repetition.size, 1) for c in lib.cells for q in c.polygons)
-
-    def check(tmp: Path) -> None:
-        _check_counts(path, tmp, refs, polys)
-
-    return check
 
 
 def _verify_oas(path):

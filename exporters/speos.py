@@ -23,6 +23,7 @@ import numpy as np
 from optdot.errors import ExportError
 from optdot.io.atomic import atomic_path, expect_size
 from optdot.io.patterns import format_fixed6
+from optdot.pattern import DotSource
 
 from .options import ExportOptions
 
@@ -30,8 +31,8 @@ from .options import ExportOptions
 BATCH = 200_000
 
 
-def write_speos(pattern, path: str | Path, opts: ExportOptions) -> None:
-    """Write ``pattern`` (a :class:`~optdot.pattern.Pattern` or a dataset) as an
+def write_speos(pattern: DotSource, path: str | Path, opts: ExportOptions) -> None:
+    """Write ``pattern`` (a :class:`~optdot.pattern.DotSource`: a pattern or a dataset) as an
     ``.OPT3DMapping`` file, atomically.
 
     Raises:

@@ -1,16 +1,50 @@
-"""The :class:`Pattern`: what the optimizer produces and every exporter and QA check reads.
+"""The :class:`Pattern`: what the optimizer produces, and :class:`DotSource`: what every
+exporter and QA check reads (a pattern in memory, or a dataset on disk part by part).
 
 Reading and writing pattern files (CSV, NPZ) lives in :mod:`optdot.io.patterns`.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from .geometry.domain import Domain
+
+#: ``(label, xy [n, 2] mm, diameter [n] mm)``: one chunk of a dot source (a tile).
+Chunk = tuple[tuple[int, int], np.ndarray, np.ndarray]
+
+
+class DotSource(Protocol):
+    """Dots on a panel, read chunk by chunk: :class:`Pattern` (one chunk, in memory) and
+    :class:`optdot.io.dataset.Dataset` (one chunk per tile, from disk) both are one, so a
+    writer or a measure that takes a ``DotSource`` holds one chunk at a time whatever
+    the size of the panel."""
+
+    @property
+    def n(self) -> int:
+        """Number of dots."""
+
+    @property
+    def box(self) -> tuple[float, float, float, float]:
+        """Panel ``(xmin, ymin, xmax, ymax)``, mm."""
+
+    @property
+    def uniform_diameter(self) -> float | None:
+        """The one diameter of every dot, mm, or None when sizes vary."""
+
+    @property
+    def nominal_diameter(self) -> float:
+        """The uniform diameter, or the median of varying ones, mm."""
+
+    def outline_rings(self) -> list[np.ndarray]:
+        """The panel's boundary loops, ``[k, 2]`` mm each (exteriors counter-clockwise)."""
+
+    def chunks(self) -> Iterator[Chunk]:
+        """The dots, one chunk at a time, in a fixed order."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -57,7 +91,7 @@ class Pattern:
         x0, y0, x1, y1 = self.box
         return [np.array([(x0, y0), (x1, y0), (x1, y1), (x0, y1)], dtype=np.float64)]
 
-    def chunks(self):
+    def chunks(self) -> Iterator[Chunk]:
         """``(label, xy [n, 2], diameter [n])`` parts of the dots: one, all of them (a
         :class:`~optdot.io.dataset.Dataset` yields one per tile; exporters stream either)."""
         yield (0, 0), self.xy, self.diameter

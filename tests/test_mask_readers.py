@@ -20,7 +20,6 @@ import pytest
 from optdot.config.schema import load_job
 from optdot.errors import ExportError, PatternFileError
 from optdot.exporters.readback import read_any
-from optdot.io.dataset import save_dataset
 from optdot.io.patterns import save_pattern
 
 from .conftest import SAMPLES, cli, one_error
@@ -190,9 +189,12 @@ def test_a_dot_beyond_the_gdsii_range_is_refused_whatever_box_it_claims(tmp_path
 def test_a_top_cell_named_like_a_tile_or_dot_cell_is_refused(tmp_path, tiny_pattern):
     from optdot.exporters.gds import write_gds
     from optdot.exporters.options import ExportOptions
-    from optdot.io.dataset import open_dataset
+    from optdot.io.dataset import open_dataset, pattern_manifest, write_dataset
 
-    save_dataset(tiny_pattern, tmp_path / "d.parquet")
+    half = tiny_pattern.xy[:, 0] < np.median(tiny_pattern.xy[:, 0])
+    with write_dataset(tmp_path / "d.parquet", pattern_manifest(tiny_pattern)) as w:
+        for k, sel in enumerate((half, ~half)):  # two tiles: one cell each
+            w.write_part(k, (k, 0), tiny_pattern.xy[sel], tiny_pattern.diameter[sel])
     ds = open_dataset(tmp_path / "d.parquet")
     with pytest.raises(ExportError, match="'T0_0' is used by the top cell and tile"):
         write_gds(ds, tmp_path / "m.gds", ExportOptions(top_cell="T0_0"))

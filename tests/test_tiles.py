@@ -149,7 +149,8 @@ def test_varying_sizes_tile_with_the_same_bytes_on_two_workers_and_one(tiled_siz
     p = load_dataset(two)
     assert p.n == job.n_dots and p.uniform_diameter is None
     # no pair closer than its mixed-pair limit: mean diameter + gap (cKDTree, all pairs)
-    pairs = cKDTree(p.xy).query_pairs(float(p.diameter.max()) + job.optimize.gap, output_type="ndarray")
+    reach = float(p.diameter.max()) + job.optimize.gap
+    pairs = cKDTree(p.xy).query_pairs(reach, output_type="ndarray")
     dist = np.hypot(*(p.xy[pairs[:, 0]] - p.xy[pairs[:, 1]]).T)
     limit = 0.5 * (p.diameter[pairs[:, 0]] + p.diameter[pairs[:, 1]]) + job.optimize.gap
     assert len(pairs) > 500 and (dist >= limit - 1e-9).all()
@@ -224,6 +225,31 @@ def test_hierarchical_masks_hold_exactly_the_dots_of_the_flat_export(tiled, tmp_
     assert {"TOP", "DOT", "T0_0", "T3_1"} <= names  # one cell per tile
     r = optdot("qa", tiled_mask, "--job", LED, check=False)
     assert r.returncode == 0, r.stdout + r.stderr
+
+
+@pytest.mark.parametrize("fmt", ["gds", "oas"])
+def test_flattened_masks_of_a_dataset_hold_plain_polygons(tiled, tmp_path, fmt):
+    """--flatten was ignored for datasets (a hierarchical mask came out): now a dataset
+    and the same dots in memory both give one polygon per dot and no dot cell."""
+    import klayout.db as kdb
+
+    from optdot import exporters
+    from optdot.exporters import ExportOptions
+
+    d, _ = tiled
+    src = d / "two.parquet"
+    mask = tmp_path / f"flat-tiles.{fmt}"
+    optdot("export", src, f"--{fmt}", mask, "--job", LED, "--flatten", "-q")
+    whole = tmp_path / f"flat-whole.{fmt}"
+    exporters.write(load_dataset(src), fmt, whole, ExportOptions(flatten=True))
+    for path in (mask, whole):
+        ly = kdb.Layout()
+        ly.read(str(path))
+        names = {ly.cell(c).name for c in ly.each_cell_bottom_up()}
+        assert "DOT" not in names, names
+        polygons = sum(ly.cell(c).shapes(ly.layer(1, 0)).size() for c in ly.each_cell_bottom_up())
+        assert polygons == open_dataset(src).n
+    assert np.array_equal(_klayout_centres(mask), _klayout_centres(whole))
 
 
 def test_a_dataset_without_its_manifest_or_with_a_changed_part_is_refused(tiled, tmp_path):

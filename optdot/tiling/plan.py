@@ -171,7 +171,8 @@ def plan_tiles(job: Job, side: float | None = None, tile_dots: int = DEFAULT_TIL
     if (nx > 1 or ny > 1) and smallest < need:
         raise JobError(
             f"tiles of {smallest:.3g} mm are too small: the seam bands need at least "
-            f"{need:.3g} mm ({2 * (BAND_SPACINGS + HALO_SPACINGS):g} hexagonal spacings of {spacing * 1e3:.4g} µm); use larger tiles"
+            f"{need:.3g} mm ({2 * (BAND_SPACINGS + HALO_SPACINGS):g} hexagonal spacings of "
+            f"{spacing * 1e3:.4g} µm); use larger tiles"
         )
     return TilePlan(xs=xs, ys=ys, quotas=tile_quotas(job, xs, ys), band=band, halo=halo)
 
