@@ -132,7 +132,7 @@ def run(cmd: list[str]) -> tuple[float, float, int, str]:
 
 
 def optdot(*args) -> list[str]:
-    return [sys.executable, "-m", "optdot", *map(str, args)]
+    return [sys.executable, "-P", "-m", "optdot", *map(str, args)]
 
 
 def report(label: str, dots: int, secs: float, gib: float) -> None:

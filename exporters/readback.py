@@ -17,7 +17,8 @@ import numpy as np
 from optdot.errors import GeometryError, PatternFileError, ResourceError, one_line
 from optdot.files import input_problem
 from optdot.geometry.domain import domain_from_rings
-from optdot.io.patterns import load_pattern, validate_dots
+from optdot.geometry.limits import validate_dots
+from optdot.io.patterns import load_pattern
 from optdot.pattern import Pattern
 from optdot.runtime.isolate import ChildCrashed, in_child
 from optdot.runtime.memory import max_dots_read

@@ -19,9 +19,7 @@ MD baseline, guarantee pass) → :class:`Pattern` → ``quality`` (metrics, gate
 from __future__ import annotations
 
 from importlib import import_module
-from pathlib import Path
 
-from . import _imports
 from .errors import (
     ExportError,
     GeometryError,
@@ -32,8 +30,6 @@ from .errors import (
     QAGateError,
     ResourceError,
 )
-
-_imports.install(Path(__file__).resolve().parent)
 
 #: Public name -> the module that defines it (imported on first use: ``import optdot``
 #: stays cheap, and the command line loads only what a command needs).

@@ -154,24 +154,3 @@ def coverage_pixels(box, nominal: float, max_px: int) -> tuple[int, int]:
     x0, y0, x1, y1 = box
     px = max(max((x1 - x0), (y1 - y0)) / max_px, 6.0 * nominal)
     return max(1, int(round((x1 - x0) / px))), max(1, int(round((y1 - y0) / px)))
-
-
-#: Names that lived here until 0.2 and moved to :mod:`optdot.io.patterns`.
-_MOVED = ("save_pattern", "load_pattern", "pattern_csv_bytes", "format_fixed6", "CSV_HEADER")
-
-
-def __getattr__(name: str):
-    if name in _MOVED:
-        import warnings
-
-        from ._imports import OptdotDeprecationWarning
-        from .io import patterns
-
-        warnings.warn(
-            f"optdot.pattern.{name} is deprecated and goes in the next release: use "
-            f"optdot.io.patterns.{name} (or `from optdot import {name}`)",
-            OptdotDeprecationWarning,
-            stacklevel=2,
-        )
-        return getattr(patterns, name)
-    raise AttributeError(f"module 'optdot.pattern' has no attribute {name!r}")

@@ -27,8 +27,9 @@ from . import stages
 from .config.job import Job, QAParams
 from .errors import JobError, QAGateError, ResourceError
 from .geometry.morton import spatial_order
-from .io.atomic import check_outputs, transaction
+from .io.atomic import transaction
 from .io.dataset import manifest_of, write_dataset
+from .io.outputs import check_outputs
 from .pattern import Pattern
 from .quality.gate import QAResult, run_qa, run_qa_dataset
 from .quality.provenance import mask_lines, provenance

@@ -65,14 +65,14 @@ def cli(*args):
 
 
 def optdot(*args, check: bool = False):
-    """``python -m optdot *args`` in a child process, as a user runs it (signals, exit
-    codes and stderr of the real process): the ``CompletedProcess``; with ``check`` its
-    exit code must be 0."""
+    """``python -P -m optdot *args`` in a child process, as a user runs it (signals, exit
+    codes and stderr of the real process; ``-P``: the installed optdot, not the folder
+    the tests run in): the ``CompletedProcess``; with ``check`` its exit code must be 0."""
     import subprocess
     import sys
 
     r = subprocess.run(
-        [sys.executable, "-m", "optdot", *map(str, args)], capture_output=True, text=True
+        [sys.executable, "-P", "-m", "optdot", *map(str, args)], capture_output=True, text=True
     )
     if check:
         assert r.returncode == 0, r.stderr

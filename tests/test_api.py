@@ -1,11 +1,11 @@
-"""The package's shape: the curated API, the deprecated old names, arrows only downstream,
-and the QA gate inside the library's export()."""
+"""The package's shape: the curated API, arrows only downstream, no import cycle (lazy
+imports included), the installed package holding every module, and the QA gate inside
+the library's export()."""
 
 from __future__ import annotations
 
 import ast
-import subprocess
-import sys
+import re
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +19,6 @@ ROOT = Path(__file__).resolve().parents[1]
 #: Stage -> stages it may import. The core never imports quality, exporters, pipeline or cli.
 ALLOWED = {
     "errors": set(),
-    "_imports": set(),
     "__main__": {"cli"},
     "files": {"runtime"},
     "runtime": {"errors"},
@@ -31,7 +30,7 @@ ALLOWED = {
     "relax": {"errors", "geometry", "spatial"},
     "stages": {"config", "errors", "geometry", "relax", "sampling"},
     "tiling": {"config", "errors", "geometry", "relax", "runtime", "spatial", "stages"},
-    "pattern": {"geometry", "io", "_imports"},
+    "pattern": {"geometry"},
     "quality": {"config", "errors", "files", "geometry", "pattern", "io", "runtime", "spatial"},
     "exporters": {"errors", "files", "geometry", "io", "pattern", "runtime"},
     "pipeline": {
@@ -58,12 +57,15 @@ def _stage_of(path: Path) -> str:
     return rel.parts[1].removesuffix(".py")
 
 
-def _imports(path: Path) -> set[str]:
-    """The optdot stages a module imports (absolute or relative)."""
+def _modules_imported(path: Path) -> set[str]:
+    """The optdot modules a module imports, at the top or inside a function (absolute or
+    relative; ``from pkg import name`` counts as ``pkg.name``, a module or not)."""
     tree = ast.parse(path.read_text())
     pkg = path.relative_to(ROOT).with_suffix("").parts
     if pkg[0] == "exporters":
         pkg = ("optdot", *pkg)
+    if pkg[-1] == "__init__":
+        pkg = (*pkg[:-1], "_")  # a package's relative imports start at the package
     out = set()
     for node in ast.walk(tree):
         names = []
@@ -73,14 +75,83 @@ def _imports(path: Path) -> set[str]:
                 mod = ".".join(base + ([node.module] if node.module else []))
             else:
                 mod = node.module or ""
-            names = [mod] if node.module else [f"{mod}.{a.name}" for a in node.names]
+            names = [mod] + [f"{mod}.{a.name}" for a in node.names]
         elif isinstance(node, ast.Import):
             names = [a.name for a in node.names]
-        for n in names:
-            parts = n.split(".")
-            if parts[0] == "optdot" and len(parts) > 1:
-                out.add(parts[1])
+        out |= {n for n in names if n.split(".")[0] == "optdot"}
     return out
+
+
+def _imports(path: Path) -> set[str]:
+    """The optdot stages a module imports (absolute or relative)."""
+    return {n.split(".")[1] for n in _modules_imported(path) if n.count(".")}
+
+
+def _module_files() -> dict[str, Path]:
+    """``{dotted module name: file}`` of every module of the package (exporters as
+    ``optdot.exporters``)."""
+    out = {}
+    for base, prefix in (
+        (ROOT / "optdot", ("optdot",)),
+        (ROOT / "exporters", ("optdot", "exporters")),
+    ):
+        for f in base.rglob("*.py"):
+            rel = f.relative_to(base).with_suffix("").parts
+            if rel[-1] == "__init__":
+                rel = rel[:-1]
+            out[".".join((*prefix, *rel))] = f
+    return out
+
+
+def test_no_import_cycle_lazy_imports_included():
+    """No module reaches itself through imports, counting imports inside functions too
+    (a lazy import hides a cycle from Python, not from the design)."""
+    files = _module_files()
+    graph = {}
+    for name, f in files.items():
+        deps = set()
+        for m in _modules_imported(f):
+            while m and m not in files:  # `from pkg import name`: the module is pkg
+                m = m.rpartition(".")[0]
+            # a package's __init__ re-exporting its modules is not an arrow back
+            if m and m != name and not name.startswith(m + "."):
+                deps.add(m)
+        graph[name] = deps
+    cycles, state = [], {}
+
+    def visit(n, path):
+        state[n] = 1
+        for d in sorted(graph[n]):
+            if state.get(d) == 1:
+                cycles.append(path[path.index(d) :] + [d])
+            elif d not in state:
+                visit(d, [*path, d])
+        state[n] = 2
+
+    for n in sorted(graph):
+        if n not in state:
+            visit(n, [n])
+    assert not cycles, cycles
+
+
+def test_the_installed_package_holds_every_module_of_the_checkout():
+    """Tests import the installed optdot (pytest --import-mode=importlib; CI installs
+    it from its own files): a module or subpackage missing from pyproject's package
+    list would be missing here."""
+    import importlib.util
+
+    assert (ROOT / "optdot" / "__init__.py").is_file()
+    where = Path(optdot.__file__).resolve().parent
+    missing = []
+    for name in _module_files():
+        spec = importlib.util.find_spec(name)
+        if spec is None:
+            missing.append(name)
+    assert not missing, (where, missing)
+    packages = {n for n, f in _module_files().items() if f.name == "__init__.py"}
+    text = (ROOT / "pyproject.toml").read_text()
+    listed = set(re.findall(r'^\s+"(optdot[\w.]*)",$', text, re.M))
+    assert listed == packages, listed ^ packages
 
 
 def test_arrows_only_downstream():
@@ -110,30 +181,6 @@ def test_curated_api_imports():
     for name in optdot.__all__:
         assert getattr(optdot, name) is not None, name
     assert issubclass(QAGateError, optdot.OptdotError) and QAGateError.exit_code == 1
-
-
-def test_old_names_warn_and_still_work():
-    code = (
-        "import warnings\n"
-        "warnings.simplefilter('error')\n"
-        "try:\n"
-        "    from optdot.job import load_job\n"
-        "except FutureWarning as w:\n"
-        "    print('WARNED', w)\n"
-        "warnings.simplefilter('ignore')\n"
-        "from optdot.job import load_job\n"
-        "from optdot.generate import generate\n"
-        "from optdot.pattern import save_pattern\n"
-        "import optdot\n"
-        f"job = load_job({str(ROOT / 'samples/tiny/job.toml')!r})\n"
-        "p = optdot.generate(job)\n"
-        "print('DOTS', p.n, generate is optdot.pipeline.generate)\n"
-    )
-    out = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True
-    ).stdout
-    assert "WARNED optdot.job is deprecated" in out and "optdot.config" in out
-    assert "DOTS 869 True" in out
 
 
 def test_export_refuses_on_a_failed_gate_and_writes_nothing(tiny_job, tiny_pattern, tmp_path):

@@ -160,7 +160,7 @@ def test_a_signal_during_export_leaves_the_old_files(tmp_path, signame, delay):
     outs = {f: tmp_path / f"v.{f}" for f in ("gds", "oas", "dxf", "csv")}
     for p in outs.values():
         p.write_bytes(b"OLD")
-    args = [sys.executable, "-m", "optdot", "export", SAMPLES / "led" / "job.toml", "-q"]
+    args = [sys.executable, "-P", "-m", "optdot", "export", SAMPLES / "led" / "job.toml", "-q"]
     for f, p in outs.items():
         args += [f"--{f}", p]
     proc = subprocess.Popen(list(map(str, args)), stderr=subprocess.PIPE, text=True)

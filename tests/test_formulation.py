@@ -7,11 +7,12 @@ import dataclasses
 import numpy as np
 import pytest
 
-from optdot.pipeline import generate, problem_of
+from optdot.pipeline import generate
 from optdot.relax.circles import circle_radius, hex_radius
 from optdot.relax.formulation import PRESETS, Formulation, formulation_of
 from optdot.relax.optdot import RelaxSettings, relax_staged
 from optdot.spatial.cellgrid import pairs_within
+from optdot.stages import problem_of
 
 
 def test_core_share_floor_and_cap(tiny_job):

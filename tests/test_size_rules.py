@@ -307,7 +307,16 @@ def test_cli_exports_every_format_and_qa_agrees_on_each(sized, tmp_path):
 
     _, p, job_path = sized
     out = {f: tmp_path / f"s.{f}" for f in ("gds", "oas", "dxf", "csv")}
-    cmd = [sys.executable, "-m", "optdot", "generate", str(job_path), "-o", str(tmp_path / "s.npz")]
+    cmd = [
+        sys.executable,
+        "-P",
+        "-m",
+        "optdot",
+        "generate",
+        str(job_path),
+        "-o",
+        str(tmp_path / "s.npz"),
+    ]
     assert subprocess.run(cmd, capture_output=True).returncode == 0
     args = [x for f, path in out.items() for x in (f"--{f}", str(path))]
     run = subprocess.run(

@@ -278,7 +278,7 @@ def test_an_interrupted_tiled_run_leaves_the_previous_dataset(tiled, tmp_path):
     before = {p.name: p.read_bytes() for p in out.iterdir()}
     args = ["generate", LED, *TILED, "--seed", "9", "-o", out]
     proc = subprocess.Popen(
-        [sys.executable, "-m", "optdot", *map(str, args)], stderr=subprocess.PIPE, text=True
+        [sys.executable, "-P", "-m", "optdot", *map(str, args)], stderr=subprocess.PIPE, text=True
     )
     deadline = time.time() + 60
     while time.time() < deadline and "dashboard" not in (err := proc.stderr.readline()):

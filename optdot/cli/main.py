@@ -24,7 +24,7 @@ import click
 
 from ..config.viewing import VIEW_PRESETS
 from ..errors import OptdotError, QAGateError, one_line, shorten
-from ..io.atomic import check_outputs
+from ..io.outputs import check_outputs
 
 #: Exit code of an unexpected internal error (sysexits' EX_SOFTWARE).
 EXIT_INTERNAL = 70

@@ -28,55 +28,19 @@ from ..runtime.stop import check_interrupt, interrupted, mark_interrupted
 
 __all__ = [
     "atomic_path",
-    "check_outputs",
-    "check_target",
     "expect_size",
     "expect_tail",
     "interrupted",
     "mark_interrupted",
+    "fsync_dir",
+    "refuse_read_only",
+    "short_name",
     "transaction",
     "writable_target",
 ]
 
 #: ``verify(tmp_path)``: raise :class:`ExportError` (or ``OSError``) if the file is wrong.
 Verifier = Callable[[Path], None]
-
-
-def check_target(target: str | Path, inputs: tuple[Path, ...] = ()) -> None:
-    """Refuse, before any work, an output that cannot be written or would overwrite an
-    input: a missing or unwritable directory, a directory in the way, anything but a
-    regular file in the way (a device node, a FIFO, a socket), a name longer than the
-    file system allows, or the same file as one of ``inputs``.
-
-    Raises:
-        ExportError: one line naming the file and the problem.
-    """
-    target = Path(target)
-    directory = target.parent if str(target.parent) else Path(".")
-    if not directory.is_dir():
-        raise ExportError(f"{target}: output directory {directory} does not exist")
-    try:
-        name_max = os.pathconf(directory, "PC_NAME_MAX")
-    except (OSError, ValueError):
-        name_max = 255
-    if len(os.fsencode(target.name)) > name_max:
-        raise ExportError(
-            f"{target.name[:40]}...: file name is {len(os.fsencode(target.name))} bytes, "
-            f"longer than the {name_max} this file system allows"
-        )
-    if target.suffix.lower() == ".parquet":
-        from .dataset import check_dataset_target  # a dataset is a directory it replaces
-
-        check_dataset_target(target)
-    else:
-        target = writable_target(target)
-        directory = target.parent
-    _refuse_read_only(target)
-    if not os.access(directory, os.W_OK | os.X_OK):
-        raise ExportError(f"{target}: cannot write in {directory} (permission denied)")
-    for src in inputs:
-        if _same_file(target, Path(src)):
-            raise ExportError(f"{target}: is an input of this run ({src}); choose another name")
 
 
 def writable_target(target: str | Path) -> Path:
@@ -106,23 +70,7 @@ def writable_target(target: str | Path) -> Path:
     return target
 
 
-def check_outputs(outputs: dict[str, str | Path], inputs: tuple = ()) -> None:
-    """Refuse, before any work, a set of outputs (``{what: path}``) in which a path is
-    given twice, cannot be written (see :func:`check_target`) or is one of ``inputs``.
-
-    Raises:
-        ExportError: one line naming the file and the problem.
-    """
-    seen: dict[Path, str] = {}
-    for what, p in outputs.items():
-        rp = Path(p).resolve()
-        if rp in seen:
-            raise ExportError(f"{p}: given for both --{seen[rp]} and --{what}")
-        seen[rp] = what
-        check_target(p, inputs)
-
-
-def _refuse_read_only(target: Path) -> None:
+def refuse_read_only(target: Path) -> None:
     """A file whose write bits are all off was protected on purpose: never replace it
     (checked on the mode, so that it holds for root too)."""
     try:
@@ -136,16 +84,7 @@ def _refuse_read_only(target: Path) -> None:
         )
 
 
-def _same_file(a: Path, b: Path) -> bool:
-    try:
-        if a.exists() and b.exists():
-            return os.path.samefile(a, b)
-    except OSError:
-        pass
-    return a.resolve() == b.resolve()
-
-
-def _short(name: str, limit: int = 120) -> str:
+def short_name(name: str, limit: int = 120) -> str:
     """At most ``limit`` bytes of a file name, for temporaries beside long-named files."""
     raw = os.fsencode(name)[:limit]
     return os.fsdecode(raw.decode("utf-8", "ignore").encode("utf-8"))
@@ -166,9 +105,11 @@ def atomic_path(target: str | Path, verify: Verifier | None = None) -> Iterator[
     directory = target.parent if str(target.parent) else Path(".")
     if not directory.is_dir():
         raise ExportError(f"{target}: output directory {directory} does not exist")
-    _refuse_read_only(target)
+    refuse_read_only(target)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{_short(target.name)}.", suffix=".tmp", dir=directory)
+        fd, tmp = tempfile.mkstemp(
+            prefix=f".{short_name(target.name)}.", suffix=".tmp", dir=directory
+        )
     except OSError as e:
         raise ExportError(f"{target}: cannot write here ({e.strerror})") from None
     os.close(fd)
@@ -186,7 +127,7 @@ def atomic_path(target: str | Path, verify: Verifier | None = None) -> Iterator[
             return
         writable_target(target)  # still a regular file (or nothing) just before the rename
         os.replace(tmp_path, target)
-        _fsync_dir(directory)
+        fsync_dir(directory)
     except OSError as e:
         with contextlib.suppress(OSError):
             tmp_path.unlink()
@@ -246,7 +187,7 @@ def transaction() -> Iterator[None]:
             raise
         raise ExportError(f"{target}: cannot replace ({e.strerror})") from None
     for directory in {target.parent for _, target in pending}:
-        _fsync_dir(directory)
+        fsync_dir(directory)
 
 
 def expect_size(size: int, what: str) -> Verifier:
@@ -290,7 +231,7 @@ def _fsync(path: Path) -> None:
         os.close(fd)
 
 
-def _fsync_dir(directory: Path) -> None:
+def fsync_dir(directory: Path) -> None:
     with contextlib.suppress(OSError):  # not every file system can sync a directory
         fd = os.open(directory, os.O_RDONLY)
         try:

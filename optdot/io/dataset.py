@@ -43,8 +43,10 @@ import numpy as np
 
 from ..errors import ExportError, PatternFileError, one_line
 from ..files import sha256_file
+from ..geometry.limits import validate_dots
+from ..pattern import Pattern
 from ..runtime.stop import check_interrupt
-from .atomic import _fsync_dir, _short
+from .atomic import fsync_dir, short_name
 
 MANIFEST = "_manifest.json"
 FORMAT = "optdot.dataset"
@@ -156,7 +158,7 @@ def write_dataset(target: str | Path, manifest: dict[str, Any]) -> Iterator[Data
     directory = target.parent if str(target.parent) else Path(".")
     check_dataset_target(target)
     try:
-        tmp = Path(tempfile.mkdtemp(prefix=f".{_short(target.name)}.", dir=directory))
+        tmp = Path(tempfile.mkdtemp(prefix=f".{short_name(target.name)}.", dir=directory))
     except OSError as e:
         raise ExportError(f"{target}: cannot write here ({e.strerror})") from None
     writer = DatasetWriter(tmp, target)
@@ -188,14 +190,14 @@ def write_dataset(target: str | Path, manifest: dict[str, Any]) -> Iterator[Data
         if target.is_dir():
             check_dataset_target(target)
             if not _renameat2_exchange(tmp, target):
-                old = directory / f".{_short(target.name)}.old"
+                old = directory / f".{short_name(target.name)}.old"
                 os.rename(target, old)
                 os.rename(tmp, target)
                 tmp = old
             shutil.rmtree(tmp, ignore_errors=True)  # the previous dataset
         else:
             os.rename(tmp, target)
-        _fsync_dir(directory)
+        fsync_dir(directory)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -458,10 +460,6 @@ def load_dataset(path: str | Path, box=None):
     Raises:
         PatternFileError: see :func:`open_dataset`, :meth:`Dataset.verify`.
     """
-
-    from ..pattern import Pattern
-    from .patterns import validate_dots
-
     ds = open_dataset(path)
     ds.verify()
     xys, ds_ = [], []

@@ -23,9 +23,10 @@ import shapely
 from ..errors import ExportError, PatternFileError, one_line
 from ..files import input_problem
 from ..geometry.domain import Domain, orient_all
-from ..geometry.limits import DIAMETER_RANGE_MM, MAX_EXTENT_MM
+from ..geometry.limits import validate_dots
 from ..pattern import Pattern
 from .atomic import atomic_path, expect_size
+from .dataset import load_dataset, save_dataset
 
 CSV_HEADER = "x_mm,y_mm,diameter_mm"
 
@@ -39,8 +40,6 @@ def save_pattern(pattern: Pattern, path: str | Path) -> None:
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix == ".parquet":
-        from .dataset import save_dataset
-
         save_dataset(pattern, path)
         return
     if suffix not in (".csv", ".npz"):
@@ -176,8 +175,6 @@ def load_pattern(path: str | Path, box: tuple[float, float, float, float] | None
     elif not path.exists():
         raise PatternFileError(f"{path}: pattern file not found")
     if suffix == ".parquet":
-        from .dataset import load_dataset
-
         return load_dataset(path, box)
     if suffix == ".npz":
         return _load_npz(path, box)
@@ -287,42 +284,6 @@ def _real(path: Path, z, name: str) -> np.ndarray:
     if a.dtype.kind not in "biuf":
         raise PatternFileError(f"{path}: {name} must hold real numbers, got dtype {a.dtype}")
     return a.astype(np.float64)
-
-
-def validate_dots(path, xy: np.ndarray, diam: np.ndarray, box) -> None:
-    """Refuse dots a mask cannot hold before any work is sized from them: NaN, diameters
-    outside :data:`DIAMETER_RANGE_MM`, a panel box or dot extent beyond
-    :data:`MAX_EXTENT_MM` (QA's rasters would need terabytes).
-
-    Args:
-        path: the file, for messages.
-        xy: ``[n, 2]`` centres, mm. diam: ``[n]`` diameters, mm.
-        box: ``(xmin, ymin, xmax, ymax)`` panel box, mm, or None.
-
-    Raises:
-        PatternFileError: one line naming the file and the problem.
-    """
-    if not np.all(np.isfinite(xy)) or not np.all(np.isfinite(diam)):
-        raise PatternFileError(f"{path}: NaN or infinite coordinate or diameter")
-    lo_d, hi_d = DIAMETER_RANGE_MM
-    if len(diam) and not (lo_d <= diam.min() and diam.max() <= hi_d):
-        bad = diam.min() if diam.min() < lo_d else diam.max()
-        raise PatternFileError(
-            f"{path}: dot diameter {bad:.6g} mm is out of range ({lo_d:g}..{hi_d:g} mm)"
-        )
-    spans = []
-    if len(xy):
-        spans += [float(np.ptp(xy[:, 0])), float(np.ptp(xy[:, 1]))]
-    if box is not None:
-        b = np.asarray(box, dtype=np.float64)
-        if not np.all(np.isfinite(b)):
-            raise PatternFileError(f"{path}: the panel box {tuple(box)} is not finite")
-        spans += [float(b[2] - b[0]), float(b[3] - b[1])]
-    if spans and max(spans) > MAX_EXTENT_MM:
-        raise PatternFileError(
-            f"{path}: the dots or the panel span {max(spans):.4g} mm; optdot handles panels up "
-            f"to {MAX_EXTENT_MM:.0f} mm (are the units mm?)"
-        )
 
 
 def _validated(path, xy, diam, box, meta) -> Pattern:

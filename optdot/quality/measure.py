@@ -46,6 +46,7 @@ from ..config.viewing import Viewing
 from ..errors import ResourceError
 from ..geometry.density import DensityMap
 from ..geometry.domain import Domain, box_protruding
+from ..geometry.limits import validate_dots
 from ..pattern import coverage_pixels
 from ..runtime.memory import available_bytes
 from ..spatial.window import grown, in_rect
@@ -147,8 +148,6 @@ def dataset_source(ds, box=None, outline: Domain | None | bool = True) -> Source
         box: the panel box (default: the dataset's).
         outline: the panel outline; True (default) for the dataset's own.
     """
-    from ..io.patterns import validate_dots
-
     the_box = tuple(box) if box is not None else ds.box
 
     def read(k: int):
