@@ -14,9 +14,8 @@ callback) and the command line only parses options and prints what it returns.
 
 from __future__ import annotations
 
-import contextlib
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -25,67 +24,44 @@ import numpy as np
 
 from . import stages
 from .config.job import Job, QAParams
-from .errors import JobError, QAGateError, ResourceError
+from .errors import ExportError, JobError, QAGateError
 from .geometry.morton import spatial_order
 from .io.atomic import transaction
-from .io.dataset import manifest_of, write_dataset
+from .io.dataset import is_dataset
 from .io.outputs import check_outputs
+from .io.patterns import save_pattern
 from .pattern import Pattern
+from .preflight import (
+    MAX_RANDOM_FILL,
+    TILE_BREAK_EVEN,
+    JobCheck,
+    _check_room,
+    check_job,
+    use_tiles,
+)
 from .quality.gate import QAResult, run_qa, run_qa_dataset
 from .quality.provenance import mask_lines, provenance
 from .relax.formulation import Formulation
 from .relax.optdot import Progress
-from .runtime.cluster import connect, embedded_workers, scheduler_address
-from .runtime.cost import Cost, estimate_cost
-from .runtime.memory import BASE_BYTES, available_bytes, check_memory, estimate_bytes
-from .runtime.stop import check_interrupt
-from .tiling.plan import TilePlan, plan_tiles
-from .tiling.run import InProcess, OnDask, TiledRun, TileProgress, run_tiles, warm_up
+from .runtime.memory import check_memory
+from .tiled import Announce, generate_tiled
+from .tiling.run import TileProgress
 
-#: Densest fill a random non-overlapping pattern reaches in practice, counting the gap
-#: (fill x ((diameter + gap) / diameter)²): OptDot's guarantee holds at 0.78 and fails at
-#: 0.80 on uniform maps (measured, 3 x 2 mm, 46 µm); random close packing of disks is
-#: ~0.82 (Berryman 1983), the hexagonal lattice 0.9069. Denser means a lattice: moiré.
-MAX_RANDOM_FILL = 0.80
-
-
-def _check_fill(job: Job, where: str) -> None:
-    """Refuse, before any work, a map whose densest cell cannot hold a random pattern at
-    the job's spacing (a gap of 5 mm between 46 µm dots allows a fill of 0.0001)."""
-    grid = job.density.grid
-    k = int(np.argmax(grid))
-    iy, ix = divmod(k, grid.shape[1])
-    spread = (job.min_distance / job.diameter) ** 2
-    eff = float(grid[iy, ix]) * spread
-    if eff >= MAX_RANDOM_FILL:
-        raise JobError(
-            f"{where}: fill {float(grid[iy, ix]):.4g} at row {iy}, column {ix} with centres "
-            f"{job.min_distance * 1e3:.4g} µm apart for {job.diameter * 1e3:.4g} µm dots "
-            f"is an effective fill of {eff:.4g}; a random non-overlapping pattern reaches "
-            f"at most {MAX_RANDOM_FILL:g} (the fill can be at most "
-            f"{MAX_RANDOM_FILL / spread:.4g} here)"
-        )
-
-
-def _check_room(job: Job, n: int, where: str) -> None:
-    """Refuse, before any work, a job whose dots cannot be placed at all."""
-    if n == 0:
-        raise JobError(
-            f"{where}: the map asks for 0 dots (mean fill fraction x panel area is under half "
-            f"a dot of {job.diameter:g} mm)"
-        )
-    if job.sizes is None:
-        _check_fill(job, where)
-    if job.domain.rectangle and job.domain.edge_margin == 0:
-        return  # fill fractions below the packing limit always fit
-    room = job.domain.max_dots(0.5 * job.diameter, job.min_distance)
-    if n > room:
-        margin = job.domain.edge_margin
-        what = f"domain.edge_margin = {margin:g} mm leaves" if margin > 0 else "the panel has"
-        raise JobError(
-            f"{where}: {what} room for at most {room:,} dots {job.diameter * 1e3:.4g} µm "
-            f"across (centres {job.min_distance * 1e3:.4g} µm apart), the map asks for {n:,}"
-        )
+__all__ = [
+    "MAX_RANDOM_FILL",
+    "TILE_BREAK_EVEN",
+    "Generated",
+    "JobCheck",
+    "check_job",
+    "dataset_pattern",
+    "export",
+    "generate",
+    "generate_tiled",
+    "generate_to",
+    "qa",
+    "use_tiles",
+    "with_job_panel",
+]
 
 
 def generate(
@@ -173,233 +149,83 @@ def generate(
     return Pattern(xy=xy, diameter=diameter, box=job.box, meta=meta, stats=stats, outline=outline)
 
 
-#: ``tiles="auto"`` tiles a job of at least this many dots even when one process would
-#: hold it: above it the tiled run on this 2-core machine is faster (BENCHMARKS.md,
-#: ``benchmarks/panels.py --break-even``).
-TILE_BREAK_EVEN = 2_000_000
-#: ``announce(line)``: what a tiled run tells the user before it starts (cluster, tiles).
-Announce = Callable[[str], None]
-
-
-def use_tiles(job: Job, mode: str = "auto") -> bool:
-    """Whether ``job`` runs tiled: ``on``, ``off``, or ``auto`` (when one process would
-    not fit, or from :data:`TILE_BREAK_EVEN` dots; the MD baseline never tiles)."""
-    if mode == "on":
-        if job.optimize.method != "optdot":
-            raise JobError(f"{job.name}: tiles need optimize.method = 'optdot' (MD is a baseline)")
-        return True
-    if mode == "off" or job.optimize.method != "optdot":
-        return False
-    n = job.n_dots
-    return n >= TILE_BREAK_EVEN or estimate_bytes(n, job.optimize.lbfgs_memory) > 0.9 * (
-        available_bytes()
-    )
+#: Pattern files :func:`generate_to` writes, by suffix.
+PATTERN_SUFFIXES = (".csv", ".npz", ".parquet")
 
 
 @dataclass(frozen=True)
-class JobCheck:
-    """What :func:`check_job` found: the job would run, and what it would cost.
+class Generated:
+    """What :func:`generate_to` wrote.
 
     Attributes:
-        n_dots: dots the map asks for. plan: the tiling, or None for one process.
-        workers: processes the tiles would run on (1 for one process).
-        cost: the estimate (:class:`optdot.runtime.cost.Cost`).
-        available_bytes: memory available now, bytes.
+        path: the pattern file or dataset.
+        n: dots written.
+        seconds: wall time of the generation, s.
+        iterations: iterations of a single-process run (None for tiles).
+        tiles: ``"nx x ny"`` of a tiled run, or None.
     """
 
-    n_dots: int
-    plan: TilePlan | None
-    workers: int
-    cost: Cost
-    available_bytes: int
+    path: Path
+    n: int
+    seconds: float
+    iterations: int | None = None
+    tiles: str | None = None
 
 
-def check_job(
+def generate_to(
     job: Job,
-    tiles: str = "auto",
-    tile_size: float | None = None,
-    workers: int | None = None,
-    formats: tuple[str, ...] = ("parquet", "gds", "oas", "dxf"),
-) -> JobCheck:
-    """Every check :func:`generate` and :func:`generate_tiled` make before they start
-    (room, fill, memory, tile size, workers), without running anything, and the cost.
-
-    Raises:
-        JobError, GeometryError, ResourceError: what the run itself would refuse.
-    """
-    where = str(job.source) if job.source else job.name
-    n = job.n_dots
-    _check_room(job, n, where)
-    opt = job.optimize
-    if not use_tiles(job, tiles):
-        check_memory(n, opt.lbfgs_memory, where)
-        cost = estimate_cost(n, opt.max_iter, opt.lbfgs_memory, formats=formats)
-        return JobCheck(n, None, 1, cost, available_bytes())
-    plan = plan_tiles(job, tile_size)
-    k, per_worker = embedded_workers(workers, None)
-    k = min(k, plan.count)
-    _check_tile_memory(job, plan, per_worker)
-    biggest = int(plan.quotas.max())
-    cost = estimate_cost(n, opt.max_iter, opt.lbfgs_memory, biggest, k, formats)
-    return JobCheck(n, plan, k, cost, available_bytes())
-
-
-def _tiled_meta(job: Job, plan: TilePlan) -> dict:
-    opt = job.optimize
-    return {
-        "job": job.name,
-        "method": opt.method,
-        "formulation": opt.formulation,
-        "seed": opt.seed,
-        "max_iter": opt.max_iter,
-        "n": int(plan.quotas.sum()),
-        "tiles": f"{plan.nx}x{plan.ny}",
-        "tiling": {"xs": [float(v) for v in plan.xs], "ys": [float(v) for v in plan.ys]},
-    }
-
-
-#: Bytes per dot of a tiled run gathered into one pattern in the command's process
-#: (positions, the order of tiles, the pattern, what the writer formats).
-GATHERED_BYTES_PER_DOT = 64
-#: Bytes per dot of a dataset on disk (three float64 columns, zstd), an upper bound.
-DATASET_BYTES_PER_DOT = 26
-
-
-def _check_gathered(job: Job, output: str | Path | None, where: str) -> None:
-    """Refuse, before any work, a tiled run whose result cannot be held or stored: in
-    memory when gathered (CSV/NPZ), on disk for a dataset."""
-    import shutil
-
-    n = job.n_dots
-    if output is None:
-        need = BASE_BYTES + n * GATHERED_BYTES_PER_DOT
-        have = available_bytes()
-        if need > 0.9 * have:
-            raise ResourceError(
-                f"{where}: {n:,} dots gathered into one pattern need about "
-                f"{need / 2**30:.1f} GiB but only {have / 2**30:.1f} GiB is available; "
-                "write a .parquet dataset instead"
-            )
-        return
-    parent = Path(output).resolve().parent
-    free = shutil.disk_usage(parent).free
-    need = n * DATASET_BYTES_PER_DOT
-    if need > free:
-        raise ResourceError(
-            f"{where}: the dataset of {n:,} dots needs about {need / 1e9:.1f} GB on disk, "
-            f"{parent} has {free / 1e9:.1f} GB free"
-        )
-
-
-def _check_tile_memory(job: Job, plan: TilePlan, per_worker: int) -> None:
-    """Refuse tiles that cannot fit a worker's memory limit (0 = no limit)."""
-    biggest = int(plan.quotas.max())
-    need = estimate_bytes(biggest, job.optimize.lbfgs_memory)
-    if per_worker and need > 0.8 * per_worker:
-        raise ResourceError(
-            f"{job.name}: a tile of {biggest:,} dots needs about {need / 2**30:.2f} GiB but "
-            f"each worker has {per_worker / 2**30:.2f} GiB; choose smaller tiles (--tile-size)"
-        )
-
-
-def generate_tiled(
-    job: Job,
-    output: str | Path | None = None,
+    output: str | Path,
     *,
-    plan: TilePlan | None = None,
+    tiles: str = "auto",
     tile_size: float | None = None,
     scheduler: str | None = None,
     workers: int | None = None,
     worker_memory: int | None = None,
-    executor: InProcess | OnDask | None = None,
+    progress: Progress | None = None,
+    tile_progress: TileProgress | None = None,
+    stage: Callable[[str], None] | None = None,
     announce: Announce | None = None,
-    progress: TileProgress | None = None,
-) -> Pattern | TiledRun:
-    """Generate ``job`` in tiles (:mod:`optdot.tiling.tasks`) on a Dask cluster.
+) -> Generated:
+    """Generate ``job`` and write it to ``output`` (``.csv``, ``.npz``, or a ``.parquet``
+    dataset), in one process or in tiles (:func:`use_tiles` with ``tiles``; the other
+    arguments as in :func:`generate` and :func:`generate_tiled`).
 
-    Args:
-        output: a ``.parquet`` dataset to stream the tiles into (the result is then the
-            :class:`TiledRun`); None gathers them into a :class:`Pattern` (tile order).
-        plan: the tiling (default: :func:`plan_tiles` with ``tile_size``).
-        tile_size: tile side, mm (default: about 150k dots per tile).
-        scheduler: an existing Dask scheduler's address (default: a LocalCluster).
-        workers: LocalCluster worker processes (default: the cores).
-        worker_memory: LocalCluster memory limit per worker, bytes.
-        executor: run on this instead of a cluster (tests: :class:`InProcess`).
-        announce: told the cluster's dashboard and the tiling before the run.
-        progress: ``progress(fraction, line)`` as tiles finish.
+    The output is checked before any work (a writable name, not one of the job's own
+    files) and written atomically: a failed or interrupted run leaves what was there.
 
     Raises:
-        ClusterError: the scheduler cannot be reached or the cluster cannot start.
-        ResourceError: a tile would not fit a worker.
-        GuaranteeError: a tile could not be made legal.
-        ExportError: the dataset cannot be written (the previous one is left as it was).
+        ExportError: the output cannot be written or is an input of the job.
+        JobError, GeometryError, ResourceError, GuaranteeError, ClusterError: as the run.
     """
-    where = str(job.source) if job.source else job.name
-    _check_room(job, job.n_dots, where)
-    _check_gathered(job, output, where)
-    plan = plan or plan_tiles(job, tile_size)
-    address = scheduler_address(scheduler)
-    if executor is None and address is None:  # before any worker is spawned
-        _check_tile_memory(job, plan, embedded_workers(workers, worker_memory)[1])
-    if executor is not None:
-        return _run_tiled(job, plan, contextlib.nullcontext(executor), output, progress)
-    on_cluster = _on_cluster(job, plan, address, workers, worker_memory, announce)
-    return _run_tiled(job, plan, on_cluster, output, progress)
-
-
-@contextlib.contextmanager
-def _on_cluster(job, plan, scheduler, workers, worker_memory, announce) -> Iterator[OnDask]:
-    """An :class:`OnDask` executor on a connected cluster, kernels compiled on it."""
-    with connect(scheduler, workers, worker_memory) as cluster:
-        _check_tile_memory(job, plan, cluster.memory_per_worker)
-        if announce is not None:
-            kind = "local cluster" if cluster.embedded else "cluster"
-            announce(
-                f"{kind}: {cluster.workers} workers, dashboard {cluster.dashboard or 'n/a'}; "
-                f"{plan.count} tiles ({plan.nx} x {plan.ny}) of ~{int(plan.quotas.mean()):,} dots"
-            )
-        warm = cluster.client.submit(_warm, pure=False)  # compile once, not per worker
-        while not warm.done():  # a first run compiles for a minute: stay stoppable
-            check_interrupt()
-            time.sleep(0.1)
-        warm.result()
-        yield OnDask(cluster.client)
-
-
-def _warm() -> int:
-    from .runtime.cluster import single_threaded
-
-    single_threaded()
-    return warm_up()
-
-
-def _run_tiled(job, plan, executor_cm, output, progress) -> Pattern | TiledRun:
-    """Run the tiles on the executor ``executor_cm`` yields. A dataset is committed only
-    after the executor was closed (a cluster shut down): a signal during the shutdown
-    stops the run before the commit, never after it."""
-    meta = _tiled_meta(job, plan)
-    outline = None if job.domain.rectangle else job.domain
-    one = job.diameter if job.sizes is None else None  # sizes: known once written
-    if output is not None:
-        manifest = manifest_of(
-            job.name, job.optimize.seed, one, one, job.box, meta, outline, plan.to_json()
+    output = Path(output)
+    if output.suffix.lower() not in PATTERN_SUFFIXES:
+        raise ExportError(
+            f"{output}: pattern files end in .csv, .npz or .parquet, "
+            f"not {output.suffix or 'no suffix'!r}"
         )
-        with write_dataset(output, manifest) as w:
-
-            def to_part(tile, xy, diameter):
-                w.write_part(plan.index(*tile), tile, xy, diameter)
-
-            with executor_cm as executor:
-                run = run_tiles(job, plan, executor, to_part, progress)
-        return run
-    got: dict = {}
-    with executor_cm as executor:
-        run = run_tiles(job, plan, executor, lambda t, xy, d: got.__setitem__(t, (xy, d)), progress)
-    xy = np.concatenate([got[t][0] for t in plan.tiles()])
-    d = np.concatenate([np.broadcast_to(got[t][1], (len(got[t][0]),)) for t in plan.tiles()])
-    stats = {"total_s": run.seconds, "history": []}
-    return Pattern(xy=xy, diameter=d, box=job.box, meta=meta, stats=stats, outline=outline)
+    check_outputs({"output": output}, tuple(job.inputs))
+    t0 = time.perf_counter()
+    if not use_tiles(job, tiles):
+        pattern = generate(job, progress=progress, stage=stage)
+        save_pattern(pattern, output)
+        secs = pattern.stats["total_s"]
+        return Generated(output, pattern.n, secs, iterations=pattern.meta["iterations"])
+    result = generate_tiled(
+        job,
+        output if is_dataset(output) else None,
+        tile_size=tile_size,
+        scheduler=scheduler,
+        workers=workers,
+        worker_memory=worker_memory,
+        announce=announce,
+        progress=tile_progress,
+    )
+    if isinstance(result, Pattern):
+        save_pattern(result, output)
+        n, plan = result.n, result.meta["tiles"]
+    else:
+        n, plan = sum(result.counts.values()), f"{result.plan.nx}x{result.plan.ny}"
+    return Generated(output, n, time.perf_counter() - t0, tiles=plan)
 
 
 def with_job_panel(pattern: Pattern, job: Job | None) -> Pattern:

@@ -33,8 +33,12 @@ ALLOWED = {
     "pattern": {"geometry"},
     "quality": {"config", "errors", "files", "geometry", "pattern", "io", "runtime", "spatial"},
     "exporters": {"errors", "files", "geometry", "io", "pattern", "runtime"},
+    "preflight": {"config", "errors", "runtime", "tiling"},
+    "tiled": {"config", "errors", "io", "pattern", "preflight", "runtime", "tiling"},
     "pipeline": {
         "io",
+        "preflight",
+        "tiled",
         "config",
         "errors",
         "geometry",

@@ -384,45 +384,25 @@ def generate(
     worker_memory,
 ):
     """Generate the dot pattern of JOB_FILE and write it to OUTPUT."""
-    from ..io.patterns import save_pattern
-    from ..pipeline import use_tiles
+    from ..pipeline import PATTERN_SUFFIXES, generate_to
+    from ..runtime.stop import interrupted
+    from .progress import ProgressBar
 
-    if output.suffix.lower() not in (".csv", ".npz", ".parquet"):
+    if output.suffix.lower() not in PATTERN_SUFFIXES:
         raise click.BadParameter(
             "must end in .csv, .npz or .parquet", param_hint="'-o' / '--output'"
         )
     job = load_job_with(job_file, seed, max_iter, method, formulation)
-    check_outputs({"output": output}, job.inputs)  # before the run, not after it
-    if use_tiles(job, tiles):
-        memory = None if worker_memory is None else int(worker_memory * 2**30)
-        _generate_tiled(job, output, quiet, tile_size, scheduler, workers, memory)
-        return
-    pattern = run_job(job, quiet)
-    save_pattern(pattern, output)
-    m = pattern.meta
-    if not quiet:
-        click.echo(
-            f"{output}: {pattern.n:,} dots, {m['iterations']} iterations, "
-            f"{pattern.stats['total_s']:.1f} s",
-            err=True,
-        )
+    bar = ProgressBar(
+        job.optimize.max_iter, label=job.optimize.method, enabled=False if quiet else None
+    )
 
+    def progress(iteration: int, value: float) -> None:
+        bar(iteration, value)
+        if interrupted():  # a signal came: stop here, in plain Python
+            raise KeyboardInterrupt
 
-def _generate_tiled(
-    job, output: Path, quiet: bool, tile_size, scheduler, workers, worker_memory
-) -> None:
-    """``generate`` in tiles: a dataset streamed tile by tile, or a gathered pattern."""
-    import time
-
-    from ..io.dataset import is_dataset
-    from ..io.patterns import save_pattern
-    from ..pipeline import generate_tiled
-    from ..runtime.stop import interrupted
-    from .progress import ProgressBar
-
-    bar = ProgressBar(1000, label="tiles", enabled=False if quiet else None)
-
-    def progress(fraction: float, line: str) -> None:
+    def tile_progress(fraction: float, line: str) -> None:
         bar.line(fraction, line)
         if interrupted():
             raise KeyboardInterrupt
@@ -431,28 +411,25 @@ def _generate_tiled(
         if not quiet:
             click.echo(line, err=True)
 
-    t0 = time.perf_counter()
-    target = output if is_dataset(output) else None
     try:
-        result = generate_tiled(
+        done = generate_to(
             job,
-            target,
+            output,
+            tiles=tiles,
             tile_size=tile_size,
             scheduler=scheduler,
             workers=workers,
-            worker_memory=worker_memory,
-            announce=announce,
+            worker_memory=None if worker_memory is None else int(worker_memory * 2**30),
             progress=progress,
+            tile_progress=tile_progress,
+            stage=bar.stage,
+            announce=announce,
         )
     finally:
         bar.close()
-    if target is None:
-        save_pattern(result, output)
-        n = result.n
-    else:
-        n = sum(result.counts.values())
     if not quiet:
-        click.echo(f"{output}: {n:,} dots in tiles, {time.perf_counter() - t0:.1f} s", err=True)
+        how = " in tiles" if done.tiles else f", {done.iterations} iterations"
+        click.echo(f"{output}: {done.n:,} dots{how}, {done.seconds:.1f} s", err=True)
 
 
 def _inputs(source: Path, job_path) -> tuple:

@@ -1,0 +1,139 @@
+"""Generation in tiles (:mod:`optdot.tiling`) on a Dask cluster, or in process: the
+cluster's life, the kernels compiled on it once, and the tiles streamed into a
+``.parquet`` dataset or gathered into one :class:`~optdot.pattern.Pattern`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+
+from .config.job import Job
+from .io.dataset import manifest_of, write_dataset
+from .pattern import Pattern
+from .preflight import _check_gathered, _check_room, _check_tile_memory
+from .runtime.cluster import connect, embedded_workers, scheduler_address
+from .runtime.stop import check_interrupt
+from .tiling.plan import TilePlan, plan_tiles
+from .tiling.run import InProcess, OnDask, TiledRun, TileProgress, run_tiles, warm_up
+
+#: ``announce(line)``: what a tiled run tells the user before it starts (cluster, tiles).
+Announce = Callable[[str], None]
+
+
+def _tiled_meta(job: Job, plan: TilePlan) -> dict:
+    opt = job.optimize
+    return {
+        "job": job.name,
+        "method": opt.method,
+        "formulation": opt.formulation,
+        "seed": opt.seed,
+        "max_iter": opt.max_iter,
+        "n": int(plan.quotas.sum()),
+        "tiles": f"{plan.nx}x{plan.ny}",
+        "tiling": {"xs": [float(v) for v in plan.xs], "ys": [float(v) for v in plan.ys]},
+    }
+
+
+def generate_tiled(
+    job: Job,
+    output: str | Path | None = None,
+    *,
+    plan: TilePlan | None = None,
+    tile_size: float | None = None,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    worker_memory: int | None = None,
+    executor: InProcess | OnDask | None = None,
+    announce: Announce | None = None,
+    progress: TileProgress | None = None,
+) -> Pattern | TiledRun:
+    """Generate ``job`` in tiles (:mod:`optdot.tiling.tasks`) on a Dask cluster.
+
+    Args:
+        output: a ``.parquet`` dataset to stream the tiles into (the result is then the
+            :class:`TiledRun`); None gathers them into a :class:`Pattern` (tile order).
+        plan: the tiling (default: :func:`plan_tiles` with ``tile_size``).
+        tile_size: tile side, mm (default: about 150k dots per tile).
+        scheduler: an existing Dask scheduler's address (default: a LocalCluster).
+        workers: LocalCluster worker processes (default: the cores).
+        worker_memory: LocalCluster memory limit per worker, bytes.
+        executor: run on this instead of a cluster (tests: :class:`InProcess`).
+        announce: told the cluster's dashboard and the tiling before the run.
+        progress: ``progress(fraction, line)`` as tiles finish.
+
+    Raises:
+        ClusterError: the scheduler cannot be reached or the cluster cannot start.
+        ResourceError: a tile would not fit a worker.
+        GuaranteeError: a tile could not be made legal.
+        ExportError: the dataset cannot be written (the previous one is left as it was).
+    """
+    where = str(job.source) if job.source else job.name
+    _check_room(job, job.n_dots, where)
+    _check_gathered(job, output, where)
+    plan = plan or plan_tiles(job, tile_size)
+    address = scheduler_address(scheduler)
+    if executor is None and address is None:  # before any worker is spawned
+        _check_tile_memory(job, plan, embedded_workers(workers, worker_memory)[1])
+    if executor is not None:
+        return _run_tiled(job, plan, contextlib.nullcontext(executor), output, progress)
+    on_cluster = _on_cluster(job, plan, address, workers, worker_memory, announce)
+    return _run_tiled(job, plan, on_cluster, output, progress)
+
+
+@contextlib.contextmanager
+def _on_cluster(job, plan, scheduler, workers, worker_memory, announce) -> Iterator[OnDask]:
+    """An :class:`OnDask` executor on a connected cluster, kernels compiled on it."""
+    with connect(scheduler, workers, worker_memory) as cluster:
+        _check_tile_memory(job, plan, cluster.memory_per_worker)
+        if announce is not None:
+            kind = "local cluster" if cluster.embedded else "cluster"
+            announce(
+                f"{kind}: {cluster.workers} workers, dashboard {cluster.dashboard or 'n/a'}; "
+                f"{plan.count} tiles ({plan.nx} x {plan.ny}) of ~{int(plan.quotas.mean()):,} dots"
+            )
+        warm = cluster.client.submit(_warm, pure=False)  # compile once, not per worker
+        while not warm.done():  # a first run compiles for a minute: stay stoppable
+            check_interrupt()
+            time.sleep(0.1)
+        warm.result()
+        yield OnDask(cluster.client)
+
+
+def _warm() -> int:
+    from .runtime.cluster import single_threaded
+
+    single_threaded()
+    return warm_up()
+
+
+def _run_tiled(job, plan, executor_cm, output, progress) -> Pattern | TiledRun:
+    """Run the tiles on the executor ``executor_cm`` yields. A dataset is committed only
+    after the executor was closed (a cluster shut down): a signal during the shutdown
+    stops the run before the commit, never after it."""
+    meta = _tiled_meta(job, plan)
+    outline = None if job.domain.rectangle else job.domain
+    one = job.diameter if job.sizes is None else None  # sizes: known once written
+    if output is not None:
+        manifest = manifest_of(
+            job.name, job.optimize.seed, one, one, job.box, meta, outline, plan.to_json()
+        )
+        with write_dataset(output, manifest) as w:
+
+            def to_part(tile, xy, diameter):
+                w.write_part(plan.index(*tile), tile, xy, diameter)
+
+            with executor_cm as executor:
+                run = run_tiles(job, plan, executor, to_part, progress)
+        return run
+    got: dict = {}
+    with executor_cm as executor:
+        run = run_tiles(job, plan, executor, lambda t, xy, d: got.__setitem__(t, (xy, d)), progress)
+    xy = np.concatenate([got[t][0] for t in plan.tiles()])
+    d = np.concatenate([np.broadcast_to(got[t][1], (len(got[t][0]),)) for t in plan.tiles()])
+    stats = {"total_s": run.seconds, "history": []}
+    return Pattern(xy=xy, diameter=d, box=job.box, meta=meta, stats=stats, outline=outline)
