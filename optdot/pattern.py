@@ -46,6 +46,34 @@ class DotSource(Protocol):
     def chunks(self) -> Iterator[Chunk]:
         """The dots, one chunk at a time, in a fixed order."""
 
+    @property
+    def outline(self) -> Domain | None:
+        """The panel outline, or None for the box."""
+
+    @property
+    def part_counts(self) -> list[int]:
+        """Dots per chunk, in chunk order."""
+
+    def read_part(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Chunk ``k`` alone: ``(xy [n, 2], diameter [n])``, mm (QA reads a chunk's
+        neighbours for its halo)."""
+
+    @property
+    def tiling(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(xs, ys)`` tile edges, mm, when the dots were made in tiles (seam
+        measures), else None."""
+
+    @property
+    def label(self) -> str:
+        """Where the dots come from, for messages (a file, or empty)."""
+
+    @property
+    def meta(self) -> dict[str, Any]:
+        """How the dots were made (job, seed, method, ...), as far as known."""
+
+    def verify(self) -> None:
+        """Check the dots' stored form (checksums) before they are measured."""
+
 
 @dataclass(frozen=True, eq=False)
 class Pattern:
@@ -100,6 +128,33 @@ class Pattern:
     def n(self) -> int:
         """Number of dots."""
         return int(self.xy.shape[0])
+
+    @property
+    def part_counts(self) -> list[int]:
+        """One chunk: all the dots."""
+        return [self.n]
+
+    def read_part(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """The one chunk (``k`` = 0): ``(xy, diameter)``."""
+        if k != 0:
+            raise IndexError(f"a pattern has one part, not part {k}")
+        return self.xy, self.diameter
+
+    @property
+    def tiling(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(xs, ys)`` tile edges of a pattern gathered from tiles, mm, else None."""
+        t = self.meta.get("tiling")
+        if isinstance(t, dict) and "xs" in t and "ys" in t:
+            return np.asarray(t["xs"], float), np.asarray(t["ys"], float)
+        return None
+
+    @property
+    def label(self) -> str:
+        """The file the pattern was read from, or empty."""
+        return str(self.meta.get("source", ""))
+
+    def verify(self) -> None:
+        """Nothing to check: the dots are in memory, validated when made or read."""
 
     @property
     def uniform_diameter(self) -> float | None:

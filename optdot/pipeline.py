@@ -30,7 +30,7 @@ from .io.atomic import transaction
 from .io.dataset import is_dataset
 from .io.outputs import check_outputs
 from .io.patterns import save_pattern
-from .pattern import Pattern
+from .pattern import DotSource, Pattern
 from .preflight import (
     MAX_RANDOM_FILL,
     TILE_BREAK_EVEN,
@@ -39,7 +39,7 @@ from .preflight import (
     check_job,
     use_tiles,
 )
-from .quality.gate import QAResult, run_qa, run_qa_dataset
+from .quality.gate import QAResult, run_qa
 from .quality.provenance import mask_lines, provenance
 from .relax.formulation import Formulation
 from .relax.optdot import Progress
@@ -108,7 +108,7 @@ def generate(
     t1 = time.perf_counter()
     stage("relaxing")
     relaxed = stages.relax(job, xy0, progress=progress, formulation=formulation)
-    info, history = relaxed.info, relaxed.history
+    info, history = relaxed.run_info(), relaxed.history
     timings["relax_s"] = time.perf_counter() - t1
 
     t2 = time.perf_counter()
@@ -236,19 +236,20 @@ def with_job_panel(pattern: Pattern, job: Job | None) -> Pattern:
 
 
 def qa(
-    pattern: Pattern | None,
+    pattern: DotSource | None,
     job: Job | None = None,
     collision: float | None = None,
     close: float | None = None,
-    dataset=None,
+    dataset: DotSource | None = None,
     close_gap: float | None = None,
     view: dict[str, Any] | None = None,
 ) -> QAResult:
-    """Measure ``pattern`` (or ``dataset``) and judge it (see
-    :func:`optdot.quality.gate.run_qa`).
+    """Measure ``pattern`` and judge it (see :func:`optdot.quality.gate.run_qa`).
 
     Args:
-        pattern: the dots in memory, or None to measure ``dataset``.
+        pattern: the dots: a :class:`Pattern`, or an opened
+            :class:`~optdot.io.dataset.Dataset` (measured tile by tile in bounded memory);
+            None to measure ``dataset`` (the older spelling).
         job: the target map and thresholds (None: defaults, no map checks); its panel
             box and outline are the panel's.
         collision: collision distance, mm (default: the job's diameter + gap, else the
@@ -257,15 +258,16 @@ def qa(
             ``collision`` and ``close`` are centre distances for dots of one size; dots of
             varying size are judged by edge gaps: ``close_gap`` (default the job's
             ``qa.close_gap``, else 14 µm) and the job's ``optimize.gap``.
-        dataset: an opened :class:`~optdot.io.dataset.Dataset`, measured tile by tile in
-            bounded memory (:func:`optdot.quality.gate.run_qa_dataset`).
         view: overrides of the visibility check, keys of :class:`QAParams`
             (``view``, ``view_distance``, ``view_luminance``, ``psf``, ``max_jnd``).
     """
+    dots = pattern if pattern is not None else dataset
+    if dots is None:
+        raise ValueError("qa needs the dots")
     params = job.qa if job else QAParams()
     if view:
         params = replace(params, **view)
-    if (pattern or dataset).uniform_diameter is None and (collision, close) != (None, None):
+    if dots.uniform_diameter is None and (collision, close) != (None, None):
         raise JobError(
             "--collision/--close are centre distances for dots of one size; these dots vary "
             "in size and are judged by edge gaps (--close-gap, the job's optimize.gap)"
@@ -275,26 +277,16 @@ def qa(
     if close_gap is not None:
         params = replace(params, close_gap=close_gap)
     if collision is None:
-        if job:
-            collision = job.collision_distance
-        else:
-            collision = (pattern or dataset).nominal_diameter
-    gap = job.optimize.gap if job else 0.0  # dots of varying size collide below it
-    density = job.density if job else None
-    if pattern is not None:
-        result = run_qa(pattern, density, params, collision, gap)
-        source, meta = pattern.meta.get("source"), pattern.meta
-    elif job is None:
-        result = run_qa_dataset(dataset, density, params, collision, collision_gap=gap)
-        source, meta = dataset.path, dataset.manifest
+        collision = job.collision_distance if job else dots.nominal_diameter
+    if job is None:
+        result = run_qa(dots, None, params, collision)
     else:
         outline = None if job.domain.rectangle else job.domain
-        result = run_qa_dataset(
-            dataset, density, params, collision, box=job.box, outline=outline, collision_gap=gap
-        )
-        source, meta = dataset.path, dataset.manifest
-    seed = meta.get("seed") if isinstance(meta, dict) else None
-    if seed is None and job is not None and pattern is not None and source is None:
+        gap = job.optimize.gap  # dots of varying size collide below it
+        result = run_qa(dots, job.density, params, collision, gap, job.box, outline)
+    source = dots.label or None
+    seed = dots.meta.get("seed")
+    if seed is None and job is not None and source is None:
         seed = job.optimize.seed  # made from this job in this run
     result.provenance = provenance(job, source, seed)
     return result

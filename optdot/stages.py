@@ -25,6 +25,7 @@ from .relax.legalize import LegalizeResult, make_legal
 from .relax.md import MDForce, md_relax
 from .relax.optdot import Progress, RelaxSettings, relax_staged
 from .relax.resize import fit_sizes, reach
+from .relax.result import RelaxResult
 from .sampling.initial import Rect, initial_dots_in
 
 #: Width of the blur the dot sizes are fitted under, as a share of ``qa.smoothing``
@@ -95,22 +96,6 @@ def throw(job: Job, n: int, seed: int | Sequence[int], rect: Rect | None, where:
     return initial_dots_in(job.density, n, seed, inside, job.dart_weights, rect, where)
 
 
-@dataclass
-class Relaxed:
-    """What :func:`relax` did.
-
-    Attributes:
-        xy: ``[n, 2]`` relaxed positions, mm (frozen dots where they were).
-        info: run facts for the pattern's metadata (iterations, evaluations,
-            neighbour builds, final penalty or MD step, why it stopped).
-        history: penalty (OptDot) or largest force (MD) after each iteration.
-    """
-
-    xy: np.ndarray
-    info: dict
-    history: list[float]
-
-
 def relax(
     job: Job,
     xy0: np.ndarray,
@@ -118,8 +103,9 @@ def relax(
     frozen: np.ndarray | None = None,
     progress: Progress | None = None,
     formulation: Formulation | None = None,
-) -> Relaxed:
-    """Relax the dots thrown at ``xy0`` (``[n, 2]`` mm, Morton order for speed).
+) -> RelaxResult:
+    """Relax the dots thrown at ``xy0`` (``[n, 2]`` mm, Morton order for speed): OptDot
+    through the formulation's stages, or the MD baseline; one result either way.
 
     Args:
         start: ``[n, 2]`` positions to start from (default ``xy0``; containers stay on
@@ -140,15 +126,12 @@ def relax(
             decay=opt.md_decay,
             cutoff=opt.md_cutoff,
         )
-        md = md_relax(
+        return md_relax(
             xy0, law, job.box, r0, steps=opt.max_iter, step=opt.md_step, skin=opt.skin,
             callback=progress,
         )  # fmt: skip
-        info = {"iterations": md.steps, "evaluations": md.steps, "neighbor_builds": md.rebuilds}
-        info.update(md_step_mm=md.eta, message=f"ran {md.steps} MD steps")
-        return Relaxed(md.xy, info, md.history)
     form = formulation_for(job) if formulation is None else formulation
-    xy, info, history = relax_staged(
+    return relax_staged(
         problem_of(job),
         form,
         xy0,
@@ -159,7 +142,6 @@ def relax(
         frozen=frozen,
         diameters=rule_diameters(job, xy0),
     )
-    return Relaxed(xy, info, history)
 
 
 @dataclass

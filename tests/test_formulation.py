@@ -78,10 +78,13 @@ def test_stages_split_the_iterations(tiny_job):
     xy0 = np.array([[1.0, 1.0], [1.01, 1.0]])
     calls = []
     settings = RelaxSettings(max_iter=30)
-    relax_staged(
+    res = relax_staged(
         problem_of(job), form, xy0, np.array([0.3, 0.3]), settings, lambda i, f: calls.append(i)
     )
     assert calls == sorted(calls) and calls[-1] <= 30
+    # one result over both stages: counts summed, history of every iteration
+    assert res.nit == len(res.history) == len(calls) and res.nfev >= res.nit
+    assert res.run_info()["iterations"] == res.nit and "penalty" in res.run_info()
 
 
 def test_job_overrides_reach_the_formulation(tiny_job):

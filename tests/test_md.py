@@ -9,6 +9,7 @@ import pytest
 
 from optdot.pipeline import generate
 from optdot.relax.md import MDForce, md_forces, md_relax
+from optdot.relax.result import RelaxResult
 from optdot.spatial.blocks import PairList
 from optdot.spatial.cellgrid import neighbor_pairs, pairs_within
 
@@ -74,6 +75,10 @@ def test_step_is_stable_and_resolves_a_cluster():
     before = len(pairs_within(xy, B))
     res = md_relax(xy, law, (0.0, 0.0, 1.0, 1.0), 0.023, steps=300, step=0.02)
     assert before > 50
+    # the one relaxation result OptDot returns too
+    assert isinstance(res, RelaxResult) and res.nit == res.nfev == len(res.history) == 300
+    info = res.run_info()
+    assert info["md_step_mm"] == pytest.approx(0.02 * B) and "penalty" not in info
     assert len(pairs_within(res.xy, B)) == 0
     # bounded motion: the net force on a dot is at most its 59 partners' unit cores, so
     # one step moves a dot at most 59 * step * b; over the run, at most that per step

@@ -325,7 +325,7 @@ def test_too_many_workers_for_the_memory_are_refused_before_spawning(tmp_path):
 
 
 def test_a_histogram_over_a_range_too_narrow_for_numpy_still_has_its_bins():
-    from optdot.quality.measure import _histogram
+    from optdot.quality.summary import _histogram
 
     values = np.array([3e9, 3e9 + 1e-6, 3e9])  # numpy: "Too many bins for data range"
     with pytest.raises(ValueError):

@@ -78,9 +78,9 @@ def test_frozen_dots_keep_their_positions_exactly():
     frozen = rng.random(300) < 0.3
     rho = job.density.at(xy0)
     assert (rho > 0).all()
-    xy, _, _ = relax_staged(
+    xy = relax_staged(
         problem_of(job), formulation_for(job), xy0, rho, settings_for(job), frozen=frozen
-    )
+    ).xy
     assert np.array_equal(xy[frozen], xy0[frozen])
     assert np.abs(xy[~frozen] - xy0[~frozen]).max() > 1e-4  # the others moved
 
@@ -365,7 +365,7 @@ def test_a_small_job_writes_a_one_part_dataset_with_todays_dots(tmp_path, tiny_p
 
 def _parts_source(xy: np.ndarray, box, cuts: int):
     """``xy`` split into ``cuts x cuts`` parts by position, as a QA source."""
-    from optdot.quality.measure import Source
+    from optdot.quality.source import Source
 
     ix = np.minimum((xy[:, 0] - box[0]) / (box[2] - box[0]) * cuts, cuts - 1).astype(int)
     iy = np.minimum((xy[:, 1] - box[1]) / (box[3] - box[1]) * cuts, cuts - 1).astype(int)
@@ -387,14 +387,15 @@ def test_qa_part_by_part_with_halos_equals_qa_of_the_whole(seed):
     """Dense clusters (pairs across part borders) beside sparse regions (nearest
     neighbours beyond the halo, re-queried): every count and distance as in one part."""
     from optdot.pattern import Pattern
-    from optdot.quality.measure import measure, pattern_source
+    from optdot.quality.measure import measure
+    from optdot.quality.source import source_of
 
     rng = np.random.default_rng(seed)
     box = (0.0, 0.0, 12.0, 12.0)
     dense = rng.uniform(4.0, 8.0, (6000, 2))  # ~40 µm apart: many close pairs
     sparse = rng.uniform(0.0, 12.0, (60, 2))  # ~1.5 mm apart: beyond the 1 mm halo
     xy, src = _parts_source(np.vstack([dense, sparse]), box, cuts=4)
-    whole = measure(pattern_source(Pattern(xy, 0.046, box)), None, 1.0, 0.060, 0.046)
+    whole = measure(source_of(Pattern(xy, 0.046, box)), None, 1.0, 0.060, 0.046)
     parts = measure(src, None, 1.0, 0.060, 0.046)
     a, b = whole.metrics, parts.metrics
     want_close = len(close_pairs(xy, 0.060))  # GEOS, the independent engine

@@ -280,6 +280,33 @@ class Dataset:
         """``(tile, xy [n, 2], diameter [n])`` per part (what streamed exporters read)."""
         return self.iter_parts()
 
+    @property
+    def part_counts(self) -> list[int]:
+        """Dots per part, in part order."""
+        return [int(p["count"]) for p in self.parts]
+
+    @property
+    def tiling(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(xs, ys)`` tile edges of a tiled run, mm, or None for one part."""
+        tiles = self.manifest.get("tiles")
+        if isinstance(tiles, dict) and tiles.get("nx", 1) * tiles.get("ny", 1) > 1:
+            return np.asarray(tiles["xs"], float), np.asarray(tiles["ys"], float)
+        return None
+
+    @property
+    def label(self) -> str:
+        """The directory, for messages."""
+        return str(self.path)
+
+    @property
+    def meta(self) -> dict[str, Any]:
+        """The run's metadata as written with the dataset (job, seed, method, tiles)."""
+        meta = self.manifest.get("meta")
+        out = dict(meta) if isinstance(meta, dict) else {}
+        if self.manifest.get("seed") is not None:
+            out["seed"] = self.manifest["seed"]
+        return out
+
     def read_part(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         """Part ``k`` (position in :attr:`parts`): ``(xy [n, 2], diameter [n])``, mm."""
         import pyarrow.parquet as pq

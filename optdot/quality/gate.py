@@ -18,11 +18,13 @@ from typing import Any
 
 from ..config.job import QAParams
 from ..geometry.density import DensityMap
-from ..pattern import Pattern
-from .measure import Source, dataset_source, measure, pattern_source
+from ..geometry.domain import Domain
+from ..pattern import DotSource
+from .measure import measure
 from .metrics import close_pairs
+from .source import Source, source_of
 
-__all__ = ["Check", "QAResult", "close_pairs", "judge", "run_qa", "run_qa_dataset"]
+__all__ = ["Check", "QAResult", "close_pairs", "judge", "run_qa"]
 
 
 @dataclass
@@ -93,42 +95,27 @@ class QAResult:
 
 
 def run_qa(
-    pattern: Pattern,
+    dots: DotSource,
     density: DensityMap | None,
     params: QAParams,
     collision: float,
     collision_gap: float = 0.0,
+    box=None,
+    outline: Domain | None | bool = True,
 ) -> QAResult:
-    """Measure an in-memory ``pattern`` and apply the gate.
+    """Measure ``dots`` (a pattern in memory, or a dataset tile by tile in bounded
+    memory, its checksums verified first) and apply the gate.
 
     Args:
-        pattern: the dots.
+        dots: any :class:`~optdot.pattern.DotSource`.
         density: the target map (None: density, empty-cell and psi-normalised metrics skipped).
         params: thresholds.
         collision: centre distance below which dots of one size collide, mm.
         collision_gap: edge gap below which dots of varying size collide, mm.
+        box, outline: the panel (default: the dots' own; True keeps their outline).
     """
-    return judge(pattern_source(pattern), density, params, collision, collision_gap)
-
-
-def run_qa_dataset(
-    ds,
-    density: DensityMap | None,
-    params: QAParams,
-    collision: float,
-    box=None,
-    outline=True,
-    collision_gap: float = 0.0,
-) -> QAResult:
-    """Measure a partitioned dataset tile by tile (bounded memory) and apply the gate.
-
-    Args:
-        ds: an opened :class:`~optdot.io.dataset.Dataset` (checksums verified here).
-        box, outline: the panel (default: the dataset's own).
-        Others as :func:`run_qa`.
-    """
-    ds.verify()
-    return judge(dataset_source(ds, box, outline), density, params, collision, collision_gap)
+    dots.verify()
+    return judge(source_of(dots, box, outline), density, params, collision, collision_gap)
 
 
 def judge(

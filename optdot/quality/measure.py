@@ -2,8 +2,10 @@
 panel of 10⁸ dots is measured in the memory of a few tiles and every number is the one
 the whole pattern at once would give.
 
-A :class:`Source` is an in-memory :class:`~optdot.pattern.Pattern` (one part, no halo
-needed) or a partitioned :class:`~optdot.io.dataset.Dataset` (one part per tile). Two passes:
+A :class:`~optdot.quality.source.Source` reads any :class:`~optdot.pattern.DotSource`: an
+in-memory pattern (one part, no halo needed) or a partitioned dataset (one part per tile).
+The passes add into :mod:`optdot.quality.sums`; :mod:`optdot.quality.summary` turns the
+sums into numbers and plot data. Two passes:
 
 1. **Each part alone** (:func:`_first_pass`): its bounding box, the dot area per map cell
    (coverage), dot counts per 2 mm square (densest region), the overview image, dots
@@ -34,34 +36,29 @@ cross-check of the pair counts in the tests.
 
 from __future__ import annotations
 
-from collections import OrderedDict
-from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import Any
-
 import numpy as np
 from scipy.spatial import cKDTree
 
 from ..config.viewing import Viewing
 from ..errors import ResourceError
 from ..geometry.density import DensityMap
-from ..geometry.domain import Domain, box_protruding
-from ..geometry.limits import validate_dots
+from ..geometry.domain import box_protruding
 from ..pattern import coverage_pixels
 from ..runtime.memory import available_bytes
-from ..spatial.window import grown, in_rect
+from ..spatial.window import in_rect
 from .metrics import (
     PatchGrid,
     SquareGrid,
     cell_area_sums,
-    coverage,
     disc_area,
     edge_bands,
     nn_normalized,
     psi6_of,
-    radial_spectrum,
 )
-from .seams import seam_finish, seam_sums
+from .seams import seam_sums
+from .source import Source, gather
+from .summary import Measured, summarize
+from .sums import FirstSums, SecondSums, add_nested, keep
 from .visibility import LuminanceGrid, visibility
 
 #: Smallest halo around a part, mm: covers the 6 nearest neighbours at any fill > ~0.01
@@ -77,119 +74,6 @@ MAX_SEGMENTS = 2000
 DENSEST_MM, ZOOM_MM = 2.0, 1.0
 #: Longest side of the overview image, pixels.
 OVERVIEW_PX = 300
-
-
-@dataclass
-class Source:
-    """Dots in parts on a panel: what QA measures.
-
-    Attributes:
-        box: panel ``(xmin, ymin, xmax, ymax)``, mm.
-        outline: the panel outline, or None for the box.
-        uniform_diameter: the one dot diameter, mm, or None when sizes vary.
-        nominal_diameter: the uniform or median diameter, mm.
-        counts: dots per part.
-        read: ``read(k) -> (xy [n_k, 2], diameter [n_k])``, mm.
-        tiling: ``(xs, ys)`` tile edges of a tiled pattern (seam metrics), or None.
-        label: the file, for messages.
-        cache_parts: parts kept in memory while their neighbours are measured.
-    """
-
-    box: tuple[float, float, float, float]
-    outline: Domain | None
-    uniform_diameter: float | None
-    nominal_diameter: float
-    counts: list[int]
-    read: Callable[[int], tuple[np.ndarray, np.ndarray]]
-    tiling: tuple[np.ndarray, np.ndarray] | None = None
-    label: str = ""
-    cache_parts: int = 8
-    _cache: OrderedDict = field(default_factory=OrderedDict, repr=False)
-
-    @property
-    def n(self) -> int:
-        return int(sum(self.counts))
-
-    def part(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """Part ``k``, through the cache."""
-        if k in self._cache:
-            self._cache.move_to_end(k)
-            return self._cache[k]
-        got = self.read(k)
-        self._cache[k] = got
-        while len(self._cache) > self.cache_parts:
-            self._cache.popitem(last=False)
-        return got
-
-
-def pattern_source(pattern) -> Source:
-    """An in-memory pattern as one part."""
-    tiling = pattern.meta.get("tiling")
-    tiles = None
-    if isinstance(tiling, dict) and "xs" in tiling and "ys" in tiling:
-        tiles = (np.asarray(tiling["xs"], float), np.asarray(tiling["ys"], float))
-    return Source(
-        box=pattern.box,
-        outline=pattern.outline,
-        uniform_diameter=pattern.uniform_diameter,
-        nominal_diameter=pattern.nominal_diameter,
-        counts=[pattern.n],
-        read=lambda k: (pattern.xy, pattern.diameter),
-        tiling=tiles,
-        label=str(pattern.meta.get("source", "")),
-        cache_parts=1,
-    )
-
-
-def dataset_source(ds, box=None, outline: Domain | None | bool = True) -> Source:
-    """A :class:`~optdot.io.dataset.Dataset`, part by part, each part checked as it is read.
-
-    Args:
-        box: the panel box (default: the dataset's).
-        outline: the panel outline; True (default) for the dataset's own.
-    """
-    the_box = tuple(box) if box is not None else ds.box
-
-    def read(k: int):
-        xy, d = ds.read_part(k)
-        validate_dots(ds.path / ds.parts[k]["file"], xy, d, the_box)
-        return xy, d
-
-    tiles = ds.manifest.get("tiles")
-    tiling = None
-    if isinstance(tiles, dict) and tiles.get("nx", 1) * tiles.get("ny", 1) > 1:
-        tiling = (np.asarray(tiles["xs"], float), np.asarray(tiles["ys"], float))
-    nx = int(tiles.get("nx", 1)) if isinstance(tiles, dict) else 1
-    return Source(
-        box=the_box,
-        outline=ds.outline if outline is True else outline,
-        uniform_diameter=ds.uniform_diameter,
-        nominal_diameter=ds.nominal_diameter,
-        counts=[int(p["count"]) for p in ds.parts],
-        read=read,
-        tiling=tiling,
-        label=str(ds.path),
-        cache_parts=3 * nx + 3,
-    )
-
-
-@dataclass
-class Measured:
-    """Numbers for the gate and the report.
-
-    Attributes:
-        metrics: JSON-ready numbers (see :func:`measure`).
-        where: ``{check: [[x, y], ...]}`` places of failures, mm (first 20).
-        arrays: plot data: ``overview`` (image, extent), ``close_mid`` / ``collision_mid``
-            / ``defects`` (``[m, 2]`` mm, at most :data:`MAX_MARKS`), ``zoom`` (xy, d,
-            segments ``[s, 2, 2]``), ``nn_hist`` (counts, µm edges), ``coverage_error``
-            (rel ``[ny, nx]``, extent), ``spectrum`` (freq, power), ``tile``, ``rings`` (the
-            outline's loops; none for a box).
-    """
-
-    metrics: dict[str, Any]
-    where: dict[str, list[list[float]]]
-    arrays: dict[str, Any]
 
 
 def measure(
@@ -220,7 +104,7 @@ def measure(
         gaps = None
     first = _first_pass(src, density, view)
     second = _second_pass(src, density, first, close, collision, gaps)
-    got = _finish(src, density, smoothing, close, collision, first, second, gaps)
+    got = summarize(src, density, smoothing, close, collision, first, second, gaps)
     if first.luminance is not None and view is not None and density is not None:
         vis, arrays = visibility(first.luminance, density, src.outline, view)
         got.metrics["visibility"] = vis
@@ -229,33 +113,12 @@ def measure(
     return got
 
 
-@dataclass
-class _First:
-    boxes: np.ndarray  # [P, 4] bounding boxes of the parts (NaN for empty parts)
-    cells: np.ndarray | None
-    squares: SquareGrid
-    square_counts: np.ndarray
-    overview: np.ndarray
-    overview_extent: tuple[float, float, float, float]
-    protruding: int = 0
-    outside: int = 0
-    margin_violations: int = 0
-    empty: int = 0
-    defects: list[np.ndarray] = field(default_factory=list)
-    where_protruding: list[np.ndarray] = field(default_factory=list)
-    where_empty: list[np.ndarray] = field(default_factory=list)
-    bands: list[tuple[str, Any, float]] = field(default_factory=list)
-    band_sums: list[float] = field(default_factory=list)
-    diameters: list[np.ndarray] = field(default_factory=list)
-    luminance: LuminanceGrid | None = None
-
-
-def _first_pass(src: Source, density: DensityMap | None, view: Viewing | None = None) -> _First:
+def _first_pass(src: Source, density: DensityMap | None, view: Viewing | None = None) -> FirstSums:
     x0, y0, x1, y1 = src.box
     onx, ony = coverage_pixels(src.box, src.nominal_diameter, OVERVIEW_PX)
     uniform = src.uniform_diameter
     squares = SquareGrid.of(src.box, DENSEST_MM)
-    f = _First(
+    f = FirstSums(
         boxes=np.full((len(src.counts), 4), np.nan),
         cells=None
         if density is None
@@ -291,16 +154,16 @@ def _first_pass(src: Source, density: DensityMap | None, view: Viewing | None = 
             f.outside += int((~src.outline.contains(xy)).sum())
             f.margin_violations += int(src.outline.protruding(xy, r).sum())
         f.protruding += int(out.sum())
-        _keep(f.where_protruding, xy[out], 20)
-        _keep(f.defects, xy[out], MAX_MARKS)
+        keep(f.where_protruding, xy[out], 20)
+        keep(f.defects, xy[out], MAX_MARKS)
         if f.luminance is not None:
             f.luminance.add(xy, disc_area(uniform) if area is None else area)
         if density is not None:
             f.cells += cell_area_sums(xy, d, uniform is not None, density)
             empty = density.empty_mask(xy)
             f.empty += int(empty.sum())
-            _keep(f.where_empty, xy[empty], 20)
-            _keep(f.defects, xy[empty], MAX_MARKS)
+            keep(f.where_empty, xy[empty], 20)
+            keep(f.defects, xy[empty], MAX_MARKS)
             for b, (_, inside, _) in enumerate(f.bands):
                 sel = inside(xy)
                 f.band_sums[b] += int(sel.sum()) if uniform is not None else area[sel].sum()
@@ -311,36 +174,16 @@ def _first_pass(src: Source, density: DensityMap | None, view: Viewing | None = 
     return f
 
 
-@dataclass
-class _Second:
-    pairs_collision: int = 0
-    pairs_close: int = 0
-    close_dots: int = 0
-    collision_mid: list[np.ndarray] = field(default_factory=list)
-    close_mid: list[np.ndarray] = field(default_factory=list)
-    nn: np.ndarray | None = None
-    nn_norm: list[np.ndarray] = field(default_factory=list)
-    psi_abs_sum: float = 0.0
-    psi_sum: complex = 0j
-    patches: tuple | None = None
-    seams: dict | None = None
-    window_xy: list[np.ndarray] = field(default_factory=list)
-    zoom_xy: list[np.ndarray] = field(default_factory=list)
-    zoom_d: list[np.ndarray] = field(default_factory=list)
-    segments: list[np.ndarray] = field(default_factory=list)
-    requeried: int = 0
-
-
 def _second_pass(
     src: Source,
     density: DensityMap | None,
-    first: _First,
+    first: FirstSums,
     close: float,
     collision: float,
     gaps: tuple[float, float] | None,
-) -> _Second:
+) -> SecondSums:
     n = src.n
-    s = _Second(nn=np.full(n, np.inf))
+    s = SecondSums(nn=np.full(n, np.inf))
     if gaps is None:
         reach = max(close, collision)
     else:  # the widest pair: two of the largest dots
@@ -361,7 +204,7 @@ def _second_pass(
         m = len(own)
         if m == 0:
             continue
-        hxy, hpart, hd = _gather(src, boxes, k, halo)
+        hxy, hpart, hd = gather(src, boxes, k, halo)
         pts = np.vstack([own, hxy]) if len(hxy) else own
         tree = cKDTree(pts)
         _check_pair_count(src, k, tree, reach)
@@ -392,11 +235,11 @@ def _second_pass(
                 (collides, "pairs_collision", s.collision_mid),
             ):
                 setattr(s, count_attr, getattr(s, count_attr) + int(sel.sum()))
-                _keep(mids, 0.5 * (pts[pr[sel, 0]] + pts[pr[sel, 1]]), MAX_MARKS)
+                keep(mids, 0.5 * (pts[pr[sel, 0]] + pts[pr[sel, 1]]), MAX_MARKS)
             seg = near & mine
             a = pts[pr[seg, 0]]
             inz = in_rect(a, zoom, closed=False)
-            _keep(s.segments, np.stack([a[inz], pts[pr[seg, 1]][inz]], axis=1), MAX_SEGMENTS)
+            keep(s.segments, np.stack([a[inz], pts[pr[seg, 1]][inz]], axis=1), MAX_SEGMENTS)
         s.close_dots += int(flag.sum())
         nn, psi, again = _nearest(src, boxes, k, own, pts, tree, halo)
         s.requeried += again
@@ -420,7 +263,7 @@ def _second_pass(
                 np.abs(psi),
                 nn_n,
             )
-            s.seams = part if s.seams is None else _add(s.seams, part)
+            s.seams = part if s.seams is None else add_nested(s.seams, part)
         s.window_xy.append(own[in_rect(own, window)])
         inz = in_rect(own, zoom, closed=False)
         s.zoom_xy.append(own[inz])
@@ -474,7 +317,7 @@ def _nearest(
         again += len(todo) if width == halo else 0
         # found distances bound the true ones from above; with too few points, double
         width = float(dist[~done, -1].max()) if kk == need else 2.0 * width
-        hxy, _, _ = _gather(src, boxes, k, width)
+        hxy, _, _ = gather(src, boxes, k, width)
         pts = np.vstack([own, hxy]) if len(hxy) else own
         tree = cKDTree(pts)
     return nn, psi, again
@@ -482,18 +325,6 @@ def _nearest(
 
 #: Bytes per listed pair while pairs are judged (indices, distances, masks, sort order).
 PAIR_BYTES = 96
-
-
-def _histogram(values: np.ndarray, bins: int = 100) -> tuple[np.ndarray, np.ndarray]:
-    """``np.histogram`` of ``values`` over bins that always exist: numpy refuses 100 bins
-    over a range too narrow for its floats (two dots 3 m apart, nearest-neighbour
-    distances equal to 1 part in 10¹⁵), so the range is widened to at least a part in
-    10⁹ of its magnitude."""
-    lo, hi = float(values.min()), float(values.max())
-    width = max(hi - lo, 1e-9 * max(abs(lo), abs(hi), 1.0))
-    edges = np.linspace(lo, lo + width, bins + 1)
-    counts, _ = np.histogram(np.clip(values, lo, edges[-1]), bins=edges)
-    return counts, edges
 
 
 def _check_pair_count(src, k: int, tree: cKDTree, reach: float) -> None:
@@ -525,141 +356,3 @@ def _check_pair_count(src, k: int, tree: cKDTree, reach: float) -> None:
             "(duplicated or piled-up dots?); listing them would need "
             f"{pairs * PAIR_BYTES / 2**30:.1f} GiB"
         )
-
-
-def _gather(
-    src: Source, boxes: np.ndarray, k: int, halo: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Dots of the other parts within the box of part ``k`` grown by ``halo``:
-    ``(xy [h, 2], part index [h], diameter [h])``."""
-    g = grown(tuple(boxes[k]), halo)
-    ok = ~np.isnan(boxes[:, 0])
-    ok &= (
-        (boxes[:, 0] <= g[2])
-        & (boxes[:, 2] >= g[0])
-        & (boxes[:, 1] <= g[3])
-        & (boxes[:, 3] >= g[1])
-    )
-    ok[k] = False
-    xys, parts, ds = [], [], []
-    for j in np.flatnonzero(ok):
-        xy, d = src.part(int(j))
-        sel = in_rect(xy, g)
-        xys.append(xy[sel])
-        parts.append(np.full(int(sel.sum()), j, np.int64))
-        ds.append(np.broadcast_to(d, (len(xy),))[sel])
-    if not xys:
-        return np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0)
-    return np.vstack(xys), np.concatenate(parts), np.concatenate(ds)
-
-
-def _add(a: dict, b: dict) -> dict:
-    """Sum of two nested dicts of arrays with the same keys."""
-    return {k: _add(v, b[k]) if isinstance(v, dict) else v + b[k] for k, v in a.items()}
-
-
-def _keep(bucket: list[np.ndarray], rows: np.ndarray, limit: int) -> None:
-    """Append ``rows`` to ``bucket`` up to ``limit`` rows in all."""
-    have = sum(len(r) for r in bucket)
-    if have < limit and len(rows):
-        bucket.append(rows[: limit - have])
-
-
-def _cat(bucket: list[np.ndarray], shape: tuple[int, ...]) -> np.ndarray:
-    return np.concatenate(bucket) if bucket else np.zeros((0, *shape))
-
-
-def _finish(
-    src: Source,
-    density: DensityMap | None,
-    smoothing: float,
-    close: float,
-    collision: float,
-    f: _First,
-    s: _Second,
-    gaps: tuple[float, float] | None = None,
-) -> Measured:
-    n = src.n
-    u = src.uniform_diameter
-    m: dict[str, Any] = {"dots": n, "box_mm": list(src.box)}
-    if u is not None:
-        m["diameter_mm"] = u
-    else:
-        d = np.concatenate(f.diameters)
-        m["diameter_mm"] = {
-            "min": float(d.min()),
-            "median": float(np.median(d)),
-            "max": float(d.max()),
-        }
-    where: dict[str, list[list[float]]] = {}
-    arrays: dict[str, Any] = {"rings": [] if src.outline is None else src.outline.rings()}
-    if gaps is None:
-        m["collision_distance_mm"] = collision
-        m["close_distance_mm"] = close
-    else:
-        m["collision_gap_mm"] = gaps[1]
-        m["close_gap_mm"] = gaps[0]
-    m["pairs_below_collision"] = s.pairs_collision
-    m["pairs_below_close"] = s.pairs_close
-    m["dots_in_close_pairs_fraction"] = float(s.close_dots / max(n, 1))
-    arrays["collision_mid"] = _cat(s.collision_mid, (2,))
-    arrays["close_mid"] = _cat(s.close_mid, (2,))
-    where["collisions"] = _where(arrays["collision_mid"])
-    nn = s.nn
-    ok = n > 1
-    m["nn_min_mm"] = float(nn.min()) if ok else None
-    m["nn_percentiles_mm"] = _percentiles(nn) if ok else {}
-    arrays["nn_hist"] = _histogram(nn * 1e3) if ok and np.isfinite(nn).all() else None
-    if src.outline is not None:
-        m["outside_outline_or_in_holes"] = f.outside
-        m["edge_margin_mm"] = src.outline.edge_margin
-        m["edge_margin_violations"] = f.margin_violations
-    m["protruding"] = f.protruding
-    where["protruding"] = _where(_cat(f.where_protruding, (2,)))
-    arrays["defects"] = _cat(f.defects, (2,))
-    m["psi6_local_mean"] = float(s.psi_abs_sum / n) if n else 0.0
-    grid, cnt, re, im = s.patches
-    m["psi6_coherence_2mm"] = grid.coherence(cnt, re, im, total=s.psi_sum, n=n)
-    nn_norm = None
-    if density is not None:
-        m["in_empty_cells"] = f.empty
-        where["in_empty"] = _where(_cat(f.where_empty, (2,)))
-        nn_norm = np.concatenate(s.nn_norm) if s.nn_norm else np.zeros(0)
-        m["nn_normalized_percentiles"] = _percentiles(nn_norm) if len(nn_norm) else {}
-        cov, rel, extent = coverage(
-            f.cells, u, n, src.nominal_diameter, src.outline, density, smoothing
-        )
-        m.update(cov)
-        arrays["coverage_error"] = (rel, extent)
-        where["coverage"] = [cov["coverage_worst_at_mm"]]
-        one = disc_area(u) if u is not None else 1.0
-        m["edge_band_coverage_ratio"] = {
-            name: float(got * one / want) if want > 0 else None
-            for (name, _, want), got in zip(f.bands, f.band_sums, strict=True)
-        }
-    if src.tiling is not None and s.seams is not None:
-        m["seams"] = seam_finish(s.seams, *src.tiling, density)
-    if len(src.counts) > 1:
-        m["qa_requeried_dots"] = s.requeried  # k-NN re-queried with a wider halo
-    tile = f.squares.densest(f.square_counts)
-    freq, power = radial_spectrum(_cat(s.window_xy, (2,)), tile, px=src.nominal_diameter / 4)
-    arrays["spectrum"] = (freq, power)
-    arrays["tile"] = tile
-    arrays["overview"] = (f.overview, f.overview_extent)
-    arrays["zoom"] = (_cat(s.zoom_xy, (2,)), _cat(s.zoom_d, ()), _cat(s.segments, (2, 2)))
-    if len(power):
-        lo = freq > 0.3 / (np.median(nn) if n > 1 else 1)
-        m["spectrum_peak_ratio"] = (
-            float(power[lo].max() / np.median(power[lo])) if lo.any() else None
-        )
-    return Measured(metrics=m, where=where, arrays=arrays)
-
-
-def _percentiles(v: np.ndarray) -> dict[str, float]:
-    """The 1st, 5th, 50th and 95th percentiles of ``v``, keyed by their number."""
-    qs = (1, 5, 50, 95)
-    return {str(q): float(x) for q, x in zip(qs, np.percentile(v, qs), strict=True)}
-
-
-def _where(points: np.ndarray, limit: int = 20) -> list[list[float]]:
-    return [[round(float(x), 6), round(float(y), 6)] for x, y in points[:limit]]

@@ -44,6 +44,7 @@ import numpy as np
 
 from ..spatial.blocks import BLOCK, PairList
 from ..spatial.verlet import VerletList
+from .result import RelaxResult
 
 
 @nb.njit(cache=True, inline="always")
@@ -169,25 +170,6 @@ def md_forces(xy: np.ndarray, law: MDForce, pairs: PairList) -> np.ndarray:
     return force
 
 
-@dataclass
-class MDResult:
-    """Outcome of :func:`md_relax`.
-
-    Attributes:
-        xy: ``[n, 2]`` final positions, mm.
-        steps: steps done.
-        rebuilds: neighbour-list builds.
-        eta: the step length dt / c, mm per unit force.
-        history: largest force magnitude at each step.
-    """
-
-    xy: np.ndarray
-    steps: int
-    rebuilds: int
-    eta: float
-    history: list[float]
-
-
 def md_relax(
     xy0: np.ndarray,
     law: MDForce,
@@ -197,7 +179,7 @@ def md_relax(
     step: float = 0.02,
     skin: float = 0.3,
     callback: Callable[[int, float], None] | None = None,
-) -> MDResult:
+) -> RelaxResult:
     """Run ``steps`` steps of the difference equation (2) from ``xy0``.
 
     Args:
@@ -221,4 +203,14 @@ def md_relax(
         history.append(float(_md_step(xy, force, eta, lo_x, lo_y, hi_x, hi_y)))
         if callback is not None:
             callback(t, history[-1])
-    return MDResult(xy=xy, steps=len(history), rebuilds=verlet.rebuilds, eta=eta, history=history)
+    steps = len(history)
+    return RelaxResult(
+        xy=xy,
+        penalty=history[-1] if history else 0.0,
+        nit=steps,
+        nfev=steps,
+        rebuilds=verlet.rebuilds,
+        message=f"ran {steps} MD steps",
+        history=history,
+        extra={"md_step_mm": eta},
+    )

@@ -10,8 +10,9 @@ import numpy as np
 
 from ..spatial.verlet import VerletList
 from .formulation import Formulation, Problem
-from .lbfgs import HALTED, MAX_ITER, minimize_lbfgs
+from .lbfgs import HALTED, minimize_lbfgs
 from .penalty import PenaltyTerms, penalty_fast
+from .result import RelaxResult
 
 #: ``progress(iteration, value)``; a true return value halts the run.
 Progress = Callable[[int, float], bool | None]
@@ -66,30 +67,6 @@ class FrozenPenalty(VerletPenalty):
         f = super().__call__(x, grad)
         grad.reshape(-1, 2)[self.frozen] = 0.0
         return f
-
-
-@dataclass
-class RelaxResult:
-    """Outcome of :func:`relax`.
-
-    Attributes:
-        xy: ``[n, 2]`` relaxed positions, mm.
-        penalty: final penalty, mm².
-        nit, nfev: iterations and evaluations.
-        rebuilds: neighbour-list builds.
-        message: why it stopped.
-        history: penalty after each iteration.
-        status: L-BFGS status code (:data:`optdot.relax.lbfgs.CONVERGED`, ...).
-    """
-
-    xy: np.ndarray
-    penalty: float
-    nit: int
-    nfev: int
-    rebuilds: int
-    message: str
-    history: list[float]
-    status: int = MAX_ITER
 
 
 def relax(
@@ -148,11 +125,11 @@ def relax_staged(
     start: np.ndarray | None = None,
     frozen: np.ndarray | None = None,
     diameters: np.ndarray | None = None,
-) -> tuple[np.ndarray, dict, list[float]]:
+) -> RelaxResult:
     """Relax ``xy0`` (``[n, 2]`` mm, fill ``rho`` ``[n]``) through the formulation's stages.
 
-    Containers stay centred on ``xy0`` in every stage. Returns positions, run info and
-    the penalty after each iteration. A stage halted by ``progress`` ends the run.
+    Containers stay centred on ``xy0`` in every stage. A stage halted by ``progress``
+    ends the run.
 
     Args:
         start: ``[n, 2]`` positions to start from, mm (default ``xy0``): a tile's second
@@ -160,10 +137,13 @@ def relax_staged(
         frozen: ``[n]`` bool, dots that do not move (a tile's halo).
         diameters: ``[n]`` dot diameters, mm, when sizes vary (see
             :meth:`~optdot.relax.formulation.Formulation.terms`).
+
+    Returns:
+        One :class:`RelaxResult` over all stages (counts and history summed; penalty,
+        status and message of the last stage run).
     """
     xy = xy0 if start is None else start
-    info = {"iterations": 0, "evaluations": 0, "neighbor_builds": 0}
-    history: list[float] = []
+    total = RelaxResult(xy, 0.0, 0, 0, 0, "no stage ran", [])
     done = 0
     for k, (share, multiplier) in enumerate(form.stages):
         last = k == len(form.stages) - 1
@@ -181,11 +161,16 @@ def relax_staged(
         )
         done += iters
         xy = res.xy
-        info["iterations"] += res.nit
-        info["evaluations"] += res.nfev
-        info["neighbor_builds"] += res.rebuilds
-        info.update(penalty=float(res.penalty), message=res.message)
-        history += res.history
+        total = RelaxResult(
+            xy,
+            float(res.penalty),
+            total.nit + res.nit,
+            total.nfev + res.nfev,
+            total.rebuilds + res.rebuilds,
+            res.message,
+            total.history + res.history,
+            res.status,
+        )
         if res.status == HALTED:
             break
-    return xy, info, history
+    return total

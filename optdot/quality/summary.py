@@ -1,0 +1,143 @@
+"""The QA numbers and plot data of a measured pattern: the two passes' sums
+(:mod:`optdot.quality.sums`) turned into JSON-ready metrics, the places of failures and
+the bounded arrays the report draws."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..geometry.density import DensityMap
+from .metrics import coverage, disc_area, radial_spectrum
+from .seams import seam_finish
+from .source import Source
+from .sums import FirstSums, SecondSums, cat
+
+
+@dataclass
+class Measured:
+    """Numbers for the gate and the report.
+
+    Attributes:
+        metrics: JSON-ready numbers (see :func:`measure`).
+        where: ``{check: [[x, y], ...]}`` places of failures, mm (first 20).
+        arrays: plot data: ``overview`` (image, extent), ``close_mid`` / ``collision_mid``
+            / ``defects`` (``[m, 2]`` mm, at most :data:`MAX_MARKS`), ``zoom`` (xy, d,
+            segments ``[s, 2, 2]``), ``nn_hist`` (counts, µm edges), ``coverage_error``
+            (rel ``[ny, nx]``, extent), ``spectrum`` (freq, power), ``tile``, ``rings`` (the
+            outline's loops; none for a box).
+    """
+
+    metrics: dict[str, Any]
+    where: dict[str, list[list[float]]]
+    arrays: dict[str, Any]
+
+
+def summarize(
+    src: Source,
+    density: DensityMap | None,
+    smoothing: float,
+    close: float,
+    collision: float,
+    f: FirstSums,
+    s: SecondSums,
+    gaps: tuple[float, float] | None = None,
+) -> Measured:
+    n = src.n
+    u = src.uniform_diameter
+    m: dict[str, Any] = {"dots": n, "box_mm": list(src.box)}
+    if u is not None:
+        m["diameter_mm"] = u
+    else:
+        d = np.concatenate(f.diameters)
+        m["diameter_mm"] = {
+            "min": float(d.min()),
+            "median": float(np.median(d)),
+            "max": float(d.max()),
+        }
+    where: dict[str, list[list[float]]] = {}
+    arrays: dict[str, Any] = {"rings": [] if src.outline is None else src.outline.rings()}
+    if gaps is None:
+        m["collision_distance_mm"] = collision
+        m["close_distance_mm"] = close
+    else:
+        m["collision_gap_mm"] = gaps[1]
+        m["close_gap_mm"] = gaps[0]
+    m["pairs_below_collision"] = s.pairs_collision
+    m["pairs_below_close"] = s.pairs_close
+    m["dots_in_close_pairs_fraction"] = float(s.close_dots / max(n, 1))
+    arrays["collision_mid"] = cat(s.collision_mid, (2,))
+    arrays["close_mid"] = cat(s.close_mid, (2,))
+    where["collisions"] = _where(arrays["collision_mid"])
+    nn = s.nn
+    ok = n > 1
+    m["nn_min_mm"] = float(nn.min()) if ok else None
+    m["nn_percentiles_mm"] = _percentiles(nn) if ok else {}
+    arrays["nn_hist"] = _histogram(nn * 1e3) if ok and np.isfinite(nn).all() else None
+    if src.outline is not None:
+        m["outside_outline_or_in_holes"] = f.outside
+        m["edge_margin_mm"] = src.outline.edge_margin
+        m["edge_margin_violations"] = f.margin_violations
+    m["protruding"] = f.protruding
+    where["protruding"] = _where(cat(f.where_protruding, (2,)))
+    arrays["defects"] = cat(f.defects, (2,))
+    m["psi6_local_mean"] = float(s.psi_abs_sum / n) if n else 0.0
+    grid, cnt, re, im = s.patches
+    m["psi6_coherence_2mm"] = grid.coherence(cnt, re, im, total=s.psi_sum, n=n)
+    nn_norm = None
+    if density is not None:
+        m["in_empty_cells"] = f.empty
+        where["in_empty"] = _where(cat(f.where_empty, (2,)))
+        nn_norm = np.concatenate(s.nn_norm) if s.nn_norm else np.zeros(0)
+        m["nn_normalized_percentiles"] = _percentiles(nn_norm) if len(nn_norm) else {}
+        cov, rel, extent = coverage(
+            f.cells, u, n, src.nominal_diameter, src.outline, density, smoothing
+        )
+        m.update(cov)
+        arrays["coverage_error"] = (rel, extent)
+        where["coverage"] = [cov["coverage_worst_at_mm"]]
+        one = disc_area(u) if u is not None else 1.0
+        m["edge_band_coverage_ratio"] = {
+            name: float(got * one / want) if want > 0 else None
+            for (name, _, want), got in zip(f.bands, f.band_sums, strict=True)
+        }
+    if src.tiling is not None and s.seams is not None:
+        m["seams"] = seam_finish(s.seams, *src.tiling, density)
+    if len(src.counts) > 1:
+        m["qa_requeried_dots"] = s.requeried  # k-NN re-queried with a wider halo
+    tile = f.squares.densest(f.square_counts)
+    freq, power = radial_spectrum(cat(s.window_xy, (2,)), tile, px=src.nominal_diameter / 4)
+    arrays["spectrum"] = (freq, power)
+    arrays["tile"] = tile
+    arrays["overview"] = (f.overview, f.overview_extent)
+    arrays["zoom"] = (cat(s.zoom_xy, (2,)), cat(s.zoom_d, ()), cat(s.segments, (2, 2)))
+    if len(power):
+        lo = freq > 0.3 / (np.median(nn) if n > 1 else 1)
+        m["spectrum_peak_ratio"] = (
+            float(power[lo].max() / np.median(power[lo])) if lo.any() else None
+        )
+    return Measured(metrics=m, where=where, arrays=arrays)
+
+
+def _histogram(values: np.ndarray, bins: int = 100) -> tuple[np.ndarray, np.ndarray]:
+    """``np.histogram`` of ``values`` over bins that always exist: numpy refuses 100 bins
+    over a range too narrow for its floats (two dots 3 m apart, nearest-neighbour
+    distances equal to 1 part in 10¹⁵), so the range is widened to at least a part in
+    10⁹ of its magnitude."""
+    lo, hi = float(values.min()), float(values.max())
+    width = max(hi - lo, 1e-9 * max(abs(lo), abs(hi), 1.0))
+    edges = np.linspace(lo, lo + width, bins + 1)
+    counts, _ = np.histogram(np.clip(values, lo, edges[-1]), bins=edges)
+    return counts, edges
+
+
+def _percentiles(v: np.ndarray) -> dict[str, float]:
+    """The 1st, 5th, 50th and 95th percentiles of ``v``, keyed by their number."""
+    qs = (1, 5, 50, 95)
+    return {str(q): float(x) for q, x in zip(qs, np.percentile(v, qs), strict=True)}
+
+
+def _where(points: np.ndarray, limit: int = 20) -> list[list[float]]:
+    return [[round(float(x), 6), round(float(y), 6)] for x, y in points[:limit]]
