@@ -226,9 +226,10 @@ def _layer_options(fn):
     )(fn)
 
 
-def run_job(job, quiet: bool):
-    """Generate the job's pattern with a progress bar."""
-    from ..pipeline import generate
+def _bar(job, quiet: bool):
+    """A progress bar for ``job`` and the callbacks that draw on it: ``(bar,
+    progress(iteration, value), tile_progress(fraction, line))``; a signal that came
+    stops the run at the next call, in plain Python."""
     from ..runtime.stop import interrupted
     from .progress import ProgressBar
 
@@ -238,9 +239,22 @@ def run_job(job, quiet: bool):
 
     def progress(iteration: int, value: float) -> None:
         bar(iteration, value)
-        if interrupted():  # a signal came: stop here, in plain Python
+        if interrupted():
             raise KeyboardInterrupt
 
+    def tile_progress(fraction: float, line: str) -> None:
+        bar.line(fraction, line)
+        if interrupted():
+            raise KeyboardInterrupt
+
+    return bar, progress, tile_progress
+
+
+def run_job(job, quiet: bool):
+    """Generate the job's pattern with a progress bar."""
+    from ..pipeline import generate
+
+    bar, progress, _ = _bar(job, quiet)
     try:
         pattern = generate(job, progress=progress, stage=bar.stage)
     finally:
@@ -385,27 +399,13 @@ def generate(
 ):
     """Generate the dot pattern of JOB_FILE and write it to OUTPUT."""
     from ..pipeline import PATTERN_SUFFIXES, generate_to
-    from ..runtime.stop import interrupted
-    from .progress import ProgressBar
 
     if output.suffix.lower() not in PATTERN_SUFFIXES:
         raise click.BadParameter(
             "must end in .csv, .npz or .parquet", param_hint="'-o' / '--output'"
         )
     job = load_job_with(job_file, seed, max_iter, method, formulation)
-    bar = ProgressBar(
-        job.optimize.max_iter, label=job.optimize.method, enabled=False if quiet else None
-    )
-
-    def progress(iteration: int, value: float) -> None:
-        bar(iteration, value)
-        if interrupted():  # a signal came: stop here, in plain Python
-            raise KeyboardInterrupt
-
-    def tile_progress(fraction: float, line: str) -> None:
-        bar.line(fraction, line)
-        if interrupted():
-            raise KeyboardInterrupt
+    bar, progress, tile_progress = _bar(job, quiet)
 
     def announce(line: str) -> None:
         if not quiet:
