@@ -1,0 +1,309 @@
+"""``optdot export`` and ``optdot qa``: the QA gate, then the masks and reports."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from ..config.viewing import VIEW_PRESETS
+from ..io.outputs import check_outputs
+from .app import main, user_errors
+from .options import (
+    POSITIVE,
+    Finite,
+    job_options,
+    layer_options,
+    load_job_with,
+    run_job,
+)
+
+
+def _inputs(source: Path, job_path) -> tuple:
+    """(job or None, every input file): the job is ``source`` when it is a .toml file."""
+    from ..config.schema import load_job
+
+    if job_path is None and source.suffix.lower() == ".toml":
+        job_path = source
+    job = load_job(job_path) if job_path else None
+    return job, (source, *(job.inputs if job else ()))
+
+
+def _read_with_job(path: Path, job, opts=None):
+    """The pattern read from ``path``, on the job's panel when there is a job."""
+    from ..exporters.readback import read_any
+    from ..pipeline import with_job_panel
+
+    return with_job_panel(read_any(path, opts, box=job.box if job else None), job)
+
+
+@main.command()
+@click.argument("source", type=click.Path(path_type=Path))
+@click.option("--gds", type=click.Path(path_type=Path), help="GDSII mask to write.")
+@click.option("--oas", type=click.Path(path_type=Path), help="OASIS mask to write.")
+@click.option("--dxf", type=click.Path(path_type=Path), help="DXF drawing to write.")
+@click.option("--csv", type=click.Path(path_type=Path), help="CSV pattern to write.")
+@click.option("--svg", type=click.Path(path_type=Path), help="SVG preview to write.")
+@click.option("--png", type=click.Path(path_type=Path), help="PNG preview to write.")
+@click.option(
+    "--speos",
+    type=click.Path(path_type=Path),
+    help="Ansys Speos 3D-texture mapping to write (.OPT3DMapping: position and scale per dot).",
+)
+@click.option(
+    "--speos-reference-diameter",
+    type=POSITIVE,
+    help="Diameter of the Speos texture element, mm (scale 1; default: the nominal diameter).",
+)
+@click.option(
+    "--job",
+    "job_path",
+    type=click.Path(path_type=Path),
+    help="Job file for the QA gate when SOURCE is a pattern.",
+)
+@click.option(
+    "--tolerance",
+    type=POSITIVE,
+    default=0.01,
+    show_default=True,
+    help="Circle polygon tolerance, µm (GDS/OAS).",
+)
+@click.option("--flatten", is_flag=True, help="Plain polygons instead of a dot cell + references.")
+@layer_options
+@click.option("--top-cell", default="TOP", show_default=True, help="Name of the top cell.")
+@click.option(
+    "--dxf-version", default="R2010", show_default=True, help="DXF release: R2010, R2000, R12, ..."
+)
+@click.option("--force", is_flag=True, help="Write masks even if the QA gate fails.")
+@click.option(
+    "--html", "html_path", type=click.Path(path_type=Path), help="QA report (HTML) to write."
+)
+@click.option(
+    "--json", "json_path", type=click.Path(path_type=Path), help="QA report (JSON) to write."
+)
+@job_options
+@user_errors
+def export(
+    source,
+    gds,
+    oas,
+    dxf,
+    csv,
+    svg,
+    png,
+    speos,
+    speos_reference_diameter,
+    job_path,
+    tolerance,
+    flatten,
+    layer,
+    datatype,
+    outline_layer,
+    top_cell,
+    dxf_version,
+    force,
+    html_path,
+    json_path,
+    seed,
+    max_iter,
+    method,
+    formulation,
+    quiet,
+):
+    """Write masks and previews of SOURCE (a job file, or a pattern .csv/.npz/.parquet).
+
+    Existing output files are replaced (atomically: a failed run leaves them as they were).
+    Masks are written only if the QA gate passes, unless --force; the verdict is printed,
+    and --html/--json keep the gate's report (written also when the gate fails).
+    """
+    from ..exporters.options import ExportOptions
+    from ..pipeline import export as export_pattern
+
+    outputs = {
+        k: v
+        for k, v in (
+            ("gds", gds),
+            ("oas", oas),
+            ("dxf", dxf),
+            ("csv", csv),
+            ("svg", svg),
+            ("png", png),
+            ("speos", speos),
+        )
+        if v is not None
+    }
+    if not outputs:
+        raise click.UsageError("give at least one of --gds --oas --dxf --csv --svg --png --speos")
+    opts = ExportOptions(
+        tolerance_um=tolerance,
+        flatten=flatten,
+        layer=layer,
+        datatype=datatype,
+        outline_layer=outline_layer,
+        top_cell=top_cell,
+        dxf_version=dxf_version,
+        speos_reference_mm=speos_reference_diameter,
+    )
+    if source.suffix.lower() == ".toml":
+        job = load_job_with(source, seed, max_iter, method, formulation)
+        inputs = (source, *job.inputs)
+    else:
+        job, inputs = _inputs(source, job_path)
+    reports = {k: v for k, v in (("html", html_path), ("json", json_path)) if v is not None}
+    check_outputs({**outputs, **reports}, inputs)
+    stream = pattern = None
+    if source.suffix.lower() == ".toml":
+        pattern = run_job(job, quiet)
+    elif source.suffix.lower() == ".parquet":
+        from ..io.dataset import open_dataset
+
+        stream = open_dataset(source)  # gate and masks tile by tile
+    else:
+        pattern = _read_with_job(source, job)
+    lines: list[str] = []
+    from .progress import ProgressBar
+
+    bar = ProgressBar(1, label="optdot", enabled=False if quiet else None)
+    try:
+        result = export_pattern(
+            pattern,
+            outputs,
+            job,
+            opts,
+            force=force,
+            stream=stream,
+            reports=reports,
+            written=lambda fmt, path, what: lines.append(f"{path}: {what}"),
+            stage=bar.stage,
+        )
+    finally:
+        bar.close()
+    if not result.passed:
+        click.echo(
+            f"optdot: warning: QA gate failed ({result.failures()}); writing anyway (--force)",
+            err=True,
+        )
+    if not quiet:
+        _print_checks(result, lambda line: click.echo(line, err=True))
+        for line in lines:
+            click.echo(line, err=True)
+
+
+@main.command()
+@click.argument("pattern_file", type=click.Path(path_type=Path))
+@click.option(
+    "--job",
+    "job_path",
+    type=click.Path(path_type=Path),
+    help="Job file: target map and thresholds.",
+)
+@click.option("--html", "html_path", type=click.Path(path_type=Path), help="HTML report to write.")
+@click.option("--json", "json_path", type=click.Path(path_type=Path), help="JSON report to write.")
+@click.option(
+    "--collision", type=POSITIVE, help="Collision distance, mm (default: dot diameter + gap)."
+)
+@click.option("--close", type=POSITIVE, help="Too-close distance, mm (default 0.060).")
+@click.option(
+    "--close-gap",
+    type=Finite(0.0, None),
+    help="Too-close edge gap, mm (dots of varying size; default qa.close_gap or 0.014).",
+)
+@click.option(
+    "--view",
+    type=click.Choice(list(VIEW_PRESETS)),
+    help="Viewing preset of the visibility check (default qa.view or notebook).",
+)
+@click.option("--distance", type=POSITIVE, help="Viewing distance, mm (overrides the preset).")
+@click.option("--luminance", type=POSITIVE, help="Screen luminance, cd/m² (overrides the preset).")
+@click.option("--psf", type=POSITIVE, help="Gaussian sigma of the stack's blur, mm (default 1.0).")
+@click.option("--max-jnd", type=POSITIVE, help="Gate: largest allowed |JND| (default: not gated).")
+@layer_options
+@click.option("--quiet", "-q", is_flag=True, help="Only the exit code.")
+@user_errors
+def qa(
+    pattern_file,
+    job_path,
+    html_path,
+    json_path,
+    collision,
+    close,
+    close_gap,
+    view,
+    distance,
+    luminance,
+    psf,
+    max_jnd,
+    layer,
+    datatype,
+    outline_layer,
+    quiet,
+):
+    """Check PATTERN_FILE (csv, npz, gds, oas, dxf) before tooling: exit 0 pass, 1 fail."""
+    from ..io.atomic import transaction
+    from ..pipeline import qa as run_gate
+    from ..quality.report import write_reports
+
+    if close_gap is not None and not 0 <= close_gap < 10:
+        raise click.BadParameter("must be an edge gap in mm, 0 <= x < 10", param_hint="--close-gap")
+    from ..exporters.options import ExportOptions
+
+    opts = ExportOptions(layer=layer, datatype=datatype, outline_layer=outline_layer)
+    outs = {k: v for k, v in (("html", html_path), ("json", json_path)) if v is not None}
+    looks = {
+        k: v
+        for k, v in (
+            ("view", view),
+            ("view_distance", distance),
+            ("view_luminance", luminance),
+            ("psf", psf),
+            ("max_jnd", max_jnd),
+        )
+        if v is not None
+    }
+    job, inputs = _inputs(pattern_file, job_path)
+    check_outputs(outs, inputs)
+    if pattern_file.suffix.lower() == ".parquet":
+        from ..io.dataset import open_dataset
+
+        # a dataset is measured tile by tile with halos, in bounded memory
+        dataset = open_dataset(pattern_file)
+        result = run_gate(
+            None, job, collision, close, dataset=dataset, close_gap=close_gap, view=looks
+        )
+    else:
+        pattern = _read_with_job(pattern_file, job, opts)
+        result = run_gate(pattern, job, collision, close, close_gap=close_gap, view=looks)
+    with transaction():  # both reports replaced together, or neither
+        write_reports(result, outs, title=f"optdot QA: {pattern_file.name}")
+    if not quiet:
+        _print_checks(result)
+    sys.exit(0 if result.passed else 1)
+
+
+def _print_checks(result, echo=click.echo) -> None:
+    """The gate as a user reads it: one line per check (PASS, FAIL, or WARN for an
+    advisory one over its level), the checks skipped, the visibility summary, and the
+    verdict (PASS, PASS WITH WARNINGS or FAIL) last."""
+    from ..quality.gate import number_text as _num
+
+    for c in result.checks:
+        mark = "PASS" if c.passed else ("WARN" if c.advisory else "FAIL")
+        where = f"  at {c.where[:3]}" if (c.where and not c.passed) else ""
+        echo(f"{mark}  {c.name}: {_num(c.value)} (limit {_num(c.limit)}){where}")
+    for s in result.skipped:
+        echo(f"SKIP  {s}")
+    vis = result.metrics.get("visibility")
+    if vis:
+        x, y = vis["max_jnd_at_mm"]
+        echo(
+            f"visibility ({vis['view']}, {vis['distance_mm']:g} mm, "
+            f"{vis['luminance_cd_m2']:g} cd/m², PSF sigma {vis['psf_sigma_mm']:g} mm): "
+            f"largest |JND| {vis['max_jnd']:.2f} at ({x:.2f}, {y:.2f}) mm, "
+            f"{vis['blobs_over_1_jnd']} blobs over 1 JND"
+        )
+    echo(f"verdict: {result.verdict}")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

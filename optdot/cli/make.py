@@ -1,0 +1,149 @@
+"""``optdot check`` and ``optdot generate``: what a job would cost, and its pattern."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from .app import main, user_errors
+from .options import (
+    job_options,
+    load_job_with,
+    progress_bar,
+    tile_options,
+)
+
+
+@main.command()
+@click.argument("job_file", type=click.Path(path_type=Path))
+@job_options
+@tile_options
+@user_errors
+def check(
+    job_file,
+    seed,
+    max_iter,
+    method,
+    formulation,
+    quiet,
+    tiles,
+    tile_size,
+    scheduler,
+    workers,
+    worker_memory,
+):
+    """Check JOB_FILE without running it: is it valid, how many dots, one process or
+    tiles, and about how long, how much memory and disk it will take (exit 0: it would
+    run; otherwise the one-line reason the run itself would give)."""
+    from ..pipeline import check_job
+
+    job = load_job_with(job_file, seed, max_iter, method, formulation)
+    got = check_job(job, tiles, tile_size, workers)
+    d = job.density.grid
+    x0, y0, x1, y1 = job.box
+    opt = job.optimize
+    gib = 2**30
+    if got.plan is None:
+        how = "one process"
+    else:
+        p = got.plan
+        how = (
+            f"{p.count} tiles ({p.nx} x {p.ny}) of ~{int(p.quotas.mean()):,} dots "
+            f"on {got.workers} local workers"
+        )
+    click.echo(f"{job_file}: valid")
+    click.echo(
+        f"panel {x1 - x0:g} x {y1 - y0:g} mm"
+        + ("" if job.domain.rectangle else " (outline)")
+        + f", map {d.shape[1]} x {d.shape[0]} cells, fill {d.min():.3g}..{d.max():.3g}"
+    )
+    click.echo(
+        f"dots: {got.n_dots:,} of {_diameter_text(job)} ({opt.method}, seed {opt.seed}, "
+        f"{opt.max_iter} iterations)"
+    )
+    click.echo(f"run: {how}")
+    c = got.cost
+    click.echo(
+        f"estimate: {_duration(c.seconds)}, {c.peak_bytes / gib:.2f} GiB peak memory "
+        f"({got.available_bytes / gib:.1f} GiB available)"
+    )
+    click.echo(
+        "disk: "
+        + ", ".join(f"{fmt.upper()} {size / 1e6:,.1f} MB" for fmt, size in c.disk_bytes.items())
+    )
+
+
+def _diameter_text(job) -> str:
+    if job.sizes is None:
+        return f"{job.diameter * 1e3:.4g} µm"
+    return f"{job.sizes.low * 1e3:.4g}..{job.sizes.high * 1e3:.4g} µm"
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 90:
+        return f"about {seconds:.0f} s"
+    if seconds < 5400:
+        return f"about {seconds / 60:.0f} min"
+    return f"about {seconds / 3600:.1f} h"
+
+
+@main.command()
+@click.argument("job_file", type=click.Path(path_type=Path))
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(path_type=Path),
+    required=True,
+    help="Pattern to write: .csv, .npz, or .parquet (a dataset directory, for large ones).",
+)
+@job_options
+@tile_options
+@user_errors
+def generate(
+    job_file,
+    output,
+    seed,
+    max_iter,
+    method,
+    formulation,
+    quiet,
+    tiles,
+    tile_size,
+    scheduler,
+    workers,
+    worker_memory,
+):
+    """Generate the dot pattern of JOB_FILE and write it to OUTPUT."""
+    from ..pipeline import PATTERN_SUFFIXES, generate_to
+
+    if output.suffix.lower() not in PATTERN_SUFFIXES:
+        raise click.BadParameter(
+            "must end in .csv, .npz or .parquet", param_hint="'-o' / '--output'"
+        )
+    job = load_job_with(job_file, seed, max_iter, method, formulation)
+    bar, progress, tile_progress = progress_bar(job, quiet)
+
+    def announce(line: str) -> None:
+        if not quiet:
+            click.echo(line, err=True)
+
+    try:
+        done = generate_to(
+            job,
+            output,
+            tiles=tiles,
+            tile_size=tile_size,
+            scheduler=scheduler,
+            workers=workers,
+            worker_memory=None if worker_memory is None else int(worker_memory * 2**30),
+            progress=progress,
+            tile_progress=tile_progress,
+            stage=bar.stage,
+            announce=announce,
+        )
+    finally:
+        bar.close()
+    if not quiet:
+        how = " in tiles" if done.tiles else f", {done.iterations} iterations"
+        click.echo(f"{output}: {done.n:,} dots{how}, {done.seconds:.1f} s", err=True)
