@@ -7,6 +7,11 @@ of them the panel lies, then flattened to the stated tolerance *on that side*
 guarantee against it holds against the drawing. The outermost loop is the panel and
 loops inside it are holes. shapely validates the result before any work; a bad outline
 is refused with shapely's reason and where (:class:`~optdot.errors.GeometryError`).
+
+Why one module of ~450 lines: one concept (a panel file becomes a validated outline), three
+formats whose loops go through the same nesting, orientation and validation; the DXF
+entity walk (blocks, units) already lives in :mod:`optdot.geometry.dxf_entities` and the
+curves in :mod:`optdot.geometry.curves`.
 """
 
 from __future__ import annotations

@@ -20,6 +20,11 @@ the directory put in place (an atomic exchange with a previous dataset of the sa
 which is then removed). An interrupted or failed run leaves the previous dataset as it was
 and no directory that looks complete; a dataset without its manifest is refused on
 reading.
+
+Why one module of ~550 lines: the format is one concept, and its writer and reader share
+the manifest's schema (:func:`_manifest_problem` is what both the reader and the
+"is this directory ours to replace" check of the writer trust); split, each half would
+import the other.
 """
 
 from __future__ import annotations
