@@ -6,6 +6,8 @@ cluster's life, the kernels compiled on it once, and the tiles streamed into a
 from __future__ import annotations
 
 import contextlib
+import hashlib
+import json
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -13,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .config.job import Job
+from .files import sha256_file
 from .io.dataset import manifest_of, write_dataset
 from .pattern import Pattern
 from .preflight import _check_gathered, _check_room, _check_tile_memory
@@ -20,9 +23,39 @@ from .runtime.cluster import connect, embedded_workers, scheduler_address
 from .runtime.stop import check_interrupt
 from .tiling.plan import TilePlan, plan_tiles
 from .tiling.run import InProcess, OnDask, TiledRun, TileProgress, run_tiles, warm_up
+from .tiling.tasks import FinalDots
 
 #: ``announce(line)``: what a tiled run tells the user before it starts (cluster, tiles).
 Announce = Callable[[str], None]
+
+
+def _code_digest() -> str:
+    """sha256 of optdot's own source files (its exporters included): a resumed run must
+    be made by the same code as the tiles it keeps."""
+    root = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for f in sorted(root.rglob("*.py")):
+        h.update(str(f.relative_to(root)).encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()
+
+
+def resume_key(job: Job, plan: TilePlan) -> str | None:
+    """The identity of a tiled run, for keeping its finished tiles across an interruption:
+    optdot's code, the job file and every input file (their bytes), the job's settings
+    with any overrides (seed, iterations, method), and the tiling. None for a job not read
+    from a file (no resume)."""
+    if job.source is None:
+        return None
+    h = hashlib.sha256(_code_digest().encode())
+    for f in (Path(job.source), *job.inputs):
+        h.update(str(f).encode())
+        h.update(sha256_file(Path(f)).encode())
+    h.update(repr(job.optimize).encode())
+    h.update(repr(job.qa).encode())
+    h.update(json.dumps(plan.to_json(), sort_keys=True).encode())
+    h.update(plan.quotas.tobytes())
+    return h.hexdigest()
 
 
 def _tiled_meta(job: Job, plan: TilePlan) -> dict:
@@ -80,9 +113,9 @@ def generate_tiled(
     if executor is None and address is None:  # before any worker is spawned
         _check_tile_memory(job, plan, embedded_workers(workers, worker_memory)[1])
     if executor is not None:
-        return _run_tiled(job, plan, contextlib.nullcontext(executor), output, progress)
+        return _run_tiled(job, plan, contextlib.nullcontext(executor), output, progress, announce)
     on_cluster = _on_cluster(job, plan, address, workers, worker_memory, announce)
-    return _run_tiled(job, plan, on_cluster, output, progress)
+    return _run_tiled(job, plan, on_cluster, output, progress, announce)
 
 
 @contextlib.contextmanager
@@ -111,10 +144,13 @@ def _warm() -> int:
     return warm_up()
 
 
-def _run_tiled(job, plan, executor_cm, output, progress) -> Pattern | TiledRun:
+def _run_tiled(job, plan, executor_cm, output, progress, announce=None) -> Pattern | TiledRun:
     """Run the tiles on the executor ``executor_cm`` yields. A dataset is committed only
     after the executor was closed (a cluster shut down): a signal during the shutdown
-    stops the run before the commit, never after it."""
+    stops the run before the commit, never after it. A dataset of a job read from files
+    resumes: the tiles an interrupted run of the same job finished are kept (the
+    staging directory of :func:`optdot.io.dataset.write_dataset`) and not made again,
+    and the result is the bytes of an uninterrupted run."""
     meta = _tiled_meta(job, plan)
     outline = None if job.domain.rectangle else job.domain
     one = job.diameter if job.sizes is None else None  # sizes: known once written
@@ -122,13 +158,22 @@ def _run_tiled(job, plan, executor_cm, output, progress) -> Pattern | TiledRun:
         manifest = manifest_of(
             job.name, job.optimize.seed, one, one, job.box, meta, outline, plan.to_json()
         )
-        with write_dataset(output, manifest) as w:
+        with write_dataset(output, manifest, resume_key(job, plan)) as w:
 
             def to_part(tile, xy, diameter):
                 w.write_part(plan.index(*tile), tile, xy, diameter)
 
+            def loader(k: int):
+                return lambda: FinalDots(*w.read_resumed(k))
+
+            finished = {tuple(e["tile"]): loader(k) for k, e in w.resumed.items()}
+            if finished and announce is not None:
+                announce(
+                    f"resuming: {len(finished)} of {plan.count} tiles were finished by an "
+                    f"interrupted run (kept in {w.tmp})"
+                )
             with executor_cm as executor:
-                run = run_tiles(job, plan, executor, to_part, progress)
+                run = run_tiles(job, plan, executor, to_part, progress, finished)
         return run
     got: dict = {}
     with executor_cm as executor:

@@ -288,7 +288,18 @@ def test_an_interrupted_tiled_run_leaves_the_previous_dataset(tiled, tmp_path):
     rest = proc.communicate(timeout=120)[1]
     assert proc.returncode == 130, err + rest
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
-    assert [p.name for p in tmp_path.iterdir()] == ["run.parquet"]  # no temporary left
+    _only_the_staging_dir_beside(out)
+
+
+def _only_the_staging_dir_beside(out):
+    """Beside ``out`` nothing but the run's staging directory (kept to resume from):
+    its resume record and finished parts, nothing else."""
+    from optdot.io.dataset import RESUME, staging_dir
+
+    staging = staging_dir(out)
+    assert sorted(p.name for p in out.parent.iterdir()) == sorted([out.name, staging.name])
+    inside = sorted(p.name for p in staging.iterdir())
+    assert inside[0] == RESUME and all(n.startswith("part-") for n in inside[1:]), inside
 
 
 def test_cluster_faults_are_one_line(tmp_path):
@@ -343,7 +354,7 @@ def test_a_full_disk_while_writing_the_dataset_keeps_the_old_one(tiled, tmp_path
     assert r.returncode == 2, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and str(out) in r.stderr, r.stderr
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
-    assert [p.name for p in tmp_path.iterdir()] == ["full.parquet"]
+    _only_the_staging_dir_beside(out)
 
 
 def test_a_directory_that_is_not_a_dataset_is_never_replaced(tmp_path):
@@ -442,3 +453,76 @@ def test_qa_of_the_dataset_tile_by_tile_equals_qa_in_memory(tiled):
     for name, v in a["seams"]["measures"].items():
         assert b["seams"]["measures"][name]["band"] == pytest.approx(v["band"], rel=1e-9)
     assert [c.passed for c in ds.checks] == [c.passed for c in mem.checks]
+
+
+class _Counting(InProcess):
+    """Runs tasks in process, counting them by kind; ``stop_after`` finished tiles, the
+    run is interrupted (as Ctrl-C would) before the next one is written."""
+
+    def __init__(self, stop_after: int | None = None) -> None:
+        self.kinds: dict[str, int] = {}
+        self.stop_after = stop_after
+
+    def submit(self, kind, key, fn, *args):
+        self.kinds[kind] = self.kinds.get(kind, 0) + 1
+        return fn(*args)
+
+    def finished(self, handles):
+        from optdot.tiling.tasks import FinalDots
+
+        done = 0
+        for h in handles:
+            if self.stop_after is not None and done == self.stop_after:
+                raise KeyboardInterrupt
+            done += isinstance(h, FinalDots)
+            yield h
+
+
+def test_an_interrupted_tiled_run_resumes_with_the_bytes_of_an_uninterrupted_one(tmp_path):
+    """Ctrl-C after 3 of 8 tiles: the target is untouched, the 3 tiles are kept beside it;
+    the same run again makes only the 5 others' guarantee passes and writes the bytes of a
+    run that was never interrupted. Another seed starts over."""
+    from optdot.io.dataset import staging_dir
+
+    job = load_job(LED).with_overrides(max_iter=15)
+    plan = plan_tiles(job, side=10.0)
+    assert plan.count == 8
+    full = tmp_path / "full.parquet"
+    generate_tiled(job, full, plan=plan, executor=InProcess())
+    out = tmp_path / "resumed.parquet"
+    with pytest.raises(KeyboardInterrupt):
+        generate_tiled(job, out, plan=plan, executor=_Counting(stop_after=3))
+    assert not out.exists()
+    staging = staging_dir(out)
+    kept = sorted(p.name for p in staging.iterdir())
+    assert len(kept) == 4 and kept[0] == "_resume.json"
+    assert all(k.startswith("part-") for k in kept[1:])
+    again = _Counting()
+    said = []
+    generate_tiled(job, out, plan=plan, executor=again, announce=said.append)
+    assert again.kinds["legal"] == 5 and "resuming: 3 of 8 tiles" in said[0]
+    assert not staging.exists()
+    names = sorted(p.name for p in full.iterdir())
+    assert names == sorted(p.name for p in out.iterdir())
+    for name in names:
+        assert (full / name).read_bytes() == (out / name).read_bytes(), name
+    # a run of another seed does not take those tiles
+    with pytest.raises(KeyboardInterrupt):
+        generate_tiled(job, out, plan=plan, executor=_Counting(stop_after=2))
+    other = _Counting()
+    generate_tiled(job.with_overrides(seed=9), out, plan=plan, executor=other)
+    assert other.kinds["legal"] == 8
+
+
+def test_a_foreign_directory_in_the_staging_place_is_never_removed(tmp_path):
+    from optdot.errors import ExportError
+    from optdot.io.dataset import staging_dir
+
+    job = load_job(LED).with_overrides(max_iter=2)
+    out = tmp_path / "x.parquet"
+    theirs = staging_dir(out)
+    theirs.mkdir()
+    (theirs / "notes.txt").write_text("mine")
+    with pytest.raises(ExportError, match="not an optdot staging directory"):
+        generate_tiled(job, out, plan=plan_tiles(job, side=10.0), executor=InProcess())
+    assert (theirs / "notes.txt").read_text() == "mine" and not out.exists()

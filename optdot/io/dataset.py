@@ -54,6 +54,8 @@ from ..runtime.stop import check_interrupt
 from .atomic import fsync_dir, short_name
 
 MANIFEST = "_manifest.json"
+#: The record of a resumable run's finished parts, in its staging directory only.
+RESUME = "_resume.json"
 FORMAT = "optdot.dataset"
 VERSION = 1
 COLUMNS = ("x_mm", "y_mm", "diameter_mm")
@@ -80,6 +82,20 @@ def _table(xy: np.ndarray, diameter: np.ndarray):
     )
 
 
+def _read_part_file(path: Path, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """A part file's dots, ``(xy [n, 2], diameter [n])`` mm, holding ``count`` rows."""
+    import pyarrow.parquet as pq
+
+    try:
+        table = pq.read_table(path, columns=list(COLUMNS))
+    except (OSError, ValueError) as e:
+        raise PatternFileError(f"{path}: not a readable Parquet part ({one_line(e)})") from None
+    if table.num_rows != count:
+        raise PatternFileError(f"{path}: holds {table.num_rows} dots, the manifest says {count}")
+    cols = [table.column(c).to_numpy().astype(np.float64, copy=False) for c in COLUMNS]
+    return np.column_stack(cols[:2]), cols[2]
+
+
 @dataclass
 class DatasetWriter:
     """Writes the parts of one dataset into a temporary directory; :meth:`commit` puts it
@@ -90,6 +106,26 @@ class DatasetWriter:
     parts: dict[int, dict[str, Any]] = field(default_factory=dict)
     #: dots written per diameter, ``{diameter mm: count}`` (sizes are quantised: few keys).
     sizes: dict[float, int] = field(default_factory=dict)
+    #: the run's identity when its parts are kept for a resume (see :func:`write_dataset`).
+    resume_key: str | None = None
+    #: parts a previous, interrupted run of the same job left, checked: ``{k: entry}``.
+    resumed: dict[int, dict[str, Any]] = field(default_factory=dict)
+
+    def read_resumed(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """A resumed part's dots: ``(xy [n, 2], diameter [n])``, mm."""
+        return _read_part_file(self.tmp / self.resumed[k]["file"], self.resumed[k]["count"])
+
+    def _record(self) -> None:
+        """Write the resume record (atomically): the key and every part written so far."""
+        if self.resume_key is None:
+            return
+        doc = {"key": self.resume_key, "parts": {str(k): v for k, v in self.parts.items()}}
+        tmp = self.tmp / (RESUME + ".tmp")
+        with open(tmp, "w") as fh:
+            json.dump(doc, fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, self.tmp / RESUME)
 
     def write_part(self, k: int, tile: tuple[int, int], xy: np.ndarray, diameter) -> None:
         """Write tile ``tile`` (part ``k``): ``xy`` ``[n, 2]`` mm, ``diameter`` mm (one or
@@ -106,14 +142,21 @@ class DatasetWriter:
             raise ExportError(f"{self.target}: cannot write ({one_line(e)})") from None
         if rows != len(xy):
             raise ExportError(f"{self.target}: part {k} holds {rows} of {len(xy)} rows")
-        for v, c in zip(*np.unique(d, return_counts=True), strict=True):
-            self.sizes[float(v)] = self.sizes.get(float(v), 0) + int(c)
         self.parts[k] = {
             "file": path.name,
             "tile": list(tile),
             "count": len(xy),
             "sha256": sha256_file(path),
         }
+        self._tally(d)
+        try:
+            self._record()
+        except OSError as e:
+            raise ExportError(f"{self.target}: cannot write ({e.strerror})") from None
+
+    def _tally(self, d: np.ndarray) -> None:
+        for v, c in zip(*np.unique(d, return_counts=True), strict=True):
+            self.sizes[float(v)] = self.sizes.get(float(v), 0) + int(c)
 
 
 def _renameat2_exchange(a: Path, b: Path) -> bool:
@@ -150,10 +193,68 @@ def check_dataset_target(target: Path) -> None:
             ) from None
 
 
+def staging_dir(target: Path) -> Path:
+    """Where a resumable run keeps its finished parts: ``.NAME.partial`` beside the target."""
+    directory = target.parent if str(target.parent) else Path(".")
+    return directory / f".{short_name(target.name)}.partial"
+
+
+def _resume_record(staging: Path) -> dict[str, Any] | None:
+    """The resume record of a staging directory, or None when it holds none."""
+    try:
+        doc = json.loads((staging / RESUME).read_text())
+    except (OSError, ValueError):
+        return None
+    ok = isinstance(doc, dict) and isinstance(doc.get("key"), str)
+    return doc if ok and isinstance(doc.get("parts"), dict) else None
+
+
+def _open_staging(target: Path, key: str) -> tuple[Path, dict[int, dict[str, Any]]]:
+    """The staging directory of ``target`` and the parts in it a previous run of the same
+    ``key`` finished (each checked against its checksum; others are dropped). A staging
+    directory of another run is cleared; a path of that name that is not ours (no resume
+    record, a link, a file) is refused, never removed."""
+    staging = staging_dir(target)
+    if staging.is_symlink() or (staging.exists() and not staging.is_dir()):
+        raise ExportError(f"{staging}: is in the way of the run's staging directory")
+    parts: dict[int, dict[str, Any]] = {}
+    if staging.is_dir():
+        doc = _resume_record(staging)
+        if doc is None:
+            raise ExportError(
+                f"{staging}: a directory that is not an optdot staging directory is in the "
+                "way of the run's staging directory; move it"
+            )
+        if doc["key"] != key:  # another job, seed, plan or optdot: start over
+            shutil.rmtree(staging)
+        else:
+            for k, entry in doc["parts"].items():
+                f = staging / str(entry.get("file", ""))
+                if f.is_file() and f.parent == staging and sha256_file(f) == entry.get("sha256"):
+                    parts[int(k)] = entry
+    try:
+        staging.mkdir(mode=0o700, exist_ok=True)
+    except OSError as e:
+        raise ExportError(f"{target}: cannot write here ({e.strerror})") from None
+    keep = {e["file"] for e in parts.values()} | {RESUME}
+    for f in staging.iterdir():  # parts cut off by the interruption
+        if f.name not in keep:
+            f.unlink()
+    return staging, parts
+
+
 @contextlib.contextmanager
-def write_dataset(target: str | Path, manifest: dict[str, Any]) -> Iterator[DatasetWriter]:
+def write_dataset(
+    target: str | Path, manifest: dict[str, Any], resume_key: str | None = None
+) -> Iterator[DatasetWriter]:
     """Write a dataset: yields a :class:`DatasetWriter`; on leaving the block the manifest
     (``manifest`` plus the parts) is written and the dataset put in place.
+
+    With ``resume_key`` (the run's identity: job, inputs, seed, tiling, optdot's code),
+    the parts are written into :func:`staging_dir` with a record of each one, and a failed
+    or interrupted run leaves them there: the next run with the same key finds them in
+    :attr:`DatasetWriter.resumed` and writes only the rest. Either way ``target`` changes
+    only when the whole dataset is in place.
 
     Raises:
         ExportError: the target cannot be written or is a directory of something else;
@@ -162,13 +263,26 @@ def write_dataset(target: str | Path, manifest: dict[str, Any]) -> Iterator[Data
     target = Path(target)
     directory = target.parent if str(target.parent) else Path(".")
     check_dataset_target(target)
+    resumed: dict[int, dict[str, Any]] = {}
+    if resume_key is not None:
+        tmp, resumed = _open_staging(target, resume_key)
+    else:
+        try:
+            tmp = Path(tempfile.mkdtemp(prefix=f".{short_name(target.name)}.", dir=directory))
+        except OSError as e:
+            raise ExportError(f"{target}: cannot write here ({e.strerror})") from None
+    writer = DatasetWriter(tmp, target, resume_key=resume_key, resumed=resumed)
+    writer.parts.update(resumed)
     try:
-        tmp = Path(tempfile.mkdtemp(prefix=f".{short_name(target.name)}.", dir=directory))
+        writer._record()  # the staging directory is recognisably ours from the start
     except OSError as e:
-        raise ExportError(f"{target}: cannot write here ({e.strerror})") from None
-    writer = DatasetWriter(tmp, target)
+        raise ExportError(f"{target}: cannot write ({e.strerror})") from None
+    for k in resumed:
+        writer._tally(writer.read_resumed(k)[1])
     try:
         yield writer
+        if resume_key is not None:
+            (tmp / RESUME).unlink(missing_ok=True)  # a dataset holds only what it lists
         parts = [writer.parts[k] for k in sorted(writer.parts)]
         doc = {"format": FORMAT, "version": VERSION, **manifest, "parts": parts}
         if doc["diameter_mm"] is None:  # sizes known once written: uniform, median
@@ -204,7 +318,8 @@ def write_dataset(target: str | Path, manifest: dict[str, Any]) -> Iterator[Data
             os.rename(tmp, target)
         fsync_dir(directory)
     except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
+        if resume_key is None or (tmp / MANIFEST).exists():
+            shutil.rmtree(tmp, ignore_errors=True)
         raise
 
 
@@ -314,20 +429,9 @@ class Dataset:
 
     def read_part(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         """Part ``k`` (position in :attr:`parts`): ``(xy [n, 2], diameter [n])``, mm."""
-        import pyarrow.parquet as pq
-
         part = self.parts[k]
         path = self.path / part["file"]
-        try:
-            table = pq.read_table(path, columns=list(COLUMNS))
-        except (OSError, ValueError) as e:
-            raise PatternFileError(f"{path}: not a readable Parquet part ({one_line(e)})") from None
-        if table.num_rows != part["count"]:
-            raise PatternFileError(
-                f"{path}: holds {table.num_rows} dots, the manifest says {part['count']}"
-            )
-        cols = [table.column(c).to_numpy().astype(np.float64, copy=False) for c in COLUMNS]
-        d = cols[2]
+        xy, d = _read_part_file(path, part["count"])
         u = self.uniform_diameter
         if u is not None and len(d) and not np.all(np.abs(d - u) <= 1e-9):
             i = int(np.argmax(np.abs(d - u) > 1e-9))
@@ -335,7 +439,7 @@ class Dataset:
                 f"{path}: dot {i} has diameter {float(d[i]):.6g} mm, the manifest says every "
                 f"dot is {u:.6g} mm"
             )
-        return np.column_stack(cols[:2]), d
+        return xy, d
 
     def iter_parts(self) -> Iterator[tuple[tuple[int, int], np.ndarray, np.ndarray]]:
         """``(tile, xy, diameter)`` of every part, in order."""

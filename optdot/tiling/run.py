@@ -112,14 +112,45 @@ class TiledRun:
     seconds: float
 
 
+def needed(plan: TilePlan, todo: set[tuple[int, int]]) -> dict[str, set[tuple[int, int]]]:
+    """The tasks that tiles ``todo`` need, when every other tile is finished (a resumed
+    run): ``{"initial", "relax", "seams", "merge", "legal": tiles or grid points}``.
+
+    A tile's guarantee pass holds its earlier-colour neighbours' final dots (read from
+    the finished parts when finished) and its later-colour neighbours' merged dots (made
+    again: the uninterrupted run held those too); merged dots need the tile's relaxation
+    and its corners' seams, a seam square needs the relaxation of the tiles meeting
+    there, a relaxation the initial dots of the tiles around it. Every task is a pure
+    function of the job and its inputs, so what is made again is what was made before.
+    """
+    merge = set(todo)
+    for t in todo:
+        c = plan.colour(*t)
+        merge |= {u for u in plan.neighbours(*t) if plan.colour(*u) > c}
+    corner_set = set(plan.corners())
+    seams = {(i + a, j + b) for i, j in merge for b in (0, 1) for a in (0, 1)} & corner_set
+    relax = set(merge)
+    for g in seams:
+        relax |= set(plan.corner_tiles(*g))
+    initial = set(relax)
+    for t in relax:
+        initial |= set(plan.neighbours(*t))
+    return {"initial": initial, "relax": relax, "seams": seams, "merge": merge, "legal": set(todo)}
+
+
 def run_tiles(
     job: Job,
     plan: TilePlan,
     executor: InProcess | OnDask,
     sink: Sink,
     progress: TileProgress | None = None,
+    finished: dict[tuple[int, int], Callable[[], FinalDots]] | None = None,
 ) -> TiledRun:
     """Generate ``job`` tile by tile on ``executor``, handing each finished tile to ``sink``.
+
+    ``finished``: tiles already done (a resumed run), each with a loader of its final
+    dots; only the tasks the other tiles need are run (:func:`needed`), and the sink
+    gets only the other tiles.
 
     Raises:
         GuaranteeError: a tile could not be made legal.
@@ -144,7 +175,24 @@ def run_tiles(
         schedule.append((j + 2, 2, j, 0, (i, j)))  # merge: needs corners j, j+1
         c = plan.colour(i, j)
         schedule.append((j + 3 + (j % 2), 3 + (j % 2), j, c, (i, j)))  # guarantee
+    finished = finished or {}
+    if finished:
+        need = needed(plan, set(tiles) - set(finished))
+        kinds = {-1: "initial", 0: "relax", 1: "seams", 2: "merge"}
+        schedule = [
+            e
+            for e in schedule
+            if (need[kinds[e[1]]] if e[1] in kinds else need["legal"]).__contains__(e[4])
+        ]
     schedule.sort()
+    held: dict = {}
+
+    def loaded(u: tuple[int, int]):
+        """A finished tile's final dots, read once and shared with the workers."""
+        if u not in held:
+            held[u] = executor.share(finished[u]())
+        return held[u]
+
     initial: dict = {}
     relaxed: dict = {}
     seams: dict = {}
@@ -168,11 +216,14 @@ def run_tiles(
             merged[i, j] = executor.submit("merge", key, apply_seams, relaxed[i, j], results)
         else:
             c = plan.colour(i, j)
-            around = [final[u] if plan.colour(*u) < c else merged[u] for u in plan.neighbours(i, j)]
+            around = [
+                (final[u] if u in final else loaded(u)) if plan.colour(*u) < c else merged[u]
+                for u in plan.neighbours(i, j)
+            ]
             h = executor.submit("legal", key, _legal, jobf, plan, merged[i, j], *around)
             final[i, j] = h
             kind_of[id(h)] = "legal"
-    total = sum(_WEIGHTS.values()) * len(tiles)
+    total = sum(_WEIGHTS.values()) * max(len(tiles) - len(finished), 1)
     done = 0.0
     counts: dict[tuple[int, int], int] = {}
     tile_of = {id(h): t for t, h in final.items()}
@@ -183,7 +234,8 @@ def run_tiles(
         seams.clear(),
         merged.clear(),
     )  # the graph holds what it still needs
-    n_done = n_relaxed = 0
+    n_done, n_relaxed = len(finished), 0
+    held.clear()
     for h in executor.finished(watched):
         kind = kind_of[id(h)]
         done += _WEIGHTS[kind] + (_WEIGHTS["seams"] if kind == "relax" else 0.0)
