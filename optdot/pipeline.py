@@ -224,7 +224,7 @@ def generate_to(
         save_pattern(result, output)
         n, plan = result.n, result.meta["tiles"]
     else:
-        n, plan = sum(result.counts.values()), f"{result.plan.nx}x{result.plan.ny}"
+        n, plan = int(result.plan.quotas.sum()), f"{result.plan.nx}x{result.plan.ny}"
     return Generated(output, n, time.perf_counter() - t0, tiles=plan)
 
 
