@@ -297,7 +297,7 @@ STREAMED = ("gds", "oas", "dxf", "speos")
 
 
 def export(
-    pattern: Pattern | None,
+    pattern: DotSource | None,
     outputs: Mapping[str, str | Path],
     job: Job | None = None,
     options=None,
@@ -310,7 +310,8 @@ def export(
     """Run the QA gate, then write ``pattern`` in each format of ``outputs``.
 
     Args:
-        pattern: the dots, or None when ``stream`` is given (then read from it only if a
+        pattern: the dots: a :class:`Pattern`, or an opened dataset (then streamed, as
+            ``stream``); None when ``stream`` is given (then read from it only if a
             format needs the whole pattern in memory).
         outputs: ``{format: path}``, formats of :data:`optdot.exporters.FORMATS`.
         job: thresholds and map of the gate (None: default thresholds).
@@ -337,6 +338,8 @@ def export(
     from . import exporters
     from .quality.report import write_reports
 
+    if pattern is not None and not isinstance(pattern, Pattern):
+        stream, pattern = pattern, None  # a dataset given as the dots: streamed
     if pattern is None and stream is None:
         raise ValueError("export needs a pattern or a dataset")
     reports = dict(reports or {})

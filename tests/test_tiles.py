@@ -526,3 +526,17 @@ def test_a_foreign_directory_in_the_staging_place_is_never_removed(tmp_path):
     with pytest.raises(ExportError, match="not an optdot staging directory"):
         generate_tiled(job, out, plan=plan_tiles(job, side=10.0), executor=InProcess())
     assert (theirs / "notes.txt").read_text() == "mine" and not out.exists()
+
+
+def test_export_takes_a_dataset_as_the_dots(tiled, tmp_path):
+    """The library's export() takes an opened dataset where a pattern goes: masks stream
+    from it, the CSV reads it whole; KLayout reads the dataset's dots from the GDS."""
+    from optdot.pipeline import export
+
+    d, _ = tiled
+    ds = open_dataset(d / "two.parquet")
+    out = {"gds": tmp_path / "x.gds", "csv": tmp_path / "x.csv"}
+    result = export(ds, out, load_job(LED))
+    assert result.passed
+    assert len(_klayout_centres(out["gds"])) == ds.n
+    assert len(out["csv"].read_text().splitlines()) == ds.n + 1
