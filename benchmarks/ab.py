@@ -57,7 +57,7 @@ def checkout(rev: str | None, where: Path) -> Path:
 
 def run(tree: Path, job: Path) -> dict:
     out = subprocess.run(
-        [sys.executable, "-c", CHILD, str(job)],
+        [sys.executable, "-P", "-c", CHILD, str(job)],
         env={**os.environ, "PYTHONPATH": str(tree)},
         cwd=tree,  # `python -c` puts the working directory first on sys.path
         check=True,

@@ -62,7 +62,9 @@ def main() -> None:
     print("| image | load job s | dot count s | dots | peak GiB |\n|---|---|---|---|---|")
     for _ in range(2):
         t0 = time.perf_counter()
-        r = subprocess.run([sys.executable, "-c", CHILD, str(job)], capture_output=True, text=True)
+        r = subprocess.run(
+            [sys.executable, "-P", "-c", CHILD, str(job)], capture_output=True, text=True
+        )
         if r.returncode:
             raise SystemExit(r.stderr)
         print(f"| {r.stdout.strip()} |  (process {time.perf_counter() - t0:.1f} s)")

@@ -38,7 +38,7 @@ print(json.dumps({"s": time.perf_counter() - t}))
 
 def _once(root: str, pattern: str) -> float:
     out = subprocess.run(
-        [sys.executable, "-c", CHILD, root, pattern], capture_output=True, text=True
+        [sys.executable, "-P", "-c", CHILD, root, pattern], capture_output=True, text=True
     )
     if out.returncode:
         sys.exit(out.stderr[-2000:])

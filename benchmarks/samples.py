@@ -16,7 +16,7 @@ from _common import machine, peak_rss_mb  # noqa: E402
 
 from optdot.config.schema import load_job  # noqa: E402
 from optdot.pipeline import generate  # noqa: E402
-from optdot.quality.gate import close_pairs  # noqa: E402
+from optdot.testing import close_pairs  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -65,7 +65,7 @@ def run_one(n_target: int, max_iter: int, ftol: float, keep: Path | None) -> str
         folder.mkdir(parents=True, exist_ok=True)
         write_job(folder, n_target, max_iter, ftol)
         out = folder / "pattern.npz"
-        cmd = [sys.executable, "-m", "optdot.cli", "generate", str(folder / "job.toml")]
+        cmd = [sys.executable, "-P", "-m", "optdot.cli", "generate", str(folder / "job.toml")]
         t = time.perf_counter()
         proc = subprocess.Popen([*cmd, "-o", str(out), "-q"])
         _, status, usage = os.wait4(proc.pid, 0)

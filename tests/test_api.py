@@ -34,6 +34,7 @@ ALLOWED = {
     "quality": {"config", "errors", "files", "geometry", "pattern", "io", "runtime", "spatial"},
     "exporters": {"errors", "files", "geometry", "io", "pattern", "runtime"},
     "preflight": {"config", "errors", "runtime", "tiling"},
+    "testing": {"relax"},
     "tiled": {"config", "errors", "files", "io", "pattern", "preflight", "runtime", "tiling"},
     "pipeline": {
         "io",

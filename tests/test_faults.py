@@ -32,7 +32,7 @@ def optdot_limited(limit: int, *args) -> subprocess.CompletedProcess:
         "main()\n"
     )
     return subprocess.run(
-        [sys.executable, "-c", code, *map(str, args)], capture_output=True, text=True
+        [sys.executable, "-P", "-c", code, *map(str, args)], capture_output=True, text=True
     )
 
 

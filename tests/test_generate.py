@@ -4,8 +4,8 @@ import pytest
 from optdot.config.schema import load_job
 from optdot.io.patterns import pattern_csv_bytes
 from optdot.pipeline import generate
-from optdot.quality.gate import close_pairs
 from optdot.relax.legalize import check_guarantee, legalize
+from optdot.testing import close_pairs
 
 from .conftest import SAMPLES, write_job
 

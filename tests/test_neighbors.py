@@ -8,9 +8,9 @@ from optdot.spatial.cellgrid import (
     neighbor_grid,
     neighbor_list,
     neighbor_pairs,
-    pairs_brute_force,
     pairs_within,
 )
+from optdot.testing import pairs_brute_force
 
 
 @settings(max_examples=40, deadline=None)

@@ -209,6 +209,7 @@ def _start_tiled(tmp_path, out: str, env=None) -> subprocess.Popen:
     return subprocess.Popen(
         [
             sys.executable,
+            "-P",
             "-m",
             "optdot",
             "generate",

@@ -21,10 +21,11 @@ from optdot.geometry.domain import Domain, validate_polygon
 from optdot.geometry.edges import EdgeIndex, signed_distances
 from optdot.pipeline import generate
 from optdot.relax.formulation import PRESETS
-from optdot.relax.penalty import penalty_fast, penalty_reference
+from optdot.relax.penalty import penalty_fast
 from optdot.spatial.blocks import PairList
-from optdot.spatial.cellgrid import neighbor_pairs, pairs_brute_force, pairs_within
+from optdot.spatial.cellgrid import neighbor_pairs, pairs_within
 from optdot.stages import problem_of
+from optdot.testing import pairs_brute_force, penalty_reference
 from tests.conftest import write_job
 
 NOTCHED = [(0, 0), (4, 0), (4, 1.2), (3.2, 1.2), (3.2, 1.8), (4, 1.8), (4, 3), (0.6, 3), (0, 2.4)]

@@ -3,9 +3,10 @@ import pytest
 from scipy.optimize import approx_fprime
 
 from optdot.relax.circles import circle_radius, container_half_sides
-from optdot.relax.penalty import PenaltyTerms, penalty_fast, penalty_reference
+from optdot.relax.penalty import PenaltyTerms, penalty_fast
 from optdot.spatial.blocks import PairList
-from optdot.spatial.cellgrid import neighbor_pairs, pairs_brute_force
+from optdot.spatial.cellgrid import neighbor_pairs
+from optdot.testing import pairs_brute_force, penalty_reference
 
 
 def make_terms(n=120, seed=0, w_hard=10.0, empty=True):

@@ -2,8 +2,7 @@ import numpy as np
 import pytest
 
 from optdot.relax import VerletPenalty, relax
-from optdot.relax.penalty import penalty_reference
-from optdot.spatial.cellgrid import pairs_brute_force
+from optdot.testing import pairs_brute_force, penalty_reference
 from tests.test_penalty import make_terms
 
 

@@ -322,6 +322,7 @@ def test_cli_exports_every_format_and_qa_agrees_on_each(sized, tmp_path):
     run = subprocess.run(
         [
             sys.executable,
+            "-P",
             "-m",
             "optdot",
             "export",
@@ -345,6 +346,7 @@ def test_cli_exports_every_format_and_qa_agrees_on_each(sized, tmp_path):
         run = subprocess.run(
             [
                 sys.executable,
+                "-P",
                 "-m",
                 "optdot",
                 "qa",

@@ -7,7 +7,6 @@ from scipy.optimize import approx_fprime
 
 from optdot.geometry.domain import Domain
 from optdot.geometry.edges import EdgeIndex, edge_args
-from optdot.relax.penalty import penalty_reference
 from optdot.relax.terms import (
     box_penalty,
     container_penalty,
@@ -15,7 +14,7 @@ from optdot.relax.terms import (
     empty_penalty,
     pair_penalty,
 )
-from optdot.spatial.cellgrid import pairs_brute_force
+from optdot.testing import pairs_brute_force, penalty_reference
 from tests.test_penalty import fast, make_terms
 
 EPS = 1e-7

@@ -19,8 +19,8 @@ from optdot.config.schema import load_job
 from optdot.errors import PatternFileError
 from optdot.io.dataset import MANIFEST, load_dataset, open_dataset
 from optdot.pipeline import generate_tiled, qa
-from optdot.quality.metrics import close_pairs
 from optdot.relax.legalize import legalize
+from optdot.testing import close_pairs
 from optdot.tiling.plan import plan_tiles, tile_integrals
 from optdot.tiling.run import InProcess
 from optdot.tiling.tasks import initial_tile

@@ -21,10 +21,9 @@ from ..geometry.density import DensityMap
 from ..geometry.domain import Domain
 from ..pattern import DotSource
 from .measure import measure
-from .metrics import close_pairs
 from .source import Source, source_of
 
-__all__ = ["Check", "QAResult", "close_pairs", "judge", "run_qa"]
+__all__ = ["Check", "QAResult", "judge", "run_qa"]
 
 
 @dataclass

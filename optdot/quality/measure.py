@@ -30,7 +30,7 @@ sums into numbers and plot data. Two passes:
      normalised nn are kept per dot (16 B per dot, the only per-dot memory, so the
      percentiles are exact).
 
-shapely/GEOS (:func:`optdot.quality.metrics.close_pairs`) stays the independent
+shapely/GEOS (:func:`optdot.testing.close_pairs`) stays the independent
 cross-check of the pair counts in the tests.
 """
 

@@ -21,23 +21,6 @@ from ..geometry.density import DensityMap
 from ..geometry.domain import polygon_cell_fractions
 
 
-def close_pairs(xy: np.ndarray, distance: float) -> np.ndarray:
-    """Pairs of centres strictly closer than ``distance``, via shapely STRtree.
-
-    Returns:
-        ``[K, 2]`` int64, i < j, sorted.
-    """
-    pts = shapely.points(xy)
-    tree = shapely.STRtree(pts)
-    i, j = tree.query(pts, predicate="dwithin", distance=distance)
-    keep = i < j
-    i, j = i[keep], j[keep]
-    d = np.hypot(*(xy[i] - xy[j]).T)
-    keep = d < distance
-    p = np.stack([i[keep], j[keep]], axis=1).astype(np.int64)
-    return p[np.lexsort((p[:, 1], p[:, 0]))] if len(p) else p
-
-
 def psi6(xy: np.ndarray, tree: cKDTree | None = None) -> np.ndarray:
     """Six-fold bond order of each dot over its 6 nearest neighbours, ``[n]`` complex."""
     tree = tree or cKDTree(xy)

@@ -16,8 +16,9 @@ For circles S_i (centre x_i, radius r_i) the objective is
 The last line is optdot's hard-core term (zero in the paper formulation): it only acts on
 dots closer than the minimum distance or protruding from the panel. All lengths in mm,
 f in mm². Each term is a small compiled function in :mod:`optdot.relax.terms`; this
-module composes them. ``penalty_reference`` is the slow, obviously-correct numpy version
-over an explicit pair list; ``penalty_fast`` is the compiled kernel over a CSR Verlet list.
+module composes them. ``penalty_fast`` is the compiled kernel over a CSR Verlet list;
+:func:`optdot.testing.penalty_reference` is the slow, obviously-correct numpy version over
+an explicit pair list the tests hold it to.
 """
 
 from __future__ import annotations
@@ -271,94 +272,3 @@ def penalty_fast(xy: np.ndarray, terms: PenaltyTerms, pairs: PairList, grad: np.
         terms.scratch,
         grad,
     )
-
-
-def penalty_reference(
-    xy: np.ndarray, terms: PenaltyTerms, pairs: np.ndarray, outline=None
-) -> tuple[float, np.ndarray]:
-    """Slow numpy penalty over explicit pairs (``[K, 2]``, e.g. all i < j); returns (f, grad).
-
-    With ``terms.edges`` set, ``outline`` is the domain's shapely geometry: the edge
-    terms are then measured by shapely (nearest points), independently of the index.
-    """
-    xy = np.asarray(xy, dtype=np.float64)
-    r = terms.radius
-    w = terms.w_hard
-    g = np.zeros_like(xy)
-    f = 0.0
-    if len(pairs):
-        i, j = pairs[:, 0], pairs[:, 1]
-        diff = xy[i] - xy[j]
-        d = np.sqrt((diff**2).sum(1))
-        unit = diff / d[:, None]
-        dl = np.maximum(r[i] + r[j] - d, 0.0)
-        cr = terms.core_radius
-        dh = np.maximum(cr[i] + cr[j] - d, 0.0) if w > 0 else np.zeros_like(d)
-        f += float((dl**2).sum() + w * (dh**2).sum())
-        coef = (2 * dl + 2 * w * dh)[:, None] * unit
-        np.add.at(g, i, -coef)
-        np.add.at(g, j, coef)
-    lo = np.array(terms.box[:2])
-    hi = np.array(terms.box[2:])
-    m = terms.margin
-    if terms.edges is not None:
-        sd, u = _outline_reference(xy, outline)
-    for rad, weight in ((terms.panel_radius[:, None], 1.0), (terms.dot_radius, w)):
-        if weight == 0:
-            continue
-        if terms.edges is not None:
-            e = np.maximum(np.broadcast_to(rad, (len(xy), 1))[:, 0] + m - sd, 0.0)
-            f += weight * float((e**2).sum())
-            g -= weight * 2 * e[:, None] * u
-            continue
-        p_lo = np.maximum(rad + m - (xy - lo), 0.0)
-        p_hi = np.maximum(xy + rad + m - hi, 0.0)
-        f += weight * float((p_lo**2).sum() + (p_hi**2).sum())
-        g += weight * (-2 * p_lo + 2 * p_hi)
-    if terms.empty.any():
-        e, u = _empty_reference(xy, terms)
-        f += float((e**2).sum())
-        g += 2 * e[:, None] * u
-    u = xy - terms.center
-    p = np.maximum(np.abs(u) + r[:, None] - terms.half_side[:, None], 0.0)
-    f += float((p**2).sum())
-    g += 2 * p * np.where(u >= 0, 1.0, -1.0)
-    return f, g
-
-
-def _outline_reference(xy: np.ndarray, outline) -> tuple[np.ndarray, np.ndarray]:
-    """Signed distance to the outline's edges (> 0 inside) and its gradient, by shapely."""
-    import shapely
-
-    pts = shapely.points(xy)
-    near = shapely.get_coordinates(shapely.shortest_line(pts, outline.boundary))[1::2]
-    diff = xy - near
-    d = np.hypot(diff[:, 0], diff[:, 1])
-    sign = np.where(shapely.contains_xy(outline, xy[:, 0], xy[:, 1]), 1.0, -1.0)
-    u = np.where(d[:, None] > 0, diff / np.maximum(d, 1e-300)[:, None], 0.0) * sign[:, None]
-    return sign * d, u
-
-
-def _empty_reference(xy: np.ndarray, terms: PenaltyTerms) -> tuple[np.ndarray, np.ndarray]:
-    """Brute-force depth ``[n]`` and gradient direction ``[n, 2]`` of the zero-cell term."""
-    gx0, gy0, cw, ch = terms.grid_box
-    iy, ix = np.nonzero(terms.empty)
-    lo = np.stack([gx0 + ix * cw, gy0 + iy * ch], axis=1)  # [Z, 2]
-    hi = lo + np.array([cw, ch])
-    near = np.clip(xy[:, None, :], lo[None], hi[None])  # [n, Z, 2]
-    diff = near - xy[:, None, :]
-    d = np.sqrt((diff**2).sum(-1))
-    inside = np.all((xy[:, None, :] >= lo[None]) & (xy[:, None, :] < hi[None]), axis=-1)
-    k = np.argmin(d, axis=1)
-    rows = np.arange(len(xy))
-    dist = d[rows, k]
-    depth = np.maximum(terms.panel_radius - dist, 0.0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        u = np.where(dist[:, None] > 0, diff[rows, k] / dist[:, None], 0.0)
-    for i in np.nonzero(inside.any(axis=1))[0]:
-        z = int(np.argmax(inside[i]))
-        sides = [xy[i, 0] - lo[z, 0], hi[z, 0] - xy[i, 0], xy[i, 1] - lo[z, 1], hi[z, 1] - xy[i, 1]]
-        s = int(np.argmin(sides))
-        depth[i] = terms.panel_radius[i] + sides[s]
-        u[i] = [(1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)][s]
-    return depth, u

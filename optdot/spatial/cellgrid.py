@@ -5,8 +5,8 @@ returns every pair closer than ``(r_i + r_j) * (1 + skin)``, once, found from it
 circle: dot i scans the cells within ``2 * r_i * (1 + skin)`` and keeps j when
 ``r_j < r_i`` (ties broken by index), so a grid sized for the typical radius stays
 efficient when radii vary 5x across a map. The result is a CSR half list: the partners
-of dot i are ``nbr[ptr[i]:ptr[i + 1]]``. :func:`pairs_brute_force` is the O(n²)
-reference the tests compare against. What to do with the list over an optimisation (the
+of dot i are ``nbr[ptr[i]:ptr[i + 1]]``. :func:`optdot.testing.pairs_brute_force` is the
+O(n²) reference the tests compare against. What to do with the list over an optimisation (the
 Verlet policy) lives in :mod:`optdot.spatial.verlet`; the block layout of the parallel
 kernels in :mod:`optdot.spatial.blocks`.
 """
@@ -346,14 +346,3 @@ def csr_to_pairs(ptr: np.ndarray, nbr: np.ndarray) -> np.ndarray:
     if len(p):
         p = p[np.lexsort((p[:, 1], p[:, 0]))]
     return p
-
-
-def pairs_brute_force(xy: np.ndarray, radius: np.ndarray | float, skin: float = 0.0) -> np.ndarray:
-    """O(n²) reference of :func:`neighbor_pairs`, as sorted ``[K, 2]`` int64 pairs, i < j."""
-    xy = np.asarray(xy, dtype=np.float64)
-    n = len(xy)
-    r = np.broadcast_to(np.asarray(radius, np.float64), (n,))
-    d2 = ((xy[:, None, :] - xy[None, :, :]) ** 2).sum(-1)
-    lim = (r[:, None] + r[None, :]) * (1.0 + skin)
-    i, j = np.nonzero(np.triu(d2 < lim * lim, k=1))
-    return np.stack([i, j], axis=1).astype(np.int64)
