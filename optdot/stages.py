@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -27,6 +28,7 @@ from .relax.optdot import Progress, RelaxSettings, relax_staged
 from .relax.resize import fit_sizes, reach
 from .relax.result import RelaxResult
 from .sampling.initial import Rect, initial_dots_in
+from .sampling.phantoms import phantom_dots
 
 #: Width of the blur the dot sizes are fitted under, as a share of ``qa.smoothing``
 #: (:mod:`optdot.relax.resize`): what a diffuser or the eye blurs at least.
@@ -131,7 +133,23 @@ def relax(
             callback=progress,
         )  # fmt: skip
     form = formulation_for(job) if formulation is None else formulation
-    return relax_staged(
+    diameters = rule_diameters(job, xy0)
+    phantom = None
+    if form.phantoms and len(xy0):
+        n = len(xy0)
+        pxy, prho, pd = phantoms_near(job, form, xy0)
+        xy0 = np.concatenate([xy0, pxy])
+        rho = np.concatenate([rho, prho])
+        start = None if start is None else np.concatenate([start, pxy])
+        # phantoms stay where they were thrown: free, they would yield to the real dots'
+        # hard core and let the first row settle against the wall again
+        frozen = np.zeros(n, bool) if frozen is None else frozen
+        frozen = np.concatenate([frozen, np.ones(len(pxy), bool)])
+        if diameters is not None:
+            diameters = np.concatenate([diameters, pd])
+        phantom = np.zeros(len(xy0), bool)
+        phantom[n:] = True
+    res = relax_staged(
         problem_of(job),
         form,
         xy0,
@@ -140,8 +158,72 @@ def relax(
         progress,
         start=start,
         frozen=frozen,
-        diameters=rule_diameters(job, xy0),
+        diameters=diameters,
+        phantom=phantom,
     )
+    if phantom is not None:
+        res.xy = np.ascontiguousarray(res.xy[~phantom])
+    return res
+
+
+def _allowed(job: Job):
+    """``allowed(xy) -> [m] bool``: a real dot's centre may stand there (in the map's box,
+    inside the outline, in a non-zero cell)."""
+    dens, dom = job.density, job.domain
+
+    def allowed(xy: np.ndarray) -> np.ndarray:
+        ok = (
+            (xy[:, 0] >= dens.x0)
+            & (xy[:, 0] <= dens.x0 + dens.width)
+            & (xy[:, 1] >= dens.y0)
+            & (xy[:, 1] <= dens.y0 + dens.height)
+        )
+        ok[ok] = dens.at(xy[ok]) > 0
+        if not dom.rectangle:
+            ok[ok] = dom.contains(xy[ok])
+        return ok
+
+    return allowed
+
+
+def phantom_reach(job: Job, form: Formulation) -> float:
+    """How far beyond a wall phantoms reach the real dots: twice the largest circle
+    (the lowest non-zero fill, the largest dot), mm."""
+    live = job.density.grid[job.density.grid > 0]
+    rho_min = float(live.min()) if live.size else 1.0
+    widest = job.diameter if job.sizes is None else job.sizes.high
+    r = float(form.radii(np.array([rho_min]), 0.5 * widest, 0)[0])
+    return 2.0 * r * (1.0 + form.polydispersity)
+
+
+@lru_cache(maxsize=4)
+def job_phantoms(job: Job, reach: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The job's phantom dots (:func:`~optdot.sampling.phantoms.phantom_dots`), thrown
+    once per job and process: ``(xy [m, 2] mm, rho [m], diameter [m] mm)``. The cache
+    holds the job, so its identity stays unique while cached."""
+    dens = job.density
+    partial = None
+    if not job.domain.rectangle:
+        ny, nx = dens.shape
+        cw, ch = dens.cell_size
+        partial = job.domain.cell_fractions(dens.x0, dens.y0, cw, ch, nx, ny) < 1.0
+    r0 = 0.5 * job.diameter
+    xy, rho, weight = phantom_dots(
+        dens, _allowed(job), partial, reach, np.pi * r0 * r0, job.optimize.seed, job.dart_weights
+    )
+    return xy, rho, job.diameter / np.sqrt(weight)
+
+
+def phantoms_near(job: Job, form: Formulation, xy0: np.ndarray):
+    """The job's phantom dots within reach of the box around ``xy0`` (``[n, 2]`` mm):
+    ``(xy [m, 2] mm, rho [m], diameter [m] mm)``. A tile's phantoms are the panel's in
+    its window, so they do not depend on the tiling."""
+    reach = phantom_reach(job, form)
+    xy, rho, d = job_phantoms(job, reach)
+    lo = xy0.min(axis=0) - reach
+    hi = xy0.max(axis=0) + reach
+    m = (xy[:, 0] >= lo[0]) & (xy[:, 0] <= hi[0]) & (xy[:, 1] >= lo[1]) & (xy[:, 1] <= hi[1])
+    return xy[m], rho[m], d[m]
 
 
 @dataclass

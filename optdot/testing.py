@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
-from .relax.penalty import PenaltyTerms
+from .relax.penalty import PHANTOM_WEIGHT, PenaltyTerms
 
 
 def pairs_brute_force(xy: np.ndarray, radius: np.ndarray | float, skin: float = 0.0) -> np.ndarray:
@@ -54,6 +54,8 @@ def penalty_reference(
     w = terms.w_hard
     g = np.zeros_like(xy)
     f = 0.0
+    ph = np.zeros(len(xy), bool) if terms.phantom is None else np.asarray(terms.phantom, bool)
+    real = (~ph).astype(np.float64)
     if len(pairs):
         i, j = pairs[:, 0], pairs[:, 1]
         diff = xy[i] - xy[j]
@@ -71,27 +73,66 @@ def penalty_reference(
     m = terms.margin
     if terms.edges is not None:
         sd, u = _outline_reference(xy, outline)
+        sd_u = u
     for rad, weight in ((terms.panel_radius[:, None], 1.0), (terms.dot_radius, w)):
         if weight == 0:
             continue
         if terms.edges is not None:
-            e = np.maximum(np.broadcast_to(rad, (len(xy), 1))[:, 0] + m - sd, 0.0)
+            e = np.maximum(np.broadcast_to(rad, (len(xy), 1))[:, 0] + m - sd, 0.0) * real
             f += weight * float((e**2).sum())
             g -= weight * 2 * e[:, None] * u
             continue
-        p_lo = np.maximum(rad + m - (xy - lo), 0.0)
-        p_hi = np.maximum(xy + rad + m - hi, 0.0)
+        p_lo = np.maximum(rad + m - (xy - lo), 0.0) * real[:, None]
+        p_hi = np.maximum(xy + rad + m - hi, 0.0) * real[:, None]
         f += weight * float((p_lo**2).sum() + (p_hi**2).sum())
         g += weight * (-2 * p_lo + 2 * p_hi)
     if terms.empty.any():
         e, u = _empty_reference(xy, terms)
+        e = e * real
         f += float((e**2).sum())
         g += 2 * e[:, None] * u
+    if ph.any():
+        on_edge = terms.edges is not None
+        depth, u = _phantom_reference(
+            xy[ph], r[ph], terms, sd[ph] if on_edge else None, sd_u[ph] if on_edge else None
+        )
+        depth = np.maximum(depth, 0.0)
+        f += PHANTOM_WEIGHT * float((depth**2).sum())
+        g[ph] += 2 * PHANTOM_WEIGHT * depth[:, None] * u
     u = xy - terms.center
     p = np.maximum(np.abs(u) + r[:, None] - terms.half_side[:, None], 0.0)
     f += float((p**2).sum())
     g += 2 * p * np.where(u >= 0, 1.0, -1.0)
     return f, g
+
+
+def _phantom_reference(xy, r, terms: PenaltyTerms, sd, sd_u) -> tuple[np.ndarray, np.ndarray]:
+    """How far each phantom stands inside the allowed region (``[m]``, <= 0 outside)
+    and the gradient of that depth (``[m, 2]``), brute force."""
+    m = terms.margin
+    if sd is not None:
+        depth, u = sd - m, sd_u.copy()
+    else:
+        x0, y0, x1, y1 = terms.box
+        sides = np.stack([xy[:, 0] - x0, x1 - xy[:, 0], xy[:, 1] - y0, y1 - xy[:, 1]], axis=1)
+        k = np.argmin(sides, axis=1)
+        depth = sides[np.arange(len(xy)), k] - m
+        u = np.array([(1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)])[k]
+    if terms.empty.any():
+        gx0, gy0, cw, ch = terms.grid_box
+        iy, ix = np.nonzero(terms.empty)
+        lo = np.stack([gx0 + ix * cw, gy0 + iy * ch], axis=1)
+        near = np.clip(xy[:, None, :], lo[None], (lo + np.array([cw, ch]))[None])
+        diff = xy[:, None, :] - near
+        d = np.sqrt((diff**2).sum(-1))
+        k = np.argmin(d, axis=1)
+        dz = d[np.arange(len(xy)), k]
+        use = (dz < 2 * r) & (dz < depth) & (depth > 0)
+        depth = np.where(use, dz, depth)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            uz = np.where(dz[:, None] > 0, diff[np.arange(len(xy)), k] / dz[:, None], 0.0)
+        u = np.where(use[:, None], uz, u)
+    return depth, u
 
 
 def _outline_reference(xy: np.ndarray, outline) -> tuple[np.ndarray, np.ndarray]:

@@ -65,8 +65,8 @@ def test_signed_distance_matches_shapely():
     assert exact[ref < 0.3].all()
 
 
-@pytest.mark.parametrize("margin", [0.0, 0.05])
-def test_outline_penalty_matches_reference_and_gradient(margin):
+@pytest.mark.parametrize("margin,phantoms", [(0.0, False), (0.05, False), (0.05, True)])
+def test_outline_penalty_matches_reference_and_gradient(margin, phantoms):
     from optdot.relax.circles import circle_radius, container_half_sides
 
     dom = notched_domain(margin)
@@ -85,7 +85,11 @@ def test_outline_penalty_matches_reference_and_gradient(margin):
         dot_radius=0.023,
         w_hard=10.0,
         margin=margin,
-        edges=EdgeIndex.build(dom, float(r.max()) + margin),
+        edges=EdgeIndex.build(dom, 2 * float(r.max()) + margin),
+        # phantoms: every third dot within 0.15 mm of an edge (inside it, their term acts)
+        phantom=((np.arange(len(xy)) % 3 == 0) & (dom.edge_distance(xy) < 0.15))
+        if phantoms
+        else None,
     )
 
     def fast(x):

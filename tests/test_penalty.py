@@ -91,3 +91,58 @@ def test_each_term_pushes_the_right_way():
     xy = np.array([[0.35, 0.5], [0.7, 0.5]])
     f, g = fast(xy, terms)
     assert f == pytest.approx(0.05**2) and g[0, 0] < 0
+
+
+def with_phantoms(xy, terms, seed=5, outline=None):
+    """``terms`` with 40 phantoms added: beyond the panel's edges, in and around the zero
+    cells, and some that strayed into the allowed region (their term acts)."""
+    rng = np.random.default_rng(seed)
+    x0, y0, x1, y1 = terms.box
+    beyond = np.column_stack([rng.uniform(x0 - 0.05, x0 + 0.04, 14), rng.uniform(y0, y1, 14)])
+    below = np.column_stack([rng.uniform(x0, x1, 14), rng.uniform(y0 - 0.05, y0 + 0.04, 14)])
+    zero = np.column_stack([rng.uniform(0.55, 0.85, 12), rng.uniform(0.35, 0.65, 12)])
+    p = np.concatenate([beyond, below, zero])
+    n, m = len(xy), len(p)
+    r = np.concatenate([terms.radius, rng.uniform(0.03, 0.05, m)])
+    ph = np.zeros(n + m, bool)
+    ph[n:] = True
+    t = PenaltyTerms(
+        radius=r,
+        panel_radius=np.concatenate([terms.panel_radius, r[n:]]),
+        center=np.concatenate([terms.center, p + rng.normal(0, 0.02, p.shape)]),
+        half_side=container_half_sides(r, 4.0) * 0.5,
+        box=terms.box,
+        dmin=terms.dmin,
+        dot_radius=terms.dot_radius,
+        w_hard=terms.w_hard,
+        empty=terms.empty,
+        grid_box=terms.grid_box,
+        margin=0.004,
+        edges=terms.edges,
+        phantom=ph,
+    )
+    return np.concatenate([xy, p]), t
+
+
+@pytest.mark.parametrize("empty", [True, False])
+def test_phantoms_fast_matches_reference(empty):
+    xy, terms = with_phantoms(*make_terms(w_hard=10.0, empty=empty))
+    f1, g1 = fast(xy, terms)
+    f2, g2 = penalty_reference(xy, terms, pairs_brute_force(xy, np.full(len(xy), 1.0)))
+    assert f1 == pytest.approx(f2, rel=1e-12)
+    np.testing.assert_allclose(g1, g2, rtol=1e-9, atol=1e-12)
+    # the phantoms' own term acts: some strayed inside, and they have no hard core
+    ph = terms.phantom
+    assert np.abs(g1[ph]).max() > 0
+    assert (terms.core_radius[ph] < 0).all()
+
+
+def test_phantom_gradient_matches_finite_differences():
+    xy, terms = with_phantoms(*make_terms(n=60, seed=1))
+
+    def f(x):
+        return fast(x.reshape(-1, 2), terms)[0]
+
+    g = fast(xy, terms)[1].ravel()
+    num = approx_fprime(xy.ravel(), f, 1e-8)
+    assert np.abs(g - num).max() < 1e-5 * max(1.0, np.abs(g).max())

@@ -70,6 +70,9 @@ class Formulation:
             one just above the close-pair threshold is all that is needed.
         hex_panel: use the hexagonal radius r' (not r) against the panel edges.
         empty_term: penalise circles reaching into zero-density cells.
+        phantoms: relax with phantom dots beyond every wall
+            (:mod:`optdot.sampling.phantoms`); the real dots' soft edge terms then keep
+            only ``r0``.
         stages: ``(share of max_iter, radius multiplier)`` per stage, relaxed in turn.
         container_factor: container side / circle radius (paper: 4).
         close_ref: the close-pair distance ``core_floor``, ``core_cap`` and ``gap`` are
@@ -90,6 +93,7 @@ class Formulation:
     core_cap: float = 0.0
     hex_panel: bool = False
     empty_term: bool = False
+    phantoms: bool = False
     stages: tuple[tuple[float, float], ...] = ((1.0, 1.0),)
     container_factor: float = 4.0
     close_ref: float = 0.060
@@ -115,9 +119,11 @@ class Formulation:
         rho: np.ndarray,
         multiplier: float = 1.0,
         diameters: np.ndarray | None = None,
+        phantom: np.ndarray | None = None,
     ) -> PenaltyTerms:
         """Penalty terms for dots starting at ``xy0`` (``[n, 2]`` mm) with fill ``rho``
         (``[n]``); ``multiplier`` scales the circle radii (staged relaxation).
+        ``phantom`` (``[n]`` bool) marks the phantom dots among them.
 
         ``diameters`` (``[n]`` mm, dots of varying size): each dot's circle and hexagonal
         radii follow its own r0_i (the circle radius rule then depends only on the local
@@ -144,12 +150,16 @@ class Formulation:
             wide = 2.0 * hex_radius(rho, r0i) * self.gap_share >= k * self.gap + shift
             core = np.where(wide, np.maximum(core, 0.5 * (k * self.gap + shift)), core)
         panel_r = np.maximum(hex_radius(rho, r0i), r0i) if self.hex_panel else r
+        if phantom is not None:
+            panel_r = np.broadcast_to(np.asarray(r0i, dtype=np.float64), r.shape).copy()
         density = problem.density
         empty = (density.grid <= 0).astype(np.uint8) if self.empty_term else None
         dom = problem.domain
         edges = None
         if not dom.rectangle:
             reach = max(float(panel_r.max(initial=0.0)), r0) + dom.edge_margin
+            if phantom is not None:
+                reach = max(reach, 2.0 * float(r.max(initial=0.0)) + dom.edge_margin)
             edges = EdgeIndex.build(dom, reach)
         return PenaltyTerms(
             radius=r,
@@ -165,6 +175,7 @@ class Formulation:
             core=core,
             margin=dom.edge_margin,
             edges=edges,
+            phantom=phantom,
         )
 
 
@@ -175,6 +186,7 @@ class Formulation:
 #: hexagonal spacing: 0.93 a clamped to 61..64 µm where a >= 62.2 µm (61 / 0.98); the dot
 #: diameter (+ gap) elsewhere, where a core cannot clear 60 µm and would only add order.
 #: The 61 µm floor matters: a core just under 60 µm pins pairs just under 60 µm.
+#: Phantom dots beyond every wall (issue 24) keep the density flat up to the walls.
 PRESETS: dict[str, Formulation] = {
     "paper": Formulation(),
     "optdot": Formulation(
@@ -188,6 +200,7 @@ PRESETS: dict[str, Formulation] = {
         hex_panel=True,
         empty_term=True,
         container_factor=3.5,
+        phantoms=True,
     ),
 }
 

@@ -125,6 +125,7 @@ def relax_staged(
     start: np.ndarray | None = None,
     frozen: np.ndarray | None = None,
     diameters: np.ndarray | None = None,
+    phantom: np.ndarray | None = None,
 ) -> RelaxResult:
     """Relax ``xy0`` (``[n, 2]`` mm, fill ``rho`` ``[n]``) through the formulation's stages.
 
@@ -137,6 +138,7 @@ def relax_staged(
         frozen: ``[n]`` bool, dots that do not move (a tile's halo).
         diameters: ``[n]`` dot diameters, mm, when sizes vary (see
             :meth:`~optdot.relax.formulation.Formulation.terms`).
+        phantom: ``[n]`` bool, phantom dots among them (relaxed, never legalised).
 
     Returns:
         One :class:`RelaxResult` over all stages (counts and history summed; penalty,
@@ -150,7 +152,7 @@ def relax_staged(
         iters = settings.max_iter - done if last else round(share * settings.max_iter)
         res = relax(
             xy,
-            form.terms(problem, xy0, rho, multiplier, diameters),
+            form.terms(problem, xy0, rho, multiplier, diameters, phantom),
             max_iter=iters,
             memory=settings.memory,
             ftol=settings.ftol,

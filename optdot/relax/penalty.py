@@ -31,7 +31,14 @@ import numpy as np
 
 from ..geometry.edges import EdgeIndex, edge_args, edge_signed_distance
 from ..spatial.blocks import BLOCK, PairList
-from .terms import box_axis_term, container_axis_term, edge_term, empty_term, pair_grad
+from .terms import (
+    box_axis_term,
+    container_axis_term,
+    edge_term,
+    empty_depth,
+    empty_term,
+    pair_grad,
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -55,6 +62,9 @@ class PenaltyTerms:
         w_hard: weight of the hard terms (0 = paper).
         empty: ``[ny, nx]`` uint8 mask of zero-density cells (all 0 = no term).
         grid_box: ``(x0, y0, cell_w, cell_h)`` of that mask, mm.
+        phantom: ``[n]`` bool, dots that stand beyond a wall
+            (:mod:`optdot.sampling.phantoms`): they keep out of the allowed region
+            (``margin`` inside the edges, out of zero cells) and have no hard core.
     """
 
     radius: np.ndarray
@@ -70,13 +80,18 @@ class PenaltyTerms:
     core: np.ndarray | None = None
     margin: float = 0.0
     edges: EdgeIndex | None = None
+    phantom: np.ndarray | None = None
 
     @cached_property
     def core_radius(self) -> np.ndarray:
-        """``[n]`` hard-core radii c_i, mm."""
+        """``[n]`` hard-core radii c_i, mm (phantoms: none)."""
         if self.core is not None:
-            return np.ascontiguousarray(self.core, dtype=np.float64)
-        return np.full(len(self.radius), 0.5 * self.dmin)
+            core = np.asarray(self.core, dtype=np.float64)
+        else:
+            core = np.full(len(self.radius), 0.5 * self.dmin)
+        if self.phantom is not None:
+            core = np.where(self.phantom, NO_CORE, core)
+        return np.ascontiguousarray(core)
 
     @cached_property
     def scratch(self) -> np.ndarray:
@@ -87,12 +102,15 @@ class PenaltyTerms:
     @cached_property
     def kernel_constants(self) -> tuple:
         """What the kernel needs besides radii and pairs, packed once per terms object:
-        (box array, has zero cells, grid box array, edge-index tuple)."""
+        (box array, has zero cells, grid box array, edge-index tuple, phantom flags:
+        ``[n]`` uint8 or ``[0]`` without phantoms)."""
+        ph = np.zeros(0, np.uint8) if self.phantom is None else self.phantom.astype(np.uint8)
         return (
             np.asarray(self.box, dtype=np.float64),
             bool(self.empty.any()),
             np.asarray(self.grid_box, dtype=np.float64),
             edge_args(self.edges),
+            np.ascontiguousarray(ph),
         )
 
     @property
@@ -116,10 +134,18 @@ def _pair_term(xy, r, cr, i, j, w, grad):  # pragma: no cover - compiled
 
 @nb.njit(cache=True, inline="always")
 def _single_terms(
-    i, xy, r, rp, c, h, box, r0, w, margin, empty, has_empty, gbox, ed, grad
+    i, xy, r, rp, c, h, box, r0, w, margin, empty, has_empty, gbox, ed, ph, grad
 ):  # pragma: no cover
     """Set ``grad[i]`` to dot i's zero-cell, outline or panel, and container terms;
-    returns their f. The terms are added in this fixed order."""
+    returns their f. The terms are added in this fixed order. A phantom (``ph[i]``)
+    has its own term and its container."""
+    if ph.shape[0] > 0 and ph[i]:
+        f, g0, g1 = _phantom_terms(i, xy, r, box, margin, empty, has_empty, gbox, ed)
+        f, g0 = container_axis_term(xy[i, 0] - c[i, 0], r[i], h[i], f, g0)
+        f, g1 = container_axis_term(xy[i, 1] - c[i, 1], r[i], h[i], f, g1)
+        grad[i, 0] = g0
+        grad[i, 1] = g1
+        return f
     f = 0.0
     g0 = 0.0
     g1 = 0.0
@@ -146,6 +172,48 @@ def _single_terms(
     grad[i, 0] = g0
     grad[i, 1] = g1
     return f
+
+
+#: Core radius of a phantom: every pair target with it is negative (no hard core).
+NO_CORE = -1e300
+#: Weight of the term that keeps phantoms out of the allowed region.
+PHANTOM_WEIGHT = 15.0
+
+
+@nb.njit(cache=True, inline="always")
+def _phantom_terms(i, xy, r, box, margin, empty, has_empty, gbox, ed):  # pragma: no cover
+    """A phantom's term: ``PHANTOM_WEIGHT · depth²`` where ``depth > 0`` is how far it
+    stands inside the allowed region (``margin`` inside the panel or outline, outside
+    the zero cells). Returns ``(f, g0, g1)``."""
+    x = xy[i, 0]
+    y = xy[i, 1]
+    if ed[0].shape[0] > 0:
+        sd, ux, uy = edge_signed_distance(x, y, ed)
+        # further inside than the index measures (inf): never, a phantom's container
+        # keeps it within 0.75 r of where it was thrown, beyond the wall
+        depth = sd - margin if sd < np.inf else 0.0
+    else:
+        depth = x - box[0]
+        ux, uy = 1.0, 0.0
+        if box[2] - x < depth:
+            depth, ux, uy = box[2] - x, -1.0, 0.0
+        if y - box[1] < depth:
+            depth, ux, uy = y - box[1], 0.0, 1.0
+        if box[3] - y < depth:
+            depth, ux, uy = box[3] - y, 0.0, -1.0
+        depth -= margin
+    if depth > 0.0 and has_empty:
+        reach = 2.0 * r[i]
+        e, zx, zy = empty_depth(x, y, reach, empty, gbox[0], gbox[1], gbox[2], gbox[3])
+        if e > 0.0 and reach - e < depth:
+            depth, ux, uy = reach - e, -zx, -zy
+    if depth <= 0.0:
+        return 0.0, 0.0, 0.0
+    return (
+        PHANTOM_WEIGHT * depth * depth,
+        2.0 * PHANTOM_WEIGHT * depth * ux,
+        2.0 * PHANTOM_WEIGHT * depth * uy,
+    )
 
 
 #: Radius given to a mover in the packed array: its listed pairs then contribute exactly 0
@@ -176,6 +244,7 @@ def _penalty_kernel(
     has_empty,
     gbox,
     ed,
+    ph,
     packed,
     grad,
 ):  # pragma: no cover - compiled
@@ -196,7 +265,7 @@ def _penalty_kernel(
             packed[i, 2] = _GONE if skip[i] else r[i]
             packed[i, 3] = _GONE if skip[i] else cr[i]
             f += _single_terms(
-                i, xy, r, rp, c, h, box, r0, w, margin, empty, has_empty, gbox, ed, grad
+                i, xy, r, rp, c, h, box, r0, w, margin, empty, has_empty, gbox, ed, ph, grad
             )
         for i in range(lo, hi):
             if skip[i]:
@@ -246,7 +315,7 @@ def penalty_fast(xy: np.ndarray, terms: PenaltyTerms, pairs: PairList, grad: np.
     Returns:
         f, mm².
     """
-    box, has_empty, grid_box, edges = terms.kernel_constants
+    box, has_empty, grid_box, edges, ph = terms.kernel_constants
     return _penalty_kernel(
         xy,
         terms.radius,
@@ -269,6 +338,7 @@ def penalty_fast(xy: np.ndarray, terms: PenaltyTerms, pairs: PairList, grad: np.
         has_empty,
         grid_box,
         edges,
+        ph,
         terms.scratch,
         grad,
     )

@@ -18,6 +18,7 @@ container      ``Σ_axes max(|v - c| + r - h, 0)²``
 empty          ``max(rp - dist(x, Z), 0)²``, Z the zero-density cells (inside Z: rp plus
                the distance to the cell's nearest side)
 =============  ============================================================================
+
 """
 
 from __future__ import annotations
