@@ -143,10 +143,10 @@ def test_generated_coverage_is_flat_up_to_every_wall(tmp_path, fill):
 
 
 def test_without_phantoms_the_first_band_is_bright(tmp_path):
-    """The same job relaxed without phantoms layers against the walls (this test is red
-    if the measure cannot see what phantoms remove)."""
+    """The same job relaxed as before issue 24 (no phantoms, no long-wavelength pass)
+    layers against the walls: the measure sees what the fix removes."""
     job = wall_job(tmp_path, 0.2)
-    form = dataclasses.replace(PRESETS["optdot"], phantoms=False)
+    form = dataclasses.replace(PRESETS["optdot"], phantoms=False, lowpass=0, lowpass_core_iter=0)
     p = generate(job, formulation=form)
     wp = wall_profile(p.xy, p.diameter, job.density, job.domain, band=0.1, reach=1.0)
     assert wp.relative[0] > 0.05

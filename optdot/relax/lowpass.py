@@ -29,9 +29,12 @@ from scipy.fft import dctn, idctn
 from scipy.ndimage import gaussian_filter, map_coordinates
 
 from ..geometry.density import DensityMap
+from ..geometry.domain import Domain
 
 #: Grid cells at most (memory: a few float64 arrays of this size).
 MAX_CELLS = 1 << 25
+#: Largest displacement, in dot spacings.
+MAX_SHIFT = 0.1
 
 
 def grid_step(density: DensityMap, spacing: float) -> float:
@@ -41,12 +44,13 @@ def grid_step(density: DensityMap, spacing: float) -> float:
     return max(0.5 * spacing, math.sqrt(area / MAX_CELLS))
 
 
-def _deposit(xy: np.ndarray, weight: np.ndarray, x0: float, y0: float, h: float, shape):
+def _deposit(xy: np.ndarray, weight: np.ndarray, x0: float, y0: float, h, shape):
     """Cloud-in-cell deposit of ``weight`` (``[n]``) at ``xy`` on a ``shape`` grid of
-    step ``h`` from ``(x0, y0)`` (cell centres at ``x0 + (i + 0.5) h``), ``[ny, nx]``."""
+    step ``h = (hx, hy)`` from ``(x0, y0)`` (cell centres at ``x0 + (i + 0.5) hx``),
+    ``[ny, nx]``."""
     ny, nx = shape
-    gx = (xy[:, 0] - x0) / h - 0.5
-    gy = (xy[:, 1] - y0) / h - 0.5
+    gx = (xy[:, 0] - x0) / h[0] - 0.5
+    gy = (xy[:, 1] - y0) / h[1] - 0.5
     ix = np.floor(gx).astype(np.int64)
     iy = np.floor(gy).astype(np.int64)
     fx, fy = gx - ix, gy - iy
@@ -59,28 +63,42 @@ def _deposit(xy: np.ndarray, weight: np.ndarray, x0: float, y0: float, h: float,
     return out.reshape(ny, nx)
 
 
+Window = tuple[float, float, float, float]
+
+
+def window_grid(window: Window, h: float) -> tuple[int, int, float, float]:
+    """``(nx, ny, hx, hy)``: the grid of step about ``h`` over ``window``."""
+    x0, y0, x1, y1 = window
+    nx = max(2, round((x1 - x0) / h))
+    ny = max(2, round((y1 - y0) / h))
+    return nx, ny, (x1 - x0) / nx, (y1 - y0) / ny
+
+
 def coverage_error(
-    xy: np.ndarray, area: np.ndarray, density: DensityMap, h: float, sigma: float
-) -> np.ndarray:
-    """``[ny, nx]`` relative coverage error on the grid of step ``h`` over the map's box,
+    xy: np.ndarray, area: np.ndarray, density: DensityMap, h: float, sigma: float,
+    window: Window, domain: Domain | None = None,
+) -> np.ndarray:  # fmt: skip
+    """``[ny, nx]`` relative coverage error on the grid of step ``h`` over ``window``,
     blurred by ``sigma`` mm: (dots - map) / map where the map is not zero, else 0.
 
     Args:
         xy: ``[n, 2]`` dot centres, mm. area: ``[n]`` dot areas, mm².
+        window: ``(x0, y0, x1, y1)``, mm, inside the map's box: every dot in it given.
+        domain: the panel; the map counts only inside it (each grid cell by its share).
     """
-    nx = max(2, round(density.width / h))
-    ny = max(2, round(density.height / h))
-    hx, hy = density.width / nx, density.height / ny
-    cx = density.x0 + (np.arange(nx) + 0.5) * hx
-    cy = density.y0 + (np.arange(ny) + 0.5) * hy
+    nx, ny, hx, hy = window_grid(window, h)
+    cx = window[0] + (np.arange(nx) + 0.5) * hx
+    cy = window[1] + (np.arange(ny) + 0.5) * hy
     gx, gy = np.meshgrid(cx, cy)
     target = density.at(np.column_stack([gx.ravel(), gy.ravel()])).reshape(ny, nx)
-    got = _deposit(xy, area, density.x0, density.y0, hx, (ny, nx)) / (hx * hy)
+    if domain is not None and not domain.rectangle:
+        target = target * domain.cell_fractions(window[0], window[1], hx, hy, nx, ny)
+    got = _deposit(xy, area, window[0], window[1], (hx, hy), (ny, nx)) / (hx * hy)
     s = (sigma / hy, sigma / hx)
     gt = gaussian_filter(target, s, mode="constant")
     gg = gaussian_filter(got, s, mode="constant")
-    live = target > 0
-    e = np.where(live, (gg - gt) / np.where(gt > 0, gt, 1.0), 0.0)
+    live = (target > 0) & (gt > 0)
+    e = np.where(live, (gg - gt) / np.where(live, gt, 1.0), 0.0)
     if live.any():
         e[live] -= e[live].mean()
     return e
@@ -101,25 +119,44 @@ def neumann_potential(e: np.ndarray, hx: float, hy: float) -> np.ndarray:
 
 
 def displacement(
-    xy: np.ndarray, area: np.ndarray, density: DensityMap, spacing: float, sigma_share: float
+    xy: np.ndarray,
+    area: np.ndarray,
+    density: DensityMap,
+    spacing: float,
+    sigma_share: float,
+    window: Window | None = None,
+    domain: Domain | None = None,
 ) -> np.ndarray:
-    """``[n, 2]`` displacement (mm) of the dots at ``xy`` that removes the coverage error
-    at wavelengths longer than about ``sigma_share`` spacings.
+    """``[n, 2]`` displacement (mm) of the dots at ``xy`` that removes their coverage
+    error at wavelengths longer than about ``sigma_share`` spacings.
 
     Args:
         xy: ``[n, 2]`` dot centres, mm. area: ``[n]`` dot areas, mm².
         spacing: median dot spacing, mm.
         sigma_share: the error's blur, in spacings.
+        window: the part of the map the dots cover (a tile and its held neighbours;
+            default the map's box); nothing flows across its border.
+        domain: the panel (an outline: the map counts only inside it).
+
+    The displacement is capped at :data:`MAX_SHIFT` spacings: the grain it removes needs
+    micrometres, and a larger error (a map step sharper than the dots can follow) is the
+    local relaxation's to settle, not a reason to move many dots far.
     """
+    box = (density.x0, density.y0, density.x0 + density.width, density.y0 + density.height)
+    if window is not None:
+        box = (max(box[0], window[0]), max(box[1], window[1]),
+               min(box[2], window[2]), min(box[3], window[3]))  # fmt: skip
     h = grid_step(density, spacing)
-    e = coverage_error(xy, area, density, h, sigma_share * spacing)
+    e = coverage_error(xy, area, density, h, sigma_share * spacing, box, domain)
     ny, nx = e.shape
-    hx, hy = density.width / nx, density.height / ny
+    hx, hy = (box[2] - box[0]) / nx, (box[3] - box[1]) / ny
     phi = neumann_potential(e, hx, hy)
     uy, ux = np.gradient(phi, hy, hx)
-    row = (xy[:, 1] - density.y0) / hy - 0.5
-    col = (xy[:, 0] - density.x0) / hx - 0.5
+    row = (xy[:, 1] - box[1]) / hy - 0.5
+    col = (xy[:, 0] - box[0]) / hx - 0.5
     u = np.empty_like(xy)
     u[:, 0] = map_coordinates(ux, [row, col], order=1, mode="nearest")
     u[:, 1] = map_coordinates(uy, [row, col], order=1, mode="nearest")
-    return u
+    size = np.hypot(u[:, 0], u[:, 1])
+    cap = MAX_SHIFT * spacing
+    return u * np.minimum(1.0, cap / np.maximum(size, 1e-300))[:, None]

@@ -134,7 +134,7 @@ def relax_tile(
     both = np.ascontiguousarray(np.concatenate([xy0, halo_xy]))
     frozen = np.zeros(len(both), bool)
     frozen[n:] = True
-    run = stages.relax(job, both, frozen=frozen if len(halo_xy) else None)
+    run = stages.relax(job, both, frozen=frozen if len(halo_xy) else None, lowpass=False)
     return TileDots((i, j), xy0, np.ascontiguousarray(run.xy[:n]))
 
 
@@ -189,6 +189,7 @@ def relax_seams(job: Job, plan: TilePlan, i: int, j: int, parts: list[TileDots])
         np.ascontiguousarray(xy0[sel]),
         start=np.ascontiguousarray(xy[sel]),
         frozen=frozen,
+        lowpass=False,
     )
     moved = sel[~frozen]
     new_mobile = run.xy[~frozen]
