@@ -44,8 +44,8 @@ from optdot.quality.texture import (  # noqa: E402
     band_mean,
     blurred_coverage_rms,
     structure_factor,
-    wall_profile,
 )
+from optdot.quality.walls import wall_profile  # noqa: E402
 from optdot.relax.formulation import PRESETS  # noqa: E402
 
 

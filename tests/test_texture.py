@@ -18,8 +18,8 @@ from optdot.quality.texture import (
     band_mean,
     blurred_coverage_rms,
     structure_factor,
-    wall_profile,
 )
+from optdot.quality.walls import wall_profile
 from optdot.relax.formulation import PRESETS
 from tests.conftest import write_job
 
@@ -150,3 +150,23 @@ def test_without_phantoms_the_first_band_is_bright(tmp_path):
     p = generate(job, formulation=form)
     wp = wall_profile(p.xy, p.diameter, job.density, job.domain, band=0.1, reach=1.0)
     assert wp.relative[0] > 0.05
+
+
+def test_qa_warns_of_layering_at_walls_and_passes_the_flat_pattern(tmp_path):
+    """QA's advisory wall check: the pre-issue-24 relaxation layers (WARN, the verdict says
+    PASS WITH WARNINGS), the default does not."""
+    from optdot.pipeline import qa
+
+    job = wall_job(tmp_path, 0.2)
+    old = dataclasses.replace(PRESETS["optdot"], phantoms=False, lowpass=0, lowpass_core_iter=0)
+    results = {}
+    for name, form in (("old", old), ("new", None)):
+        r = qa(generate(job, formulation=form), job)
+        (check,) = [c for c in r.checks if "of a wall" in c.name]
+        results[name] = (check, r)
+    old_check, old_r = results["old"]
+    assert old_check.advisory and not old_check.passed and old_check.value > 0.05
+    assert old_r.verdict == "PASS WITH WARNINGS" and old_r.passed
+    new_check, _ = results["new"]
+    assert new_check.passed and abs(new_check.value) < 0.03
+    assert len(old_r.metrics["walls"]["relative"]) == 20

@@ -448,6 +448,10 @@ def test_qa_of_the_dataset_tile_by_tile_equals_qa_in_memory(tiled):
     assert vb["max_jnd_at_mm"] == va["max_jnd_at_mm"]
     assert vb["jnd_percentiles"] == pytest.approx(va["jnd_percentiles"], rel=1e-9)
     assert [x["jnd"] for x in vb["blobs"]] == pytest.approx([x["jnd"] for x in va["blobs"]])
+    # the wall profile summed part by part (dots in any order) is the whole pattern's
+    wa, wb = a["walls"], b["walls"]
+    assert wb["relative"] == pytest.approx(wa["relative"], rel=1e-9, abs=1e-12)
+    assert wb["worst_relative"] == pytest.approx(wa["worst_relative"], rel=1e-9)
     for name, v in a["edge_band_coverage_ratio"].items():
         assert b["edge_band_coverage_ratio"][name] == pytest.approx(v, rel=1e-12)
     for name, v in a["seams"]["measures"].items():

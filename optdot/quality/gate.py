@@ -211,6 +211,18 @@ def judge(
                 advisory=not gated,
             )
         )
+    walls = m.get("walls")
+    if walls and walls["band_dots_min"] > 0:
+        checks.append(
+            Check(
+                f"coverage / map - 1 in the worst {walls['band_mm']:g} mm band within "
+                f"{walls['reach_mm']:g} mm of a wall (advisory: layering at edges)",
+                walls["worst_relative"],
+                walls["limit"],
+                bool(abs(walls["worst_relative"]) <= walls["limit"]),
+                advisory=True,
+            )
+        )
     seams = m.get("seams") or {}
     if seams:
         differ = [k for k, v in seams["measures"].items() if not v["passed"]]

@@ -9,7 +9,8 @@ sums into numbers and plot data. Two passes:
 
 1. **Each part alone** (:func:`_first_pass`): its bounding box, the dot area per map cell
    (coverage), dot counts per 2 mm square (densest region), the overview image, dots
-   protruding from the panel or in zero-density cells, dot area in the edge bands. These
+   protruding from the panel or in zero-density cells, dot area in the edge bands and in
+   bands of distance from the walls (:mod:`optdot.quality.walls`). These
    are sums over dots, so parts add up exactly (counts are integers; float sums differ
    from one pass over all dots only in the order of addition).
 2. **Each part with a halo** (:func:`_second_pass`): the dots of the other parts within
@@ -60,6 +61,7 @@ from .source import Source, gather
 from .summary import Measured, summarize
 from .sums import FirstSums, SecondSums, add_nested, keep
 from .visibility import LuminanceGrid, visibility
+from .walls import WallProfiler
 
 #: Smallest halo around a part, mm: covers the 6 nearest neighbours at any fill > ~0.01
 #: of 46 µm dots (beyond, the exact re-query takes over).
@@ -132,6 +134,7 @@ def _first_pass(src: Source, density: DensityMap | None, view: Viewing | None = 
         if view is not None:
             f.luminance = LuminanceGrid.over(density, view)
         f.bands = edge_bands(src.box, src.outline, density)
+        f.walls = WallProfiler(density, src.outline)
         f.band_sums = [0 if uniform is not None else 0.0 for _ in f.bands]
     for k in range(len(src.counts)):
         xy, d = src.part(k)
@@ -158,6 +161,8 @@ def _first_pass(src: Source, density: DensityMap | None, view: Viewing | None = 
         keep(f.defects, xy[out], MAX_MARKS)
         if f.luminance is not None:
             f.luminance.add(xy, disc_area(uniform) if area is None else area)
+        if f.walls is not None:
+            f.walls.add(xy, d)
         if density is not None:
             f.cells += cell_area_sums(xy, d, uniform is not None, density)
             empty = density.empty_mask(xy)

@@ -305,6 +305,22 @@ def _figures(result: QAResult) -> list[tuple[str, str]]:
         ax.set(xlabel="x (mm)", ylabel="y (mm)", title="Coverage vs target (1 mm Gaussian)")
         save(fig, "coverage error")
 
+    if "walls" in a and "walls" in m:
+        prof = a["walls"]
+        mid = 0.5 * (prof.edges[1:] + prof.edges[:-1])
+        lim = m["walls"]["limit"] * 100
+        fig, ax = plt.subplots(figsize=(6, 3.5))
+        ax.axhspan(-lim, lim, color="0.9", label="advisory band")
+        ax.plot(mid, prof.relative * 100, marker="o", ms=3)
+        ax.axhline(0, color="k", lw=0.5)
+        ax.set(
+            xlabel="distance from the nearest wall (mm)",
+            ylabel="coverage / map - 1 (%)",
+            title="Coverage against distance from walls (edges, holes, zero-fill borders)",
+        )
+        ax.legend()
+        save(fig, "wall profile")
+
     freq, power = a["spectrum"]
     if len(freq):
         fig, ax = plt.subplots(figsize=(6, 3.5))

@@ -14,6 +14,7 @@ from .metrics import coverage, disc_area, radial_spectrum
 from .seams import seam_finish
 from .source import Source
 from .sums import FirstSums, SecondSums, cat
+from .walls import WallProfile
 
 
 @dataclass
@@ -103,6 +104,9 @@ def summarize(
             name: float(got * one / want) if want > 0 else None
             for (name, _, want), got in zip(f.bands, f.band_sums, strict=True)
         }
+        if f.walls is not None:
+            m["walls"] = _walls(f.walls.result(), src.nominal_diameter)
+            arrays["walls"] = f.walls.result()
     if src.tiling is not None and s.seams is not None:
         m["seams"] = seam_finish(s.seams, *src.tiling, density)
     if len(src.counts) > 1:
@@ -119,6 +123,29 @@ def summarize(
             float(power[lo].max() / np.median(power[lo])) if lo.any() else None
         )
     return Measured(metrics=m, where=where, arrays=arrays)
+
+
+#: Advisory level of the worst wall band (coverage / map - 1), unless the bands hold so few
+#: dots that their own noise is larger.
+WALL_BAND_LIMIT = 0.03
+
+
+def _walls(prof: WallProfile, nominal: float) -> dict[str, Any]:
+    """The wall profile's numbers: each band's coverage / map - 1, the worst band and the
+    advisory limit ``max(WALL_BAND_LIMIT, 1 / sqrt(dots in the emptiest band))``."""
+    rel = prof.relative
+    worst, at = prof.worst()
+    dots = prof.target * prof.area / disc_area(nominal)
+    fewest = float(np.min(dots[prof.area > 0])) if (prof.area > 0).any() else 0.0
+    return {
+        "band_mm": float(prof.edges[1] - prof.edges[0]),
+        "reach_mm": float(prof.edges[-1]),
+        "relative": [None if not np.isfinite(v) else float(v) for v in rel],
+        "worst_relative": worst,
+        "worst_band_from_mm": at,
+        "band_dots_min": fewest,
+        "limit": float(max(WALL_BAND_LIMIT, 1.0 / np.sqrt(max(fewest, 1.0)))),
+    }
 
 
 def _histogram(values: np.ndarray, bins: int = 100) -> tuple[np.ndarray, np.ndarray]:

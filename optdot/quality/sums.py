@@ -10,6 +10,7 @@ import numpy as np
 
 from .metrics import SquareGrid
 from .visibility import LuminanceGrid
+from .walls import WallProfiler
 
 
 @dataclass
@@ -31,6 +32,7 @@ class FirstSums:
     band_sums: list[float] = field(default_factory=list)
     diameters: list[np.ndarray] = field(default_factory=list)
     luminance: LuminanceGrid | None = None
+    walls: WallProfiler | None = None
 
 
 @dataclass

@@ -12,11 +12,8 @@ misses (issue 24, ``../shared/quality.md``):
   ``k a = 3`` the raster changes S by less than 1 %.
 * :func:`blurred_coverage_rms`: the dot area on a fine raster seen through a Gaussian
   of ``sigma`` mm, RMS relative to its mean over the window shrunk by ``3 sigma``.
-* :func:`wall_profile`: coverage over the map's fill in bands of distance from the
-  nearest wall (panel edge, hole, zero-fill border), summed along every wall. A dot's
-  area is split between the bands analytically (the disc cut by lines parallel to the
-  wall at its distance, walls taken straight at the dot's scale); band areas and their
-  target coverage come from a raster of the allowed region and its distance transform.
+* the wall profile (:mod:`optdot.quality.walls`): coverage over the map's fill in bands
+  of distance from the nearest wall.
 
 All lengths in mm.
 """
@@ -24,13 +21,9 @@ All lengths in mm.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import distance_transform_edt, gaussian_filter, map_coordinates
-
-from ..geometry.density import DensityMap
-from ..geometry.domain import Domain
+from scipy.ndimage import gaussian_filter
 
 Window = tuple[float, float, float, float]
 
@@ -130,90 +123,3 @@ def blurred_coverage_rms(
         return float("nan")
     mean = float(inner.mean())
     return float(inner.std() / mean) if mean > 0 else float("nan")
-
-
-@dataclass(frozen=True)
-class WallProfile:
-    """Coverage against distance from the nearest wall.
-
-    Attributes:
-        edges: ``[b + 1]`` band edges, mm from the wall.
-        coverage: ``[b]`` dot area in each band over its area, 1.
-        target: ``[b]`` the map's mean fill over each band, 1.
-        area: ``[b]`` band areas, mm².
-    """
-
-    edges: np.ndarray
-    coverage: np.ndarray
-    target: np.ndarray
-    area: np.ndarray
-
-    @property
-    def relative(self) -> np.ndarray:
-        """``[b]`` coverage / target − 1 (NaN where the target is 0)."""
-        with np.errstate(invalid="ignore", divide="ignore"):
-            return np.where(self.target > 0, self.coverage / self.target - 1.0, np.nan)
-
-
-def _segment(h: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """Area of a disc of radius ``r`` beyond a chord at signed distance ``h`` from its
-    centre (``h <= -r``: the whole disc; ``h >= r``: nothing)."""
-    u = np.clip(h / r, -1.0, 1.0)
-    return r * r * (np.arccos(u) - u * np.sqrt(1.0 - u * u))
-
-
-def wall_profile(
-    xy: np.ndarray,
-    diameter: float | np.ndarray,
-    density: DensityMap,
-    domain: Domain | None = None,
-    band: float = 0.1,
-    reach: float = 2.0,
-    px: float | None = None,
-) -> WallProfile:
-    """Coverage in bands of ``band`` mm from the nearest wall out to ``reach`` mm.
-
-    Walls: the map's box, the outline of ``domain`` (when not a rectangle) and the
-    borders of the map's zero-fill cells. ``px`` is the raster's pixel (default the
-    larger of ``band / 10`` and what keeps the raster under 4·10⁷ pixels).
-    """
-    x0, y0 = density.x0, density.y0
-    w, h = density.width, density.height
-    px = px or max(band / 10.0, math.sqrt(w * h / 4e7))
-    nx, ny = max(2, round(w / px)), max(2, round(h / px))
-    pxx, pxy = w / nx, h / ny
-    cx = x0 + (np.arange(nx) + 0.5) * pxx
-    cy = y0 + (np.arange(ny) + 0.5) * pxy
-    allowed = np.zeros((ny + 2, nx + 2), bool)
-    rho = np.zeros((ny + 2, nx + 2))
-    for j in range(ny):
-        pts = np.column_stack([cx, np.full(nx, cy[j])])
-        r = density.at(pts)
-        ok = r > 0
-        if domain is not None and not domain.rectangle:
-            ok &= domain.contains(pts)
-        allowed[j + 1, 1:-1] = ok
-        rho[j + 1, 1:-1] = np.where(ok, r, 0.0)
-    dist = distance_transform_edt(allowed, sampling=(pxy, pxx))
-    dist = np.where(allowed, dist - 0.5 * min(pxx, pxy), 0.0)
-    edges = np.arange(0.0, reach + 0.5 * band, band)
-    nb = len(edges) - 1
-    k = np.digitize(dist[allowed], edges) - 1
-    okb = (k >= 0) & (k < nb)
-    area = np.bincount(k[okb], minlength=nb) * pxx * pxy
-    target_area = np.bincount(k[okb], rho[allowed][okb], minlength=nb) * pxx * pxy
-    # each dot: its distance to the wall (bilinear in the distance raster) and its area
-    # split between the bands by chords parallel to the wall
-    d = np.broadcast_to(np.asarray(diameter, dtype=np.float64), (len(xy),))
-    col = (xy[:, 0] - x0) / pxx + 0.5
-    row = (xy[:, 1] - y0) / pxy + 0.5
-    near = map_coordinates(dist, [row, col], order=1, mode="constant", cval=0.0)
-    r = 0.5 * d
-    sel = near < reach + r
-    delta, r = near[sel], r[sel]
-    below = np.stack([_segment(delta - t, r) for t in edges])  # disc area within t of the wall
-    got = (below[1:] - below[:-1]).sum(axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cov = np.where(area > 0, got / np.maximum(area, 1e-300), np.nan)
-        tgt = np.where(area > 0, target_area / np.maximum(area, 1e-300), np.nan)
-    return WallProfile(edges, cov, tgt, area)
