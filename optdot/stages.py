@@ -182,15 +182,16 @@ def _lowpass(job, form, res, xy0, rho, frozen, diameters, phantom) -> RelaxResul
 
     ``form.lowpass`` times: every real dot's coverage error over the window of the real
     dots, the movers (not phantoms, not held) and their containers moved along the
-    field, then ``form.lowpass_iter`` L-BFGS iterations. The relaxation comes first
-    because it makes long-wavelength grain of its own (30 more iterations bring half of
-    it back; 2 do not). Last, ``form.lowpass_core_iter`` iterations of the hard-core
-    term alone (soft circles shrunk until they no longer meet, containers kept): the
-    correction moves dots at the scale of a spacing too and pushes pairs that stood
-    just outside the core under 60 µm, and with the compressed soft circles gone the
-    core clears them (LED sample: 5,484 pairs under 60 µm after the relaxation, 7,357
-    after the correction, 587 after 10 core iterations) without bringing the grain
-    back. Measured in BENCHMARKS.md (issue 24).
+    field, then ``form.lowpass_iter`` L-BFGS iterations (default none). The relaxation
+    comes first because it makes long-wavelength grain of its own: 30 more iterations
+    of it after the correction bring half the grain back, and even 2 leave S(k a 0.3-1)
+    at 0.00034 where none leaves 0.00005 (uniform 0.20 map). Last,
+    ``form.lowpass_core_iter`` iterations of the hard-core term alone (soft circles
+    shrunk until they no longer meet, containers kept): the correction moves dots at the
+    scale of a spacing too and pushes pairs that stood just outside the core under
+    60 µm; with the compressed soft circles gone the core clears them (LED sample: 5,484
+    pairs under 60 µm after the relaxation, 7,357 after a correction, 541 after 10 core
+    iterations) without bringing the grain back. Measured in BENCHMARKS.md (issue 24).
     """
     real = np.ones(len(xy0), bool) if phantom is None else ~phantom
     movers = real if frozen is None else real & ~frozen
@@ -208,11 +209,13 @@ def _lowpass(job, form, res, xy0, rho, frozen, diameters, phantom) -> RelaxResul
         u[real] = shift
         u[~movers] = 0.0
         xy0 = xy0 + u
-        more = relax_staged(
-            problem_of(job), form, xy0, rho, settings, None, start=res.xy + u, frozen=frozen,
-            diameters=diameters, phantom=phantom,
-        )  # fmt: skip
-        res = _after(res, more)
+        res.xy = res.xy + u
+        if form.lowpass_iter:
+            more = relax_staged(
+                problem_of(job), form, xy0, rho, settings, None, start=res.xy, frozen=frozen,
+                diameters=diameters, phantom=phantom,
+            )  # fmt: skip
+            res = _after(res, more)
     if form.lowpass_core_iter:
         # the hard core alone: soft circles too small to meet, containers as they were
         shrink = 1e-3

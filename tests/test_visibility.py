@@ -237,3 +237,38 @@ def test_cli_view_options_and_the_jnd_gate(tiny_pattern, tmp_path):
     assert passed.returncode == 0
     bad = run("--psf", "-1")
     assert bad.returncode == 2 and "--psf" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_bright_and_dark_regions_are_labelled_apart():
+    """A bright strip touching a dark one (a layered edge: line and band) gives two blobs,
+    one of each kind; merged by |JND| they would be one."""
+    from scipy import ndimage
+
+    from optdot.quality.visibility import BLOB_JND, label_blobs
+
+    jnd = np.zeros((20, 30))
+    jnd[5:15, 3:6] = 4.0  # bright line
+    jnd[5:15, 6:12] = -2.0  # dark band right beside it
+    jnd[2:4, 20:25] = -1.0  # a separate dark spot
+    labels, count = label_blobs(jnd)
+    assert count == 3
+    kinds = {int(np.sign(jnd[labels == k][0])) for k in range(1, count + 1)}
+    assert kinds == {1, -1}
+    assert len(np.unique(labels[5:15, 3:12])) == 2  # the line and the band stay apart
+    merged, n_abs = ndimage.label(np.abs(jnd) >= BLOB_JND, structure=np.ones((3, 3)))
+    assert n_abs == 2  # what labelling |JND| did
+
+
+def test_the_strongest_dark_blob_is_the_planted_dip(led):
+    """With the grain of 0.4 a 1 % dip (sigma 3 mm) planted in the LED sample is the
+    strongest dark blob of the panel (the pattern before 0.4 hid it behind 4-5 JND dark
+    bands along its edges; a 0.2 % dip stays under 1 JND)."""
+    job, pattern = led
+    view = viewing("notebook")
+    area = np.pi * (0.5 * pattern.diameter) ** 2 * np.ones(len(pattern.xy))
+    dip = 0.01 * np.exp(-((pattern.xy - CENTRE) ** 2).sum(1) / (2 * 3.0**2))
+    metrics, _, _, _ = _jnd(job, pattern.xy, area * (1 - dip), view)
+    dark = [b for b in metrics["blobs"] if b["kind"] == "dark"]
+    top = dark[0]
+    assert math.hypot(top["x_mm"] - CENTRE[0], top["y_mm"] - CENTRE[1]) < 3
+    assert top["jnd"] <= -1.5

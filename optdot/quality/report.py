@@ -156,7 +156,8 @@ def _visibility_section(result: QAResult) -> str:
         )
     jnd_png = _jnd_figure(result)
     blobs = "".join(
-        f"<tr><td>{b['x_mm']:.2f}, {b['y_mm']:.2f}</td><td>{b['area_mm2']:.3g}</td>"
+        f"<tr><td>{b['x_mm']:.2f}, {b['y_mm']:.2f}</td><td>{b.get('kind', '')}</td>"
+        f"<td>{b['area_mm2']:.3g}</td>"
         f"<td>{b['contrast_percent']:+.3f}</td><td>{b['jnd']:+.2f}</td><td>{b['semu']:.2f}</td></tr>"
         for b in vis["blobs"][:10]
     )
@@ -178,18 +179,19 @@ visible (50 % of observers), red brighter, blue darker. Regions over 1 JND are w
 viewer will notice; under 0.5 nobody will. <b>What to do</b>: a blob inside the panel
 with a map of its shape is a coverage error of the pattern (regenerate with another seed
 or more iterations, check the map's resolution); a line along an edge is the dots'
-layering against the wall (hidden under a frame of a few mm, or use
-<code>edge_margin</code>); speckle all over means the stack blurs less than the grain of
+layering against the wall (see the wall profile below; patterns from optdot 0.4 on do not
+layer: regenerate); speckle all over means the stack blurs less than the grain of
 the dots: smaller dots (<code>[dots] diameter = [lo, hi]</code>) or more diffusion. The
 PSF and the gate (<code>qa.max_jnd</code>, off by default) should be calibrated against a
 photographed test plate (README, "Visibility").</p>
 <figure><img style="max-width:100%" alt="JND map" src="data:image/png;base64,{jnd_png}">
 <figcaption>JND map over the panel</figcaption></figure>
-<table><tr><th>blob at (mm)</th><th>area (mm²)</th><th>contrast (%)</th><th>JND</th>
+<table><tr><th>blob at (mm)</th><th>kind</th><th>area (mm²)</th><th>contrast (%)</th><th>JND</th>
 <th>SEMU index |C|/C<sub>jnd</sub></th></tr>{blobs}</table>
 <p>SEMU index: |C| over C<sub>jnd</sub> = 1.97/S<sup>0.33</sup> + 0.72 % (S the blob's
 area in mm²; the commonly cited form of SEMI D31), a second opinion that ignores distance;
-blobs are regions where |JND| ≥ 0.5.</p>"""
+blobs are regions where |JND| ≥ 0.5, bright and dark ones apart (a bright line beside a
+dark band is two blobs).</p>"""
 
 
 def _jnd_figure(result: QAResult) -> str:

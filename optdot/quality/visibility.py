@@ -233,7 +233,7 @@ def _numbers(g: LuminanceGrid, view: Viewing, jnd, contrast, rel, valid):
         if valid.any()
         else 0.0,
     }
-    labels, count = ndimage.label(absj >= BLOB_JND, structure=np.ones((3, 3)))
+    labels, count = label_blobs(jnd)
     blobs: list[dict[str, Any]] = []
     m["blobs_over_1_jnd"] = 0
     if count:
@@ -255,6 +255,7 @@ def _numbers(g: LuminanceGrid, view: Viewing, jnd, contrast, rel, valid):
                     "area_mm2": area,
                     "contrast_percent": 100 * cpeak,
                     "jnd": float(jnd[py, px]),
+                    "kind": "bright" if jnd[py, px] > 0 else "dark",
                     "semu": float(abs(100 * cpeak) / semu_threshold(area)),
                 }
             )
@@ -270,6 +271,16 @@ def _x(g: LuminanceGrid, i) -> float:
 
 def _y(g: LuminanceGrid, j) -> float:
     return round(g.y0 + (int(j) + 0.5) * g.ch, 4)
+
+
+def label_blobs(jnd: np.ndarray) -> tuple[np.ndarray, int]:
+    """Regions of ``|jnd| >= BLOB_JND`` (8-connected), bright and dark labelled apart, so a
+    bright edge line and the dark band beside it are two blobs, not one: ``(labels
+    [ny, nx] int, count)``, bright regions first."""
+    eight = np.ones((3, 3))
+    bright, nb = ndimage.label(jnd >= BLOB_JND, structure=eight)
+    dark, nd = ndimage.label(jnd <= -BLOB_JND, structure=eight)
+    return np.where(dark > 0, dark + nb, bright), nb + nd
 
 
 def _pool(a: np.ndarray) -> np.ndarray:

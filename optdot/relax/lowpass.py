@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.fft import dctn, idctn
+from scipy.fft import dctn, idctn, next_fast_len
 from scipy.ndimage import gaussian_filter, map_coordinates
 
 from ..geometry.density import DensityMap
@@ -67,10 +67,11 @@ Window = tuple[float, float, float, float]
 
 
 def window_grid(window: Window, h: float) -> tuple[int, int, float, float]:
-    """``(nx, ny, hx, hy)``: the grid of step about ``h`` over ``window``."""
+    """``(nx, ny, hx, hy)``: the grid of step about ``h`` (a little finer, so the cosine
+    transform's lengths have small prime factors) over ``window``."""
     x0, y0, x1, y1 = window
-    nx = max(2, round((x1 - x0) / h))
-    ny = max(2, round((y1 - y0) / h))
+    nx = next_fast_len(max(2, round((x1 - x0) / h)), real=True)
+    ny = next_fast_len(max(2, round((y1 - y0) / h)), real=True)
     return nx, ny, (x1 - x0) / nx, (y1 - y0) / ny
 
 
