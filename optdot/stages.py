@@ -198,7 +198,9 @@ def _lowpass(job, form, res, xy0, rho, frozen, diameters, phantom) -> RelaxResul
     d = np.broadcast_to(job.diameter if diameters is None else diameters, (len(xy0),))
     area = np.pi * 0.25 * d[real] ** 2
     spacing = float(np.median(2.0 * hex_radius(rho[real], 0.5 * d[real])))
-    lo, hi = xy0[real].min(axis=0), xy0[real].max(axis=0)
+    # the dots' box grown by a spacing (clipped to the map's): the target must cover the
+    # strip between the outermost centres and the walls, whose coverage they carry
+    lo, hi = xy0[real].min(axis=0) - spacing, xy0[real].max(axis=0) + spacing
     window = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
     settings = dataclasses.replace(settings_for(job), max_iter=form.lowpass_iter)
     for _ in range(form.lowpass):

@@ -88,10 +88,9 @@ def coverage_error(
         domain: the panel; the map counts only inside it (each grid cell by its share).
     """
     nx, ny, hx, hy = window_grid(window, h)
-    cx = window[0] + (np.arange(nx) + 0.5) * hx
-    cy = window[1] + (np.arange(ny) + 0.5) * hy
-    gx, gy = np.meshgrid(cx, cy)
-    target = density.at(np.column_stack([gx.ravel(), gy.ravel()])).reshape(ny, nx)
+    # the map's mean over each grid cell (sampling it at the centres would alias its cell
+    # edges against the grid: a moiré the correction would then print)
+    target = density.resampled(window[0], window[1], hx, hy, nx, ny)
     if domain is not None and not domain.rectangle:
         target = target * domain.cell_fractions(window[0], window[1], hx, hy, nx, ny)
     got = _deposit(xy, area, window[0], window[1], (hx, hy), (ny, nx)) / (hx * hy)
