@@ -105,8 +105,8 @@ def summarize(
             for (name, _, want), got in zip(f.bands, f.band_sums, strict=True)
         }
         if f.walls is not None:
-            m["walls"] = _walls(f.walls.result(), src.nominal_diameter)
             arrays["walls"] = f.walls.result()
+            m["walls"] = _walls(arrays["walls"], src.nominal_diameter)
     if src.tiling is not None and s.seams is not None:
         m["seams"] = seam_finish(s.seams, *src.tiling, density)
     if len(src.counts) > 1:
