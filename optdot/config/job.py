@@ -21,6 +21,7 @@ from ..geometry.domain import Domain
 from ..geometry.limits import DIAMETER_RANGE_MM, MAX_EXTENT_MM
 from ..geometry.sizes import DotSizes, dots_per_cell
 from .grids import validate_grid
+from .light_guide import DesignParams, LightGuide
 from .viewing import DEFAULT_VIEW, Viewing, viewing
 
 METHODS = ("optdot", "md")
@@ -216,6 +217,8 @@ class Job:
         domain: where dots may go (default: the rectangle of the grid).
         inputs: every file the job reads (job, grid, outline, keep-out files); outputs
             may not overwrite them.
+        light_guide: the slab and LEDs ``simulate`` and ``design`` trace, or None.
+        design: how ``design`` makes a map (``[design]``).
     """
 
     width: float
@@ -230,6 +233,8 @@ class Job:
     inputs: tuple[Path, ...] = ()
     sizes: DotSizes | None = None
     interpolation: str = "nearest"
+    light_guide: LightGuide | None = None
+    design: DesignParams = field(default_factory=DesignParams)
 
     def __post_init__(self) -> None:
         where = str(self.source) if self.source else "job"

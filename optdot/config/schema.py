@@ -23,6 +23,7 @@ from ..geometry.sizes import DEFAULT_STEP, DotSizes
 from .grids import load_grid, validate_grid
 from .images import IMAGE_SUFFIXES, check_ranges, load_image
 from .job import Job, OptimizeParams, QAParams
+from .light_guide import DESIGN_KEYS, LIGHT_GUIDE_KEYS, design_from, light_guide_from
 
 SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
     "": {"name": (str,)},
@@ -82,6 +83,8 @@ SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
         "max_jnd": (int, float),
         "warn_jnd": (int, float),
     },
+    "light_guide": LIGHT_GUIDE_KEYS,
+    "design": DESIGN_KEYS,
 }
 _REQUIRED = {"dots": ("diameter",)}
 
@@ -90,8 +93,13 @@ _REQUIRED = {"dots": ("diameter",)}
 MAX_JOB_BYTES = 1 << 20
 
 
-def load_job(path: str | Path) -> Job:
+def load_job(path: str | Path, need_map: bool = True) -> Job:
     """Read and validate a TOML job file.
+
+    Args:
+        need_map: False lets a job with a ``[light_guide]`` leave out ``[density]`` (what
+            ``optdot design`` makes); its map is then a uniform placeholder at the middle
+            of ``design.fill_range``, which nothing but the design loop's start reads.
 
     Raises:
         JobError: one-line message naming the file, the field and the problem.
@@ -108,10 +116,12 @@ def load_job(path: str | Path) -> Job:
         raise JobError(f"{path}: malformed TOML ({one_line(e)})") from None
     except RecursionError:
         raise JobError(f"{path}: malformed TOML (arrays or tables nested too deep)") from None
-    return job_from_dict(raw, base=path.parent, source=path)
+    return job_from_dict(raw, base=path.parent, source=path, need_map=need_map)
 
 
-def job_from_dict(raw: dict[str, Any], base: Path = Path("."), source: Path | None = None) -> Job:
+def job_from_dict(
+    raw: dict[str, Any], base: Path = Path("."), source: Path | None = None, need_map: bool = True
+) -> Job:
     """Build a :class:`Job` from the parsed TOML tree (see :func:`load_job`)."""
     where = str(source) if source else "job"
     sections: dict[str, dict[str, Any]] = {"": {}}
@@ -158,7 +168,16 @@ def job_from_dict(raw: dict[str, Any], base: Path = Path("."), source: Path | No
                     f"box ({size:.6g} mm); with an outline the density grid covers that box, "
                     "so leave width/height out or check the outline's units (mm)"
                 )
-    grid_path, grid = _load_density(sections.get("density", {}), base, where)
+    design = design_from(sections.get("design", {}), base, where)
+    if "density" not in sections and "light_guide" in sections and not need_map:
+        grid_path, grid = None, np.full((1, 1), 0.5 * sum(design.fill_range))
+    elif "density" not in sections and "light_guide" in sections:
+        raise JobError(
+            f"{where}: no [density] map yet; 'optdot design {where} -o map.csv' designs one "
+            "for the light guide and writes a job that uses it"
+        )
+    else:
+        grid_path, grid = _load_density(sections.get("density", {}), base, where)
     try:
         opt = OptimizeParams(**_floats(sections.get("optimize", {})))
         qa = QAParams(**_floats(sections.get("qa", {})))
@@ -168,6 +187,9 @@ def job_from_dict(raw: dict[str, Any], base: Path = Path("."), source: Path | No
         raise JobError(f"{where}: domain.width/height = {width}, {height} must be > 0 mm")
     validate_grid(grid, str(grid_path))
     density = DensityMap(grid, width, height, x0, y0)
+    guide = None
+    if "light_guide" in sections:
+        guide = light_guide_from(sections["light_guide"], (x0, y0, x0 + width, y0 + height), where)
     interpolation = sections.get("density", {}).get("interpolation", "nearest")
     if interpolation not in INTERPOLATIONS:
         raise JobError(
@@ -193,6 +215,8 @@ def job_from_dict(raw: dict[str, Any], base: Path = Path("."), source: Path | No
         ),
         sizes=sizes,
         interpolation=interpolation,
+        light_guide=guide,
+        design=design,
     )
 
 

@@ -1,0 +1,393 @@
+"""``simulate``: the luminance of a light guide, traced with the map's coverage or the real dots.
+
+:func:`simulate` sets up what the compiled tracer (:mod:`optdot.optics.trace`) needs from
+a job (emitters, profiles, walls, the coverage raster or the dots' cell grid), traces the
+rays in fixed batches, and bins where they leave the top face. What it reports, with the
+Monte Carlo noise of each figure:
+
+- **efficiency**: extracted / injected (rays Fresnel turns back at the LED edge are not
+  injected), and where the rest went (absorbed in the bulk or the dots, lost at the edges
+  or the bottom); binomial noise ``sqrt(p (1 - p) / injected)``.
+- **9-point uniformity**: min/max of the exitance over 9 discs at 1/6, 1/2, 5/6 of each
+  side (the catalogue measure of backlights; spot diameter an option).
+- **luminance RMS and min/max** over bins of the panel less a border, and the RMS the
+  Monte Carlo noise alone would give (``sqrt(mean(1 / count))``).
+
+The exitance of the top face is what a diffuser sheet turns into luminance, so the map is
+called luminance (relative: 1 = the mean over the measured region).
+
+Reproducible: the same job, rays and seed give the same counts on any thread count (each
+ray has its own random stream; counts are integers).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..config.job import Job
+from ..config.light_guide import LightGuide
+from ..errors import JobError
+from ..pattern import DotSource
+from .trace import FATES, UNCOUPLED, trace
+
+#: Rays per compiled call (outputs 9 bytes per ray).
+BATCH = 1 << 20
+#: Samples of a profile's cumulative distribution over 0..90 degrees.
+PROFILE_SAMPLES = 2049
+
+
+@dataclass(frozen=True)
+class Coverage:
+    """A coverage raster: ``grid [ny, nx]`` (0..1) over cells of ``(dx, dy)`` mm from
+    ``(x0, y0)``."""
+
+    grid: np.ndarray
+    x0: float
+    y0: float
+    dx: float
+    dy: float
+
+
+@dataclass
+class Simulation:
+    """What :func:`simulate` found.
+
+    Attributes:
+        rays: rays emitted. injected: rays that entered the guide.
+        fates: rays per fate (``trace.FATES``; ``not_coupled`` is of the emitted).
+        counts: ``[nby, nbx]`` extracted rays per bin over the panel box.
+        box: the panel box, mm. bin: ``(dx, dy)`` bin size, mm.
+        measured: ``[nby, nbx]`` bool, the bins the RMS and min/max are taken over.
+        spots: ``[9, 3]`` spot centre x, y (mm) and extracted rays in it; spot: diameter, mm.
+        mode: ``"coverage"`` or ``"dots"``.
+    """
+
+    rays: int
+    injected: int
+    fates: dict[str, int]
+    counts: np.ndarray
+    box: tuple[float, float, float, float]
+    bin: tuple[float, float]
+    measured: np.ndarray
+    spots: np.ndarray
+    spot: float
+    mode: str
+    border: float
+    seed: int
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def efficiency(self) -> float:
+        """Extracted / injected."""
+        return self.fates["extracted"] / max(self.injected, 1)
+
+    @property
+    def luminance(self) -> np.ndarray:
+        """``[nby, nbx]`` relative exitance (1 = mean over the measured bins)."""
+        c = self.counts.astype(np.float64)
+        mean = c[self.measured].mean() if self.measured.any() else c.mean()
+        return c / mean if mean > 0 else c
+
+    def uniformity9(self) -> tuple[float, float]:
+        """9-point uniformity (min/max over the spots) and its Monte Carlo sigma."""
+        c = self.spots[:, 2]
+        if c.max() <= 0:
+            return 0.0, 0.0
+        u = float(c.min() / c.max())
+        sigma = u * math.sqrt(1.0 / max(c.min(), 1.0) + 1.0 / c.max())
+        return u, sigma
+
+    def rms(self) -> tuple[float, float, float, float]:
+        """Over the measured bins: (RMS of L / mean - 1, the noise's share of it, min/mean,
+        max/mean)."""
+        c = self.counts[self.measured].astype(np.float64)
+        if len(c) == 0 or c.mean() <= 0:
+            return math.nan, math.nan, math.nan, math.nan
+        rel = c / c.mean()
+        noise = math.sqrt(float(np.mean(1.0 / np.maximum(c, 1.0))))
+        return float(rel.std()), noise, float(rel.min()), float(rel.max())
+
+    def summary(self) -> dict:
+        """Every figure with its Monte Carlo sigma, JSON-ready."""
+        eff = self.efficiency
+        inj = max(self.injected, 1)
+        u9, u9s = self.uniformity9()
+        rms, noise, lo, hi = self.rms()
+        shares = {k: v / inj for k, v in self.fates.items() if k != "not_coupled"}
+        return {
+            "mode": self.mode,
+            "rays": self.rays,
+            "seed": self.seed,
+            "injected": self.injected,
+            "coupling": self.injected / max(self.rays, 1),
+            "efficiency": eff,
+            "efficiency_sigma": math.sqrt(eff * (1 - eff) / inj),
+            "shares": shares,
+            "counts": dict(self.fates),
+            "uniformity_9point": u9,
+            "uniformity_9point_sigma": u9s,
+            "spot_diameter_mm": self.spot,
+            "spots": [[float(a), float(b), int(c)] for a, b, c in self.spots],
+            "luminance_rms": rms,
+            "luminance_rms_noise": noise,
+            "luminance_min": lo,
+            "luminance_max": hi,
+            "bin_mm": list(self.bin),
+            "border_mm": self.border,
+            **self.extra,
+        }
+
+
+def coverage_of(job: Job) -> Coverage:
+    """The job's map as a coverage raster: fill times the share of each cell inside the
+    panel."""
+    d = job.density
+    g = np.array(d.grid, dtype=np.float64)
+    w = job.cell_weights
+    if w is not None:
+        g = g * w
+    dx, dy = d.cell_size
+    return Coverage(np.clip(g, 0, 1), d.x0, d.y0, dx, dy)
+
+
+def simulate(
+    job: Job,
+    rays: int,
+    seed: int = 0,
+    dots: DotSource | None = None,
+    coverage: Coverage | None = None,
+    bin_mm: float | None = None,
+    spot_mm: float | None = None,
+    border_mm: float = 5.0,
+    bins: tuple[int, int] | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> Simulation:
+    """Trace ``rays`` rays through the job's light guide.
+
+    Args:
+        job: a job with a ``[light_guide]``.
+        rays: rays to emit (shared among the LEDs by power).
+        seed: random seed (>= 0).
+        dots: the real pattern to trace (explicit mode); None for the coverage mode.
+        coverage: the raster of the coverage mode (default: the job's map).
+        bin_mm: luminance bin size, mm (default: 1/20 of the shorter side, at most 5).
+        spot_mm: 9-point spot diameter, mm (default: 1/6 of the shorter side, at most 10).
+        border_mm: excluded from the RMS and min/max, mm from the panel's outline.
+        bins: ``(nbx, nby)`` luminance bins over the box (instead of ``bin_mm``).
+        progress: ``progress(done, total)`` after each batch.
+    """
+    guide = job.light_guide
+    if guide is None:
+        raise JobError(f"{job.source or 'job'}: no [light_guide] section to simulate")
+    if not 1 <= rays <= 10**10:
+        raise JobError(f"rays = {rays} must be 1..1e10")
+    if seed < 0:
+        raise JobError(f"seed = {seed} must be >= 0")
+    x0, y0, x1, y1 = box = job.box
+    short = min(x1 - x0, y1 - y0)
+    bin_mm = min(5.0, short / 20) if bin_mm is None else float(bin_mm)
+    spot_mm = min(10.0, short / 6) if spot_mm is None else float(spot_mm)
+    if not 0 < bin_mm <= max(x1 - x0, y1 - y0) or not 0 < spot_mm <= short / 3:
+        raise JobError(
+            f"bin {bin_mm:g} mm / spot {spot_mm:g} mm: must be > 0 and fit the panel "
+            f"({x1 - x0:g} x {y1 - y0:g} mm; spots at most a third of the shorter side)"
+        )
+    emit, emit_start, theta, cdf, modes = _emitters(guide, rays, box)
+    walls, normals = _walls(job)
+    phys = _physics(guide)
+    if dots is None:
+        cov = coverage or coverage_of(job)
+        phi = np.ascontiguousarray(cov.grid, dtype=np.float64)
+        g = np.array([cov.x0, cov.y0, cov.dx, cov.dy])
+        grid = (np.zeros(2, np.int64), np.zeros(1), np.zeros(1), np.zeros(1), np.ones(6))
+        explicit = False
+    else:
+        phi, g = np.zeros((1, 1)), np.ones(4)
+        grid = _dot_grid(dots, box)
+        explicit = True
+    if bins is None:
+        nbx = max(1, int(round((x1 - x0) / bin_mm)))
+        nby = max(1, int(round((y1 - y0) / bin_mm)))
+    else:
+        nbx, nby = bins
+    counts = np.zeros(nby * nbx, np.int64)
+    fates = np.zeros(len(FATES), np.int64)
+    spots = _spot_centres(box)
+    spot_counts = np.zeros(9, np.int64)
+    r2 = (0.5 * spot_mm) ** 2
+    for first in range(0, rays, BATCH):
+        count = min(BATCH, rays - first)
+        fate, ex, ey = trace(
+            seed,
+            first,
+            count,
+            emit,
+            emit_start,
+            theta,
+            cdf,
+            modes,
+            walls,
+            normals,
+            phys,
+            explicit,
+            phi,
+            g,
+            *grid,
+        )
+        fates += np.bincount(fate, minlength=len(FATES))
+        out = fate == 0
+        px, py = ex[out].astype(np.float64), ey[out].astype(np.float64)
+        ix = np.clip(((px - x0) / (x1 - x0) * nbx).astype(np.int64), 0, nbx - 1)
+        iy = np.clip(((py - y0) / (y1 - y0) * nby).astype(np.int64), 0, nby - 1)
+        counts += np.bincount(iy * nbx + ix, minlength=nby * nbx)
+        for k, (sx, sy) in enumerate(spots):
+            spot_counts[k] += int(np.count_nonzero((px - sx) ** 2 + (py - sy) ** 2 <= r2))
+        if progress is not None:
+            progress(first + count, rays)
+    fate_counts = {name: int(v) for name, v in zip(FATES, fates, strict=True)}
+    counts = counts.reshape(nby, nbx)
+    return Simulation(
+        rays=rays,
+        injected=rays - int(fates[UNCOUPLED]),
+        fates=fate_counts,
+        counts=counts,
+        box=box,
+        bin=((x1 - x0) / nbx, (y1 - y0) / nby),
+        measured=_measured(job, nbx, nby, border_mm),
+        spots=np.column_stack([spots, spot_counts]),
+        spot=spot_mm,
+        mode="dots" if explicit else "coverage",
+        border=border_mm,
+        seed=seed,
+    )
+
+
+def _spot_centres(box) -> np.ndarray:
+    x0, y0, x1, y1 = box
+    f = np.array([1 / 6, 1 / 2, 5 / 6])
+    gx, gy = np.meshgrid(x0 + f * (x1 - x0), y0 + f * (y1 - y0))
+    return np.column_stack([gx.ravel(), gy.ravel()])
+
+
+def _measured(job: Job, nbx: int, nby: int, border: float) -> np.ndarray:
+    """Bins wholly inside the panel shrunk by ``border`` mm."""
+    import shapely
+
+    x0, y0, x1, y1 = job.box
+    inner = job.domain.geometry.buffer(-border) if border > 0 else job.domain.geometry
+    xs = np.linspace(x0, x1, nbx + 1)
+    ys = np.linspace(y0, y1, nby + 1)
+    gx0, gy0 = np.meshgrid(xs[:-1], ys[:-1])
+    gx1, gy1 = np.meshgrid(xs[1:], ys[1:])
+    boxes = shapely.box(gx0.ravel(), gy0.ravel(), gx1.ravel(), gy1.ravel())
+    ok = shapely.contains(inner, boxes) if not inner.is_empty else np.zeros(len(boxes), bool)
+    return np.asarray(ok).reshape(nby, nbx)
+
+
+def _physics(guide: LightGuide) -> np.ndarray:
+    return np.array(
+        [
+            guide.thickness,
+            guide.refractive_index,
+            guide.absorption,
+            guide.dot_albedo,
+            1.0 if guide.dot_scatter == "extract" else 0.0,
+            guide.reflector,
+            guide.edge_reflectance,
+            1.0 if guide.edge_finish == "specular" else 0.0,
+            0.0,
+        ]
+    )
+
+
+def _emitters(guide: LightGuide, rays: int, box):
+    """Emitter table, rays per emitter (largest remainder by power), profile CDFs."""
+    rows, power = [], []
+    theta = np.linspace(0.0, 0.5 * math.pi, PROFILE_SAMPLES)
+    cdfs, modes = [], []
+    for p, leds in enumerate(guide.leds):
+        if leds.profile == "collimated":
+            intensity = np.cos(theta)  # unused: the tilt is the one angle
+            modes.append((1.0, math.radians(leds.tilt)))
+        elif leds.profile == "lambertian":
+            intensity = np.cos(theta)
+            modes.append((0.0, 0.0))
+        else:
+            table = np.array(leds.profile)
+            intensity = np.interp(np.degrees(theta), table[:, 0], table[:, 1], right=0.0)
+            modes.append((0.0, 0.0))
+        pdf = intensity * np.sin(theta)
+        cdf = np.concatenate([[0.0], np.cumsum(0.5 * (pdf[1:] + pdf[:-1]))])
+        cdfs.append(cdf / cdf[-1] if cdf[-1] > 0 else np.linspace(0, 1, len(cdf)))
+        for pos in leds.positions:
+            tx, ty, nx, ny, cx, cy = _edge_frame(leds.edge, pos, box)
+            rows.append((cx, cy, tx, ty, nx, ny, leds.width, p))
+            power.append(leds.power)
+    share = np.array(power) / sum(power) * rays
+    n = np.floor(share).astype(np.int64)
+    rest = rays - int(n.sum())
+    if rest:
+        n[np.argsort(-(share - n), kind="stable")[:rest]] += 1
+    start = np.concatenate([[0], np.cumsum(n)]).astype(np.int64)
+    return np.array(rows, np.float64), start, theta, np.array(cdfs), np.array(modes)
+
+
+def _edge_frame(edge: str, pos: float, box):
+    """Tangent, inward normal and centre of an LED at ``pos`` on ``edge`` of ``box``."""
+    x0, y0, x1, y1 = box
+    if edge == "bottom":
+        return 1.0, 0.0, 0.0, 1.0, pos, y0
+    if edge == "top":
+        return 1.0, 0.0, 0.0, -1.0, pos, y1
+    if edge == "left":
+        return 0.0, 1.0, 1.0, 0.0, x0, pos
+    return 0.0, 1.0, -1.0, 0.0, x1, pos
+
+
+def _walls(job: Job) -> tuple[np.ndarray, np.ndarray]:
+    """The side walls: the panel outline's outer ring as segments, with inward normals.
+    Holes and keep-outs are clear slab without dots."""
+    polys = job.domain.polygons
+    if len(polys) != 1:
+        raise JobError(
+            f"{job.source or 'job'}: the panel is {len(polys)} separate pieces; a light guide "
+            "is one slab"
+        )
+    ring = np.asarray(polys[0].exterior.coords)[:-1]  # counter-clockwise
+    a, b = ring, np.roll(ring, -1, axis=0)
+    e = b - a
+    length = np.hypot(e[:, 0], e[:, 1])
+    keep = length > 0
+    a, b, e, length = a[keep], b[keep], e[keep], length[keep]
+    normals = np.column_stack([-e[:, 1], e[:, 0]]) / length[:, None]  # left = inside
+    return np.column_stack([a, b]), normals
+
+
+def _dot_grid(dots: DotSource, box) -> tuple:
+    """The dots sorted into square cells at least one diameter wide (a point on a dot
+    lies in the dot's cell or a neighbour): ``(start, x, y, r2, grid)``."""
+    xs, ys, ds = [], [], []
+    for _, xy, d in dots.chunks():
+        xs.append(np.asarray(xy[:, 0], np.float64))
+        ys.append(np.asarray(xy[:, 1], np.float64))
+        ds.append(np.broadcast_to(np.asarray(d, np.float64), (len(xy),)))
+    x = np.concatenate(xs) if xs else np.zeros(0)
+    y = np.concatenate(ys) if ys else np.zeros(0)
+    d = np.concatenate(ds) if ds else np.zeros(0)
+    x0, y0, x1, y1 = box
+    area = (x1 - x0) * (y1 - y0)
+    cell = max(float(d.max()) if len(d) else 1.0, 1.5 * math.sqrt(area / max(len(x), 1)))
+    nx = max(1, int(math.ceil((x1 - x0) / cell)))
+    ny = max(1, int(math.ceil((y1 - y0) / cell)))
+    ix = np.clip(((x - x0) / cell).astype(np.int64), 0, nx - 1)
+    iy = np.clip(((y - y0) / cell).astype(np.int64), 0, ny - 1)
+    key = iy * nx + ix
+    order = np.argsort(key, kind="stable")
+    start = np.zeros(nx * ny + 1, np.int64)
+    np.cumsum(np.bincount(key, minlength=nx * ny), out=start[1:])
+    r2 = (0.5 * d[order]) ** 2
+    return (start, x[order], y[order], r2, np.array([x0, y0, cell, cell, nx, ny], np.float64))
