@@ -51,7 +51,8 @@ ALLOWED = {
         "stages",
         "tiling",
     },
-    "cli": {"config", "errors", "exporters", "io", "pipeline", "quality", "runtime"},
+    "optics": {"config", "errors", "geometry", "io", "pattern"},
+    "cli": {"config", "errors", "exporters", "io", "optics", "pipeline", "quality", "runtime"},
 }
 
 

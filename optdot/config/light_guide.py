@@ -44,7 +44,7 @@ dots scatter it. What :mod:`optdot.optics` needs to trace it:
   a tool-able pattern extracts).
 - ``target``: optional CSV grid of relative luminance to follow (row 0 = bottom), any
   resolution over the panel box; default uniform.
-- ``iterations``: most iterations (default 12).
+- ``iterations``: most iterations (default 16).
 - ``rays``: rays of the last iteration (default: 400 per cell); the first runs 1/16 of it.
 - ``smoothing``: Gaussian sigma of the update, in cells (default 1).
 """
@@ -146,14 +146,16 @@ class DesignParams:
         iterations: most iterations.
         rays: rays of the last iteration, or None for 400 per cell.
         smoothing: Gaussian sigma of the update, cells.
+        target_file: the file ``target`` came from.
     """
 
     cell: float = 1.0
     fill_range: tuple[float, float] = (0.02, 0.6)
     target: np.ndarray | None = field(default=None, compare=False)
-    iterations: int = 12
+    iterations: int = 16
     rays: int | None = None
     smoothing: float = 1.0
+    target_file: Path | None = None
 
 
 def _typed(sec: dict[str, Any], keys: dict[str, tuple[type, ...]], label: str, where: str):
@@ -213,6 +215,34 @@ def light_guide_from(
         )
     leds = tuple(_leds(row, k, box, where) for k, row in enumerate(rows))
     return LightGuide(t, leds, n, a, albedo, scatter, refl, edge_r, finish)
+
+
+def check_leds_on(guide: LightGuide, geometry, box, where: str) -> None:
+    """Refuse LEDs whose emitting face is not on the panel outline's outer boundary (an
+    edge the outline does not have there: a notch, a chamfer, a rounded corner)."""
+    import shapely
+    from shapely.geometry import LineString, MultiPolygon
+
+    polys = list(geometry.geoms) if isinstance(geometry, MultiPolygon) else [geometry]
+    boundary = shapely.union_all([p.exterior for p in polys])
+    x0, y0, x1, y1 = box
+    tol = 1e-3 + 1e-6 * max(x1 - x0, y1 - y0)
+    near = boundary.buffer(tol)
+    for k, leds in enumerate(guide.leds):
+        for p in leds.positions:
+            a, b = p - 0.5 * leds.width, p + 0.5 * leds.width
+            seg = {
+                "bottom": ((a, y0), (b, y0)),
+                "top": ((a, y1), (b, y1)),
+                "left": ((x0, a), (x0, b)),
+                "right": ((x1, a), (x1, b)),
+            }[leds.edge]
+            if not near.contains(LineString(seg)):
+                raise JobError(
+                    f"{where}: light_guide.leds[{k}]: the LED at {p:g} mm on the {leds.edge} "
+                    f"edge is not on the panel outline (the outline has no {leds.edge} edge "
+                    "there)"
+                )
 
 
 def _leds(row: Any, k: int, box, where: str) -> Leds:
@@ -291,7 +321,7 @@ def design_from(sec: dict[str, Any], base: Path, where: str) -> DesignParams:
         raise JobError(
             f"{where}: design.fill_range = {fr!r} must be [min, max] with 0 <= min < max <= 0.85"
         )
-    iters = int(sec.get("iterations", 12))
+    iters = int(sec.get("iterations", 16))
     if not 1 <= iters <= 200:
         raise JobError(f"{where}: design.iterations = {iters} must be 1..200")
     rays = sec.get("rays")
@@ -304,4 +334,12 @@ def design_from(sec: dict[str, Any], base: Path, where: str) -> DesignParams:
         target = load_grid(path)
         if not (np.all(np.isfinite(target)) and target.min() >= 0 and target.max() > 0):
             raise JobError(f"{path}: design.target must hold relative luminances >= 0, not all 0")
-    return DesignParams(cell, (float(fr[0]), float(fr[1])), target, iters, rays, smooth)
+    return DesignParams(
+        cell,
+        (float(fr[0]), float(fr[1])),
+        target,
+        iters,
+        rays,
+        smooth,
+        base / sec["target"] if "target" in sec else None,
+    )

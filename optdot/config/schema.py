@@ -23,7 +23,13 @@ from ..geometry.sizes import DEFAULT_STEP, DotSizes
 from .grids import load_grid, validate_grid
 from .images import IMAGE_SUFFIXES, check_ranges, load_image
 from .job import Job, OptimizeParams, QAParams
-from .light_guide import DESIGN_KEYS, LIGHT_GUIDE_KEYS, design_from, light_guide_from
+from .light_guide import (
+    DESIGN_KEYS,
+    LIGHT_GUIDE_KEYS,
+    check_leds_on,
+    design_from,
+    light_guide_from,
+)
 
 SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
     "": {"name": (str,)},
@@ -190,6 +196,8 @@ def job_from_dict(
     guide = None
     if "light_guide" in sections:
         guide = light_guide_from(sections["light_guide"], (x0, y0, x0 + width, y0 + height), where)
+        if domain is not None:
+            check_leds_on(guide, domain.geometry, domain.box, where)
     interpolation = sections.get("density", {}).get("interpolation", "nearest")
     if interpolation not in INTERPOLATIONS:
         raise JobError(
@@ -211,7 +219,9 @@ def job_from_dict(
         name=str(sections[""].get("name", source.stem if source else "optdot")),
         source=source,
         inputs=tuple(
-            p for p in (source, grid_path, size_file, *_outline_files(dom, base)) if p is not None
+            p
+            for p in (source, grid_path, size_file, *_outline_files(dom, base), design.target_file)
+            if p is not None
         ),
         sizes=sizes,
         interpolation=interpolation,

@@ -1,0 +1,189 @@
+"""``optdot simulate`` and ``optdot design``: the light guide's luminance, and the map that
+makes it uniform (see :mod:`optdot.optics`)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import click
+
+from .app import main, user_errors
+from .options import Finite
+
+RAYS = click.IntRange(1000, 10**10)
+
+
+@main.command()
+@click.argument("job_file", type=click.Path(path_type=Path))
+@click.argument("pattern", type=click.Path(path_type=Path), required=False)
+@click.option("--rays", type=RAYS, default=2_000_000, show_default=True, help="Rays to trace.")
+@click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=0, show_default=True)
+@click.option(
+    "--bin",
+    "bin_mm",
+    type=Finite(0.01, 1000),
+    help="Luminance bin, mm (default: 1/20 of the shorter side, at most 5).",
+)
+@click.option(
+    "--spot",
+    "spot_mm",
+    type=Finite(0.01, 1000),
+    help="9-point spot diameter, mm (default: 1/6 of the shorter side, at most 10).",
+)
+@click.option(
+    "--border",
+    "border_mm",
+    type=Finite(0, 1000),
+    default=5.0,
+    show_default=True,
+    help="Left out of the RMS and min/max, mm from the outline.",
+)
+@click.option(
+    "--json",
+    "json_path",
+    type=click.Path(path_type=Path),
+    help="Figures and luminance map (JSON) to write.",
+)
+@click.option(
+    "--png", "png_path", type=click.Path(path_type=Path), help="Luminance map (PNG) to write."
+)
+@click.option("--quiet", "-q", is_flag=True, help="Print the figures only.")
+@user_errors
+def simulate(job_file, pattern, rays, seed, bin_mm, spot_mm, border_mm, json_path, png_path, quiet):
+    """Trace JOB_FILE's light guide and report its luminance: with PATTERN (a pattern
+    file, dataset or mask) through the real dots, without it through the map's coverage.
+    Prints efficiency, where the rest of the light went, 9-point uniformity and the
+    luminance RMS, each with its Monte Carlo noise."""
+    from ..config.schema import load_job
+    from ..io.atomic import transaction
+    from ..io.outputs import check_outputs
+    from ..optics.outputs import luminance_png, simulation_json, write_text
+    from ..optics.simulate import simulate as run
+
+    job = load_job(job_file)
+    outs = {k: v for k, v in (("json", json_path), ("png", png_path)) if v is not None}
+    inputs = (*job.inputs, *((pattern,) if pattern else ()))
+    check_outputs(outs, inputs)
+    dots = None
+    if pattern is not None:
+        from .gate import _read_with_job
+
+        dots = _read_with_job(pattern, job)
+    t0 = time.perf_counter()
+    sim = run(job, rays, seed, dots=dots, bin_mm=bin_mm, spot_mm=spot_mm, border_mm=border_mm)
+    seconds = time.perf_counter() - t0
+    sim.extra["seconds"] = round(seconds, 3)
+    _print_simulation(sim, seconds)
+    with transaction():
+        if json_path is not None:
+            write_text(json_path, simulation_json(sim, job, pattern))
+        if png_path is not None:
+            luminance_png(png_path, sim, job.name)
+
+
+def _print_simulation(sim, seconds: float, echo=click.echo) -> None:
+    s = sim.summary()
+    mode = "real dots" if sim.mode == "dots" else "map coverage"
+    echo(
+        f"traced {s['rays']:,} rays through the {mode} in {seconds:.1f} s "
+        f"({s['rays'] / max(seconds, 1e-9):,.0f} rays/s), seed {s['seed']}"
+    )
+    echo(
+        f"efficiency: {s['efficiency']:.2%} ± {s['efficiency_sigma']:.2%} of the injected "
+        f"light leaves the top (coupled into the edge: {s['coupling']:.1%})"
+    )
+    sh = s["shares"]
+    echo(
+        "the rest: "
+        + ", ".join(f"{k.replace('_', ' ')} {v:.2%}" for k, v in sh.items() if k != "extracted")
+    )
+    echo(
+        f"9-point uniformity: {s['uniformity_9point']:.3f} ± "
+        f"{s['uniformity_9point_sigma']:.3f} (spots of {s['spot_diameter_mm']:.3g} mm)"
+    )
+    echo(
+        f"luminance over the panel less {s['border_mm']:g} mm, bins of "
+        f"{s['bin_mm'][0]:.3g} x {s['bin_mm'][1]:.3g} mm: RMS {s['luminance_rms']:.2%} "
+        f"(noise alone {s['luminance_rms_noise']:.2%}), min {s['luminance_min']:.3f}, "
+        f"max {s['luminance_max']:.3f} of the mean"
+    )
+
+
+@main.command()
+@click.argument("job_file", type=click.Path(path_type=Path))
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(path_type=Path),
+    required=True,
+    help="Designed fill map to write (CSV, row 0 = bottom).",
+)
+@click.option(
+    "--png",
+    "png_path",
+    type=click.Path(path_type=Path),
+    help="16-bit PNG of the map (default: OUTPUT with .png).",
+)
+@click.option(
+    "--job-out",
+    type=click.Path(path_type=Path),
+    help="Job that uses the map (default: OUTPUT with .toml).",
+)
+@click.option(
+    "--rays", type=RAYS, help="Rays of the last iteration (default: [design] rays or 400 per cell)."
+)
+@click.option("--iterations", type=click.IntRange(1, 200), help="Override design.iterations.")
+@click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=0, show_default=True)
+@click.option("--quiet", "-q", is_flag=True, help="No line per iteration.")
+@user_errors
+def design(job_file, output, png_path, job_out, rays, iterations, seed, quiet):
+    """Design the fill map that makes JOB_FILE's light guide uniform (or follow
+    [design] target): iterate ray traces of the map's coverage, print the uniformity of
+    each, and write the map (CSV and 16-bit PNG) and a job ready for 'optdot generate'."""
+    from ..config.schema import load_job
+    from ..io.atomic import transaction
+    from ..io.outputs import check_outputs
+    from ..optics.design import design as run
+    from ..optics.design import design_grid
+    from ..optics.outputs import write_design
+
+    if output.suffix.lower() != ".csv":
+        raise click.BadParameter("must end in .csv", param_hint="'-o' / '--output'")
+    png_path = png_path or output.with_suffix(".png")
+    job_out = job_out or output.with_suffix(".toml")
+    job = load_job(job_file, need_map=False)
+    check_outputs({"output": output, "png": png_path, "job-out": job_out}, job.inputs)
+    if job.light_guide is None:
+        from ..errors import JobError
+
+        raise JobError(f"{job_file}: no [light_guide] section to design for")
+    nx, ny, dx, dy = design_grid(job)
+    p = job.design
+    if not quiet:
+        click.echo(
+            f"designing {nx} x {ny} cells of {dx:.3g} x {dy:.3g} mm, fill "
+            f"{p.fill_range[0]:g}..{p.fill_range[1]:g}",
+            err=True,
+        )
+    t0 = time.perf_counter()
+
+    def report(f: dict) -> None:
+        if not quiet:
+            click.echo(
+                f"iteration {f['iteration']:2d}: {f['rays']:>11,} rays, 9-point "
+                f"{f['uniformity_9point']:.3f}, RMS {f['luminance_rms']:.2%} (noise "
+                f"{f['luminance_rms_noise']:.2%}), efficiency {f['efficiency']:.1%}, "
+                f"{time.perf_counter() - t0:.0f} s",
+                err=True,
+            )
+
+    got = run(job, seed=seed, rays=rays, iterations=iterations, report=report)
+    with transaction():
+        write_design(got, job, output, png_path, job_out)
+    last = got.history[-1]
+    click.echo(
+        f"{output}: designed map, 9-point uniformity {last['uniformity_9point']:.3f}, "
+        f"efficiency {last['efficiency']:.1%} (map coverage; check it with "
+        f"'optdot simulate {job_out} PATTERN' after 'optdot generate {job_out}')"
+    )

@@ -1,0 +1,133 @@
+"""What ``simulate`` and ``design`` write: the figures as JSON, the luminance map as PNG,
+the designed map (CSV, 16-bit PNG) and the job that uses it. Every file goes through
+:func:`optdot.io.atomic.atomic_path` inside one transaction: all of a command's outputs
+appear together or none does, and a failed run leaves the old files as they were."""
+
+from __future__ import annotations
+
+import io
+import json
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from ..config.job import Job
+from ..config.writer import job_toml, rebased
+from ..errors import JobError
+from ..io.atomic import atomic_path
+from .design import Designed
+from .simulate import Simulation
+
+
+def simulation_json(sim: Simulation, job: Job, pattern: Path | None) -> str:
+    """The figures of ``sim`` with the luminance map (JSON text)."""
+    doc = {
+        "job": str(job.source) if job.source else job.name,
+        "pattern": str(pattern) if pattern else None,
+        **sim.summary(),
+        "box_mm": list(sim.box),
+        "luminance": np.round(sim.luminance, 5).tolist(),
+        "luminance_rows": "row 0 = bottom (y = ymin)",
+    }
+    return json.dumps(doc, indent=1, allow_nan=True) + "\n"
+
+
+def write_text(path: Path, text: str) -> None:
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
+def luminance_png(path: Path, sim: Simulation, title: str) -> None:
+    """The relative luminance over the panel with the 9 spots, as a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Circle
+
+    x0, y0, x1, y1 = sim.box
+    lum = sim.luminance
+    fig, ax = plt.subplots(figsize=(7.5, 7.5 * (y1 - y0) / (x1 - x0) + 1.2), dpi=110)
+    vals = lum[sim.measured] if sim.measured.any() else lum.ravel()
+    lo, hi = np.percentile(vals, [1, 99]) if len(vals) else (0.0, 1.0)
+    span = max(abs(1 - lo), abs(hi - 1), 0.02)
+    im = ax.imshow(
+        lum,
+        origin="lower",
+        extent=(x0, x1, y0, y1),
+        cmap="RdBu_r",
+        vmin=1 - span,
+        vmax=1 + span,
+        interpolation="nearest",
+    )
+    for sx, sy, _ in sim.spots:
+        ax.add_patch(Circle((sx, sy), sim.spot / 2, fill=False, color="k", lw=0.8))
+    fig.colorbar(im, ax=ax, label="luminance / mean", shrink=0.8)
+    u9, _ = sim.uniformity9()
+    rms, noise, _, _ = sim.rms()
+    ax.set_title(
+        f"{title}: efficiency {sim.efficiency:.1%}, 9-point {u9:.3f}, RMS {rms:.1%} "
+        f"(noise {noise:.1%})",
+        fontsize=9,
+    )
+    ax.set_xlabel("x, mm")
+    ax.set_ylabel("y, mm")
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", bbox_inches="tight")
+    plt.close(fig)
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(buf.getvalue())
+
+
+def map_csv(fill: np.ndarray) -> str:
+    """The map as CSV, row 0 = bottom, six decimals."""
+    out = io.StringIO()
+    np.savetxt(out, fill, delimiter=",", fmt="%.6f")
+    return out.getvalue()
+
+
+def map_png(path: Path, fill: np.ndarray) -> None:
+    """The map as a 16-bit greyscale PNG, top row = top of the panel, pixel = fill x
+    65535 (read back with ``image = ...`` and ``fill_range = [0, 1]``)."""
+    from PIL import Image
+
+    px = np.round(np.clip(fill[::-1], 0, 1) * 65535).astype(np.uint16)
+    img = Image.fromarray(px)
+    with atomic_path(path) as tmp:
+        img.save(tmp, format="PNG")
+
+
+def designed_job(job: Job, map_path: Path, job_path: Path) -> str:
+    """TOML of ``job`` reading its map from ``map_path``, to be written at ``job_path``."""
+    if job.source is None:
+        raise JobError("the designed job needs the job file it comes from")
+    raw = tomllib.loads(Path(job.source).read_text(encoding="utf-8-sig"))
+    raw = rebased(raw, Path(job.source).parent, job_path.parent)
+    import os
+
+    rel = os.path.relpath(os.path.abspath(map_path), os.path.abspath(job_path.parent))
+    raw["density"] = {"grid": rel, "interpolation": "linear"}
+    return job_toml(_ordered(raw))
+
+
+def _ordered(raw: dict) -> dict:
+    """Top-level keys first, then the sections in the README's order."""
+    order = ["domain", "density", "dots", "optimize", "qa", "light_guide", "design"]
+    top = {k: v for k, v in raw.items() if not isinstance(v, dict)}
+    secs = {k: raw[k] for k in order if k in raw}
+    secs.update({k: v for k, v in raw.items() if isinstance(v, dict) and k not in secs})
+    return {**top, **secs}
+
+
+def write_design(
+    designed: Designed, job: Job, out_csv: Path, out_png: Path | None, out_job: Path | None
+) -> None:
+    """Write the designed map (CSV, optional PNG) and the job that uses it."""
+    text = map_csv(designed.fill)
+    job_text = designed_job(job, out_csv, out_job) if out_job is not None else None
+    write_text(out_csv, text)
+    if out_png is not None:
+        map_png(out_png, designed.fill)
+    if out_job is not None:
+        write_text(out_job, job_text)
