@@ -174,6 +174,11 @@ def job_from_dict(
                     f"box ({size:.6g} mm); with an outline the density grid covers that box, "
                     "so leave width/height out or check the outline's units (mm)"
                 )
+    guide = None
+    if "light_guide" in sections:
+        guide = light_guide_from(sections["light_guide"], (x0, y0, x0 + width, y0 + height), where)
+        if domain is not None:
+            check_leds_on(guide, domain.geometry, domain.box, where)
     design = design_from(sections.get("design", {}), base, where)
     if "density" not in sections and "light_guide" in sections and not need_map:
         grid_path, grid = None, np.full((1, 1), 0.5 * sum(design.fill_range))
@@ -193,11 +198,6 @@ def job_from_dict(
         raise JobError(f"{where}: domain.width/height = {width}, {height} must be > 0 mm")
     validate_grid(grid, str(grid_path))
     density = DensityMap(grid, width, height, x0, y0)
-    guide = None
-    if "light_guide" in sections:
-        guide = light_guide_from(sections["light_guide"], (x0, y0, x0 + width, y0 + height), where)
-        if domain is not None:
-            check_leds_on(guide, domain.geometry, domain.box, where)
     interpolation = sections.get("density", {}).get("interpolation", "nearest")
     if interpolation not in INTERPOLATIONS:
         raise JobError(
