@@ -42,7 +42,7 @@ def _one_d_job(tmp: Path, both_ends: bool, cells: int = 400, **guide) -> Path:
         "absorption": 0.0,
         "dot_albedo": 1.0,
         "dot_scatter": '"extract"',
-        "edge_reflectance": 0.0,
+        "edge_finish": '"absorbing"',
         "reflector": 0.0,
         **guide,
     }

@@ -19,9 +19,11 @@ dots scatter it. What :mod:`optdot.optics` needs to trace it:
 - ``reflector``: diffuse reflectance of the sheet under the guide, 0..1 (default 0.95;
   0 for none or black).
 - ``edge_reflectance``: reflectance of what covers the edges, 0..1 (default 0.9, white
-  tape; 0 for black). Light that total internal reflection keeps inside stays inside.
-- ``edge_finish``: ``"diffuse"`` (default: tape in air; the light that leaves an edge comes
-  back Lambertian) or ``"specular"`` (a mirror film on the edges).
+  tape; 0: nothing comes back). Light that total internal reflection or Fresnel keeps
+  inside the slab stays inside.
+- ``edge_finish``: ``"diffuse"`` (default: tape in air; what leaves an edge comes back
+  Lambertian), ``"specular"`` (a mirror film in air) or ``"absorbing"`` (black paint in
+  optical contact: every ray that reaches an edge is absorbed; ``edge_reflectance`` unused).
 
 ``[[light_guide.leds]]`` (one table per row of LEDs)
 
@@ -62,7 +64,7 @@ from ..errors import JobError
 
 EDGES = ("bottom", "top", "left", "right")
 DOT_SCATTER = ("lambertian", "extract")
-EDGE_FINISH = ("diffuse", "specular")
+EDGE_FINISH = ("diffuse", "specular", "absorbing")
 
 LIGHT_GUIDE_KEYS: dict[str, tuple[type, ...]] = {
     "thickness": (int, float),

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..config.job import Job
-from ..config.light_guide import LightGuide
+from ..config.light_guide import EDGE_FINISH, LightGuide
 from ..errors import JobError
 from ..pattern import DotSource
 from .trace import FATES, UNCOUPLED, trace
@@ -298,7 +298,7 @@ def _physics(guide: LightGuide) -> np.ndarray:
             1.0 if guide.dot_scatter == "extract" else 0.0,
             guide.reflector,
             guide.edge_reflectance,
-            1.0 if guide.edge_finish == "specular" else 0.0,
+            float(EDGE_FINISH.index(guide.edge_finish)),
             0.0,
         ]
     )

@@ -14,8 +14,10 @@ A ray is followed event by event through the slab ``0 <= z <= t`` bounded by sid
   with the albedo (Lambertian into the slab, or straight out in ``extract`` mode) or
   absorbs; between dots the escape cone leads to the reflector sheet, which returns light
   Lambertian in air, refracted back in (or absorbs it: *lost at the bottom*).
-- **Walls**: with ``edge_reflectance`` the light comes back, mirrored (``specular``) or
-  Lambertian refracted in (``diffuse``); otherwise *lost at the edges*.
+- **Walls**: total internal reflection outside the escape cone, Fresnel inside it; what
+  leaves the edge meets the cover, which returns ``edge_reflectance`` of it, mirrored
+  (``specular``) or Lambertian refracted back in (``diffuse``); the rest is *lost at the
+  edges*. An ``absorbing`` edge (black paint in optical contact) takes everything.
 - **Bulk absorption**: a free path drawn once per ray from ``exp(-a s)``, spent along the
   3-D path.
 
@@ -169,7 +171,8 @@ def trace(
         prof_mode: ``[p, 2]`` (0 table / 1 collimated, tilt in rad).
         walls: ``[m, 4]`` segments (ax, ay, bx, by), mm. normals: ``[m, 2]`` inward.
         phys: ``[9]`` thickness mm, index, absorption 1/mm, dot albedo, extract (0/1),
-            reflector, edge reflectance, specular edges (0/1), unused.
+            reflector, edge reflectance, edge finish (0 diffuse, 1 specular,
+            2 absorbing), unused.
         explicit: trace real dots (True) or the coverage map ``phi``.
         phi: ``[ny, nx]`` coverage; g: ``[4]`` its x0, y0, dx, dy, mm.
         start: ``[cells + 1]`` CSR of dots by cell; dx_, dy_: ``[n]`` centres; r2: ``[n]``
@@ -183,7 +186,7 @@ def trace(
     ex = np.empty(count, np.float32)
     ey = np.empty(count, np.float32)
     t, n, absorb, albedo = phys[0], phys[1], phys[2], phys[3]
-    extract_mode, refl, edge_r, specular = phys[4] > 0.5, phys[5], phys[6], phys[7] > 0.5
+    extract_mode, refl, edge_r, edge_mode = phys[4] > 0.5, phys[5], phys[6], int(phys[7])
     cos_c = math.sqrt(1.0 - 1.0 / (n * n))  # cosine of the critical angle
     n_emit = emit.shape[0]
     for j in nb.prange(count):
@@ -271,31 +274,40 @@ def trace(
             s_wall -= s
             if at_wall:
                 z = min(max(z + dz * path, 0.0), t)
-                state, u = _uniform(state)
-                if u >= edge_r:
+                if edge_mode == 2:  # black, in optical contact: all of it absorbed
                     end = EDGE
                     break
                 nx_, ny_ = normals[wall, 0], normals[wall, 1]
-                if specular:
-                    c = dxn * nx_ + dyn * ny_  # < 0: towards the wall
-                    dxn -= 2.0 * c * nx_
-                    dyn -= 2.0 * c * ny_
-                else:
-                    ok = False
-                    cn = sn = az = 0.0
-                    while not ok:
-                        state, ok, cn, sn, az = _lambert_in(state, n)
-                        if not ok:  # back to the tape
-                            state, u = _uniform(state)
-                            if u >= edge_r:
-                                break
-                    if not ok:
+                c = dxn * nx_ + dyn * ny_  # < 0: towards the wall
+                state, u = _uniform(state)
+                if -c > cos_c and u >= _fresnel(-c, n, 1.0):  # out through the edge
+                    state, u = _uniform(state)
+                    if u >= edge_r:
                         end = EDGE
                         break
-                    # tangent of the wall: (-ny, nx)
-                    dxn = nx_ * cn - ny_ * sn * math.cos(az)
-                    dyn = ny_ * cn + nx_ * sn * math.cos(az)
-                    dz = sn * math.sin(az)
+                    if edge_mode == 0:  # tape in air: back Lambertian, refracted in
+                        ok = False
+                        cn = sn = az = 0.0
+                        while True:
+                            state, ok, cn, sn, az = _lambert_in(state, n)
+                            if ok:
+                                break
+                            state, u = _uniform(state)  # back to the tape
+                            if u >= edge_r:
+                                break
+                        if not ok:
+                            end = EDGE
+                            break
+                        # tangent of the wall: (-ny, nx)
+                        dxn = nx_ * cn - ny_ * sn * math.cos(az)
+                        dyn = ny_ * cn + nx_ * sn * math.cos(az)
+                        dz = sn * math.sin(az)
+                    else:  # a mirror film: the way back is the mirror image
+                        dxn -= 2.0 * c * nx_
+                        dyn -= 2.0 * c * ny_
+                else:  # total internal or Fresnel reflection at the edge
+                    dxn -= 2.0 * c * nx_
+                    dyn -= 2.0 * c * ny_
                 x += nx_ * 1e-9
                 y += ny_ * 1e-9
                 new_leg = True
