@@ -201,6 +201,12 @@ def export(
 @click.option("--html", "html_path", type=click.Path(path_type=Path), help="HTML report to write.")
 @click.option("--json", "json_path", type=click.Path(path_type=Path), help="JSON report to write.")
 @click.option(
+    "--simulation",
+    "simulation_path",
+    type=click.Path(path_type=Path),
+    help="A luminance simulation ('optdot simulate --json') to show beside the JND map.",
+)
+@click.option(
     "--collision", type=POSITIVE, help="Collision distance, mm (default: dot diameter + gap)."
 )
 @click.option("--close", type=POSITIVE, help="Too-close distance, mm (default 0.060).")
@@ -226,6 +232,7 @@ def qa(
     job_path,
     html_path,
     json_path,
+    simulation_path,
     collision,
     close,
     close_gap,
@@ -262,7 +269,12 @@ def qa(
         if v is not None
     }
     job, inputs = _inputs(pattern_file, job_path)
-    check_outputs(outs, inputs)
+    check_outputs(outs, (*inputs, *((simulation_path,) if simulation_path else ())))
+    simulation = None
+    if simulation_path is not None:
+        from ..optics.outputs import read_simulation
+
+        simulation = read_simulation(simulation_path)
     if pattern_file.suffix.lower() == ".parquet":
         from ..io.dataset import open_dataset
 
@@ -274,6 +286,10 @@ def qa(
     else:
         pattern = _read_with_job(pattern_file, job, opts)
         result = run_gate(pattern, job, collision, close, close_gap=close_gap, view=looks)
+    if simulation is not None:
+        from ..quality.simulated import attach_simulation
+
+        attach_simulation(result, simulation, str(simulation_path))
     with transaction():  # both reports replaced together, or neither
         write_reports(result, outs, title=f"optdot QA: {pattern_file.name}")
     if not quiet:

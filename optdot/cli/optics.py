@@ -77,7 +77,7 @@ def simulate(job_file, pattern, rays, seed, bin_mm, spot_mm, border_mm, json_pat
     _print_simulation(sim, seconds)
     with transaction():
         if json_path is not None:
-            write_text(json_path, simulation_json(sim, job, pattern))
+            write_text(json_path, simulation_json(sim, job, pattern, dots.n if dots else None))
         if png_path is not None:
             luminance_png(png_path, sim, job.name)
 

@@ -42,8 +42,9 @@ dots scatter it. What :mod:`optdot.optics` needs to trace it:
 
 - ``cell``: size of the designed map's cells, mm (default 1).
 - ``fill_range``: ``[min, max]`` fill fraction of the designed map (default
-  ``[0.02, 0.6]``); the map is scaled so its largest fill reaches ``max`` (the most light
-  a tool-able pattern extracts).
+  ``[0, 0.4]``); the map is scaled so its largest fill reaches ``max`` (the most light
+  a tool-able pattern extracts). Above ~0.45, 46 µm dots cannot keep 60 µm apart (at
+  0.45 2 % of the dots are in closer pairs, at 0.5 nearly all).
 - ``target``: optional CSV grid of relative luminance to follow (row 0 = bottom), any
   resolution over the panel box; default uniform.
 - ``iterations``: most iterations (default 16).
@@ -152,7 +153,7 @@ class DesignParams:
     """
 
     cell: float = 1.0
-    fill_range: tuple[float, float] = (0.02, 0.6)
+    fill_range: tuple[float, float] = (0.0, 0.4)
     target: np.ndarray | None = field(default=None, compare=False)
     iterations: int = 16
     rays: int | None = None
@@ -314,7 +315,7 @@ def design_from(sec: dict[str, Any], base: Path, where: str) -> DesignParams:
 
     _typed(sec, DESIGN_KEYS, "design", where)
     cell = _number(sec, "cell", 1.0, 0.05, 100, where, "design", "in mm, ")
-    fr = sec.get("fill_range", [0.02, 0.6])
+    fr = sec.get("fill_range", [0.0, 0.4])
     if not (
         len(fr) == 2
         and all(isinstance(v, int | float) and not isinstance(v, bool) for v in fr)

@@ -20,17 +20,48 @@ from .design import Designed
 from .simulate import Simulation
 
 
-def simulation_json(sim: Simulation, job: Job, pattern: Path | None) -> str:
+def simulation_json(sim: Simulation, job: Job, pattern: Path | None, dots: int | None) -> str:
     """The figures of ``sim`` with the luminance map (JSON text)."""
     doc = {
         "job": str(job.source) if job.source else job.name,
         "pattern": str(pattern) if pattern else None,
+        "dots": dots,
         **sim.summary(),
         "box_mm": list(sim.box),
         "luminance": np.round(sim.luminance, 5).tolist(),
         "luminance_rows": "row 0 = bottom (y = ymin)",
     }
     return json.dumps(doc, indent=1, allow_nan=True) + "\n"
+
+
+def read_simulation(path: Path) -> dict:
+    """A JSON file ``simulate --json`` wrote, checked: figures, box and luminance map.
+
+    Raises:
+        JobError: one line naming the file and what is wrong with it.
+    """
+    from ..files import input_problem
+
+    problem = input_problem(path, 1 << 28)
+    if problem is not None:
+        raise JobError(f"{path}: simulation file {problem}")
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        raise JobError(f"{path}: not a simulation JSON file ({type(e).__name__})") from None
+    need = ("luminance", "box_mm", "efficiency", "uniformity_9point", "rays", "mode")
+    missing = [k for k in need if not isinstance(doc, dict) or k not in doc]
+    if missing:
+        raise JobError(f"{path}: not a simulation JSON file (no {', '.join(missing)})")
+    try:
+        lum = np.array(doc["luminance"], dtype=np.float64)
+        box = [float(v) for v in doc["box_mm"]]
+    except (TypeError, ValueError):
+        lum, box = np.zeros(0), []
+    if lum.ndim != 2 or lum.size == 0 or not np.all(np.isfinite(lum)) or len(box) != 4:
+        raise JobError(f"{path}: the luminance map or box_mm is malformed")
+    doc["luminance"] = lum
+    return doc
 
 
 def write_text(path: Path, text: str) -> None:

@@ -91,7 +91,7 @@ def write_html(
     Everything drawn comes from ``result`` (its plot arrays are bounded in size), so a
     panel of any dot count gives a report of the same size."""
     figs = _figures(result)
-    seen = _visibility_section(result)
+    seen = _visibility_section(result) + _simulation_section(result)
     verdict = result.verdict
     color = {"PASS": "#1a7f37", "FAIL": "#cf222e"}.get(verdict, "#9a6700")
     rows = "".join(
@@ -192,6 +192,49 @@ photographed test plate (README, "Visibility").</p>
 area in mm²; the commonly cited form of SEMI D31), a second opinion that ignores distance;
 blobs are regions where |JND| ≥ 0.5, bright and dark ones apart (a bright line beside a
 dark band is two blobs).</p>"""
+
+
+def _simulation_section(result: QAResult) -> str:
+    """The simulated luminance (``qa --simulation``) and its figures, or nothing."""
+    sim = result.metrics.get("simulation")
+    if not sim or "luminance" not in result.arrays:
+        return ""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Circle
+
+    lum, ext, spots = result.arrays["luminance"]
+    w, h = ext[1] - ext[0], ext[3] - ext[2]
+    fig, ax = plt.subplots(figsize=(10, max(2.5, min(8.0, 10 * h / max(w, 1e-9) + 1))))
+    span = max(0.02, min(0.5, float(np.percentile(np.abs(lum - 1), 99)) if lum.size else 0.1))
+    im = ax.imshow(lum, origin="lower", extent=ext, cmap="RdBu_r", vmin=1 - span, vmax=1 + span)
+    fig.colorbar(im, ax=ax, label="luminance / mean")
+    for sx, sy, _ in spots:
+        ax.add_patch(
+            Circle(
+                (sx, sy), 0.5 * (sim.get("spot_diameter_mm") or 0), fill=False, color="k", lw=0.8
+            )
+        )
+    ax.set(xlabel="x (mm)", ylabel="y (mm)", title="Simulated luminance (circles: 9-point spots)")
+    png = _png_base64(fig)
+    mode = "the real dots" if sim.get("mode") == "dots" else "the map's coverage"
+    other = (
+        ""
+        if sim.get("same_pattern")
+        else (f" <b>It traced another pattern ({sim.get('dots'):,} dots, not these).</b>")
+    )
+    return f"""<h2>Simulated luminance</h2>
+<p>From <code>{html.escape(str(sim.get("file")))}</code>: {sim.get("rays", 0):,} rays through
+{mode}.{other} Efficiency <b>{sim["efficiency"]:.1%}</b> ± {sim["efficiency_sigma"]:.2%};
+9-point uniformity <b>{sim["uniformity_9point"]:.3f}</b> ± {sim["uniformity_9point_sigma"]:.3f};
+luminance RMS {sim["luminance_rms"]:.2%} over the panel less {sim["border_mm"]:g} mm
+(Monte Carlo noise alone {sim["luminance_rms_noise"]:.2%}), min {sim["luminance_min"]:.3f},
+max {sim["luminance_max"]:.3f} of the mean. Compare it with the JND map above: the JND map
+judges the dots against the map, this one the map and the dots against the LEDs.</p>
+<figure><img style="max-width:100%" alt="simulated luminance" src="data:image/png;base64,{png}"></figure>
+"""
 
 
 def _jnd_figure(result: QAResult) -> str:
