@@ -72,8 +72,7 @@ def simulate(job_file, pattern, rays, seed, bin_mm, spot_mm, border_mm, json_pat
         dots = _read_with_job(pattern, job)
     t0 = time.perf_counter()
     sim = run(job, rays, seed, dots=dots, bin_mm=bin_mm, spot_mm=spot_mm, border_mm=border_mm)
-    seconds = time.perf_counter() - t0
-    sim.extra["seconds"] = round(seconds, 3)
+    seconds = time.perf_counter() - t0  # printed, not written: same seed, same bytes
     _print_simulation(sim, seconds)
     with transaction():
         if json_path is not None:

@@ -149,13 +149,17 @@ def _figures(it: int, sim: Simulation) -> dict:
 
 
 def _target(target: np.ndarray | None, ny: int, nx: int) -> np.ndarray:
-    """The target luminance on the design grid (uniform by default), mean 1."""
+    """The target luminance on the design grid (uniform by default), mean 1: the target's
+    cells cover the panel box, read as samples at their centres, bilinear between them and
+    constant beyond the outermost."""
     if target is None:
         return np.ones((ny, nx))
-    t = zoom(np.asarray(target, np.float64), (ny / target.shape[0], nx / target.shape[1]), order=1)
-    t = t[:ny, :nx]
-    if t.shape != (ny, nx):
-        t = np.pad(t, ((0, ny - t.shape[0]), (0, nx - t.shape[1])), mode="edge")
+    t = np.asarray(target, np.float64)
+    t = zoom(t, (ny / t.shape[0], nx / t.shape[1]), order=1, grid_mode=True, mode="nearest")
+    if t.shape != (ny, nx):  # zoom rounds the output shape
+        t = np.pad(
+            t[:ny, :nx], ((0, max(0, ny - t.shape[0])), (0, max(0, nx - t.shape[1]))), mode="edge"
+        )
     return np.maximum(t, 0.0) / max(float(t.mean()), 1e-300)
 
 
