@@ -84,11 +84,24 @@ def main() -> None:
     ap.add_argument("--rays", type=float, default=1e7)
     ap.add_argument("--design-rays", type=int, default=None)
     ap.add_argument("--skip-generate", action="store_true")
+    ap.add_argument(
+        "--fill",
+        type=float,
+        default=None,
+        help="no design: a uniform map of this fill (the scale run: 0.255 gives ~1e7 dots "
+        "on the notebook guide)",
+    )
     args = ap.parse_args()
     out = args.out or Path(f"/tmp/optdot-lgp-{args.guide}")
     out.mkdir(parents=True, exist_ok=True)
     print(machine())
     job = load_job(write_job(args.guide, out), need_map=False)
+    if args.fill is not None:
+        (out / "uniform.csv").write_text(f"{args.fill}\n")
+        text = (out / "job.toml").read_text()
+        (out / "map.toml").write_text(text + '\n[density]\ngrid = "uniform.csv"\n')
+        run_generate_and_simulate(args, out)
+        return
     t0 = time.perf_counter()
     got = design(
         job,
@@ -108,6 +121,11 @@ def main() -> None:
         f"coverage mode 9-point {last['uniformity_9point']:.3f}, efficiency "
         f"{last['efficiency']:.1%}"
     )
+    run_generate_and_simulate(args, out)
+
+
+def run_generate_and_simulate(args, out: Path) -> None:
+    """Generate the map's pattern (a child process) and trace it both ways."""
     dots = out / "dots.parquet"
     if not args.skip_generate or not dots.exists():
         t0 = time.perf_counter()

@@ -203,7 +203,7 @@ def simulate(
         cov = coverage or coverage_of(job)
         phi = np.ascontiguousarray(cov.grid, dtype=np.float64)
         g = np.array([cov.x0, cov.y0, cov.dx, cov.dy])
-        grid = (np.zeros(2, np.int64), np.zeros(1), np.zeros(1), np.zeros(1), np.ones(6))
+        grid = (np.zeros(2, np.int64), np.zeros(1), np.zeros(1), np.zeros(1), np.ones(7))
         explicit = False
     else:
         phi, g = np.zeros((1, 1)), np.ones(4)
@@ -368,8 +368,8 @@ def _walls(job: Job) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _dot_grid(dots: DotSource, box) -> tuple:
-    """The dots sorted into square cells at least one diameter wide (a point on a dot
-    lies in the dot's cell or a neighbour): ``(start, x, y, r2, grid)``."""
+    """The dots sorted into square cells at least one diameter wide (a point on a dot lies
+    within the largest radius of the dot's cell): ``(start, x, y, r2, grid)``."""
     xs, ys, ds = [], [], []
     for _, xy, d in dots.chunks():
         xs.append(np.asarray(xy[:, 0], np.float64))
@@ -390,4 +390,6 @@ def _dot_grid(dots: DotSource, box) -> tuple:
     start = np.zeros(nx * ny + 1, np.int64)
     np.cumsum(np.bincount(key, minlength=nx * ny), out=start[1:])
     r2 = (0.5 * d[order]) ** 2
-    return (start, x[order], y[order], r2, np.array([x0, y0, cell, cell, nx, ny], np.float64))
+    rmax = 0.5 * float(d.max()) if len(d) else 0.0
+    grid = np.array([x0, y0, cell, cell, nx, ny, rmax], np.float64)
+    return start, x[order], y[order], r2, grid

@@ -124,11 +124,14 @@ def _on_dot(x, y, explicit, phi, g, start, dx_, dy_, r2, cg, u):
         if ix < 0 or iy < 0 or ix >= phi.shape[1] or iy >= phi.shape[0]:
             return False
         return u < phi[iy, ix]
-    nx, ny = int(cg[4]), int(cg[5])
-    cx = int(math.floor((x - cg[0]) / cg[2]))
-    cy = int(math.floor((y - cg[1]) / cg[3]))
-    for jy in range(max(cy - 1, 0), min(cy + 2, ny)):
-        for jx in range(max(cx - 1, 0), min(cx + 2, nx)):
+    nx, ny, rmax = int(cg[4]), int(cg[5]), cg[6]
+    # the cells the disc of the largest dot radius around (x, y) overlaps (1 to 4)
+    ax = int(math.floor((x - rmax - cg[0]) / cg[2]))
+    bx = int(math.floor((x + rmax - cg[0]) / cg[2]))
+    ay = int(math.floor((y - rmax - cg[1]) / cg[3]))
+    by = int(math.floor((y + rmax - cg[1]) / cg[3]))
+    for jy in range(max(ay, 0), min(by + 1, ny)):
+        for jx in range(max(ax, 0), min(bx + 1, nx)):
             c = jy * nx + jx
             for k in range(start[c], start[c + 1]):
                 ddx = x - dx_[k]
@@ -176,7 +179,8 @@ def trace(
         explicit: trace real dots (True) or the coverage map ``phi``.
         phi: ``[ny, nx]`` coverage; g: ``[4]`` its x0, y0, dx, dy, mm.
         start: ``[cells + 1]`` CSR of dots by cell; dx_, dy_: ``[n]`` centres; r2: ``[n]``
-            squared radii; cg: ``[6]`` cell grid x0, y0, dx, dy, nx, ny.
+            squared radii; cg: ``[7]`` cell grid x0, y0, dx, dy, nx, ny and the largest
+            dot radius (cells at least that wide).
 
     Returns:
         ``(fate [count] int8, x [count] float32, y [count] float32)``: how and where each
