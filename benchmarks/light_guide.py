@@ -85,6 +85,11 @@ def main() -> None:
     ap.add_argument("--design-rays", type=int, default=None)
     ap.add_argument("--skip-generate", action="store_true")
     ap.add_argument(
+        "--simulate-only",
+        action="store_true",
+        help="trace the map and pattern an earlier run left in --out, nothing else",
+    )
+    ap.add_argument(
         "--fill",
         type=float,
         default=None,
@@ -95,6 +100,10 @@ def main() -> None:
     out = args.out or Path(f"/tmp/optdot-lgp-{args.guide}")
     out.mkdir(parents=True, exist_ok=True)
     print(machine())
+    if args.simulate_only:
+        args.skip_generate = True
+        run_generate_and_simulate(args, out)
+        return
     job = load_job(write_job(args.guide, out), need_map=False)
     if args.fill is not None:
         (out / "uniform.csv").write_text(f"{args.fill}\n")
