@@ -27,6 +27,7 @@ from hypothesis.extra import numpy as hnp
 
 from optdot.config.grids import load_grid, validate_grid
 from optdot.config.schema import SCHEMA, load_job
+from optdot.config.writer import toml_value
 from optdot.errors import OptdotError
 from optdot.exporters import write
 from optdot.exporters.readback import read_any
@@ -94,22 +95,6 @@ text_values = st.one_of(
     st.sampled_from(["optdot", "md", "paper", "density.csv", "o.dxf", "o.wkt", "missing.csv", ""]),
 )
 toml_values = st.one_of(floats, ints, st.booleans(), text_values, st.lists(text_values, max_size=3))
-
-
-def toml_value(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, float):
-        if math.isnan(v):
-            return "nan"
-        if math.isinf(v):
-            return "inf" if v > 0 else "-inf"
-        return repr(v)
-    if isinstance(v, int):
-        return str(v)
-    if isinstance(v, str):
-        return json.dumps(v)  # a TOML basic string
-    return "[" + ", ".join(toml_value(x) for x in v) + "]"
 
 
 @st.composite

@@ -52,7 +52,7 @@ def job_toml(raw: dict[str, Any]) -> str:
     lines: list[str] = []
     for k, v in raw.items():
         if not isinstance(v, dict):
-            lines.append(f"{_key(k)} = {_value(v)}")
+            lines.append(f"{_key(k)} = {toml_value(v)}")
     for name, sec in raw.items():
         if isinstance(sec, dict):
             _section(lines, name, sec)
@@ -68,11 +68,11 @@ def _section(lines: list[str], name: str, sec: dict[str, Any]) -> None:
         elif isinstance(v, dict):
             tables[k] = [v]
         else:
-            lines.append(f"{_key(k)} = {_value(v)}")
+            lines.append(f"{_key(k)} = {toml_value(v)}")
     for k, rows in tables.items():
         for row in rows:
             lines += ["", f"[[{name}.{_key(k)}]]"]
-            lines += [f"{_key(kk)} = {_value(vv)}" for kk, vv in row.items()]
+            lines += [f"{_key(kk)} = {toml_value(vv)}" for kk, vv in row.items()]
 
 
 def _key(k: str) -> str:
@@ -80,7 +80,8 @@ def _key(k: str) -> str:
     return k if bare else json.dumps(k)
 
 
-def _value(v: Any) -> str:
+def toml_value(v: Any) -> str:
+    """One TOML value: a string (ASCII, escaped), number, boolean or array of them."""
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, int):
@@ -92,7 +93,7 @@ def _value(v: Any) -> str:
             return "inf" if v > 0 else "-inf"
         return repr(v)
     if isinstance(v, str):
-        return json.dumps(v, ensure_ascii=False)
+        return json.dumps(v)  # a TOML basic string
     if isinstance(v, list | tuple):
-        return "[" + ", ".join(_value(x) for x in v) + "]"
+        return "[" + ", ".join(toml_value(x) for x in v) + "]"
     raise TypeError(f"cannot write {type(v).__name__} into a job")
