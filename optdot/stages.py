@@ -118,14 +118,11 @@ def relax(
         frozen: ``[n]`` bool, dots held still (a tile's neighbours).
         progress: ``progress(iteration, value)``; a true return halts.
         formulation: overrides the job's (benchmarks try variants).
-        lowpass: run the formulation's long-wavelength correction passes
-            (:func:`_lowpass`) after the relaxation; its hard-core iterations run either
-            way. Tiles do not run the passes: corrected tile by tile, with the neighbours
-            held, the error piles up on the seams (LED sample tiled: seam bands -1.1 %
-            coverage, 17 JND at a tile corner); a correction across tiles needs the whole
-            panel's coverage at once. The hard-core iterations are local and do run in
-            tiles: they bring a seam's share of dots in pairs under 60 µm from 7 % to under
-            1 % (the interior's), `benchmarks/seams.py`.
+        lowpass: run the formulation's long-wavelength correction and its hard-core
+            iterations (:func:`_lowpass`) after the relaxation. Tiles relax without
+            (False): the correction runs once their seams are relaxed, blended over
+            windows that span the seams (:func:`correction_field`), and the hard core in
+            their guarantee task (:func:`hard_core`).
     """
     opt = job.optimize
     rho = job.density.at(xy0)
@@ -147,19 +144,9 @@ def relax(
     diameters = rule_diameters(job, xy0)
     phantom = None
     if form.phantoms and len(xy0):
-        n = len(xy0)
-        pxy, prho, pd = phantoms_near(job, form, xy0)
-        xy0 = np.concatenate([xy0, pxy])
-        rho = np.concatenate([rho, prho])
-        start = None if start is None else np.concatenate([start, pxy])
-        # phantoms stay where they were thrown: free, they would yield to the real dots'
-        # hard core and let the first row settle against the wall again
-        frozen = np.zeros(n, bool) if frozen is None else frozen
-        frozen = np.concatenate([frozen, np.ones(len(pxy), bool)])
-        if diameters is not None:
-            diameters = np.concatenate([diameters, pd])
-        phantom = np.zeros(len(xy0), bool)
-        phantom[n:] = True
+        xy0, rho, start, frozen, diameters, phantom = _with_phantoms(
+            job, form, xy0, rho, start, frozen, diameters
+        )
     res = relax_staged(
         problem_of(job),
         form,
@@ -172,20 +159,111 @@ def relax(
         diameters=diameters,
         phantom=phantom,
     )
-    if (form.lowpass or form.lowpass_core_iter) and settings_for(job).max_iter > 0:
-        res = _lowpass(job, form, res, xy0, rho, frozen, diameters, phantom, lowpass)
+    if lowpass and (form.lowpass or form.lowpass_core_iter) and settings_for(job).max_iter > 0:
+        res = _lowpass(job, form, res, xy0, rho, frozen, diameters, phantom)
     if phantom is not None:
         res.xy = np.ascontiguousarray(res.xy[~phantom])
     return res
 
 
-def _lowpass(job, form, res, xy0, rho, frozen, diameters, phantom, passes=True) -> RelaxResult:
+def correction_field(
+    job: Job,
+    xy0: np.ndarray,
+    xy: np.ndarray,
+    window: Rect,
+    formulation: Formulation | None = None,
+) -> np.ndarray:
+    """One pass of the long-wavelength correction (:func:`_passes`) solved over
+    ``window`` ``(x0, y0, x1, y1)`` mm: ``[n, 2]`` displacement of the dots at ``xy``
+    (containers ``xy0``), mm; zero when the formulation has no correction. Every dot in
+    the window and within a grid cell around it must be given (a tile's neighbours'
+    too): the tiles blend the fields of overlapping windows
+    (:func:`optdot.tiling.tasks.correct_tile`)."""
+    form = formulation_for(job) if formulation is None else formulation
+    if job.optimize.method == "md" or not form.lowpass or not len(xy0):
+        return np.zeros_like(xy)
+    if settings_for(job).max_iter == 0:
+        return np.zeros_like(xy)
+    area, spacing = _areas(job, job.density.at(xy0), rule_diameters(job, xy0))
+    return displacement(xy, area, job.density, spacing, form.lowpass_sigma, window, job.domain)
+
+
+def _areas(job: Job, rho: np.ndarray, diameters: np.ndarray | None) -> tuple[np.ndarray, float]:
+    """``([n] dot areas mm², median hexagonal spacing mm)`` of dots at fills ``rho``."""
+    d = np.broadcast_to(job.diameter if diameters is None else diameters, (len(rho),))
+    area = np.pi * 0.25 * d**2
+    return area, float(np.median(2.0 * hex_radius(rho, 0.5 * d)))
+
+
+def hard_core(
+    job: Job,
+    xy0: np.ndarray,
+    xy: np.ndarray,
+    held: tuple[np.ndarray, np.ndarray | float] | None = None,
+    formulation: Formulation | None = None,
+) -> np.ndarray:
+    """The formulation's hard-core iterations (see :func:`_lowpass`) for a tile's dots
+    after its correction, with its neighbours' dots held: ``[n, 2]`` new positions, mm.
+
+    Args:
+        held: ``(positions [h, 2] mm, diameters [h] or one, mm)`` of the neighbours (final
+            for the tiles settled before, corrected for the others).
+    """
+    form = formulation_for(job) if formulation is None else formulation
+    if job.optimize.method == "md" or not form.lowpass_core_iter or not len(xy0):
+        return xy
+    if settings_for(job).max_iter == 0:
+        return xy
+    n = len(xy0)
+    diameters = rule_diameters(job, xy0)
+    frozen = None
+    if held is not None and len(held[0]):
+        hxy = np.asarray(held[0], np.float64)
+        xy0 = np.concatenate([xy0, hxy])
+        xy = np.concatenate([xy, hxy])
+        frozen = np.zeros(len(xy0), bool)
+        frozen[n:] = True
+        if diameters is not None:
+            diameters = np.concatenate([diameters, np.broadcast_to(held[1], (len(hxy),))])
+    rho = job.density.at(xy0)
+    phantom = None
+    if form.phantoms:
+        xy0, rho, start, frozen, diameters, phantom = _with_phantoms(
+            job, form, xy0, rho, xy, frozen, diameters
+        )
+        xy = start
+    res = RelaxResult(np.ascontiguousarray(xy), np.nan, 0, 0, 0, "", [])
+    res = _core(job, form, res, xy0, rho, frozen, diameters, phantom)
+    return np.ascontiguousarray(res.xy[:n])
+
+
+def _with_phantoms(job, form, xy0, rho, start, frozen, diameters):
+    """The phantom dots near the walls appended (frozen): ``(xy0, rho, start, frozen,
+    diameters, phantom mask)``."""
+    n = len(xy0)
+    pxy, prho, pd = phantoms_near(job, form, xy0)
+    xy0 = np.concatenate([xy0, pxy])
+    rho = np.concatenate([rho, prho])
+    start = None if start is None else np.concatenate([start, pxy])
+    # phantoms stay where they were thrown: free, they would yield to the real dots'
+    # hard core and let the first row settle against the wall again
+    frozen = np.zeros(n, bool) if frozen is None else frozen
+    frozen = np.concatenate([frozen, np.ones(len(pxy), bool)])
+    if diameters is not None:
+        diameters = np.concatenate([diameters, pd])
+    phantom = np.zeros(len(xy0), bool)
+    phantom[n:] = True
+    return xy0, rho, start, frozen, diameters, phantom
+
+
+def _lowpass(job, form, res, xy0, rho, frozen, diameters, phantom) -> RelaxResult:
     """The long-wavelength correction (:mod:`optdot.relax.lowpass`) after the
     relaxation, then the hard core alone.
 
     ``form.lowpass`` times: every real dot's coverage error over the window of the real
     dots, the movers (not phantoms, not held) and their containers moved along the
-    field, then ``form.lowpass_iter`` L-BFGS iterations (default none). The relaxation
+    field, then
+    ``form.lowpass_iter`` L-BFGS iterations (default none). The relaxation
     comes first because it makes long-wavelength grain of its own: 30 more iterations
     of it after the correction bring half the grain back, and even 2 leave S(k a 0.3-1)
     at 0.00034 where none leaves 0.00005 (uniform 0.20 map). Last,
@@ -196,17 +274,27 @@ def _lowpass(job, form, res, xy0, rho, frozen, diameters, phantom, passes=True) 
     pairs under 60 µm after the relaxation, 7,357 after a correction, 541 after 10 core
     iterations) without bringing the grain back. Measured in BENCHMARKS.md (issue 24).
     """
+    res, xy0 = _passes(job, form, res, xy0, rho, frozen, diameters, phantom)
+    res = _core(job, form, res, xy0, rho, frozen, diameters, phantom)
+    if form.lowpass or form.lowpass_core_iter:
+        res.message += (
+            f"; then {form.lowpass} long-wavelength passes ({form.lowpass_iter} iterations "
+            f"each) and {form.lowpass_core_iter} hard-core iterations"
+        )
+    return res
+
+
+def _passes(job, form, res, xy0, rho, frozen, diameters, phantom):
+    """The correction passes of :func:`_lowpass`: ``(result, containers moved)``."""
     real = np.ones(len(xy0), bool) if phantom is None else ~phantom
     movers = real if frozen is None else real & ~frozen
-    d = np.broadcast_to(job.diameter if diameters is None else diameters, (len(xy0),))
-    area = np.pi * 0.25 * d[real] ** 2
-    spacing = float(np.median(2.0 * hex_radius(rho[real], 0.5 * d[real])))
+    area, spacing = _areas(job, rho[real], None if diameters is None else diameters[real])
     # the dots' box grown by a spacing (clipped to the map's): the target must cover the
     # strip between the outermost centres and the walls, whose coverage they carry
     lo, hi = xy0[real].min(axis=0) - spacing, xy0[real].max(axis=0) + spacing
     window = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
     settings = dataclasses.replace(settings_for(job), max_iter=form.lowpass_iter)
-    for _ in range(form.lowpass if passes else 0):
+    for _ in range(form.lowpass):
         u = np.zeros_like(xy0)
         shift = displacement(
             res.xy[real], area, job.density, spacing, form.lowpass_sigma, window, job.domain
@@ -221,25 +309,25 @@ def _lowpass(job, form, res, xy0, rho, frozen, diameters, phantom, passes=True) 
                 diameters=diameters, phantom=phantom,
             )  # fmt: skip
             res = _after(res, more)
-    if form.lowpass_core_iter:
-        # the hard core alone: soft circles too small to meet, containers as they were
-        shrink = 1e-3
-        core_only = dataclasses.replace(
-            form, radius_factor=form.radius_factor * shrink,
-            container_factor=form.container_factor / shrink,
-        )  # fmt: skip
-        more = relax_staged(
-            problem_of(job), core_only, xy0, rho,
-            dataclasses.replace(settings, max_iter=form.lowpass_core_iter), None,
-            start=res.xy, frozen=frozen, diameters=diameters, phantom=phantom,
-        )  # fmt: skip
-        res = _after(res, more)
-    if form.lowpass or form.lowpass_core_iter:
-        res.message += (
-            f"; then {form.lowpass} long-wavelength passes ({form.lowpass_iter} iterations "
-            f"each) and {form.lowpass_core_iter} hard-core iterations"
-        )
-    return res
+    return res, xy0
+
+
+def _core(job, form, res, xy0, rho, frozen, diameters, phantom) -> RelaxResult:
+    """The hard-core iterations of :func:`_lowpass`: soft circles too small to meet,
+    containers as they were."""
+    if not form.lowpass_core_iter:
+        return res
+    shrink = 1e-3
+    core_only = dataclasses.replace(
+        form, radius_factor=form.radius_factor * shrink,
+        container_factor=form.container_factor / shrink,
+    )  # fmt: skip
+    settings = dataclasses.replace(settings_for(job), max_iter=form.lowpass_core_iter)
+    more = relax_staged(
+        problem_of(job), core_only, xy0, rho, settings, None, start=res.xy, frozen=frozen,
+        diameters=diameters, phantom=phantom,
+    )  # fmt: skip
+    return _after(res, more)
 
 
 def _after(res: RelaxResult, more: RelaxResult) -> RelaxResult:

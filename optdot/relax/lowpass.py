@@ -47,19 +47,25 @@ def grid_step(density: DensityMap, spacing: float) -> float:
 def _deposit(xy: np.ndarray, weight: np.ndarray, x0: float, y0: float, h, shape):
     """Cloud-in-cell deposit of ``weight`` (``[n]``) at ``xy`` on a ``shape`` grid of
     step ``h = (hx, hy)`` from ``(x0, y0)`` (cell centres at ``x0 + (i + 0.5) hx``),
-    ``[ny, nx]``."""
+    ``[ny, nx]``. A dot inside the grid's box keeps all its weight (what falls past a
+    border cell's centre lands in that cell: at a wall, nothing is lost); a dot outside
+    it (a neighbour tile's, around a tile's window) gives only the share that falls in."""
     ny, nx = shape
     gx = (xy[:, 0] - x0) / h[0] - 0.5
     gy = (xy[:, 1] - y0) / h[1] - 0.5
     ix = np.floor(gx).astype(np.int64)
     iy = np.floor(gy).astype(np.int64)
     fx, fy = gx - ix, gy - iy
+    inside = (gx >= -0.5) & (gx < nx - 0.5) & (gy >= -0.5) & (gy < ny - 0.5)
     out = np.zeros(ny * nx)
     for dx, wx in ((0, 1.0 - fx), (1, fx)):
         for dy, wy in ((0, 1.0 - fy), (1, fy)):
-            cx = np.clip(ix + dx, 0, nx - 1)
-            cy = np.clip(iy + dy, 0, ny - 1)
-            out += np.bincount(cy * nx + cx, weight * wx * wy, minlength=ny * nx)
+            cx, cy = ix + dx, iy + dy
+            keep = inside | ((cx >= 0) & (cx < nx) & (cy >= 0) & (cy < ny))
+            cx = np.clip(cx[keep], 0, nx - 1)
+            cy = np.clip(cy[keep], 0, ny - 1)
+            w = (weight * wx * wy)[keep]
+            out += np.bincount(cy * nx + cx, w, minlength=ny * nx)
     return out.reshape(ny, nx)
 
 
@@ -134,8 +140,9 @@ def displacement(
         xy: ``[n, 2]`` dot centres, mm. area: ``[n]`` dot areas, mm².
         spacing: median dot spacing, mm.
         sigma_share: the error's blur, in spacings.
-        window: the part of the map the dots cover (a tile and its held neighbours;
-            default the map's box); nothing flows across its border.
+        window: the part of the map to correct (default the map's box); nothing flows
+            across its border. Every dot in it must be given; dots given outside it count
+            with the share of their cloud that falls in.
         domain: the panel (an outline: the map counts only inside it).
 
     The displacement is capped at :data:`MAX_SHIFT` spacings: the grain it removes needs

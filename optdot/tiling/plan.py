@@ -25,6 +25,10 @@ DEFAULT_TILE_DOTS = 150_000
 #: Phase-2 band half-width and frozen shell, in units of the largest hexagonal spacing.
 BAND_SPACINGS = 6.0
 HALO_SPACINGS = 2.0
+#: Margin of the long-wavelength correction's windows beyond their tile-sized core, in
+#: hexagonal spacings at the lowest fill (at most half a tile less the halo, so a tile's
+#: neighbours hold every dot of the windows it blends).
+MARGIN_SPACINGS = 30
 
 
 @dataclass(frozen=True)
@@ -38,6 +42,8 @@ class TilePlan:
         band: half-width of the strip along each inner tile border that phase 2 relaxes
             again, mm.
         halo: width of the frozen dots kept around what a task moves, mm.
+        margin: how far beyond its tile the long-wavelength correction of a tile reads
+            its neighbours' dots, mm (:func:`optdot.tiling.tasks.correct_tile`).
     """
 
     xs: np.ndarray
@@ -45,6 +51,7 @@ class TilePlan:
     quotas: np.ndarray
     band: float
     halo: float
+    margin: float = 0.0
 
     @property
     def nx(self) -> int:
@@ -174,7 +181,10 @@ def plan_tiles(job: Job, side: float | None = None, tile_dots: int = DEFAULT_TIL
             f"{need:.3g} mm ({2 * (BAND_SPACINGS + HALO_SPACINGS):g} hexagonal spacings of "
             f"{spacing * 1e3:.4g} µm); use larger tiles"
         )
-    return TilePlan(xs=xs, ys=ys, quotas=tile_quotas(job, xs, ys), band=band, halo=halo)
+    margin = max(0.0, min(MARGIN_SPACINGS * spacing, 0.5 * smallest - halo))
+    return TilePlan(
+        xs=xs, ys=ys, quotas=tile_quotas(job, xs, ys), band=band, halo=halo, margin=margin
+    )
 
 
 def tile_integrals(job: Job, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:

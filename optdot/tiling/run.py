@@ -1,9 +1,9 @@
 """Run the tile tasks of :mod:`optdot.tiling.tasks` as one task graph, in process or on Dask.
 
-Tasks are submitted in waves along the panel's rows (relax row j, its seams, its merge,
-then the guarantee pass of the rows behind it), which is also Dask's priority order, so
-only a few rows of tiles are held at once: memory is bounded by the tile size and the
-panel's width, not by the panel. Finished tiles are handed to ``sink`` one at a time, in
+Tasks are submitted in waves along the panel's rows (relax row j, its seams, its merge, its
+correction, then the guarantee pass of the rows behind it), which is also Dask's priority
+order, so only a few rows of tiles are held at once: memory is bounded by the tile size and
+the panel's width, not by the panel. Finished tiles are handed to ``sink`` one at a time, in
 the order they finish; what the sink writes depends only on the tile, so the output is the
 same whatever the order.
 """
@@ -27,6 +27,7 @@ from .tasks import (
     FinalDots,
     TileDots,
     apply_seams,
+    correct_tile,
     held_dots,
     initial_task,
     legalize_tile,
@@ -41,7 +42,7 @@ Sink = Callable[[tuple[int, int], np.ndarray, Any], None]
 TileProgress = Callable[[float, str], None]
 
 #: Share of a tile's time each kind of task takes (for the ETA), measured at 150k dots.
-_WEIGHTS = {"relax": 1.0, "seams": 0.25, "merge": 0.0, "legal": 0.08}
+_WEIGHTS = {"relax": 1.0, "seams": 0.25, "merge": 0.0, "correct": 0.2, "legal": 0.08}
 
 
 def _run(fn: Callable, *args: Any) -> Any:
@@ -114,19 +115,24 @@ class TiledRun:
 
 def needed(plan: TilePlan, todo: set[tuple[int, int]]) -> dict[str, set[tuple[int, int]]]:
     """The tasks that tiles ``todo`` need, when every other tile is finished (a resumed
-    run): ``{"initial", "relax", "seams", "merge", "legal": tiles or grid points}``.
+    run): ``{"initial", "relax", "seams", "merge", "correct", "legal": tiles or grid
+    points}``.
 
     A tile's guarantee pass holds its earlier-colour neighbours' final dots (read from
-    the finished parts when finished) and its later-colour neighbours' merged dots (made
-    again: the uninterrupted run held those too); merged dots need the tile's relaxation
-    and its corners' seams, a seam square needs the relaxation of the tiles meeting
-    there, a relaxation the initial dots of the tiles around it. Every task is a pure
-    function of the job and its inputs, so what is made again is what was made before.
+    the finished parts when finished) and its later-colour neighbours' corrected dots
+    (made again: the uninterrupted run held those too); a correction needs the merged
+    dots of its tile and the tiles around it, merged dots the tile's relaxation and its
+    corners' seams, a seam square the relaxation of the tiles meeting there, a relaxation
+    the initial dots of the tiles around it. Every task is a pure function of the job and
+    its inputs, so what is made again is what was made before.
     """
-    merge = set(todo)
+    correct = set(todo)
     for t in todo:
         c = plan.colour(*t)
-        merge |= {u for u in plan.neighbours(*t) if plan.colour(*u) > c}
+        correct |= {u for u in plan.neighbours(*t) if plan.colour(*u) > c}
+    merge = set(correct)
+    for t in correct:
+        merge |= set(plan.neighbours(*t))
     corner_set = set(plan.corners())
     seams = {(i + a, j + b) for i, j in merge for b in (0, 1) for a in (0, 1)} & corner_set
     relax = set(merge)
@@ -135,7 +141,14 @@ def needed(plan: TilePlan, todo: set[tuple[int, int]]) -> dict[str, set[tuple[in
     initial = set(relax)
     for t in relax:
         initial |= set(plan.neighbours(*t))
-    return {"initial": initial, "relax": relax, "seams": seams, "merge": merge, "legal": set(todo)}
+    return {
+        "initial": initial,
+        "relax": relax,
+        "seams": seams,
+        "merge": merge,
+        "correct": correct,
+        "legal": set(todo),
+    }
 
 
 def run_tiles(
@@ -173,12 +186,13 @@ def run_tiles(
         schedule.append((j + 1, 1, j, 0, (i, j)))  # seams of corner row j: relax j-1, j
     for i, j in tiles:
         schedule.append((j + 2, 2, j, 0, (i, j)))  # merge: needs corners j, j+1
+        schedule.append((j + 3, 3, j, 0, (i, j)))  # correct: needs merged j-1..j+1
         c = plan.colour(i, j)
-        schedule.append((j + 3 + (j % 2), 3 + (j % 2), j, c, (i, j)))  # guarantee
+        schedule.append((j + 4 + (j % 2), 4 + (j % 2), j, c, (i, j)))  # guarantee
     finished = finished or {}
     if finished:
         need = needed(plan, set(tiles) - set(finished))
-        kinds = {-1: "initial", 0: "relax", 1: "seams", 2: "merge"}
+        kinds = {-1: "initial", 0: "relax", 1: "seams", 2: "merge", 3: "correct"}
         schedule = [
             e
             for e in schedule
@@ -197,6 +211,7 @@ def run_tiles(
     relaxed: dict = {}
     seams: dict = {}
     merged: dict = {}
+    corrected: dict = {}
     final: dict = {}
     kind_of: dict[Any, str] = {}
     for _, kind, _, _, (i, j) in schedule:
@@ -214,25 +229,31 @@ def run_tiles(
         elif kind == 2:
             results = [seams[c] for c in corners_of[i, j]]
             merged[i, j] = executor.submit("merge", key, apply_seams, relaxed[i, j], results)
+        elif kind == 3:
+            around = [merged[u] for u in plan.neighbours(i, j)]
+            h = executor.submit("correct", key, correct_tile, jobf, plan, merged[i, j], *around)
+            corrected[i, j] = h
+            kind_of[id(h)] = "correct"
         else:
             c = plan.colour(i, j)
             around = [
-                (final[u] if u in final else loaded(u)) if plan.colour(*u) < c else merged[u]
+                (final[u] if u in final else loaded(u)) if plan.colour(*u) < c else corrected[u]
                 for u in plan.neighbours(i, j)
             ]
-            h = executor.submit("legal", key, _legal, jobf, plan, merged[i, j], *around)
+            h = executor.submit("legal", key, _legal, jobf, plan, corrected[i, j], *around)
             final[i, j] = h
             kind_of[id(h)] = "legal"
     total = sum(_WEIGHTS.values()) * max(len(tiles) - len(finished), 1)
     done = 0.0
     counts: dict[tuple[int, int], int] = {}
     tile_of = {id(h): t for t, h in final.items()}
-    watched = list(relaxed.values()) + list(final.values())
+    watched = list(relaxed.values()) + list(corrected.values()) + list(final.values())
     (
         initial.clear(),
         relaxed.clear(),
         seams.clear(),
         merged.clear(),
+        corrected.clear(),
     )  # the graph holds what it still needs
     n_done, n_relaxed = len(finished), 0
     held.clear()
