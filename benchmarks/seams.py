@@ -11,9 +11,9 @@ is the number of dots whose centres lie in it over the map's integral over the b
 raster of 0.01 mm pixels binned the same way), minus 1; at 0.05 mm bands a row of dots
 standing on the seam shows as a peak. ψ6 is |ψ6| over the 6 nearest neighbours; close =
 share of dots in a pair closer than 60 µm; nn = nearest-neighbour distance over the local
-hexagonal spacing. The single process runs the long-wavelength correction and its
-hard-core iterations and tiles do not (yet): compare each column's shape along the rows
-(seam against far from it), not tiled against one.
+hexagonal spacing. The single process runs two passes of the long-wavelength correction,
+tiles one (blended across their borders): compare each column's shape along the rows
+(seam against far from it) first, tiled against one second.
 """
 
 from __future__ import annotations
