@@ -24,7 +24,7 @@ from .config.job import Job
 from .relax.circles import hex_radius
 from .relax.formulation import Formulation, Problem, formulation_of
 from .relax.legalize import LegalizeResult, make_legal
-from .relax.lowpass import displacement
+from .relax.lowpass import MAX_SHIFT, RegionError, displacement, grid_step
 from .relax.md import MDForce, md_relax
 from .relax.optdot import Progress, RelaxSettings, relax_staged
 from .relax.resize import fit_sizes, reach
@@ -121,7 +121,7 @@ def relax(
         lowpass: run the formulation's long-wavelength correction and its hard-core
             iterations (:func:`_lowpass`) after the relaxation. Tiles relax without
             (False): the correction runs once their seams are relaxed, blended over
-            windows that span the seams (:func:`correction_field`), and the hard core in
+            windows that span the seams (:func:`correction_region`), and the hard core in
             their guarantee task (:func:`hard_core`).
     """
     opt = job.optimize
@@ -166,26 +166,58 @@ def relax(
     return res
 
 
-def correction_field(
-    job: Job,
-    xy0: np.ndarray,
-    xy: np.ndarray,
-    window: Rect,
-    formulation: Formulation | None = None,
-) -> np.ndarray:
-    """One pass of the long-wavelength correction (:func:`_passes`) solved over
-    ``window`` ``(x0, y0, x1, y1)`` mm: ``[n, 2]`` displacement of the dots at ``xy``
-    (containers ``xy0``), mm; zero when the formulation has no correction. Every dot in
-    the window and within a grid cell around it must be given (a tile's neighbours'
-    too): the tiles blend the fields of overlapping windows
-    (:func:`optdot.tiling.tasks.correct_tile`)."""
+def correction_region(
+    job: Job, xy0: np.ndarray, xy: np.ndarray, region: Rect, formulation: Formulation | None = None
+):
+    """The coverage error a tile's correction solves, over ``region`` (the windows it
+    blends grown by :func:`correction_pad`, :func:`optdot.tiling.tasks.correct_tile`) on
+    the lattice every tile shares: ``(RegionError, cap mm)``, or None when the formulation
+    has no correction. Every dot in the region and within a lattice cell around it must be
+    given."""
     form = formulation_for(job) if formulation is None else formulation
     if job.optimize.method == "md" or not form.lowpass or not len(xy0):
-        return np.zeros_like(xy)
+        return None
     if settings_for(job).max_iter == 0:
-        return np.zeros_like(xy)
-    area, spacing = _areas(job, job.density.at(xy0), rule_diameters(job, xy0))
-    return displacement(xy, area, job.density, spacing, form.lowpass_sigma, window, job.domain)
+        return None
+    area, _ = _areas(job, job.density.at(xy0), rule_diameters(job, xy0))
+    spacing = job_spacing(job)
+    h = max(grid_step(job.density, spacing), TILE_GRID * spacing)
+    err = RegionError(xy, area, job.density, h, form.lowpass_sigma * spacing, region, job.domain)
+    return err, MAX_SHIFT * spacing
+
+
+#: Lattice step of the tiles' correction, in spacings (one process: half a spacing). The
+#: grain it removes lies at 6 spacings and longer (S(k a 0.3-1)); a spacing resolves it
+#: and takes a quarter of the cells.
+TILE_GRID = 0.5
+
+
+def correction_pad(job: Job, formulation: Formulation | None = None) -> float:
+    """How far beyond its windows a tile's correction deposits and blurs, mm (4 blur
+    sigmas and 2 lattice cells): a window's error is then the same in every tile that
+    solves it, whatever lies past its edge in the tile's region. At most 3.8 spacings."""
+    form = formulation_for(job) if formulation is None else formulation
+    spacing = job_spacing(job)
+    h = max(grid_step(job.density, spacing), TILE_GRID * spacing)
+    return 4.0 * form.lowpass_sigma * spacing + 2.0 * h
+
+
+@lru_cache(maxsize=8)
+def job_spacing(job: Job) -> float:
+    """The map's median hexagonal spacing over its non-zero cells, weighted by dot
+    count, mm: one figure for every tile (their lattice and blur must agree)."""
+    g = job.density.grid
+    d = job.cell_diameters
+    live = g > 0
+    if not live.any():
+        return float(job.diameter)
+    r0 = 0.5 * (job.diameter if d is None else d[live])
+    a = np.broadcast_to(np.pi * r0**2, (int(live.sum()),))
+    spacing = 2.0 * hex_radius(g[live], r0)
+    count = g[live] / a
+    order = np.argsort(spacing)
+    cum = np.cumsum(count[order])
+    return float(spacing[order][np.searchsorted(cum, 0.5 * cum[-1])])
 
 
 def _areas(job: Job, rho: np.ndarray, diameters: np.ndarray | None) -> tuple[np.ndarray, float]:

@@ -70,14 +70,13 @@ def test_a_correction_solved_tile_by_tile_is_seen_on_the_seams(led, monkeypatch)
             return dots
         from optdot.spatial.window import grown, in_rect
 
-        x0, y0, x1, y1 = job_.box
-        b = grown(plan_.rect(*dots.tile), plan_.margin)
-        window = (max(b[0], x0), max(b[1], y0), min(b[2], x1), min(b[3], y1))
-        near = [in_rect(a.xy, grown(window, plan_.halo)) for a in around]
+        window = grown(plan_.rect(*dots.tile), plan_.margin)
+        region = grown(window, stages.correction_pad(job_))
+        near = [in_rect(a.xy, grown(region, plan_.halo)) for a in around]
         xy0 = np.concatenate([dots.xy0] + [a.xy0[k] for a, k in zip(around, near, strict=True)])
         xy = np.concatenate([dots.xy] + [a.xy[k] for a, k in zip(around, near, strict=True)])
-        u = stages.correction_field(job_, xy0, xy, window)[:n]
-        return tasks.TileDots(dots.tile, dots.xy0, dots.xy + u)
+        err, cap = stages.correction_region(job_, xy0, xy, region)
+        return tasks.TileDots(dots.tile, dots.xy0, dots.xy + err.field(window, dots.xy, cap))
 
     monkeypatch.setattr(tiling_run, "correct_tile", own_window_only)
     got = _profile(job, plan, _tiled(job, plan))

@@ -167,3 +167,70 @@ def displacement(
     size = np.hypot(u[:, 0], u[:, 1])
     cap = MAX_SHIFT * spacing
     return u * np.minimum(1.0, cap / np.maximum(size, 1e-300))[:, None]
+
+
+class RegionError:
+    """The blurred relative coverage error over a region of a lattice shared by every tile
+    (origin the map's corner, step ``h``), for the windows a tile blends
+    (:func:`optdot.tiling.tasks.correct_tile`): deposited, resampled and blurred once for
+    the region, then solved window by window (:meth:`field`). Two tiles that solve the same
+    window snap it to the same lattice lines and see the same dots there, so they get the
+    same field.
+
+    Attributes:
+        i0, j0: lattice index of the region's first column and row.
+        h: lattice step, mm. x0, y0: the lattice's origin, mm.
+        e: ``[ny, nx]`` relative error (0 where the map is 0), not mean-corrected.
+        live: ``[ny, nx]`` bool, where the map is not zero.
+    """
+
+    def __init__(
+        self, xy: np.ndarray, area: np.ndarray, density: DensityMap, h: float, sigma: float,
+        region: Window, domain: Domain | None = None,
+    ) -> None:  # fmt: skip
+        self.h, self.x0, self.y0 = h, density.x0, density.y0
+        mx = int(math.ceil(density.width / h - 1e-9))
+        my = int(math.ceil(density.height / h - 1e-9))
+        self.i0 = max(0, int(math.floor((region[0] - self.x0) / h)))
+        self.j0 = max(0, int(math.floor((region[1] - self.y0) / h)))
+        i1 = min(mx, int(math.ceil((region[2] - self.x0) / h)))
+        j1 = min(my, int(math.ceil((region[3] - self.y0) / h)))
+        nx, ny = max(1, i1 - self.i0), max(1, j1 - self.j0)
+        ox, oy = self.x0 + self.i0 * h, self.y0 + self.j0 * h
+        target = density.resampled(ox, oy, h, h, nx, ny)
+        if domain is not None and not domain.rectangle:
+            target = target * domain.cell_fractions(ox, oy, h, h, nx, ny)
+        got = _deposit(xy, area, ox, oy, (h, h), (ny, nx)) / (h * h)
+        s = sigma / h
+        gt = gaussian_filter(target, s, mode="constant")
+        gg = gaussian_filter(got, s, mode="constant")
+        self.live = (target > 0) & (gt > 0)
+        self.e = np.where(self.live, (gg - gt) / np.where(self.live, gt, 1.0), 0.0)
+
+    def field(self, window: Window, at: np.ndarray, cap: float) -> np.ndarray:
+        """``[m, 2]`` displacement (mm, capped at ``cap``) at the points ``at`` from the
+        Neumann solution over ``window`` snapped to the lattice (inside the region)."""
+        h = self.h
+        a = max(0, int(round((window[0] - self.x0) / h)) - self.i0)
+        b = max(0, int(round((window[1] - self.y0) / h)) - self.j0)
+        c = min(self.e.shape[1], int(round((window[2] - self.x0) / h)) - self.i0)
+        d = min(self.e.shape[0], int(round((window[3] - self.y0) / h)) - self.j0)
+        e = self.e[b:d, a:c].copy()
+        live = self.live[b:d, a:c]
+        if e.shape[0] < 2 or e.shape[1] < 2 or not live.any():
+            return np.zeros((len(at), 2))
+        e[live] -= e[live].mean()
+        # zeros up to lengths the cosine transform is fast at (a few cells past the far
+        # sides, where nothing is read): the same for every tile that solves this window
+        fy, fx = next_fast_len(e.shape[0], real=True), next_fast_len(e.shape[1], real=True)
+        e = np.pad(e, ((0, fy - e.shape[0]), (0, fx - e.shape[1])))
+        phi = neumann_potential(e, h, h)
+        uy, ux = np.gradient(phi, h, h)
+        ox, oy = self.x0 + (self.i0 + a) * h, self.y0 + (self.j0 + b) * h
+        row = (at[:, 1] - oy) / h - 0.5
+        col = (at[:, 0] - ox) / h - 0.5
+        u = np.empty((len(at), 2))
+        u[:, 0] = map_coordinates(ux, [row, col], order=1, mode="nearest")
+        u[:, 1] = map_coordinates(uy, [row, col], order=1, mode="nearest")
+        size = np.hypot(u[:, 0], u[:, 1])
+        return u * np.minimum(1.0, cap / np.maximum(size, 1e-300))[:, None]

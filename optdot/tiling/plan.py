@@ -26,9 +26,9 @@ DEFAULT_TILE_DOTS = 150_000
 BAND_SPACINGS = 6.0
 HALO_SPACINGS = 2.0
 #: Margin of the long-wavelength correction's windows beyond their tile-sized core, in
-#: hexagonal spacings at the lowest fill (at most half a tile less the halo, so a tile's
-#: neighbours hold every dot of the windows it blends).
-MARGIN_SPACINGS = 30
+#: hexagonal spacings at the lowest fill (at most half a tile less the halo and the
+#: correction's pad of 4 spacings, so a tile's neighbours hold every dot it reads).
+MARGIN_SPACINGS = 10
 
 
 @dataclass(frozen=True)
@@ -181,7 +181,7 @@ def plan_tiles(job: Job, side: float | None = None, tile_dots: int = DEFAULT_TIL
             f"{need:.3g} mm ({2 * (BAND_SPACINGS + HALO_SPACINGS):g} hexagonal spacings of "
             f"{spacing * 1e3:.4g} µm); use larger tiles"
         )
-    margin = max(0.0, min(MARGIN_SPACINGS * spacing, 0.5 * smallest - halo))
+    margin = max(0.0, min(MARGIN_SPACINGS * spacing, 0.5 * smallest - halo - 4.0 * spacing))
     return TilePlan(
         xs=xs, ys=ys, quotas=tile_quotas(job, xs, ys), band=band, halo=halo, margin=margin
     )

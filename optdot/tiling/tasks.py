@@ -57,9 +57,14 @@ runs over the whole panel; a task only chooses which dots are mobile and which a
    Two tiles compute a window they share from the same phase-2 dots, so a dot's
    displacement is the same whichever side of a seam it stands on: no jump, and what the
    blend adds, the weights' gradient times the fields' differences, is spread over a
-   tile. One pass (the single process runs the formulation's two, off the moved dots:
-   here the neighbours have not moved yet): on the LED sample's phase-2 dots the blurred
-   coverage error falls from 0.26 % to 0.07 % (one pass over the whole panel: 0.066 %).
+   tile. The tile deposits its dots and its neighbours' on a lattice all tiles share
+   once, and solves each window on its part of it, so two tiles solving one window get one
+   field. One pass (the single process runs the formulation's two, off the moved dots:
+   here the neighbours have not moved yet): on the LED sample's phase-2 dots (4 x 2 tiles
+   of 10 mm) the blurred coverage error falls from 0.26 % to 0.086 % RMS, flat across the
+   seams (one pass over the whole panel at once: 0.066 %). Windows reach 10 spacings
+   past their tile-sized core (``plan.margin``): 4 gave 0.098 %, 30 0.089 % and 40 % more
+   time.
 
 5. **guarantee** (:func:`legalize_tile`). The formulation's hard-core iterations (which
    clear the pairs under 60 µm the correction made), then :func:`optdot.stages.finish`:
@@ -239,29 +244,29 @@ def correct_tile(job: Job, plan: TilePlan, dots: TileDots, *around: TileDots) ->
         return dots
     i, j = dots.tile
     tx, ty = plan.size
-    m, h = plan.margin, plan.halo
+    m = plan.margin
     rect = plan.rect(i, j)
-    reach = (rect[0] - tx / 2 - m - h, rect[1] - ty / 2 - m - h,
-             rect[2] + tx / 2 + m + h, rect[3] + ty / 2 + m + h)  # fmt: skip
-    near = [in_rect(a.xy, reach) for a in around]
+    region = (rect[0] - tx / 2 - m, rect[1] - ty / 2 - m,
+              rect[2] + tx / 2 + m, rect[3] + ty / 2 + m)  # fmt: skip
+    region = grown(region, stages.correction_pad(job))
+    near = [in_rect(a.xy, grown(region, plan.halo)) for a in around]
     xy0 = np.concatenate([dots.xy0] + [a.xy0[k] for a, k in zip(around, near, strict=True)])
     xy = np.concatenate([dots.xy] + [a.xy[k] for a, k in zip(around, near, strict=True)])
-    px0, py0, px1, py1 = job.box
+    got = stages.correction_region(job, xy0, xy, region)
+    if got is None:
+        return dots
+    err, cap = got
     u = np.zeros((n, 2))
     total = np.zeros(n)
     for cy in (rect[1], 0.5 * (rect[1] + rect[3]), rect[3]):
         wy = np.maximum(0.0, 1.0 - 2.0 * np.abs(dots.xy[:, 1] - cy) / ty)
         for cx in (rect[0], 0.5 * (rect[0] + rect[2]), rect[2]):
             w = wy * np.maximum(0.0, 1.0 - 2.0 * np.abs(dots.xy[:, 0] - cx) / tx)
-            if not (w > 0).any():
+            own = np.flatnonzero(w > 0)
+            if not len(own):
                 continue
-            window = (max(cx - tx / 2 - m, px0), max(cy - ty / 2 - m, py0),
-                      min(cx + tx / 2 + m, px1), min(cy + ty / 2 + m, py1))  # fmt: skip
-            pick = np.flatnonzero(in_rect(xy, grown(window, h)))
-            field = stages.correction_field(job, xy0[pick], xy[pick], window)
-            mine = pick < n  # the tile's own dots come first
-            own = pick[mine]
-            u[own] += w[own, None] * field[mine]
+            window = (cx - tx / 2 - m, cy - ty / 2 - m, cx + tx / 2 + m, cy + ty / 2 + m)
+            u[own] += w[own, None] * err.field(window, dots.xy[own], cap)
             total[own] += w[own]
     u /= np.maximum(total, 1e-300)[:, None]
     return TileDots(dots.tile, dots.xy0, np.ascontiguousarray(dots.xy + u))
