@@ -189,8 +189,8 @@ class RegionError:
         region: Window, domain: Domain | None = None,
     ) -> None:  # fmt: skip
         self.h, self.x0, self.y0 = h, density.x0, density.y0
-        mx = int(math.ceil(density.width / h - 1e-9))
-        my = int(math.ceil(density.height / h - 1e-9))
+        self.mx = mx = int(math.ceil(density.width / h - 1e-9))
+        self.my = my = int(math.ceil(density.height / h - 1e-9))
         self.i0 = max(0, int(math.floor((region[0] - self.x0) / h)))
         self.j0 = max(0, int(math.floor((region[1] - self.y0) / h)))
         i1 = min(mx, int(math.ceil((region[2] - self.x0) / h)))
@@ -220,13 +220,23 @@ class RegionError:
         if e.shape[0] < 2 or e.shape[1] < 2 or not live.any():
             return np.zeros((len(at), 2))
         e[live] -= e[live].mean()
-        # zeros up to lengths the cosine transform is fast at (a few cells past the far
-        # sides, where nothing is read): the same for every tile that solves this window
-        fy, fx = next_fast_len(e.shape[0], real=True), next_fast_len(e.shape[1], real=True)
-        e = np.pad(e, ((0, fy - e.shape[0]), (0, fx - e.shape[1])))
+        # zeros up to lengths the cosine transform is fast at, a few cells past a side
+        # that is not a wall (a wall keeps its zero flux): the same for every tile
+        pads = []
+        for axis, (lo, hi, end) in enumerate(((b, d, self.my), (a, c, self.mx))):
+            extra = next_fast_len(e.shape[axis], real=True) - e.shape[axis]
+            first = self.j0 if axis == 0 else self.i0
+            if first + hi < end:
+                pads.append((0, extra))
+            elif first + lo > 0:
+                pads.append((extra, 0))
+            else:
+                pads.append((0, 0))
+        e = np.pad(e, pads)
         phi = neumann_potential(e, h, h)
         uy, ux = np.gradient(phi, h, h)
-        ox, oy = self.x0 + (self.i0 + a) * h, self.y0 + (self.j0 + b) * h
+        ox = self.x0 + (self.i0 + a - pads[1][0]) * h
+        oy = self.y0 + (self.j0 + b - pads[0][0]) * h
         row = (at[:, 1] - oy) / h - 0.5
         col = (at[:, 0] - ox) / h - 0.5
         u = np.empty((len(at), 2))
