@@ -74,6 +74,9 @@ MAX_MARKS = 100_000
 MAX_SEGMENTS = 2000
 #: Side of the densest region whose spectrum is taken, mm; of its zoom, mm.
 DENSEST_MM, ZOOM_MM = 2.0, 1.0
+#: Side of the square the grain (long-wavelength structure factor) is measured on, mm:
+#: wavelengths up to 20 spacings need a window several times that.
+GRAIN_MM = 10.0
 #: Longest side of the overview image, pixels.
 OVERVIEW_PX = 300
 
@@ -179,6 +182,16 @@ def _first_pass(src: Source, density: DensityMap | None, view: Viewing | None = 
     return f
 
 
+def grain_window(densest, box) -> tuple[float, float, float, float]:
+    """A square of :data:`GRAIN_MM` (at most the panel's sides) centred on the densest
+    square, moved inside the panel box."""
+    cx, cy = 0.5 * (densest[0] + densest[2]), 0.5 * (densest[1] + densest[3])
+    wx, wy = min(GRAIN_MM, box[2] - box[0]), min(GRAIN_MM, box[3] - box[1])
+    x0 = min(max(cx - wx / 2, box[0]), box[2] - wx)
+    y0 = min(max(cy - wy / 2, box[1]), box[3] - wy)
+    return x0, y0, x0 + wx, y0 + wy
+
+
 def _second_pass(
     src: Source,
     density: DensityMap | None,
@@ -201,6 +214,7 @@ def _second_pass(
     size = patches.nx * patches.ny
     p_cnt, p_re, p_im = np.zeros(size, np.int64), np.zeros(size), np.zeros(size)
     window = first.squares.densest(first.square_counts)
+    s.grain_window = grain_window(window, src.box)
     zs = min(ZOOM_MM, window[2] - window[0])
     zoom = (window[0], window[1], window[0] + zs, window[1] + zs)
     offsets = np.concatenate([[0], np.cumsum(src.counts)]).astype(np.int64)
@@ -270,6 +284,7 @@ def _second_pass(
             )
             s.seams = part if s.seams is None else add_nested(s.seams, part)
         s.window_xy.append(own[in_rect(own, window)])
+        s.grain_xy.append(own[in_rect(own, s.grain_window, closed=False)])
         inz = in_rect(own, zoom, closed=False)
         s.zoom_xy.append(own[inz])
         s.zoom_d.append(d[inz])

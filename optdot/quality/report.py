@@ -140,7 +140,7 @@ figure{{display:inline-block;margin:.5em}}img{{max-width:560px}}</style></head><
 <p>The overview shows the fill the dots realise, close pairs and defects; the zoom the
 densest region at true scale; the histogram the nearest-neighbour distances against the
 collision and too-close limits; the coverage map the error after smoothing; the spectrum a
-peak where the pattern orders (moiré risk).</p>{imgs}<h2>Numbers</h2>{numbers}</body></html>
+peak where the pattern orders (moiré risk).</p>{_grain_text(m)}{imgs}<h2>Numbers</h2>{numbers}</body></html>
 """
     with atomic_path(path, expect_tail(b"</html>\n", str(path))) as tmp:
         tmp.write_text(doc, encoding="utf-8")
@@ -192,6 +192,24 @@ photographed test plate (README, "Visibility").</p>
 area in mm²; the commonly cited form of SEMI D31), a second opinion that ignores distance;
 blobs are regions where |JND| ≥ 0.5, bright and dark ones apart (a bright line beside a
 dark band is two blobs).</p>"""
+
+
+def _grain_text(m) -> str:
+    """One paragraph on the long-wavelength grain (``metrics["grain"]``), or nothing."""
+    g = m.get("grain")
+    if not g:
+        return ""
+    w = g["window_mm"]
+    fill = g.get("fill_range")
+    fills = f", fill {fill[0]:.3g}–{fill[1]:.3g}" if fill else ""
+    return (
+        f"<p>Grain: structure factor S = <b>{g['s_ka_0.3_1']:.2g}</b> at wavelengths of 6–20 "
+        f"dot spacings (k·a 0.3–1) and {g['s_ka_1_3']:.2g} at 2–6 (k·a 1–3), over "
+        f"({w[0]:.1f}, {w[1]:.1f})–({w[2]:.1f}, {w[3]:.1f}) mm around the densest square "
+        f"({g['dots']:,} dots{fills}). Random (Poisson) dots give 1; optdot's own pattern on "
+        "a uniform map ~0.00001; a map that changes inside the window adds its own "
+        "long-wavelength structure.</p>"
+    )
 
 
 def _simulation_section(result: QAResult) -> str:

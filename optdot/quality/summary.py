@@ -14,6 +14,7 @@ from .metrics import coverage, disc_area, radial_spectrum
 from .seams import seam_finish
 from .source import Source
 from .sums import FirstSums, SecondSums, cat
+from .texture import band_mean, structure_factor
 from .walls import WallProfile
 
 
@@ -111,6 +112,9 @@ def summarize(
         m["seams"] = seam_finish(s.seams, *src.tiling, density)
     if len(src.counts) > 1:
         m["qa_requeried_dots"] = s.requeried  # k-NN re-queried with a wider halo
+    grain = _grain(cat(s.grain_xy, (2,)), s.grain_window, density)
+    if grain is not None:
+        m["grain"] = grain
     tile = f.squares.densest(f.square_counts)
     freq, power = radial_spectrum(cat(s.window_xy, (2,)), tile, px=src.nominal_diameter / 4)
     arrays["spectrum"] = (freq, power)
@@ -168,3 +172,32 @@ def _percentiles(v: np.ndarray) -> dict[str, float]:
 
 def _where(points: np.ndarray, limit: int = 20) -> list[list[float]]:
     return [[round(float(x), 6), round(float(y), 6)] for x, y in points[:limit]]
+
+
+def _grain(xy: np.ndarray, window, density: DensityMap | None) -> dict | None:
+    """The long-wavelength structure factor on the densest region (a square of
+    ``measure.GRAIN_MM``): S averaged over k·a 0.3-1 (wavelengths of 6-20 spacings, the
+    grain a viewer sees through a diffuser) and 1-3; Poisson points give 1, the single
+    process on a uniform map ~1e-5 (BENCHMARKS.md, issue 24). None when the window holds
+    too few dots or spacings to resolve k·a 0.3."""
+    if window is None or len(xy) < 2000:
+        return None
+    ka, sf, a = structure_factor(xy, window)
+    if min(window[2] - window[0], window[3] - window[1]) < 40 * a:
+        return None
+    out = {
+        "window_mm": [float(v) for v in window],
+        "dots": int(len(xy)),
+        "spacing_mm": float(a),
+        "s_ka_0.3_1": band_mean(ka, sf, 0.3, 1.0),
+        "s_ka_1_3": band_mean(ka, sf, 1.0, 3.0),
+    }
+    if density is not None:
+        cw, ch = density.cell_size
+        ix0 = int(np.clip((window[0] - density.x0) // cw, 0, density.shape[1] - 1))
+        ix1 = int(np.clip((window[2] - density.x0) // cw, 0, density.shape[1] - 1))
+        iy0 = int(np.clip((window[1] - density.y0) // ch, 0, density.shape[0] - 1))
+        iy1 = int(np.clip((window[3] - density.y0) // ch, 0, density.shape[0] - 1))
+        g = density.grid[iy0 : iy1 + 1, ix0 : ix1 + 1]
+        out["fill_range"] = [float(g.min()), float(g.max())]
+    return out

@@ -49,6 +49,8 @@ class SecondSums:
     patches: tuple | None = None
     seams: dict | None = None
     window_xy: list[np.ndarray] = field(default_factory=list)
+    grain_xy: list[np.ndarray] = field(default_factory=list)
+    grain_window: tuple[float, float, float, float] | None = None
     zoom_xy: list[np.ndarray] = field(default_factory=list)
     zoom_d: list[np.ndarray] = field(default_factory=list)
     segments: list[np.ndarray] = field(default_factory=list)
