@@ -248,13 +248,12 @@ def run_tiles(
     counts: dict[tuple[int, int], int] = {}
     tile_of = {id(h): t for t, h in final.items()}
     watched = list(relaxed.values()) + list(corrected.values()) + list(final.values())
-    (
-        initial.clear(),
-        relaxed.clear(),
-        seams.clear(),
-        merged.clear(),
-        corrected.clear(),
-    )  # the graph holds what it still needs
+    # the graph holds what it still needs; the merged dots and the seam moves stay
+    # referenced too: a correction lost with a dead worker is recomputed from the merged
+    # dots of nine tiles, which Dask would otherwise have forgotten once every correction
+    # that read them was done ("cancelled: already forgotten", seen with a frozen worker)
+    keep = list(merged.values()) + list(seams.values())
+    initial.clear(), relaxed.clear(), seams.clear(), merged.clear(), corrected.clear()
     n_done, n_relaxed = len(finished), 0
     held.clear()
     for h in executor.finished(watched):
@@ -276,6 +275,7 @@ def run_tiles(
                 f"tiles: {n_relaxed}/{len(tiles)} relaxed, {n_done}/{len(tiles)} finished, "
                 f"ETA {eta:.0f} s",
             )
+    keep.clear()
     return TiledRun(plan, counts, time.perf_counter() - t0)
 
 
