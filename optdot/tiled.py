@@ -16,7 +16,8 @@ import numpy as np
 
 from .config.job import Job
 from .files import sha256_file
-from .io.dataset import manifest_of, write_dataset
+from .io.dataset_write import write_dataset
+from .io.manifest import manifest_of
 from .pattern import Pattern
 from .preflight import _check_gathered, _check_room, _check_tile_memory
 from .runtime.cluster import connect, embedded_workers, scheduler_address

@@ -189,7 +189,9 @@ def test_a_dot_beyond_the_gdsii_range_is_refused_whatever_box_it_claims(tmp_path
 def test_a_top_cell_named_like_a_tile_or_dot_cell_is_refused(tmp_path, tiny_pattern):
     from optdot.exporters.gds import write_gds
     from optdot.exporters.options import ExportOptions
-    from optdot.io.dataset import open_dataset, pattern_manifest, write_dataset
+    from optdot.io.dataset import open_dataset
+    from optdot.io.dataset_write import write_dataset
+    from optdot.io.manifest import pattern_manifest
 
     half = tiny_pattern.xy[:, 0] < np.median(tiny_pattern.xy[:, 0])
     with write_dataset(tmp_path / "d.parquet", pattern_manifest(tiny_pattern)) as w:

@@ -16,7 +16,8 @@ import stat
 import numpy as np
 import pytest
 
-from optdot.io.dataset import MANIFEST, save_dataset
+from optdot.io.dataset import MANIFEST
+from optdot.io.dataset_write import save_dataset
 from optdot.io.patterns import save_pattern
 
 from .conftest import SAMPLES, cli, one_error

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from optdot.io.dataset import save_dataset
+from optdot.io.dataset_write import save_dataset
 from optdot.io.patterns import save_pattern
 
 from .conftest import SAMPLES, optdot

@@ -294,7 +294,7 @@ def test_an_interrupted_tiled_run_leaves_the_previous_dataset(tiled, tmp_path):
 def _only_the_staging_dir_beside(out):
     """Beside ``out`` nothing but the run's staging directory (kept to resume from):
     its resume record and finished parts, nothing else."""
-    from optdot.io.dataset import RESUME, staging_dir
+    from optdot.io.dataset_write import RESUME, staging_dir
 
     staging = staging_dir(out)
     assert sorted(p.name for p in out.parent.iterdir()) == sorted([out.name, staging.name])
@@ -486,7 +486,7 @@ def test_an_interrupted_tiled_run_resumes_with_the_bytes_of_an_uninterrupted_one
     """Ctrl-C after 3 of 8 tiles: the target is untouched, the 3 tiles are kept beside it;
     the same run again makes only the 5 others' guarantee passes and writes the bytes of a
     run that was never interrupted. Another seed starts over."""
-    from optdot.io.dataset import staging_dir
+    from optdot.io.dataset_write import staging_dir
 
     job = load_job(LED).with_overrides(max_iter=15)
     plan = plan_tiles(job, side=10.0)
@@ -520,7 +520,7 @@ def test_an_interrupted_tiled_run_resumes_with_the_bytes_of_an_uninterrupted_one
 
 def test_a_foreign_directory_in_the_staging_place_is_never_removed(tmp_path):
     from optdot.errors import ExportError
-    from optdot.io.dataset import staging_dir
+    from optdot.io.dataset_write import staging_dir
 
     job = load_job(LED).with_overrides(max_iter=2)
     out = tmp_path / "x.parquet"

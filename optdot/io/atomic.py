@@ -7,6 +7,9 @@ the target. A write error (full disk, file-size limit, read-only place) or a fai
 removes the temporary file, leaves the target as it was and raises
 :class:`~optdot.errors.ExportError` naming the file and the reason.
 
+A directory output (a dataset) is built beside its target and put in place whole by
+:func:`install_directory`.
+
 Several outputs of one command form one :func:`transaction`: each is written and verified
 to its temporary file, and only when all are ready are they renamed, together; a failure or
 an interrupt before that replaces none of them and leaves no temporary file.
@@ -16,7 +19,10 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import ctypes
+import ctypes.util
 import os
+import shutil
 import stat
 import tempfile
 from collections.abc import Callable, Iterator
@@ -33,6 +39,7 @@ __all__ = [
     "interrupted",
     "mark_interrupted",
     "fsync_dir",
+    "install_directory",
     "refuse_read_only",
     "short_name",
     "transaction",
@@ -238,3 +245,49 @@ def fsync_dir(directory: Path) -> None:
             os.fsync(fd)
         finally:
             os.close(fd)
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap two paths atomically (Linux ``renameat2(RENAME_EXCHANGE)``); False where the
+    system or the file system cannot."""
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
+        fn = libc.renameat2
+    except (OSError, AttributeError, TypeError):
+        return False
+    at_fdcwd, rename_exchange = -100, 2
+    return fn(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange) == 0
+
+
+def install_directory(new: Path, target: Path) -> None:
+    """Put the finished directory ``new`` (beside ``target``) at ``target``.
+
+    A new name is a rename. A directory already at ``target`` (the caller has checked it
+    is one it may replace) is exchanged with ``new`` in one step where Linux can
+    (``renameat2``), so readers see the old directory or the new one, never neither;
+    elsewhere it is moved aside to ``.NAME.old``, ``new`` renamed in, and on a failure
+    moved back. The previous directory is then removed and the parent synced.
+
+    Raises:
+        ExportError: a rename failed; ``target`` is as it was.
+    """
+    directory = target.parent if str(target.parent) else Path(".")
+    try:
+        if not target.is_dir():
+            os.rename(new, target)
+        elif _exchange(new, target):
+            shutil.rmtree(new, ignore_errors=True)  # the previous directory, now at ``new``
+        else:
+            old = directory / f".{short_name(target.name)}.old"
+            os.rename(target, old)
+            try:
+                os.rename(new, target)
+            except OSError:
+                os.rename(old, target)
+                raise
+            shutil.rmtree(old, ignore_errors=True)
+    except OSError as e:
+        raise ExportError(
+            f"{target}: cannot put the new directory in place ({e.strerror})"
+        ) from None
+    fsync_dir(directory)

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from ..errors import ExportError
 from .atomic import refuse_read_only, writable_target
-from .dataset import check_dataset_target
+from .dataset_write import check_dataset_target
 
 
 def check_target(target: str | Path, inputs: tuple[Path, ...] = ()) -> None:

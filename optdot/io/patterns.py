@@ -26,7 +26,8 @@ from ..geometry.domain import Domain, orient_all
 from ..geometry.limits import validate_dots
 from ..pattern import Pattern
 from .atomic import atomic_path, expect_size
-from .dataset import load_dataset, save_dataset
+from .dataset import load_dataset
+from .dataset_write import save_dataset
 
 CSV_HEADER = "x_mm,y_mm,diameter_mm"
 

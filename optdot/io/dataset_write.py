@@ -1,0 +1,262 @@
+"""Write a partitioned Parquet dataset (the layout: :mod:`optdot.io.manifest`),
+all or nothing.
+
+Parts go to a temporary directory beside the target, each is checked (rows, checksum) as
+it is written, the manifest is written last, and only then is the directory put in place
+(:func:`optdot.io.atomic.install_directory`: an atomic exchange with a previous dataset of
+the same name, which is then removed). An interrupted or failed run leaves the previous
+dataset as it was and no directory that looks complete. A directory is replaced only
+when it is wholly an optdot dataset (:func:`check_dataset_target`).
+
+A resumable run (``resume_key``) keeps its finished parts in a staging directory
+(:func:`staging_dir`) with a record of each one, so the next run of the same job writes
+only the rest.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import ExportError, PatternFileError, one_line
+from ..files import sha256_file
+from ..runtime.stop import check_interrupt
+from .atomic import install_directory, short_name
+from .dataset import open_dataset, read_part_file
+from .manifest import FORMAT, MANIFEST, VERSION, part_name, pattern_manifest, size_fields
+
+#: The record of a resumable run's finished parts, in its staging directory only.
+RESUME = "_resume.json"
+
+
+def _table(xy: np.ndarray, diameter: np.ndarray):
+    import pyarrow as pa
+
+    return pa.table(
+        {
+            "x_mm": pa.array(np.ascontiguousarray(xy[:, 0]), pa.float64()),
+            "y_mm": pa.array(np.ascontiguousarray(xy[:, 1]), pa.float64()),
+            "diameter_mm": pa.array(np.ascontiguousarray(diameter), pa.float64()),
+        }
+    )
+
+
+@dataclass
+class DatasetWriter:
+    """Writes the parts of one dataset into a temporary (or staging) directory; use
+    through :func:`write_dataset`, which writes the manifest and puts it in place."""
+
+    tmp: Path
+    target: Path
+    parts: dict[int, dict[str, Any]] = field(default_factory=dict)
+    #: dots written per diameter, ``{diameter mm: count}`` (sizes are quantised: few keys).
+    sizes: dict[float, int] = field(default_factory=dict)
+    #: the run's identity when its parts are kept for a resume (see :func:`write_dataset`).
+    resume_key: str | None = None
+    #: parts a previous, interrupted run of the same job left, checked: ``{k: entry}``.
+    resumed: dict[int, dict[str, Any]] = field(default_factory=dict)
+
+    def read_resumed(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """A resumed part's dots: ``(xy [n, 2], diameter [n])``, mm."""
+        return read_part_file(self.tmp / self.resumed[k]["file"], self.resumed[k]["count"])
+
+    def _record(self) -> None:
+        """Write the resume record (atomically): the key and every part written so far."""
+        if self.resume_key is None:
+            return
+        doc = {"key": self.resume_key, "parts": {str(k): v for k, v in self.parts.items()}}
+        tmp = self.tmp / (RESUME + ".tmp")
+        with open(tmp, "w") as fh:
+            json.dump(doc, fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, self.tmp / RESUME)
+
+    def write_part(self, k: int, tile: tuple[int, int], xy: np.ndarray, diameter) -> None:
+        """Write tile ``tile`` (part ``k``): ``xy`` ``[n, 2]`` mm, ``diameter`` mm (one or
+        ``[n]``)."""
+        import pyarrow.parquet as pq
+
+        check_interrupt()
+        d = np.broadcast_to(np.asarray(diameter, np.float64), (len(xy),))
+        path = self.tmp / part_name(k)
+        try:
+            pq.write_table(_table(xy, d), path, compression="zstd", write_statistics=True)
+            rows = pq.ParquetFile(path).metadata.num_rows
+        except OSError as e:
+            raise ExportError(f"{self.target}: cannot write ({one_line(e)})") from None
+        if rows != len(xy):
+            raise ExportError(f"{self.target}: part {k} holds {rows} of {len(xy)} rows")
+        self.parts[k] = {
+            "file": path.name,
+            "tile": list(tile),
+            "count": len(xy),
+            "sha256": sha256_file(path),
+        }
+        self._tally(d)
+        try:
+            self._record()
+        except OSError as e:
+            raise ExportError(f"{self.target}: cannot write ({e.strerror})") from None
+
+    def _tally(self, d: np.ndarray) -> None:
+        for v, c in zip(*np.unique(d, return_counts=True), strict=True):
+            self.sizes[float(v)] = self.sizes.get(float(v), 0) + int(c)
+
+
+def check_dataset_target(target: Path) -> None:
+    """Refuse a target that is not a new name or an optdot dataset (never replaced).
+
+    A directory is ours only when its own manifest says so (this format and version,
+    well formed) and it holds nothing but that manifest and the parts it lists: a user's
+    directory with a stray ``_manifest.json`` in it, or a dataset someone added files
+    to, is left alone.
+    """
+    if target.is_symlink():
+        raise ExportError(f"{target}: is a symbolic link; a dataset is replaced only in place")
+    if target.exists() and not target.is_dir():
+        raise ExportError(f"{target}: is a file, not a dataset directory")
+    if target.is_dir():
+        try:
+            open_dataset(target, strict=True)
+        except PatternFileError as e:
+            raise ExportError(
+                f"{target}: is a directory that is not an optdot dataset, never replaced ({e})"
+            ) from None
+
+
+def staging_dir(target: Path) -> Path:
+    """Where a resumable run keeps its finished parts: ``.NAME.partial`` beside the target."""
+    directory = target.parent if str(target.parent) else Path(".")
+    return directory / f".{short_name(target.name)}.partial"
+
+
+def _resume_record(staging: Path) -> dict[str, Any] | None:
+    """The resume record of a staging directory, or None when it holds none."""
+    try:
+        doc = json.loads((staging / RESUME).read_text())
+    except (OSError, ValueError):
+        return None
+    ok = isinstance(doc, dict) and isinstance(doc.get("key"), str)
+    return doc if ok and isinstance(doc.get("parts"), dict) else None
+
+
+def _open_staging(target: Path, key: str) -> tuple[Path, dict[int, dict[str, Any]]]:
+    """The staging directory of ``target`` and the parts in it a previous run of the same
+    ``key`` finished (each checked against its checksum; others are dropped). A staging
+    directory of another run is cleared; a path of that name that is not ours (no resume
+    record, a link, a file) is refused, never removed."""
+    staging = staging_dir(target)
+    if staging.is_symlink() or (staging.exists() and not staging.is_dir()):
+        raise ExportError(f"{staging}: is in the way of the run's staging directory")
+    parts: dict[int, dict[str, Any]] = {}
+    if staging.is_dir():
+        doc = _resume_record(staging)
+        if doc is None:
+            raise ExportError(
+                f"{staging}: a directory that is not an optdot staging directory is in the "
+                "way of the run's staging directory; move it"
+            )
+        if doc["key"] != key:  # another job, seed, plan or optdot: start over
+            shutil.rmtree(staging)
+        else:
+            for k, entry in doc["parts"].items():
+                f = staging / str(entry.get("file", ""))
+                if f.is_file() and f.parent == staging and sha256_file(f) == entry.get("sha256"):
+                    parts[int(k)] = entry
+    try:
+        staging.mkdir(mode=0o700, exist_ok=True)
+    except OSError as e:
+        raise ExportError(f"{target}: cannot write here ({e.strerror})") from None
+    keep = {e["file"] for e in parts.values()} | {RESUME}
+    for f in staging.iterdir():  # parts cut off by the interruption
+        if f.name not in keep:
+            f.unlink()
+    return staging, parts
+
+
+@contextlib.contextmanager
+def write_dataset(
+    target: str | Path, manifest: dict[str, Any], resume_key: str | None = None
+) -> Iterator[DatasetWriter]:
+    """Write a dataset: yields a :class:`DatasetWriter`; on leaving the block the manifest
+    (``manifest`` plus the parts) is written and the dataset put in place.
+
+    With ``resume_key`` (the run's identity: job, inputs, seed, tiling, optdot's code),
+    the parts are written into :func:`staging_dir` with a record of each one, and a failed
+    or interrupted run leaves them there: the next run with the same key finds them in
+    :attr:`DatasetWriter.resumed` and writes only the rest. Either way ``target`` changes
+    only when the whole dataset is in place.
+
+    Raises:
+        ExportError: the target cannot be written or is a directory of something else;
+            nothing at ``target`` changed.
+    """
+    target = Path(target)
+    directory = target.parent if str(target.parent) else Path(".")
+    check_dataset_target(target)
+    resumed: dict[int, dict[str, Any]] = {}
+    if resume_key is not None:
+        tmp, resumed = _open_staging(target, resume_key)
+    else:
+        try:
+            tmp = Path(tempfile.mkdtemp(prefix=f".{short_name(target.name)}.", dir=directory))
+        except OSError as e:
+            raise ExportError(f"{target}: cannot write here ({e.strerror})") from None
+    writer = DatasetWriter(tmp, target, resume_key=resume_key, resumed=resumed)
+    writer.parts.update(resumed)
+    try:
+        writer._record()  # the staging directory is recognisably ours from the start
+    except OSError as e:
+        raise ExportError(f"{target}: cannot write ({e.strerror})") from None
+    for k in resumed:
+        writer._tally(writer.read_resumed(k)[1])
+    try:
+        yield writer
+        if resume_key is not None:
+            (tmp / RESUME).unlink(missing_ok=True)  # a dataset holds only what it lists
+        parts = [writer.parts[k] for k in sorted(writer.parts)]
+        doc = {"format": FORMAT, "version": VERSION, **manifest, "parts": parts}
+        if doc["diameter_mm"] is None:  # sizes known once written: uniform, median
+            doc.update(size_fields(writer.sizes))
+        doc["n"] = sum(p["count"] for p in parts)
+        data = json.dumps(doc, indent=1, sort_keys=True).encode() + b"\n"
+        try:
+            with open(tmp / MANIFEST, "wb") as fh:
+                fh.write(data)
+                fh.flush()
+                os.fsync(fh.fileno())
+            for p in parts:
+                fd = os.open(tmp / p["file"], os.O_RDONLY)
+                try:
+                    os.fsync(fd)
+                finally:
+                    os.close(fd)
+        except OSError as e:
+            raise ExportError(f"{target}: cannot write ({e.strerror})") from None
+        if (tmp / MANIFEST).stat().st_size != len(data):
+            raise ExportError(f"{target}: the manifest is incomplete (disk full?)")
+        os.chmod(tmp, 0o755)
+        check_interrupt()
+        if target.is_dir():
+            check_dataset_target(target)
+        install_directory(tmp, target)
+    except BaseException:
+        if resume_key is None or (tmp / MANIFEST).exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def save_dataset(pattern, path: str | Path) -> None:
+    """Write an in-memory pattern as a one-part dataset."""
+    with write_dataset(path, pattern_manifest(pattern)) as w:
+        w.write_part(0, (0, 0), pattern.xy, pattern.diameter)

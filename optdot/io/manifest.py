@@ -1,0 +1,196 @@
+"""The manifest of an optdot dataset (``NAME.parquet/_manifest.json``): its schema, the
+check both the reader and the writer trust, and the fields a run writes.
+
+A dataset's layout::
+
+    NAME.parquet/
+        part-00000.parquet     columns x_mm, y_mm, diameter_mm (float64), one tile each,
+        part-00001.parquet     tiles row by row (part k = tile (k % nx, k // nx))
+        ...
+        _manifest.json         format, job, seed, dot count, diameter, box, outline (WKB
+                               hex), tiling, and per part: file, tile, count, sha256
+
+Reading is :mod:`optdot.io.dataset`, writing :mod:`optdot.io.dataset_write`; both
+import this module and neither the other's internals, so "is this directory an optdot
+dataset" (the reader's question, and the writer's before it replaces anything) has one
+answer: :func:`read_manifest`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import PatternFileError, one_line
+
+MANIFEST = "_manifest.json"
+FORMAT = "optdot.dataset"
+VERSION = 1
+COLUMNS = ("x_mm", "y_mm", "diameter_mm")
+
+
+def part_name(k: int) -> str:
+    """File name of part ``k``."""
+    return f"part-{k:05d}.parquet"
+
+
+def read_manifest(path: Path) -> dict[str, Any]:
+    """The manifest of the dataset directory ``path``, parsed and checked (format,
+    version, every field's name and type; not the parts on disk).
+
+    Raises:
+        PatternFileError: no manifest (not a dataset, or an incomplete write), too large,
+            not JSON, another format or version, or a malformed field.
+    """
+    mf = path / MANIFEST
+    if not mf.is_file():
+        raise PatternFileError(f"{path}: no {MANIFEST} (not an optdot dataset, or incomplete)")
+    try:
+        if mf.stat().st_size > MAX_MANIFEST_BYTES:
+            raise PatternFileError(
+                f"{mf}: {mf.stat().st_size:,} bytes, larger than any optdot manifest"
+            )
+        doc = json.loads(mf.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as e:
+        raise PatternFileError(f"{mf}: not a readable manifest ({one_line(e)})") from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise PatternFileError(f"{mf}: not an optdot dataset manifest")
+    if doc.get("version") != VERSION:
+        raise PatternFileError(f"{mf}: dataset version {doc.get('version')!r} is not {VERSION}")
+    problem = manifest_problem(doc)
+    if problem:
+        raise PatternFileError(f"{mf}: malformed manifest ({problem})")
+    return doc
+
+
+#: Largest manifest read, bytes (a 10⁸-dot panel's is ~100 kB).
+MAX_MANIFEST_BYTES = 64 << 20
+
+
+def _is_num(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _is_int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def manifest_problem(doc: dict[str, Any]) -> str | None:
+    """What is wrong with a manifest's fields (names and types), or None."""
+    box = doc.get("box")
+    if not (isinstance(box, list) and len(box) == 4 and all(_is_num(v) for v in box)):
+        return "box must be 4 numbers"
+    if not (box[0] < box[2] and box[1] < box[3]):
+        return "box is empty"
+    for key in ("diameter_mm",):
+        if not (_is_num(doc.get(key)) and doc[key] > 0):
+            return f"{key} must be a number > 0"
+    u = doc.get("uniform_diameter_mm")
+    if u is not None and not (_is_num(u) and u > 0):
+        return "uniform_diameter_mm must be null or a number > 0"
+    if not isinstance(doc.get("meta", {}), dict):
+        return "meta must be an object"
+    if "outline_wkb_hex" in doc and not isinstance(doc["outline_wkb_hex"], str):
+        return "outline_wkb_hex must be a string"
+    if not _is_num(doc.get("edge_margin_mm", 0.0)):
+        return "edge_margin_mm must be a number"
+    tiles = doc.get("tiles")
+    if tiles is not None:
+        ok = isinstance(tiles, dict) and all(
+            _is_int(tiles.get(k)) and tiles[k] >= 1 for k in ("nx", "ny")
+        )
+        ok = ok and all(
+            isinstance(tiles.get(k), list) and all(_is_num(v) for v in tiles[k])
+            for k in ("xs", "ys")
+        )
+        if not ok:
+            return "tiles must hold nx, ny (integers) and xs, ys (numbers)"
+    parts = doc.get("parts")
+    if not isinstance(parts, list):
+        return "parts must be a list"
+    files = set()
+    for i, p in enumerate(parts):
+        ok = isinstance(p, dict) and isinstance(p.get("file"), str)
+        ok = ok and _PART_NAME.fullmatch(p["file"]) is not None and p["file"] not in files
+        ok = ok and _is_int(p.get("count")) and p["count"] >= 0
+        ok = ok and isinstance(p.get("tile"), list) and len(p["tile"]) == 2
+        ok = ok and all(_is_int(v) and v >= 0 for v in p["tile"])
+        ok = ok and isinstance(p.get("sha256"), str) and len(p["sha256"]) == 64
+        if not ok:
+            return f"part {i} needs file (part-NNNNN.parquet, once), count, tile, sha256"
+        files.add(p["file"])
+    if not (_is_int(doc.get("n")) and doc["n"] == sum(p["count"] for p in parts)):
+        return "n must be the sum of the parts' counts"
+    return None
+
+
+_PART_NAME = re.compile(r"part-\d{5,}\.parquet")
+
+
+def outline_hex(outline) -> dict[str, Any]:
+    """Manifest fields of a panel outline (a Domain, or None for the box): WKB as hex,
+    bit-exact, and the edge margin."""
+    if outline is None:
+        return {}
+    import shapely
+
+    wkb = shapely.to_wkb(outline.geometry, byte_order=1, hex=True)
+    return {"outline_wkb_hex": wkb, "edge_margin_mm": float(outline.edge_margin)}
+
+
+def size_fields(sizes: dict[float, int]) -> dict[str, Any]:
+    """``diameter_mm`` (the median, as ``np.median`` of every dot's) and
+    ``uniform_diameter_mm`` (the one diameter, or None) of dots counted per diameter."""
+    if not sizes:
+        return {"diameter_mm": 0.0, "uniform_diameter_mm": None}
+    values = np.array(sorted(sizes))
+    cum = np.cumsum([sizes[v] for v in values])
+    n = int(cum[-1])
+    lo = values[np.searchsorted(cum, (n - 1) // 2, side="right")]
+    hi = values[np.searchsorted(cum, n // 2, side="right")]
+    uniform = float(values[0]) if len(values) == 1 else None
+    return {"diameter_mm": float(0.5 * (lo + hi)), "uniform_diameter_mm": uniform}
+
+
+def manifest_of(
+    job: str | None,
+    seed: int | None,
+    diameter: float | None,
+    uniform: float | None,
+    box,
+    meta: dict[str, Any],
+    outline=None,
+    tiles: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """The manifest fields of a dataset besides its parts (one tile = the box by default).
+    ``diameter`` None: the nominal and uniform diameters are taken from the parts as
+    they are written (:class:`DatasetWriter`)."""
+    return {
+        "job": job,
+        "seed": seed,
+        "diameter_mm": None if diameter is None else float(diameter),
+        "uniform_diameter_mm": uniform,
+        "box": [float(v) for v in box],
+        "meta": meta,
+        "tiles": tiles or {"nx": 1, "ny": 1, "xs": [box[0], box[2]], "ys": [box[1], box[3]]},
+        **outline_hex(outline),
+    }
+
+
+def pattern_manifest(pattern) -> dict[str, Any]:
+    """Manifest fields of an in-memory pattern (one part)."""
+    m = pattern.meta
+    return manifest_of(
+        m.get("job"),
+        m.get("seed"),
+        pattern.nominal_diameter,
+        pattern.uniform_diameter,
+        pattern.box,
+        m,
+        pattern.outline,
+    )
