@@ -65,7 +65,11 @@ class InProcess:
         return fn(*args)
 
     def finished(self, handles: list[Any]):
-        yield from handles
+        """The handles in order; the list is emptied (each handed over once)."""
+        items = handles[::-1]
+        handles.clear()
+        while items:
+            yield items.pop()
 
     def result(self, handle: Any) -> Any:
         return handle
@@ -89,10 +93,13 @@ class OnDask:
 
     def finished(self, handles: list[Any]):
         """The handles as they finish; the wait wakes every 0.1 s, so a stop asked for
-        by a signal is honoured within that, not after the running tile."""
+        by a signal is honoured within that, not after the running tile. The list is
+        emptied: from here ``as_completed`` holds each future until it is handed over,
+        and the caller drops it after (its result is then freed once no task needs it)."""
         from distributed import as_completed
 
         done = as_completed(handles)
+        handles.clear()
         while not done.is_empty():
             batch = done.next_batch(block=False)
             if not batch:
@@ -248,12 +255,16 @@ def run_tiles(
     counts: dict[tuple[int, int], int] = {}
     tile_of = {id(h): t for t, h in final.items()}
     watched = list(relaxed.values()) + list(corrected.values()) + list(final.values())
-    # the graph holds what it still needs; the merged dots and the seam moves stay
-    # referenced too: a correction lost with a dead worker is recomputed from the merged
-    # dots of nine tiles, which Dask would otherwise have forgotten once every correction
-    # that read them was done ("cancelled: already forgotten", seen with a frozen worker)
+    # The graph holds what it still needs: a relaxed, corrected or final tile is dropped
+    # here once handed over, and its dots are freed when the last task reading them is
+    # done (holding all of them to the end took the monitor panel, 27M dots, to 4 GiB).
+    # The merged dots and the seam moves stay referenced to the end: a correction lost
+    # with a dead worker is recomputed from the merged dots of nine tiles, which Dask
+    # would otherwise have forgotten once every correction that read them was done
+    # ("cancelled: already forgotten", seen with a frozen worker).
     keep = list(merged.values()) + list(seams.values())
     initial.clear(), relaxed.clear(), seams.clear(), merged.clear(), corrected.clear()
+    final.clear()
     n_done, n_relaxed = len(finished), 0
     held.clear()
     for h in executor.finished(watched):
@@ -266,6 +277,8 @@ def run_tiles(
             sink(t, fin.xy, fin.diameter)
             counts[t] = len(fin.xy)
             n_done += 1
+            del fin
+        del h
         if progress is not None:
             elapsed = time.perf_counter() - t0
             frac = min(done / total, 1.0)
