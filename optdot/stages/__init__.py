@@ -1,0 +1,61 @@
+"""The stages of generation as functions of a job and a set of dots: one path for every dot.
+
+:func:`optdot.pipeline.generate` runs them once over the whole panel; the tiles of
+:mod:`optdot.tiling.tasks` run the same functions over a tile, with the neighbouring
+tiles' dots held still around it. Nothing here knows whether it sees a panel or a tile:
+
+* :func:`throw` (:mod:`.initial`): the initial dots of a window (the panel, or a tile),
+  §2.1.
+* :func:`relax` (:mod:`.relaxation`): circles and containers on the initial dots, phantom
+  dots beyond the walls (:mod:`.walls`), then OptDot (L-BFGS through the formulation's
+  stages, then the long-wavelength correction and the hard core, :mod:`.correction`) or
+  the MD baseline of §2.2. A tile relaxes without the correction; it gets
+  :func:`correction_region` over windows that span its seams, and :func:`hard_core` in
+  its guarantee task.
+* :func:`finish` (:mod:`.finishing`): dot sizes fitted to the coverage where the dots
+  stand (when sizes vary, :mod:`optdot.relax.resize`), then the guarantee pass and its
+  check.
+
+What a job asks of each stage (its problem, formulation, settings, sizes, halo, spacing)
+is :mod:`.settings`.
+"""
+
+from .correction import TILE_GRID, correction_pad, correction_region, hard_core
+from .finishing import Finished, finish
+from .initial import throw
+from .relaxation import relax
+from .settings import (
+    FIT_SHARE,
+    fit_sigma,
+    fitted,
+    formulation_for,
+    halo_width,
+    job_spacing,
+    problem_of,
+    rule_diameters,
+    settings_for,
+)
+from .walls import job_phantoms, phantom_reach, phantoms_near
+
+__all__ = [
+    "FIT_SHARE",
+    "TILE_GRID",
+    "Finished",
+    "correction_pad",
+    "correction_region",
+    "finish",
+    "fit_sigma",
+    "fitted",
+    "formulation_for",
+    "halo_width",
+    "hard_core",
+    "job_phantoms",
+    "job_spacing",
+    "phantom_reach",
+    "phantoms_near",
+    "problem_of",
+    "relax",
+    "rule_diameters",
+    "settings_for",
+    "throw",
+]

@@ -1,0 +1,182 @@
+"""The long-wavelength correction after the relaxation (:mod:`optdot.relax.lowpass`),
+over the panel or over a tile's blended windows, and the hard-core iterations that
+follow it."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..config.job import Job
+from ..relax.formulation import Formulation
+from ..relax.lowpass import MAX_SHIFT, RegionError, displacement, grid_step
+from ..relax.optdot import relax_staged
+from ..relax.result import RelaxResult
+from ..sampling.initial import Rect
+from .settings import areas, formulation_for, job_spacing, problem_of, rule_diameters, settings_for
+from .walls import with_phantoms
+
+
+def correction_region(
+    job: Job, xy0: np.ndarray, xy: np.ndarray, region: Rect, formulation: Formulation | None = None
+):
+    """The coverage error a tile's correction solves, over ``region`` (the windows it
+    blends grown by :func:`correction_pad`, :func:`optdot.tiling.tasks.correct_tile`) on
+    the lattice every tile shares: ``(RegionError, cap mm)``, or None when the formulation
+    has no correction. Every dot in the region and within a lattice cell around it must be
+    given."""
+    form = formulation_for(job) if formulation is None else formulation
+    if job.optimize.method == "md" or not form.lowpass or not len(xy0):
+        return None
+    if settings_for(job).max_iter == 0:
+        return None
+    area, _ = areas(job, job.density.at(xy0), rule_diameters(job, xy0))
+    spacing = job_spacing(job)
+    h = max(grid_step(job.density, spacing), TILE_GRID * spacing)
+    err = RegionError(xy, area, job.density, h, form.lowpass_sigma * spacing, region, job.domain)
+    return err, MAX_SHIFT * spacing
+
+
+#: Lattice step of the tiles' correction, in spacings (one process: half a spacing). The
+#: grain it removes lies at 6 spacings and longer (S(k a 0.3-1)); a spacing resolves it
+#: and takes a quarter of the cells.
+TILE_GRID = 0.5
+
+
+def correction_pad(job: Job, formulation: Formulation | None = None) -> float:
+    """How far beyond its windows a tile's correction deposits and blurs, mm (4 blur
+    sigmas and 2 lattice cells): a window's error is then the same in every tile that
+    solves it, whatever lies past its edge in the tile's region. At most 3.8 spacings."""
+    form = formulation_for(job) if formulation is None else formulation
+    spacing = job_spacing(job)
+    h = max(grid_step(job.density, spacing), TILE_GRID * spacing)
+    return 4.0 * form.lowpass_sigma * spacing + 2.0 * h
+
+
+def hard_core(
+    job: Job,
+    xy0: np.ndarray,
+    xy: np.ndarray,
+    held: tuple[np.ndarray, np.ndarray | float] | None = None,
+    formulation: Formulation | None = None,
+) -> np.ndarray:
+    """The formulation's hard-core iterations (see :func:`long_wavelength`) for a tile's dots
+    after its correction, with its neighbours' dots held: ``[n, 2]`` new positions, mm.
+
+    Args:
+        held: ``(positions [h, 2] mm, diameters [h] or one, mm)`` of the neighbours (final
+            for the tiles settled before, corrected for the others).
+    """
+    form = formulation_for(job) if formulation is None else formulation
+    if job.optimize.method == "md" or not form.lowpass_core_iter or not len(xy0):
+        return xy
+    if settings_for(job).max_iter == 0:
+        return xy
+    n = len(xy0)
+    diameters = rule_diameters(job, xy0)
+    frozen = None
+    if held is not None and len(held[0]):
+        hxy = np.asarray(held[0], np.float64)
+        xy0 = np.concatenate([xy0, hxy])
+        xy = np.concatenate([xy, hxy])
+        frozen = np.zeros(len(xy0), bool)
+        frozen[n:] = True
+        if diameters is not None:
+            diameters = np.concatenate([diameters, np.broadcast_to(held[1], (len(hxy),))])
+    rho = job.density.at(xy0)
+    phantom = None
+    if form.phantoms:
+        xy0, rho, start, frozen, diameters, phantom = with_phantoms(
+            job, form, xy0, rho, xy, frozen, diameters
+        )
+        xy = start
+    res = RelaxResult(np.ascontiguousarray(xy), np.nan, 0, 0, 0, "", [])
+    res = core_iterations(job, form, res, xy0, rho, frozen, diameters, phantom)
+    return np.ascontiguousarray(res.xy[:n])
+
+
+def long_wavelength(job, form, res, xy0, rho, frozen, diameters, phantom) -> RelaxResult:
+    """The long-wavelength correction (:mod:`optdot.relax.lowpass`) after the
+    relaxation, then the hard core alone.
+
+    ``form.lowpass`` times: every real dot's coverage error over the window of the real
+    dots, the movers (not phantoms, not held) and their containers moved along the
+    field, then
+    ``form.lowpass_iter`` L-BFGS iterations (default none). The relaxation
+    comes first because it makes long-wavelength grain of its own: 30 more iterations
+    of it after the correction bring half the grain back, and even 2 leave S(k a 0.3-1)
+    at 0.00034 where none leaves 0.00005 (uniform 0.20 map). Last,
+    ``form.lowpass_core_iter`` iterations of the hard-core term alone (soft circles
+    shrunk until they no longer meet, containers kept): the correction moves dots at the
+    scale of a spacing too and pushes pairs that stood just outside the core under
+    60 µm; with the compressed soft circles gone the core clears them (LED sample: 5,484
+    pairs under 60 µm after the relaxation, 7,357 after a correction, 541 after 10 core
+    iterations) without bringing the grain back. Measured in BENCHMARKS.md (issue 24).
+    """
+    res, xy0 = correction_passes(job, form, res, xy0, rho, frozen, diameters, phantom)
+    res = core_iterations(job, form, res, xy0, rho, frozen, diameters, phantom)
+    if form.lowpass or form.lowpass_core_iter:
+        res.message += (
+            f"; then {form.lowpass} long-wavelength passes ({form.lowpass_iter} iterations "
+            f"each) and {form.lowpass_core_iter} hard-core iterations"
+        )
+    return res
+
+
+def correction_passes(job, form, res, xy0, rho, frozen, diameters, phantom):
+    """The correction passes of :func:`long_wavelength`: ``(result, containers moved)``."""
+    real = np.ones(len(xy0), bool) if phantom is None else ~phantom
+    movers = real if frozen is None else real & ~frozen
+    area, spacing = areas(job, rho[real], None if diameters is None else diameters[real])
+    # the dots' box grown by a spacing (clipped to the map's): the target must cover the
+    # strip between the outermost centres and the walls, whose coverage they carry
+    lo, hi = xy0[real].min(axis=0) - spacing, xy0[real].max(axis=0) + spacing
+    window = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+    settings = dataclasses.replace(settings_for(job), max_iter=form.lowpass_iter)
+    for _ in range(form.lowpass):
+        u = np.zeros_like(xy0)
+        shift = displacement(
+            res.xy[real], area, job.density, spacing, form.lowpass_sigma, window, job.domain
+        )
+        u[real] = shift
+        u[~movers] = 0.0
+        xy0 = xy0 + u
+        res.xy = res.xy + u
+        if form.lowpass_iter:
+            more = relax_staged(
+                problem_of(job), form, xy0, rho, settings, None, start=res.xy, frozen=frozen,
+                diameters=diameters, phantom=phantom,
+            )  # fmt: skip
+            res = continued(res, more)
+    return res, xy0
+
+
+def core_iterations(job, form, res, xy0, rho, frozen, diameters, phantom) -> RelaxResult:
+    """The hard-core iterations of :func:`long_wavelength`: soft circles too small to meet,
+    containers as they were."""
+    if not form.lowpass_core_iter:
+        return res
+    shrink = 1e-3
+    core_only = dataclasses.replace(
+        form, radius_factor=form.radius_factor * shrink,
+        container_factor=form.container_factor / shrink,
+    )  # fmt: skip
+    settings = dataclasses.replace(settings_for(job), max_iter=form.lowpass_core_iter)
+    more = relax_staged(
+        problem_of(job), core_only, xy0, rho, settings, None, start=res.xy, frozen=frozen,
+        diameters=diameters, phantom=phantom,
+    )  # fmt: skip
+    return continued(res, more)
+
+
+def continued(res: RelaxResult, more: RelaxResult) -> RelaxResult:
+    """``res`` continued by ``more``: its positions, evaluations and history added; the
+    iteration count, status and message stay the relaxation's (what its progress bar
+    showed)."""
+    res.xy = more.xy
+    res.penalty = more.penalty
+    res.nfev += more.nfev
+    res.rebuilds += more.rebuilds
+    res.history = res.history + more.history
+    return res

@@ -1,0 +1,76 @@
+"""The last stage: dot sizes fitted to the coverage (when they vary by a rule), then the
+guarantee pass and its check."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config.job import Job
+from ..relax.legalize import LegalizeResult, make_legal
+from ..relax.resize import fit_sizes
+from ..sampling.initial import Rect
+from .settings import fit_sigma, fitted, rule_diameters
+
+
+@dataclass
+class Finished:
+    """What :func:`finish` made of a set of dots.
+
+    Attributes:
+        xy: ``[n, 2]`` final positions, mm, rounded to 1 nm.
+        diameter: the one diameter, mm, or ``[n]`` per dot.
+        legalize: the guarantee pass's facts (sweeps, fixes).
+    """
+
+    xy: np.ndarray
+    diameter: float | np.ndarray
+    legalize: LegalizeResult
+
+
+def finish(
+    job: Job,
+    xy: np.ndarray,
+    xy0: np.ndarray,
+    where: str,
+    held: tuple[np.ndarray, np.ndarray | float] | None = None,
+    window: Rect | None = None,
+) -> Finished:
+    """Sizes fitted (when they vary by a rule), then the guarantee pass and its check.
+
+    Args:
+        xy: ``[n, 2]`` relaxed positions, mm.
+        xy0: ``[n, 2]`` where they were thrown (their start cells: size and the cell a
+            dot returns to if it drifted into a zero cell).
+        where: the job or tile, for the error message.
+        held: ``(positions [h, 2] mm, diameters [h] or one, mm)`` of dots held still
+            around these (a tile's neighbours within :func:`halo_width`): they count in
+            the coverage and the spacing, and someone else fixes them.
+        window: the part of the panel the size fit covers (a tile grown by the fit's
+            reach; None: the panel).
+
+    Raises:
+        GuaranteeError: a violation is left after the pass.
+    """
+    n = len(xy)
+    d = rule_diameters(job, xy0)
+    home = job.density.cell_index(xy0)
+    frozen = None
+    if held is not None and len(held[0]):
+        xy = np.concatenate([xy, held[0]])
+        home = np.concatenate([home, np.zeros(len(held[0]), np.int64)])
+        frozen = np.zeros(len(xy), bool)
+        frozen[n:] = True
+        if d is not None:
+            d = np.concatenate([d, np.broadcast_to(held[1], (len(held[0]),))])
+    if d is None:
+        radius, dmin = 0.5 * job.diameter, job.min_distance
+    else:
+        if fitted(job):
+            fit = None if frozen is None else ~frozen
+            d = fit_sizes(xy, d, job.sizes, job.density, job.domain, fit_sigma(job), fit, window)
+        radius, dmin = 0.5 * d, d + job.optimize.gap
+    leg = make_legal(xy, job.density, home, job.domain, radius, dmin, where, frozen)
+    diameter = job.diameter if d is None else d[:n]
+    return Finished(np.ascontiguousarray(leg.xy[:n]), diameter, leg)

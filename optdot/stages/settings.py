@@ -1,0 +1,94 @@
+"""What a job asks of every stage: its penalty problem, formulation, L-BFGS settings,
+size rule, halo and spacing. Pure functions of the job, shared by the panel and its tiles."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from ..config.job import Job
+from ..relax.circles import hex_radius
+from ..relax.formulation import Formulation, Problem, formulation_of
+from ..relax.optdot import RelaxSettings
+from ..relax.resize import reach
+
+#: Width of the blur the dot sizes are fitted under, as a share of ``qa.smoothing``
+#: (:mod:`optdot.relax.resize`): what a diffuser or the eye blurs at least.
+FIT_SHARE = 0.5
+
+
+def problem_of(job: Job) -> Problem:
+    """The fields of ``job`` a formulation builds its penalty terms from."""
+    return Problem(
+        domain=job.domain,
+        density=job.density,
+        dot_radius=0.5 * job.diameter,
+        min_distance=job.min_distance,
+        close_target=job.close_target,
+        seed=job.optimize.seed,
+    )
+
+
+def formulation_for(job: Job) -> Formulation:
+    """The job's formulation with its radius and container factors."""
+    opt = job.optimize
+    return formulation_of(opt.formulation, opt.radius_factor, opt.container_factor)
+
+
+def settings_for(job: Job) -> RelaxSettings:
+    """The job's L-BFGS settings."""
+    opt = job.optimize
+    return RelaxSettings(opt.max_iter, opt.lbfgs_memory, opt.ftol, opt.skin)
+
+
+def fit_sigma(job: Job) -> float:
+    """Gaussian width the dot sizes are fitted under, mm."""
+    return FIT_SHARE * job.qa.smoothing
+
+
+def fitted(job: Job) -> bool:
+    """Whether ``job``'s dot sizes are fitted after relaxation (sizes vary by a rule; an
+    explicit diameter grid is the user's choice and kept)."""
+    return job.sizes is not None and job.sizes.rule != "grid"
+
+
+def halo_width(job: Job) -> float:
+    """How far around a set of dots :func:`finish` needs the dots held still, mm: the
+    size fit's blur reach when sizes are fitted, else two of the largest spacings."""
+    widest = job.diameter if job.sizes is None else job.sizes.high
+    width = 2.0 * (widest + job.optimize.gap)
+    return max(width, reach(fit_sigma(job))) if fitted(job) else width
+
+
+def rule_diameters(job: Job, xy0: np.ndarray) -> np.ndarray | None:
+    """``[n]`` diameter the size rule gives the dots thrown at ``xy0`` (their start
+    cells'), mm; None for dots of one size."""
+    if job.sizes is None:
+        return None
+    return np.asarray(job.diameters_at(job.density.cell_index(xy0)), dtype=np.float64)
+
+
+@lru_cache(maxsize=8)
+def job_spacing(job: Job) -> float:
+    """The map's median hexagonal spacing over its non-zero cells, weighted by dot
+    count, mm: one figure for every tile (their lattice and blur must agree)."""
+    g = job.density.grid
+    d = job.cell_diameters
+    live = g > 0
+    if not live.any():
+        return float(job.diameter)
+    r0 = 0.5 * (job.diameter if d is None else d[live])
+    a = np.broadcast_to(np.pi * r0**2, (int(live.sum()),))
+    spacing = 2.0 * hex_radius(g[live], r0)
+    count = g[live] / a
+    order = np.argsort(spacing)
+    cum = np.cumsum(count[order])
+    return float(spacing[order][np.searchsorted(cum, 0.5 * cum[-1])])
+
+
+def areas(job: Job, rho: np.ndarray, diameters: np.ndarray | None) -> tuple[np.ndarray, float]:
+    """``([n] dot areas mm², median hexagonal spacing mm)`` of dots at fills ``rho``."""
+    d = np.broadcast_to(job.diameter if diameters is None else diameters, (len(rho),))
+    area = np.pi * 0.25 * d**2
+    return area, float(np.median(2.0 * hex_radius(rho, 0.5 * d)))
