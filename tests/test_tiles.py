@@ -10,6 +10,7 @@ import signal
 import subprocess
 import sys
 import time
+import weakref
 
 import numpy as np
 import pytest
@@ -544,3 +545,43 @@ def test_export_takes_a_dataset_as_the_dots(tiled, tmp_path):
     assert result.passed
     assert len(_klayout_centres(out["gds"])) == ds.n
     assert len(out["csv"].read_text().splitlines()) == ds.n + 1
+
+
+class _Watching(InProcess):
+    """Keeps a weak reference to every relaxed, corrected and final tile it makes."""
+
+    def __init__(self) -> None:
+        self.refs: dict[str, list] = {"relax": [], "correct": [], "legal": []}
+
+    def submit(self, kind, key, fn, *args):
+        out = fn(*args)
+        if kind in self.refs:
+            self.refs[kind].append(weakref.ref(out))
+        return out
+
+
+def test_a_tiled_run_lets_go_of_each_tile_once_handed_over():
+    """Memory: the run holds a relaxed, corrected or final tile only while a task still
+    needs it (holding every one to the end took the monitor panel to 4 GiB). When the
+    last tile reaches the sink, every earlier tile's results are gone."""
+    from optdot.tiling.run import run_tiles, tiny_job
+
+    job = tiny_job()
+    ex = _Watching()
+    alive_at_last: dict[str, int] = {}
+    plan = plan_tiles(job, side=3.0)
+
+    sinks = []
+
+    def sink(tile, xy, d):
+        sinks.append(tile)
+        if len(sinks) == plan.count:
+            # (an empty tile's correction hands its merged dots on, which the run keeps)
+            alive_at_last.update(
+                {k: sum(r() is not None and len(r().xy) > 0 for r in v) for k, v in ex.refs.items()}
+            )
+
+    run_tiles(job, plan, ex, sink)
+    assert plan.count == 4 and len(ex.refs["relax"]) == 4
+    # only the tile in the sink's hands is alive
+    assert alive_at_last == {"relax": 0, "correct": 0, "legal": 1}

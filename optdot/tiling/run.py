@@ -250,6 +250,7 @@ def run_tiles(
             h = executor.submit("legal", key, _legal, jobf, plan, corrected[i, j], *around)
             final[i, j] = h
             kind_of[id(h)] = "legal"
+    h = around = parts = results = None  # the loop's last handles: no longer held here
     total = sum(_WEIGHTS.values()) * max(len(tiles) - len(finished), 1)
     done = 0.0
     counts: dict[tuple[int, int], int] = {}
