@@ -272,3 +272,40 @@ def test_the_strongest_dark_blob_is_the_planted_dip(led):
     top = dark[0]
     assert math.hypot(top["x_mm"] - CENTRE[0], top["y_mm"] - CENTRE[1]) < 3
     assert top["jnd"] <= -1.5
+
+
+def _perfect_with_bump(at: tuple[float, float], view):
+    """A 20 x 20 mm map at fill 0.2 with no light for x < 5 mm (a zero-fill region),
+    delivered exactly, plus 5 % more dot area in a Gaussian of sigma 0.3 mm at ``at``
+    (lit cells only): ``(metrics, peak |JND|)``."""
+    fill = np.full((20, 20), 0.2)
+    fill[:, :5] = 0.0
+    density = DensityMap(fill, 20.0, 20.0)
+    g = LuminanceGrid.over(density, view)
+    g.sums[:] = density.resampled(g.x0, g.y0, g.cw, g.ch, g.nx, g.ny) * g.cw * g.ch
+    x = g.x0 + (np.arange(g.nx) + 0.5) * g.cw
+    y = g.y0 + (np.arange(g.ny) + 0.5) * g.ch
+    r2 = (x[None, :] - at[0]) ** 2 + (y[:, None] - at[1]) ** 2
+    g.sums += np.where(g.sums > 0, 0.05 * g.sums * np.exp(-r2 / (2 * 0.3**2)), 0.0)
+    metrics, _ = visibility(g, density, None, view)
+    return metrics, metrics["max_jnd"]
+
+
+def test_light_by_a_zero_fill_region_is_judged_against_the_eyes_adaptation():
+    """The same excess of dot area seen just inside a zero-fill region's border and in the
+    open panel: the light it adds is the same, and the eye, adapted to its 2° surround,
+    sees it about as strongly in both places (1.15x by the border), not as a contrast over
+    the few per cent of light the PSF carries into the dark side (the ratio of blurs did
+    that: 2.3x here, and 20 JND at the tsuno sample's empty corner)."""
+    view = viewing("notebook")
+    _, inner = _perfect_with_bump((14.0, 10.0), view)
+    metrics, border = _perfect_with_bump((5.3, 10.0), view)
+    assert inner > 0.5  # the bump is seen in the open
+    assert 0.7 * inner < border < 1.5 * inner
+    # a perfect pattern with a zero-fill region is not seen at all
+    fill = np.full((20, 20), 0.2)
+    fill[:, :5] = 0.0
+    density = DensityMap(fill, 20.0, 20.0)
+    g = LuminanceGrid.over(density, view)
+    g.sums[:] = density.resampled(g.x0, g.y0, g.cw, g.ch, g.nx, g.ny) * g.cw * g.ch
+    assert visibility(g, density, None, view)[0]["max_jnd"] < 0.01

@@ -10,10 +10,20 @@ the PSF and fine enough for 60 cycles/degree at the viewing distance):
 2. **Luminance**: coverage and the target map (exact pixel means times the panel's share
    of each cell) are both blurred by the stack's Gaussian PSF; their ratio is the
    relative luminance, 1 where the pattern delivers the map (the intended gradient is
-   not an error). Cells outside the panel, or where the blurred map is under 2 % fill
-   (its zero regions), are left out (contrast 0).
-3. **Contrast**: relative luminance over its local mean, a Gaussian of FWHM 2° at the
-   viewing distance (the field the eye adapts to), minus 1.
+   not an error). Across a zero-fill region's border the light meant to be there
+   falls from the panel's to none: *meant* = the lit (non-zero) share of the panel under
+   the PSF, and the luminance *seen* = relative luminance × meant. Weighting by *meant*
+   matters only there: the ratio of two blurred maps is a ratio of two Gaussian tails in
+   the dark side's penumbra, where a dot-area error of the first lit row reads as a
+   contrast over a few per cent of light (the tsuno sample's empty corner: 20 JND, a
+   planted bump 2.3× stronger by the border than in the open); the eye sees the light
+   that error adds against its adaptation field, as anywhere else (1.15×;
+   ``tests/test_visibility.py``). Cells outside the panel, or where *meant* is under
+   :data:`MIN_LIT` (deep in a zero region), are left out (contrast 0).
+3. **Contrast**: seen over its local mean, a Gaussian of FWHM 2° at the viewing distance
+   (the field the eye adapts to; zero regions count in it as dark), less the same for
+   *meant* (the intended soft border of a zero region is not an error). On a map with no
+   zero region *meant* is 1 and this is relative luminance over its local mean, minus 1.
 4. **Eye**: the contrast image filtered by Barten's CSF (:mod:`optdot.quality.csf`) at
    the view's luminance and a field of :data:`FIELD_DEG`: a sinusoidal ripple of
    contrast m comes out as m·S(u), so the map is in JND (1 = just visible, 50 %
@@ -53,8 +63,9 @@ MAX_CELLS = 30_000_000
 BLOB_JND = 0.5
 #: Most blobs listed (the largest peaks).
 MAX_BLOBS = 20
-#: Blurred map fill under which a cell is left out (zero-density regions).
-MIN_FILL = 0.02
+#: Intended relative luminance (the lit share of the panel under the PSF) under which a
+#: cell is left out: deep in a zero-fill region, where no light is meant to be.
+MIN_LIT = 0.001
 #: Longest side of the JND image in the report, pixels.
 IMAGE_PX = 600
 
@@ -185,21 +196,38 @@ def visibility(
         frac = np.ones((g.ny, g.nx))
     else:
         frac = outline.cell_fractions(g.x0, g.y0, g.cw, g.ch, g.nx, g.ny)
-    target = density.resampled(g.x0, g.y0, g.cw, g.ch, g.nx, g.ny) * frac
+    fill = density.resampled(g.x0, g.y0, g.cw, g.ch, g.nx, g.ny)
+    target = fill * frac
     got = g.sums / cell_area
     sp = _Spectral.of(g, _margin(view))
     psf = sp.gaussian(view.psf)
     lum = sp.back(sp.forward(got) * psf, got)
     want = sp.back(sp.forward(target) * psf, got)
     share = sp.back(sp.forward(frac) * psf, got)
-    valid = (frac > 0.5) & (share > 0.25) & (want > MIN_FILL * np.maximum(share, 1e-12))
+    # the intended luminance, relative to the lit panel's: the lit (non-zero) share of the
+    # panel under the PSF, 1 in the panel, falling to 0 across a zero-fill region's border
+    lit = sp.back(sp.forward((fill > 0) * frac) * psf, got) / np.maximum(share, 1e-12)
+    inside = (frac > 0.5) & (share > 0.25)
+    valid = inside & (lit > MIN_LIT) & (want > 1e-12)
     rel = np.where(valid, lum / np.where(valid, want, 1.0), 1.0)
-    del lum, want, share, target, got
-    vf = valid.astype(float)
+    del lum, want, share, target, got, fill
+    # luminance seen, relative to the lit panel's: rel where the map is lit, fading with
+    # the intended luminance into a zero-fill region's penumbra (cells of no light count
+    # as dark in the eye's adaptation field, and a relative error there is scaled by how
+    # much light is left)
+    seen = np.where(valid, rel * lit, 0.0)
+    meant = np.where(valid, lit, 0.0)
+    vf = inside.astype(float)
     a_sigma = _adaptation_sigma(view)
-    mean = sp.blur(rel * vf, a_sigma) / np.maximum(sp.blur(vf, a_sigma), 1e-12)
-    contrast = np.where(valid, rel / np.where(valid, mean, 1.0) - 1.0, 0.0)
-    del mean, vf
+    norm = np.maximum(sp.blur(vf, a_sigma), 1e-12)
+    adapt_seen = sp.blur(seen * vf, a_sigma) / norm
+    adapt_meant = sp.blur(meant * vf, a_sigma) / norm
+    contrast = np.where(
+        valid,
+        seen / np.where(valid, adapt_seen, 1.0) - meant / np.where(valid, adapt_meant, 1.0),
+        0.0,
+    )
+    del adapt_seen, adapt_meant, seen, meant, vf, norm, lit
     u = cycles_per_degree(np.sqrt(sp.f2), view.distance)
     jnd = sp.back(sp.forward(contrast) * barten_csf(u, view.luminance, FIELD_DEG), contrast)
     del u
