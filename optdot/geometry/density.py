@@ -119,6 +119,20 @@ class DensityMap:
         fy = sparse_overlap(y0 + np.arange(ny + 1) * ch, self.y0, self.cell_size[1], self.shape[0])
         return np.asarray(fy @ (fx @ self.grid.T).T) / (cw * ch)
 
+    def deposited(self, x0: float, y0: float, cw: float, ch: float, nx: int, ny: int) -> np.ndarray:
+        """``[ny, nx]`` fill of the map as a cloud-in-cell deposit on another grid sees it
+        (lower-left corner ``x0, y0``, pixels ``cw x ch``, mm): every bit of the map's area
+        shared among the 4 nearest pixel centres by bilinear weights, what lies past the
+        outermost centres given to the outermost pixels, exactly as dots are deposited
+        (:class:`optdot.quality.visibility.LuminanceGrid`), then divided by the pixel
+        area. Comparing a deposit of dots with :meth:`resampled` instead mistakes the
+        deposit's own smoothing for an error where the map is steep: the led sample's
+        LED edge read +0.38 % too bright through a 1 mm blur on 0.25 mm pixels, where a
+        0.025 mm grid finds +0.005 %."""
+        fx = sparse_hats(x0, cw, nx, self.x0, self.cell_size[0], self.shape[1])
+        fy = sparse_hats(y0, ch, ny, self.y0, self.cell_size[1], self.shape[0])
+        return np.asarray(fy @ (fx @ self.grid.T).T) / (cw * ch)
+
     def integral(
         self, x0: float, y0: float, x1: float, y1: float, cell_weights: np.ndarray | None = None
     ) -> float:
@@ -184,3 +198,50 @@ def sparse_overlap(edges: np.ndarray, lo: float, step: float, n: int):
     c0 = lo + cols * step
     val = np.clip(np.minimum(b[rows], c0 + step) - np.maximum(a[rows], c0), 0.0, None)
     return csr_matrix((val, (rows, cols)), shape=(len(a), n))
+
+
+def _hat_integral(t: np.ndarray, w: float) -> np.ndarray:
+    """Integral from -inf to ``t`` of the hat ``max(0, 1 - |u| / w)``."""
+    t = np.clip(t, -w, w)
+    return np.where(t <= 0, (t + w) ** 2 / (2 * w), w - (w - t) ** 2 / (2 * w))
+
+
+def sparse_hats(p0: float, step: float, n: int, lo: float, cell: float, m: int):
+    """``[n, m]`` CSR: the length (mm) of each of ``m`` map cells (width ``cell`` from
+    ``lo``) weighted by the cloud-in-cell hat of each of ``n`` pixels (width ``step``
+    from ``p0``, centres ``p0 + (j + 0.5) step``); the first and last hats stay at 1
+    beyond their centres (a deposit gives what lies past them to the outermost pixels)."""
+    from scipy.sparse import csr_matrix
+
+    c = p0 + (np.arange(n) + 0.5) * step
+    left = c - step
+    right = c + step
+    left[0] = -np.inf
+    right[-1] = np.inf
+    k0 = np.clip(np.floor((np.maximum(left, lo) - lo) / cell).astype(np.int64), 0, m - 1)
+    k1 = np.clip(
+        np.ceil((np.minimum(right, lo + m * cell) - lo) / cell).astype(np.int64) - 1, 0, m - 1
+    )
+    k1 = np.maximum(k1, k0)
+    count = k1 - k0 + 1
+    rows = np.repeat(np.arange(n), count)
+    within = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+    cols = np.repeat(k0, count) + within
+    a = lo + cols * cell
+    b = a + cell
+    cj = c[rows]
+    val = _hat_integral(b - cj, step) - _hat_integral(a - cj, step)
+    if n == 1:
+        val = b - a
+    else:
+        first, last = rows == 0, rows == n - 1
+        # the flat part past the outermost centres
+        val[first] += np.clip(np.minimum(b[first], c[0]) - a[first], 0.0, None) - (
+            _hat_integral(np.minimum(b[first], c[0]) - c[0], step)
+            - _hat_integral(np.minimum(a[first], c[0]) - c[0], step)
+        )
+        val[last] += np.clip(b[last] - np.maximum(a[last], c[-1]), 0.0, None) - (
+            _hat_integral(np.maximum(b[last], c[-1]) - c[-1], step)
+            - _hat_integral(np.maximum(a[last], c[-1]) - c[-1], step)
+        )
+    return csr_matrix((val, (rows, cols)), shape=(n, m))
