@@ -135,6 +135,27 @@ def optdot(*args) -> list[str]:
     return [sys.executable, "-P", "-m", "optdot", *map(str, args)]
 
 
+def blob_places(blobs: list[dict], box, xs, ys, seam_mm: float = 1.5, edge_mm: float = 2.0):
+    """Where the strongest blobs sit (issue 24's measure): ``(on edges, edge band's share
+    of the panel, on seams, seam bands' share, blobs)``. A blob is on an edge within
+    ``edge_mm`` of the panel's border, else on a seam within ``seam_mm`` of an inner tile
+    border (``xs``, ``ys``: the tiling's borders, both ends included)."""
+    x0, y0, x1, y1 = box
+
+    def where(x, y):
+        edge = np.minimum(np.minimum(x - x0, x1 - x), np.minimum(y - y0, y1 - y)) < edge_mm
+        dx = np.min(np.abs(np.subtract.outer(x, np.asarray(xs[1:-1]))), axis=-1, initial=np.inf)
+        dy = np.min(np.abs(np.subtract.outer(y, np.asarray(ys[1:-1]))), axis=-1, initial=np.inf)
+        return edge, ~edge & (np.minimum(dx, dy) < seam_mm)
+
+    gx, gy = np.meshgrid(np.arange(x0 + 0.25, x1, 0.5), np.arange(y0 + 0.25, y1, 0.5))
+    e_area, s_area = where(gx.ravel(), gy.ravel())
+    bx = np.array([b["x_mm"] for b in blobs])
+    by = np.array([b["y_mm"] for b in blobs])
+    on_e, on_s = where(bx, by) if len(blobs) else (np.zeros(0, bool), np.zeros(0, bool))
+    return int(on_e.sum()), float(e_area.mean()), int(on_s.sum()), float(s_area.mean()), len(blobs)
+
+
 def report(label: str, dots: int, secs: float, gib: float) -> None:
     print(f"| {label} | {dots:,} | {secs:.0f} | {dots / secs:,.0f} | {gib:.2f} |", flush=True)
 
@@ -229,15 +250,35 @@ def main() -> None:
                     size = mask.stat().st_size / 1e9
                     print(f"| {name} {label} | {fmt} | {secs:.0f} | {gib:.2f} | {size:.2f} |")
         if args.qa:
-            print("\n| pattern | pairs < 60 µm | ψ6 mean | coverage RMS | QA s | QA GiB |")
-            print("|---|---|---|---|---|---|")
+            print(
+                "\n| pattern | pairs < 60 µm | ψ6 mean | coverage RMS | JND p50 / p99 | largest"
+                " JND | blobs > 1 JND | of the strongest: on edges (area) | on seams (area) "
+                "| QA s | QA GiB |"
+            )
+            print("|---|---|---|---|---|---|---|---|---|---|---|")
             seams = []
+            tiling = None
+            for _, out in outs:
+                if out.suffix == ".parquet":
+                    tiling = json.loads((out / "_manifest.json").read_text())["tiles"]
             for label, out in outs:
                 m = qa_summary(out, job)
+                v = m.get("visibility", {})
+                pct = v.get("jnd_percentiles", {})
+                places = "– | –"
+                if tiling is not None and v.get("blobs"):
+                    w, h = PANELS[name]
+                    ne, ae, ns, as_, nb = blob_places(
+                        v["blobs"], (0, 0, w, h), tiling["xs"], tiling["ys"]
+                    )
+                    places = f"{ne} of {nb} ({100 * ae:.0f} %) | {ns} of {nb} ({100 * as_:.0f} %)"
                 print(
                     f"| {name} {label} | {m['pairs_below_close']:,} | "
                     f"{m['psi6_local_mean']:.4f} | {100 * m['coverage_rel_rms_smoothed']:.3f} % "
-                    f"| {m['_qa_s']:.0f} | {m['_qa_gib']:.2f} |"
+                    f"| {pct.get('50', float('nan')):.2f} / {pct.get('99', float('nan')):.2f} "
+                    f"| {v.get('max_jnd_signed', float('nan')):+.2f} "
+                    f"| {v.get('blobs_over_1_jnd', 0)} "
+                    f"| {places} | {m['_qa_s']:.0f} | {m['_qa_gib']:.2f} |"
                 )
                 if m.get("seams"):
                     seams.append((label, m["seams"]))

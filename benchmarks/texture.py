@@ -16,7 +16,13 @@ Rows: ``optdot`` (the default), ``optdot 0.3`` (the default before issue 24: no 
 no long-wavelength correction), ``paper``, ``md`` (the §2.2 baseline), and on the uniform
 map the peers: ``sobol`` (the initial throw, unrelaxed), ``poisson``, ``scipy
 PoissonDisk`` (radius = the hexagonal spacing x 0.85; fills fewer dots), ``lloyd`` (20
-Lloyd iterations from the Sobol throw, by 50 samples per point).
+Lloyd iterations from the Sobol throw, by 50 samples per point), and any ``--points``:
+points a peer made elsewhere, e.g. Gaussian blue noise from ``blue-sampler`` (it needs jax
+and Python >= 3.12; its 2.1.7 release imports on 3.11): in a separate venv, ``pip install
+jax finufft gridpoints squarenet matplotlib`` then ``pip install --no-deps
+--ignore-requires-python blue-sampler==2.1.7``, ``x = blue_sampler.sample_points(N=108310,
+D=2, method="rgbn")``, ``numpy.save("blue.npy", x)``, then ``--points "blue-sampler
+rgbn=blue.npy:SECONDS"`` here.
 """
 
 from __future__ import annotations
@@ -122,6 +128,11 @@ def main() -> None:
     maps = ["uniform", "led", "tsuno", "chokka", "walls"]
     ap.add_argument("--map", default="uniform", choices=maps)
     ap.add_argument("--only", nargs="*")
+    ap.add_argument(
+        "--points", action="append", default=[], metavar="NAME=FILE[:SECONDS]",
+        help="a peer's points from another environment: FILE.npy of [n, 2] in the unit "
+        "square (scaled to the map's box), measured as row NAME (uniform map only)",
+    )  # fmt: skip
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp())
     path = {
@@ -142,7 +153,8 @@ def main() -> None:
         rms = "–" if math.isnan(m["rms"]) else f"{100 * m['rms']:.3f} %"
         cells = [name, len(xy), rms, f"{m['S_0.3-1']:.5f}", f"{m['S_1-3']:.4f}"]
         cells += [f"{m['psi6']:.3f}", f"{m['coh2']:.3f}", f"{m['nn1/a']:.2f}", m["<60"]]
-        cells += [m["<46"], f"{100 * m['wall']:+.1f} %", f"{seconds:.1f}"]
+        secs = "–" if math.isnan(seconds) else f"{seconds:.1f}"
+        cells += [m["<46"], f"{100 * m['wall']:+.1f} %", secs]
         print("| " + " | ".join(str(c) for c in cells) + " |", flush=True)
 
     def run(name, form=None, method=None):
@@ -178,6 +190,11 @@ def main() -> None:
         t = time.perf_counter()
         xy = make()
         row(name, xy, 0.046, time.perf_counter() - t)
+    for spec in args.points:
+        name, _, rest = spec.partition("=")
+        file, _, secs = rest.partition(":")
+        u = np.load(file)
+        row(name, np.mod(u, 1.0) * np.array([box[2], box[3]]), 0.046, float(secs or "nan"))
 
 
 def poisson_disk(job, n: int) -> np.ndarray:
