@@ -3,7 +3,9 @@ WITH WARNINGS when a viewer will see something or checks were skipped, FAIL when
 gate fails; ``export`` prints the verdict, says what each file holds, keeps the report;
 the library refuses to overwrite its own inputs as the CLI does.
 
-Before the fix the led sample's report said a green PASS beside 13 JND, ``qa`` without a
+Before the fix the led sample's report said a green PASS beside 13 JND (since the
+eye model's corrections and the wide correction pass its clean pattern reads 0.7 JND,
+so a defect is planted in it here), ``qa`` without a
 job said PASS without naming what it skipped, and ``export`` printed no verdict and
 "SVG, N dots" for a window of a few hundred.
 """
@@ -26,7 +28,9 @@ from .conftest import SAMPLES, cli
 def led(
     tmp_path_factory,
 ):
-    """The led sample's pattern (111k dots, 13 JND along its LED edge) and its job."""
+    """The led sample's job and its pattern with a defect a viewer sees (``p.csv``: one
+    dot in ten taken out within 2 mm of the panel's centre, a dark spot of several JND);
+    the clean pattern (``clean.csv``) reads under 1 JND."""
     from optdot.config.schema import load_job
     from optdot.pipeline import generate
 
@@ -34,7 +38,14 @@ def led(
     for f in (SAMPLES / "led").iterdir():
         shutil.copy(f, d / f.name)
     job = load_job(d / "job.toml")
-    save_pattern(generate(job), d / "p.csv")
+    pattern = generate(job)
+    save_pattern(pattern, d / "clean.csv")
+    near = np.hypot(*(pattern.xy - [18.0, 7.5]).T) < 2.0
+    drop = near & (np.arange(len(pattern.xy)) % 10 == 0)
+    lines = (d / "clean.csv").read_text().splitlines()
+    kept = [lines[0]] + [ln for ln, gone in zip(lines[1:], drop, strict=True) if not gone]
+    (d / "p.csv").write_text("\n".join(kept) + "\n")
+    (d / "n.txt").write_text(str(len(kept) - 1))
     return d
 
 
@@ -51,6 +62,8 @@ def test_a_pattern_a_viewer_sees_passes_with_warnings(led):
     quiet_eye = (led / "job.toml").read_text() + "\n[qa]\nwarn_jnd = 1000\n"
     (led / "calm.toml").write_text(quiet_eye)
     rc, err, out = cli("qa", led / "p.csv", "--job", led / "calm.toml")
+    assert rc == 0 and out.splitlines()[-1] == "verdict: PASS", out
+    rc, err, out = cli("qa", led / "clean.csv", "--job", led / "job.toml")
     assert rc == 0 and out.splitlines()[-1] == "verdict: PASS", out
 
 
@@ -84,11 +97,12 @@ def test_export_prints_the_verdict_each_file_and_keeps_the_report(led):
     ]  # fmt: skip
     rc, err, _ = cli(*args)
     assert rc == 0, err
+    n = int((led / "n.txt").read_text())
     assert "verdict: PASS WITH WARNINGS" in err
-    assert f"{out_dir / 'm.gds'}: GDS, 111,215 dots" in err
-    assert f"{out_dir / 'm.svg'}: SVG, 111,215 dots" in err
+    assert f"{out_dir / 'm.gds'}: GDS, {n:,} dots" in err
+    assert f"{out_dir / 'm.svg'}: SVG, {n:,} dots" in err
     doc = json.loads((out_dir / "r.json").read_text())
-    assert doc["verdict"] == "PASS WITH WARNINGS" and doc["metrics"]["dots"] == 111_215
+    assert doc["verdict"] == "PASS WITH WARNINGS" and doc["metrics"]["dots"] == n
     assert "r.json" in (out_dir / "r.html").read_text()  # the HTML links its JSON
 
 

@@ -187,14 +187,15 @@ def test_a_seam_of_missing_dots_is_seen_at_half_a_metre_not_from_a_tv_sofa(led):
 
 
 def test_the_clean_led_sample_reports_its_own_largest_jnd(led, tmp_path):
-    """The report states the clean pattern's largest |JND| and where it is: on the LED
-    edge, where the map is at its lowest (0.03) and the dots fewest, its first blob."""
+    """The report states the clean pattern's largest |JND|, its first blob, and it is
+    under 1: nothing a viewer sees. With two fine correction passes (no wide one) the LED
+    edge, where the map is at its lowest (0.03), read 2.2 JND."""
     from optdot.pipeline import qa
 
     job, pattern = led
     vis = qa(pattern, job).metrics["visibility"]
     assert vis["view"] == "notebook" and vis["psf_sigma_mm"] == 1.0
-    assert vis["max_jnd"] > 1 and vis["max_jnd_at_mm"][1] < 0.5
+    assert 0.1 < vis["max_jnd"] < 1.0
     top = vis["blobs"][0]
     assert abs(top["jnd"]) == pytest.approx(vis["max_jnd"])
     assert top["jnd"] == pytest.approx(vis["max_jnd_signed"])

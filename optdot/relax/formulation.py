@@ -76,6 +76,11 @@ class Formulation:
         lowpass: passes of the long-wavelength correction after the relaxation
             (:mod:`optdot.relax.lowpass`); 0 = off.
         lowpass_sigma: the correction's blur, in dot spacings.
+        lowpass_last_sigma: the last pass's blur, in dot spacings (0: ``lowpass_sigma``).
+            A fine pass first, a wide one last: at a wall the fine pass's displacement
+            saturates its cap on the first row's layering (a structure of one spacing
+            that dots pinned ``r0`` from the wall cannot undo) and leaves the error along
+            the wall at scales the eye sees; the wide pass sees past the row.
         lowpass_iter: L-BFGS iterations after each pass (0: none, the default: they bring
             grain back).
         lowpass_core_iter: L-BFGS iterations of the hard-core term alone after the
@@ -103,11 +108,19 @@ class Formulation:
     phantoms: bool = False
     lowpass: int = 0
     lowpass_sigma: float = 0.7
+    lowpass_last_sigma: float = 0.0
     lowpass_iter: int = 0
     lowpass_core_iter: int = 0
     stages: tuple[tuple[float, float], ...] = ((1.0, 1.0),)
     container_factor: float = 4.0
     close_ref: float = 0.060
+
+    def lowpass_sigmas(self) -> list[float]:
+        """The blur of each long-wavelength pass, in dot spacings (``lowpass`` of them)."""
+        sigmas = [self.lowpass_sigma] * self.lowpass
+        if sigmas and self.lowpass_last_sigma > 0:
+            sigmas[-1] = self.lowpass_last_sigma
+        return sigmas
 
     def radii(
         self, rho: np.ndarray, r0: float | np.ndarray, seed: int, multiplier: float = 1.0
@@ -201,7 +214,9 @@ class Formulation:
 #: passes of the long-wavelength correction cut the grain seen through a 0.5 mm blur from
 #: 0.28 % to 0.015 % RMS (uniform 0.20 map; the second pass takes the LED sample's
 #: largest JND from 3.7 to 3.0), and 10 iterations of the hard core alone after them
-#: clear most pairs under 60 µm.
+#: clear most pairs under 60 µm. The second pass blurs over 3 spacings, not 0.7: the
+#: largest JND of led 2.18 -> 0.69, tsuno 1.84 -> 1.10, chokka 0.45 -> 0.29, the grain
+#: on the uniform map unchanged at 0.015 % (session 15, BENCHMARKS.md).
 PRESETS: dict[str, Formulation] = {
     "paper": Formulation(),
     "optdot": Formulation(
@@ -217,6 +232,7 @@ PRESETS: dict[str, Formulation] = {
         container_factor=3.5,
         phantoms=True,
         lowpass=2,
+        lowpass_last_sigma=3.0,
         lowpass_core_iter=10,
     ),
 }

@@ -134,11 +134,9 @@ def correction_passes(job, form, res, xy0, rho, frozen, diameters, phantom):
     lo, hi = xy0[real].min(axis=0) - spacing, xy0[real].max(axis=0) + spacing
     window = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
     settings = dataclasses.replace(settings_for(job), max_iter=form.lowpass_iter)
-    for _ in range(form.lowpass):
+    for sigma in form.lowpass_sigmas():
         u = np.zeros_like(xy0)
-        shift = displacement(
-            res.xy[real], area, job.density, spacing, form.lowpass_sigma, window, job.domain
-        )
+        shift = displacement(res.xy[real], area, job.density, spacing, sigma, window, job.domain)
         u[real] = shift
         u[~movers] = 0.0
         xy0 = xy0 + u
