@@ -278,15 +278,21 @@ def test_the_strongest_dark_blob_is_the_planted_dip(led):
     assert top["jnd"] <= -1.5
 
 
-def _perfect_with_bump(at: tuple[float, float], view):
-    """A 20 x 20 mm map at fill 0.2 with no light for x < 5 mm (a zero-fill region),
-    delivered exactly, plus 5 % more dot area in a Gaussian of sigma 0.3 mm at ``at``
-    (lit cells only): ``(metrics, peak |JND|)``."""
+def _zero_strip_delivered(view) -> tuple[DensityMap, LuminanceGrid]:
+    """A 20 x 20 mm map at fill 0.2 with no light for x < 5 mm (a zero-fill region), and
+    a grid holding it delivered exactly (deposited as dots are)."""
     fill = np.full((20, 20), 0.2)
     fill[:, :5] = 0.0
     density = DensityMap(fill, 20.0, 20.0)
     g = LuminanceGrid.over(density, view)
     g.sums[:] = density.deposited(g.x0, g.y0, g.cw, g.ch, g.nx, g.ny) * g.cw * g.ch
+    return density, g
+
+
+def _perfect_with_bump(at: tuple[float, float], view):
+    """:func:`_zero_strip_delivered` plus 5 % more dot area in a Gaussian of sigma 0.3 mm
+    at ``at`` (lit cells only): ``(metrics, peak |JND|)``."""
+    density, g = _zero_strip_delivered(view)
     x = g.x0 + (np.arange(g.nx) + 0.5) * g.cw
     y = g.y0 + (np.arange(g.ny) + 0.5) * g.ch
     r2 = (x[None, :] - at[0]) ** 2 + (y[:, None] - at[1]) ** 2
@@ -307,11 +313,7 @@ def test_light_by_a_zero_fill_region_is_judged_against_the_eyes_adaptation():
     assert inner > 0.5  # the bump is seen in the open
     assert 0.7 * inner < border < 1.5 * inner
     # a perfect pattern with a zero-fill region is not seen at all
-    fill = np.full((20, 20), 0.2)
-    fill[:, :5] = 0.0
-    density = DensityMap(fill, 20.0, 20.0)
-    g = LuminanceGrid.over(density, view)
-    g.sums[:] = density.deposited(g.x0, g.y0, g.cw, g.ch, g.nx, g.ny) * g.cw * g.ch
+    density, g = _zero_strip_delivered(view)
     assert visibility(g, density, None, view)[0]["max_jnd"] < 0.01
 
 

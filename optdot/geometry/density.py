@@ -182,19 +182,26 @@ def _linear_axis(g: np.ndarray, factor: int, axis: int) -> np.ndarray:
     return a * (1.0 - w) + b * w
 
 
-def sparse_overlap(edges: np.ndarray, lo: float, step: float, n: int):
-    """:func:`axis_overlap` as a ``scipy.sparse`` CSR matrix ``[len(edges) - 1, n]``,
-    storing only the overlaps that are there (~ len(edges) + n of them)."""
-    from scipy.sparse import csr_matrix
-
-    a, b = edges[:-1], edges[1:]
+def _spans(a: np.ndarray, b: np.ndarray, lo: float, step: float, n: int):
+    """``(rows, cols)``: for each interval ``a[k]..b[k]`` (mm) the indices of the ``n``
+    grid cells (width ``step`` from ``lo``) it touches, clamped to the grid, at least one
+    each."""
     k0 = np.clip(np.floor((a - lo) / step).astype(np.int64), 0, n - 1)
     k1 = np.clip(np.ceil((b - lo) / step).astype(np.int64) - 1, 0, n - 1)
     k1 = np.maximum(k1, k0)
     count = k1 - k0 + 1
     rows = np.repeat(np.arange(len(a)), count)
     within = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
-    cols = np.repeat(k0, count) + within
+    return rows, np.repeat(k0, count) + within
+
+
+def sparse_overlap(edges: np.ndarray, lo: float, step: float, n: int):
+    """:func:`axis_overlap` as a ``scipy.sparse`` CSR matrix ``[len(edges) - 1, n]``,
+    storing only the overlaps that are there (~ len(edges) + n of them)."""
+    from scipy.sparse import csr_matrix
+
+    a, b = edges[:-1], edges[1:]
+    rows, cols = _spans(a, b, lo, step, n)
     c0 = lo + cols * step
     val = np.clip(np.minimum(b[rows], c0 + step) - np.maximum(a[rows], c0), 0.0, None)
     return csr_matrix((val, (rows, cols)), shape=(len(a), n))
@@ -216,17 +223,9 @@ def sparse_hats(p0: float, step: float, n: int, lo: float, cell: float, m: int):
     c = p0 + (np.arange(n) + 0.5) * step
     left = c - step
     right = c + step
-    left[0] = -np.inf
-    right[-1] = np.inf
-    k0 = np.clip(np.floor((np.maximum(left, lo) - lo) / cell).astype(np.int64), 0, m - 1)
-    k1 = np.clip(
-        np.ceil((np.minimum(right, lo + m * cell) - lo) / cell).astype(np.int64) - 1, 0, m - 1
-    )
-    k1 = np.maximum(k1, k0)
-    count = k1 - k0 + 1
-    rows = np.repeat(np.arange(n), count)
-    within = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
-    cols = np.repeat(k0, count) + within
+    left[0] = lo
+    right[-1] = lo + m * cell
+    rows, cols = _spans(np.maximum(left, lo), np.minimum(right, lo + m * cell), lo, cell, m)
     a = lo + cols * cell
     b = a + cell
     cj = c[rows]

@@ -217,7 +217,11 @@ def visibility(
     # the intended luminance, relative to the lit panel's: the lit (non-zero) share of the
     # panel under the PSF, 1 in the panel, falling to 0 across a zero-fill region's border
     lit_cells = (density.resampled(g.x0, g.y0, g.cw, g.ch, g.nx, g.ny) > 0) * frac
-    lit = sp.back(sp.forward(lit_cells) * psf, got) / np.maximum(share, 1e-12)
+    dark = bool(((lit_cells == 0) & (frac > 0)).any())  # a zero-fill region in the panel
+    if dark:
+        lit = sp.back(sp.forward(lit_cells) * psf, got) / np.maximum(share, 1e-12)
+    else:
+        lit = np.ones_like(got)
     inside = (frac > 0.5) & (share > 0.25)
     valid = inside & (lit > MIN_LIT) & (want > 1e-12)
     rel = np.where(valid, lum / np.where(valid, want, 1.0), 1.0)
@@ -232,7 +236,8 @@ def visibility(
     a_sigma = _adaptation_sigma(view)
     norm = np.maximum(sp.blur(vf, a_sigma), 1e-12)
     adapt_seen = sp.blur(seen * vf, a_sigma) / norm
-    adapt_meant = sp.blur(meant * vf, a_sigma) / norm
+    # with no zero region meant is 1 everywhere and so is its ratio to its adaptation
+    adapt_meant = sp.blur(meant * vf, a_sigma) / norm if dark else meant
     contrast = np.where(
         valid,
         seen / np.where(valid, adapt_seen, 1.0) - meant / np.where(valid, adapt_meant, 1.0),
