@@ -506,6 +506,8 @@ def test_an_interrupted_tiled_run_resumes_with_the_bytes_of_an_uninterrupted_one
     said = []
     generate_tiled(job, out, plan=plan, executor=again, announce=said.append)
     assert again.kinds["legal"] == 5 and "resuming: 3 of 8 tiles" in said[0]
+    # the panel-wide field is made again from every tile's throw
+    assert again.kinds["deposit"] == 8 and again.kinds["coarse"] == 1
     assert not staging.exists()
     names = sorted(p.name for p in full.iterdir())
     assert names == sorted(p.name for p in out.iterdir())

@@ -5,7 +5,9 @@
 tiles' dots held still around it. Nothing here knows whether it sees a panel or a tile:
 
 * :func:`throw` (:mod:`.initial`): the initial dots of a window (the panel, or a tile),
-  §2.1.
+  §2.1; for tiles, their long-wavelength grain removed across the panel before they
+  relax (:func:`coarse_shift` along the field :func:`coarse_solve` makes from every
+  tile's :func:`coarse_part`).
 * :func:`relax` (:mod:`.relaxation`): circles and containers on the initial dots, phantom
   dots beyond the walls (:mod:`.walls`), then OptDot (L-BFGS through the formulation's
   stages, then the long-wavelength correction and the hard core, :mod:`.correction`) or
@@ -22,7 +24,7 @@ is :mod:`.settings`.
 
 from .correction import TILE_GRID, correction_pad, correction_region, hard_core
 from .finishing import Finished, finish
-from .initial import throw
+from .initial import coarse_part, coarse_shift, coarse_solve, throw
 from .relaxation import relax
 from .settings import (
     FIT_SHARE,
@@ -41,6 +43,9 @@ __all__ = [
     "FIT_SHARE",
     "TILE_GRID",
     "Finished",
+    "coarse_part",
+    "coarse_shift",
+    "coarse_solve",
     "correction_pad",
     "correction_region",
     "finish",

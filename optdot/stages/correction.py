@@ -18,8 +18,17 @@ from .settings import areas, formulation_for, job_spacing, problem_of, rule_diam
 from .walls import with_phantoms
 
 
+def corrected(job: Job, form: Formulation) -> bool:
+    """Whether ``job`` gets the long-wavelength correction."""
+    return job.optimize.method != "md" and form.lowpass > 0 and settings_for(job).max_iter > 0
+
+
 def correction_region(
-    job: Job, xy0: np.ndarray, xy: np.ndarray, region: Rect, formulation: Formulation | None = None
+    job: Job,
+    xy0: np.ndarray,
+    xy: np.ndarray,
+    region: Rect,
+    formulation: Formulation | None = None,
 ):
     """The coverage error a tile's correction solves, over ``region`` (the windows it
     blends grown by :func:`correction_pad`, :func:`optdot.tiling.tasks.correct_tile`) on
@@ -27,9 +36,7 @@ def correction_region(
     has no correction. Every dot in the region and within a lattice cell around it must be
     given."""
     form = formulation_for(job) if formulation is None else formulation
-    if job.optimize.method == "md" or not form.lowpass or not len(xy0):
-        return None
-    if settings_for(job).max_iter == 0:
+    if not corrected(job, form) or not len(xy0):
         return None
     area, _ = areas(job, job.density.at(xy0), rule_diameters(job, xy0))
     spacing = job_spacing(job)

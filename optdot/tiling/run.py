@@ -27,7 +27,9 @@ from .tasks import (
     FinalDots,
     TileDots,
     apply_seams,
+    coarse_task,
     correct_tile,
+    deposit_task,
     held_dots,
     initial_task,
     legalize_tile,
@@ -43,6 +45,9 @@ TileProgress = Callable[[float, str], None]
 
 #: Share of a tile's time each kind of task takes (for the ETA), measured at 150k dots.
 _WEIGHTS = {"relax": 1.0, "seams": 0.25, "merge": 0.0, "correct": 0.2, "legal": 0.08}
+
+#: Kinds of task in the schedule, in the order a wave submits them.
+INITIAL, DEPOSIT, COARSE, RELAX, SEAMS, MERGE, CORRECT = range(-3, 4)
 
 
 def _run(fn: Callable, *args: Any) -> Any:
@@ -122,15 +127,16 @@ class TiledRun:
 
 def needed(plan: TilePlan, todo: set[tuple[int, int]]) -> dict[str, set[tuple[int, int]]]:
     """The tasks that tiles ``todo`` need, when every other tile is finished (a resumed
-    run): ``{"initial", "relax", "seams", "merge", "correct", "legal": tiles or grid
-    points}``.
+    run): ``{"initial", "deposit", "coarse", "relax", "seams", "merge", "correct",
+    "legal": tiles or grid points}`` (``coarse``: ``{(0, 0)}``, one task, or empty).
 
     A tile's guarantee pass holds its earlier-colour neighbours' final dots (read from
     the finished parts when finished) and its later-colour neighbours' corrected dots
     (made again: the uninterrupted run held those too); a correction needs the merged
     dots of its tile and the tiles around it, merged dots the tile's relaxation and its
     corners' seams, a seam square the relaxation of the tiles meeting there, a relaxation
-    the initial dots of the tiles around it. Every task is a pure function of the job and
+    the initial dots of the tiles around it and the panel-wide field, which needs every
+    tile's initial dots (cheap: a throw). Every task is a pure function of the job and
     its inputs, so what is made again is what was made before.
     """
     correct = set(todo)
@@ -148,8 +154,11 @@ def needed(plan: TilePlan, todo: set[tuple[int, int]]) -> dict[str, set[tuple[in
     initial = set(relax)
     for t in relax:
         initial |= set(plan.neighbours(*t))
+    deposit = set(plan.tiles()) if relax else set()
     return {
-        "initial": initial,
+        "initial": initial | deposit,
+        "deposit": deposit,
+        "coarse": {(0, 0)} if relax else set(),
         "relax": relax,
         "seams": seams,
         "merge": merge,
@@ -187,24 +196,27 @@ def run_tiles(
     }
     schedule: list[tuple[int, int, int, int, tuple[int, int]]] = []
     for i, j in tiles:
-        schedule.append((j, -1, j, 0, (i, j)))  # initial dots: wave j (relax j-1 needs them)
-        schedule.append((j + 1, 0, j, 0, (i, j)))  # relax: needs initial j-1..j+1
+        # every tile's initial dots and their deposit first: the panel-wide field that
+        # the first relaxation needs is solved from all of them
+        schedule.append((-2, INITIAL, j, 0, (i, j)))
+        schedule.append((-2, DEPOSIT, j, 0, (i, j)))
+        schedule.append((j + 1, RELAX, j, 0, (i, j)))  # needs initial j-1..j+1
+    schedule.append((-1, COARSE, 0, 0, (0, 0)))
     for i, j in corners:
-        schedule.append((j + 1, 1, j, 0, (i, j)))  # seams of corner row j: relax j-1, j
+        schedule.append((j + 1, SEAMS, j, 0, (i, j)))  # seams of corner row j: relax j-1, j
     for i, j in tiles:
-        schedule.append((j + 2, 2, j, 0, (i, j)))  # merge: needs corners j, j+1
-        schedule.append((j + 3, 3, j, 0, (i, j)))  # correct: needs merged j-1..j+1
+        schedule.append((j + 2, MERGE, j, 0, (i, j)))  # merge: needs corners j, j+1
+        schedule.append((j + 3, CORRECT, j, 0, (i, j)))  # correct: needs merged j-1..j+1
         c = plan.colour(i, j)
         schedule.append((j + 4 + (j % 2), 4 + (j % 2), j, c, (i, j)))  # guarantee
     finished = finished or {}
     if finished:
         need = needed(plan, set(tiles) - set(finished))
-        kinds = {-1: "initial", 0: "relax", 1: "seams", 2: "merge", 3: "correct"}
-        schedule = [
-            e
-            for e in schedule
-            if (need[kinds[e[1]]] if e[1] in kinds else need["legal"]).__contains__(e[4])
-        ]
+        kinds = {
+            INITIAL: "initial", DEPOSIT: "deposit", COARSE: "coarse", RELAX: "relax",
+            SEAMS: "seams", MERGE: "merge", CORRECT: "correct",
+        }  # fmt: skip
+        schedule = [e for e in schedule if e[4] in need[kinds.get(e[1], "legal")]]
     schedule.sort()
     held: dict = {}
 
@@ -215,6 +227,8 @@ def run_tiles(
         return held[u]
 
     initial: dict = {}
+    deposits: dict = {}
+    coarse = None
     relaxed: dict = {}
     seams: dict = {}
     merged: dict = {}
@@ -223,20 +237,27 @@ def run_tiles(
     kind_of: dict[Any, str] = {}
     for _, kind, _, _, (i, j) in schedule:
         key = f"{i}-{j}"
-        if kind == -1:
+        if kind == INITIAL:
             initial[i, j] = executor.submit("initial", key, initial_task, jobf, plan, i, j)
-        elif kind == 0:
+        elif kind == DEPOSIT:
+            deposits[i, j] = executor.submit("deposit", key, deposit_task, jobf, initial[i, j])
+        elif kind == COARSE:
+            parts = [deposits[t] for t in tiles]
+            coarse = executor.submit("coarse", "panel", coarse_task, jobf, *parts)
+        elif kind == RELAX:
             around = [initial[u] for u in plan.neighbours(i, j)]
-            h = executor.submit("relax", key, relax_tile, jobf, plan, i, j, initial[i, j], *around)
+            h = executor.submit(
+                "relax", key, relax_tile, jobf, plan, coarse, i, j, initial[i, j], *around
+            )
             relaxed[i, j] = h
             kind_of[id(h)] = "relax"
-        elif kind == 1:
+        elif kind == SEAMS:
             parts = [relaxed[t] for t in plan.corner_tiles(i, j)]
             seams[i, j] = executor.submit("seams", key, relax_seams, jobf, plan, i, j, parts)
-        elif kind == 2:
+        elif kind == MERGE:
             results = [seams[c] for c in corners_of[i, j]]
             merged[i, j] = executor.submit("merge", key, apply_seams, relaxed[i, j], results)
-        elif kind == 3:
+        elif kind == CORRECT:
             around = [merged[u] for u in plan.neighbours(i, j)]
             h = executor.submit("correct", key, correct_tile, jobf, plan, merged[i, j], *around)
             corrected[i, j] = h
@@ -263,8 +284,12 @@ def run_tiles(
     # with a dead worker is recomputed from the merged dots of nine tiles, which Dask
     # would otherwise have forgotten once every correction that read them was done
     # ("cancelled: already forgotten", seen with a frozen worker).
-    keep = list(merged.values()) + list(seams.values())
+    # So do the panel-wide field and the deposits it was solved from (a few cells a
+    # tile): a relaxation lost with a dead worker needs the field again.
+    keep = list(merged.values()) + list(seams.values()) + list(deposits.values()) + [coarse]
     initial.clear(), relaxed.clear(), seams.clear(), merged.clear(), corrected.clear()
+    deposits.clear()
+    coarse = None
     final.clear()
     n_done, n_relaxed = len(finished), 0
     held.clear()

@@ -93,6 +93,7 @@ import numpy as np
 from .. import stages
 from ..config.job import Job
 from ..geometry.morton import spatial_order
+from ..relax.lowpass import CoarseField, LatticePart
 from ..spatial.window import bounds, grown, in_rect
 from .plan import TilePlan
 
@@ -144,15 +145,24 @@ def initial_task(job: Job, plan: TilePlan, i: int, j: int) -> np.ndarray:
 
 
 def relax_tile(
-    job: Job, plan: TilePlan, i: int, j: int, xy0: np.ndarray, *around: np.ndarray
+    job: Job,
+    plan: TilePlan,
+    coarse: CoarseField | None,
+    i: int,
+    j: int,
+    xy0: np.ndarray,
+    *around: np.ndarray,
 ) -> TileDots:
-    """Phase 1: tile ``(i, j)``'s initial dots ``xy0`` relaxed, with the initial dots of
-    the tiles ``around`` it within the halo held still (so the border dots feel the right
-    density across the border and do not spill into it)."""
+    """Phase 1: tile ``(i, j)``'s initial dots ``xy0`` moved along the panel-wide field
+    ``coarse`` (:func:`optdot.stages.coarse_shift`) and relaxed, with the initial dots of
+    the tiles ``around`` it within the halo, moved alike, held still (so the border dots
+    feel the right density across the border and do not spill into it). The moved
+    throw is the tile's containers from here on."""
+    xy0 = stages.coarse_shift(job, coarse, xy0)
     if len(xy0) == 0:
         return TileDots((i, j), xy0, xy0.copy())
     box = grown(plan.rect(i, j), plan.halo)
-    halo = [a[in_rect(a, box)] for a in around]
+    halo = [stages.coarse_shift(job, coarse, a[in_rect(a, box)]) for a in around]
     halo_xy = np.concatenate(halo) if halo else np.zeros((0, 2))
     n = len(xy0)
     both = np.ascontiguousarray(np.concatenate([xy0, halo_xy]))
@@ -234,6 +244,18 @@ def apply_seams(dots: TileDots, results: list[SeamMoves]) -> TileDots:
             idx, pos = res.moves[dots.tile]
             xy[idx] = pos
     return TileDots(dots.tile, dots.xy0, xy)
+
+
+def deposit_task(job: Job, xy0: np.ndarray) -> LatticePart:
+    """A tile's initial dots ``xy0`` deposited on the panel-wide lattice
+    (:func:`optdot.stages.coarse_part`)."""
+    return stages.coarse_part(job, xy0)
+
+
+def coarse_task(job: Job, *parts: LatticePart) -> CoarseField | None:
+    """The panel-wide field from every tile's deposit, in the plan's tile order
+    (:func:`optdot.stages.coarse_solve`)."""
+    return stages.coarse_solve(job, list(parts))
 
 
 def correct_tile(job: Job, plan: TilePlan, dots: TileDots, *around: TileDots) -> TileDots:
