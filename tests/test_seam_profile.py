@@ -34,6 +34,7 @@ def _profile(job, plan, xy: np.ndarray) -> dict[str, float]:
         "seam_rms": float(np.sqrt(np.mean(e[seam] ** 2))),
         "seam_mean": float(e[seam].mean()),
         "inner_rms": float(np.sqrt(np.mean(e[inner] ** 2))),
+        "rms": float(np.sqrt(np.mean(e[wall > 1.0] ** 2))),
     }
 
 
@@ -52,9 +53,13 @@ def led():
 def test_seams_carry_the_interiors_coverage(led):
     job, plan = led
     got = _profile(job, plan, _tiled(job, plan))
-    assert got["seam_rms"] < 1.4 * got["inner_rms"], got
     assert abs(got["seam_mean"]) < 5e-4, got
     assert got["inner_rms"] < 1.5e-3, got  # the grain itself is corrected (0.26 % without)
+    # the throws moved along the panel-wide field before relaxing: the seams, where the
+    # windows of two tiles meet, end smoother than the interior (0.046 % against 0.071 %;
+    # without the field 0.074 % against 0.079 %)
+    assert got["seam_rms"] < 0.8 * got["inner_rms"], got
+    assert got["rms"] < 7.2e-4, got  # 0.065 % (0.078 % without)
 
 
 def test_a_correction_solved_tile_by_tile_is_seen_on_the_seams(led, monkeypatch):
