@@ -195,8 +195,9 @@ def visibility(
 
     Returns:
         ``(metrics, arrays)``: JSON-ready numbers (``max_jnd``, ``max_jnd_at_mm``,
-        percentiles, ``blobs`` ...) and ``{"jnd": (image, extent), "contrast": [ny, nx]}``
-        (the image max-|.|-pooled to at most :data:`IMAGE_PX` pixels a side).
+        percentiles, ``blobs`` ...) and ``{"jnd": (image, extent), "blobs": [...]}`` (the
+        image max-|.|-pooled to at most :data:`IMAGE_PX` pixels a side; the blobs as in
+        the metrics).
     """
     g = grid
     cell_area = g.cw * g.ch
