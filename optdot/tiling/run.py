@@ -1,11 +1,13 @@
 """Run the tile tasks of :mod:`optdot.tiling.tasks` as one task graph, in process or on Dask.
 
-Tasks are submitted in waves along the panel's rows (relax row j, its seams, its merge, its
-correction, then the guarantee pass of the rows behind it), which is also Dask's priority
-order, so only a few rows of tiles are held at once: memory is bounded by the tile size and
-the panel's width, not by the panel. Finished tiles are handed to ``sink`` one at a time, in
-the order they finish; what the sink writes depends only on the tile, so the output is the
-same whatever the order.
+Every tile's throw and its deposit come first (the panel-wide field the first relaxation
+needs is solved from all of them; the throws are held until their relaxations take them,
+16 B a dot). Then tasks are submitted in waves along the panel's rows (relax row j, its
+seams, its merge, its correction, then the guarantee pass of the rows behind it), which is
+also Dask's priority order, so only a few rows of relaxed and corrected tiles are held at
+once (the merged dots, 32 B a dot, are kept to the end: see :func:`run_tiles`). Finished
+tiles are handed to ``sink`` one at a time, in the order they finish; what the sink writes
+depends only on the tile, so the output is the same whatever the order.
 """
 
 from __future__ import annotations
