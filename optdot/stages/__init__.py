@@ -12,8 +12,9 @@ tiles' dots held still around it. Nothing here knows whether it sees a panel or 
   dots beyond the walls (:mod:`.walls`), then OptDot (L-BFGS through the formulation's
   stages, then the long-wavelength correction and the hard core, :mod:`.correction`) or
   the MD baseline of §2.2. A tile relaxes without the correction; it gets
-  :func:`correction_region` over windows that span its seams, and :func:`hard_core` in
-  its guarantee task.
+  :func:`correction_region` over windows that span its seams, the wide last pass over
+  the panel from every tile's :func:`wide_part` (:func:`wide_solve`), and
+  :func:`hard_core` in its guarantee task.
 * :func:`finish` (:mod:`.finishing`): dot sizes fitted to the coverage where the dots
   stand (when sizes vary, :mod:`optdot.relax.resize`), then the guarantee pass and its
   check.
@@ -22,7 +23,15 @@ What a job asks of each stage (its problem, formulation, settings, sizes, halo, 
 is :mod:`.settings`.
 """
 
-from .correction import TILE_GRID, correction_pad, correction_region, hard_core
+from .correction import (
+    TILE_GRID,
+    correction_pad,
+    correction_region,
+    hard_core,
+    wide_part,
+    wide_sigma,
+    wide_solve,
+)
 from .finishing import Finished, finish
 from .initial import coarse_part, coarse_shift, coarse_solve, throw
 from .relaxation import relax
@@ -36,6 +45,7 @@ from .settings import (
     problem_of,
     rule_diameters,
     settings_for,
+    thrown_areas,
 )
 from .walls import job_phantoms, phantom_reach, phantoms_near
 
@@ -62,5 +72,9 @@ __all__ = [
     "relax",
     "rule_diameters",
     "settings_for",
+    "thrown_areas",
     "throw",
+    "wide_part",
+    "wide_sigma",
+    "wide_solve",
 ]

@@ -1,6 +1,19 @@
 """The long-wavelength correction after the relaxation (:mod:`optdot.relax.lowpass`),
 over the panel or over a tile's blended windows, and the hard-core iterations that
-follow it."""
+follow it.
+
+The last of two or more passes (the wide one, 3 spacings by default) is solved over the
+whole panel at once on a lattice of half its blur (:func:`wide_part`, :func:`wide_solve`),
+in one process and in tiles alike: its error is a sum of per-dot deposits, so a tiled
+run adds every tile's part and gets the panel's field, where its windows a tile wide
+could not (each solves with its own mean and walls). The lattice is also what the wide
+pass wants: against the half-spacing grid of the first pass it leaves less at the walls,
+where the map is deposited as the dots are and nothing flows across the walls' faces
+(notebook strip 140 x 20 mm, one process: strongest blob 1.09 -> 0.54 JND, p99 0.35 ->
+0.21; the tsuno sample 1.10 -> 0.43; BENCHMARKS.md, session 17). Steps of 0.5 and 1
+spacing (a sixth and a third of the blur) left 0.72 and 0.62 JND on the strip's run
+of the pass on tiled dots (1.3 before it), 1.5 spacings 0.50.
+"""
 
 from __future__ import annotations
 
@@ -10,7 +23,17 @@ import numpy as np
 
 from ..config.job import Job
 from ..relax.formulation import Formulation
-from ..relax.lowpass import MAX_SHIFT, RegionError, displacement, grid_step
+from ..relax.lowpass import (
+    MAX_SHIFT,
+    CoarseField,
+    Lattice,
+    LatticePart,
+    RegionError,
+    coarse_field,
+    deposit_part,
+    displacement,
+    grid_step,
+)
 from ..relax.optdot import relax_staged
 from ..relax.result import RelaxResult
 from ..sampling.initial import Rect
@@ -21,6 +44,47 @@ from .walls import with_phantoms
 def corrected(job: Job, form: Formulation) -> bool:
     """Whether ``job`` gets the long-wavelength correction."""
     return job.optimize.method != "md" and form.lowpass > 0 and settings_for(job).max_iter > 0
+
+
+#: Lattice step of the wide pass, in its blurs (two cells a sigma).
+WIDE_STEP = 0.5
+#: Cells of the wide pass's lattice at most (32 MB a float32 array): a 55-inch panel's
+#: step grows to 0.31 mm, 1.4 cells a sigma.
+WIDE_CELLS = 1 << 23
+
+
+def wide_sigma(job: Job, formulation: Formulation | None = None) -> float | None:
+    """The blur of the correction's last pass, mm, when it is solved over the whole panel
+    (two passes or more); None otherwise."""
+    form = formulation_for(job) if formulation is None else formulation
+    if not corrected(job, form) or form.lowpass < 2:
+        return None
+    return form.lowpass_sigmas()[-1] * job_spacing(job)
+
+
+def wide_part(
+    job: Job, xy: np.ndarray, area: np.ndarray, formulation: Formulation | None = None
+) -> LatticePart | None:
+    """Dots at ``xy`` (``[n, 2]`` mm) of areas ``area`` (``[n]`` mm²) deposited on the
+    wide pass's lattice, for :func:`wide_solve`; None when the job has no wide pass."""
+    sigma = wide_sigma(job, formulation)
+    if sigma is None:
+        return None
+    return deposit_part(xy, area, Lattice.over(job.box, WIDE_STEP * sigma, WIDE_CELLS))
+
+
+def wide_solve(
+    job: Job, parts: list[LatticePart | None], formulation: Formulation | None = None
+) -> CoarseField | None:
+    """The wide pass's field over the panel from the :func:`wide_part` of every set of
+    its dots, added in the order given (the plan's tile order: the same bytes whoever
+    computed what); None when the job has no wide pass."""
+    sigma = wide_sigma(job, formulation)
+    if sigma is None:
+        return None
+    lattice = Lattice.over(job.box, WIDE_STEP * sigma, WIDE_CELLS)
+    cap = MAX_SHIFT * job_spacing(job)
+    return coarse_field(list(parts), lattice, job.density, sigma, cap, job.domain)
 
 
 def correction_region(
@@ -141,9 +205,17 @@ def correction_passes(job, form, res, xy0, rho, frozen, diameters, phantom):
     lo, hi = xy0[real].min(axis=0) - spacing, xy0[real].max(axis=0) + spacing
     window = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
     settings = dataclasses.replace(settings_for(job), max_iter=form.lowpass_iter)
-    for sigma in form.lowpass_sigmas():
+    sigmas = form.lowpass_sigmas()
+    wide = wide_sigma(job, form) is not None
+    for k, sigma in enumerate(sigmas):
         u = np.zeros_like(xy0)
-        shift = displacement(res.xy[real], area, job.density, spacing, sigma, window, job.domain)
+        if wide and k == len(sigmas) - 1:
+            part = wide_part(job, res.xy[real], area, form)
+            shift = wide_solve(job, [part], form).displacement(res.xy[real])
+        else:
+            shift = displacement(
+                res.xy[real], area, job.density, spacing, sigma, window, job.domain
+            )
         u[real] = shift
         u[~movers] = 0.0
         xy0 = xy0 + u

@@ -28,7 +28,7 @@ from ..config.job import Job
 from ..relax.lowpass import CoarseField, Lattice, LatticePart, coarse_field, deposit_part
 from ..sampling.initial import Rect, initial_dots_in
 from .correction import corrected
-from .settings import areas, formulation_for, job_spacing, rule_diameters
+from .settings import formulation_for, job_spacing, thrown_areas
 
 
 def throw(job: Job, n: int, seed: int | Sequence[int], rect: Rect | None, where: str):
@@ -67,10 +67,7 @@ def coarse_lattice(job: Job) -> Lattice:
 def coarse_part(job: Job, xy0: np.ndarray) -> LatticePart:
     """A tile's initial dots ``xy0`` (``[n, 2]`` mm) deposited by their areas on
     :func:`coarse_lattice`, for :func:`coarse_solve`."""
-    if not len(xy0):
-        return deposit_part(xy0, np.zeros(0), coarse_lattice(job))
-    area, _ = areas(job, job.density.at(xy0), rule_diameters(job, xy0))
-    return deposit_part(xy0, area, coarse_lattice(job))
+    return deposit_part(xy0, thrown_areas(job, xy0), coarse_lattice(job))
 
 
 def coarse_solve(job: Job, parts: list[LatticePart]) -> CoarseField | None:

@@ -3,9 +3,12 @@
 Every tile's throw and its deposit come first (the panel-wide field the first relaxation
 needs is solved from all of them; the throws are held until their relaxations take them,
 16 B a dot). Then tasks are submitted in waves along the panel's rows (relax row j, its
-seams, its merge, its correction, then the guarantee pass of the rows behind it), which is
-also Dask's priority order, so only a few rows of relaxed and corrected tiles are held at
-once (the merged dots, 32 B a dot, are kept to the end: see :func:`run_tiles`). Finished
+seams, its merge, its trial correction), which is also Dask's priority order, so only a
+few rows of relaxed tiles are held at once; the wide field from every trial (a barrier);
+then row by row the corrections and the guarantee passes of the rows behind them, so only
+a few rows of corrected tiles are held (the merged dots, 32 B a dot, are kept to the end:
+see :func:`run_tiles`). Without a wide pass (a formulation of one correction pass) there
+is no trial and no barrier. Finished
 tiles are handed to ``sink`` one at a time, in the order they finish; what the sink writes
 depends only on the tile, so the output is the same whatever the order.
 """
@@ -24,6 +27,7 @@ from ..config.job import Job, OptimizeParams
 from ..geometry.density import DensityMap
 from ..runtime.cluster import single_threaded
 from ..runtime.stop import check_interrupt
+from ..stages import wide_sigma
 from .plan import TilePlan, plan_tiles
 from .tasks import (
     FinalDots,
@@ -37,6 +41,8 @@ from .tasks import (
     legalize_tile,
     relax_seams,
     relax_tile,
+    trial_task,
+    wide_task,
 )
 
 #: ``sink(tile, xy, diameter)``: a finished tile's final positions ``[n, 2]`` mm and
@@ -46,10 +52,16 @@ Sink = Callable[[tuple[int, int], np.ndarray, Any], None]
 TileProgress = Callable[[float, str], None]
 
 #: Share of a tile's time each kind of task takes (for the ETA), measured at 150k dots.
-_WEIGHTS = {"relax": 1.0, "seams": 0.25, "merge": 0.0, "correct": 0.2, "legal": 0.08}
+_WEIGHTS = {"relax": 1.0, "seams": 0.25, "merge": 0.0, "trial": 0.2, "correct": 0.2, "legal": 0.08}
 
-#: Kinds of task in the schedule, in the order a wave submits them.
-INITIAL, DEPOSIT, COARSE, RELAX, SEAMS, MERGE, CORRECT = range(-3, 4)
+#: Kinds of task in the schedule, in the order a wave submits them (the guarantee
+#: passes: ``LEGAL`` and ``LEGAL + 1``, by row parity).
+INITIAL, DEPOSIT, COARSE, RELAX, SEAMS, MERGE, TRIAL, WIDE, CORRECT, LEGAL = range(-3, 7)
+#: Names of the kinds in :func:`needed`.
+KIND_NAMES = {
+    INITIAL: "initial", DEPOSIT: "deposit", COARSE: "coarse", RELAX: "relax", SEAMS: "seams",
+    MERGE: "merge", TRIAL: "trial", WIDE: "wide", CORRECT: "correct",
+}  # fmt: skip
 
 
 def _run(fn: Callable, *args: Any) -> Any:
@@ -127,26 +139,32 @@ class TiledRun:
     seconds: float
 
 
-def needed(plan: TilePlan, todo: set[tuple[int, int]]) -> dict[str, set[tuple[int, int]]]:
+def needed(
+    plan: TilePlan, todo: set[tuple[int, int]], wide: bool = False
+) -> dict[str, set[tuple[int, int]]]:
     """The tasks that tiles ``todo`` need, when every other tile is finished (a resumed
-    run): ``{"initial", "deposit", "coarse", "relax", "seams", "merge", "correct",
-    "legal": tiles or grid points}`` (``coarse``: ``{(0, 0)}``, one task, or empty).
+    run): ``{"initial", "deposit", "coarse", "relax", "seams", "merge", "trial", "wide",
+    "correct", "legal": tiles or grid points}`` (``coarse``, ``wide``: ``{(0, 0)}``, one
+    task, or empty).
 
     A tile's guarantee pass holds its earlier-colour neighbours' final dots (read from
     the finished parts when finished) and its later-colour neighbours' corrected dots
     (made again: the uninterrupted run held those too); a correction needs the merged
-    dots of its tile and the tiles around it, merged dots the tile's relaxation and its
-    corners' seams, a seam square the relaxation of the tiles meeting there, a relaxation
-    the initial dots of the tiles around it and the panel-wide field, which needs every
-    tile's initial dots (cheap: a throw). Every task is a pure function of the job and
-    its inputs, so what is made again is what was made before.
+    dots of its tile and the tiles around it, and with ``wide`` (the job's correction
+    has a wide pass) the wide field, which needs every tile's trial correction, so every
+    tile's merged dots; merged dots need the tile's relaxation and its corners' seams, a
+    seam square the relaxation of the tiles meeting there, a relaxation the initial dots
+    of the tiles around it and the panel-wide field, which needs every tile's initial
+    dots (cheap: a throw). Every task is a pure function of the job and its inputs, so
+    what is made again is what was made before.
     """
     correct = set(todo)
     for t in todo:
         c = plan.colour(*t)
         correct |= {u for u in plan.neighbours(*t) if plan.colour(*u) > c}
-    merge = set(correct)
-    for t in correct:
+    trial = set(plan.tiles()) if wide and correct else set()
+    merge = correct | trial
+    for t in correct | trial:
         merge |= set(plan.neighbours(*t))
     corner_set = set(plan.corners())
     seams = {(i + a, j + b) for i, j in merge for b in (0, 1) for a in (0, 1)} & corner_set
@@ -164,6 +182,8 @@ def needed(plan: TilePlan, todo: set[tuple[int, int]]) -> dict[str, set[tuple[in
         "relax": relax,
         "seams": seams,
         "merge": merge,
+        "trial": trial,
+        "wide": {(0, 0)} if trial else set(),
         "correct": correct,
         "legal": set(todo),
     }
@@ -196,6 +216,10 @@ def run_tiles(
         t: [c for c in ((t[0] + a, t[1] + b) for b in (0, 1) for a in (0, 1)) if c in corner_set]
         for t in tiles
     }
+    wide = wide_sigma(job) is not None
+    # the correction waves: with a wide pass, every tile's trial correction, then the
+    # field (a barrier: it needs all of them), then the corrections and guarantee passes
+    after = plan.ny + 3 if wide else 0  # the wave of the wide field
     schedule: list[tuple[int, int, int, int, tuple[int, int]]] = []
     for i, j in tiles:
         # every tile's initial dots and their deposit first: the panel-wide field that
@@ -204,21 +228,21 @@ def run_tiles(
         schedule.append((-2, DEPOSIT, j, 0, (i, j)))
         schedule.append((j + 1, RELAX, j, 0, (i, j)))  # needs initial j-1..j+1
     schedule.append((-1, COARSE, 0, 0, (0, 0)))
+    if wide:
+        schedule.append((after, WIDE, 0, 0, (0, 0)))
     for i, j in corners:
         schedule.append((j + 1, SEAMS, j, 0, (i, j)))  # seams of corner row j: relax j-1, j
     for i, j in tiles:
         schedule.append((j + 2, MERGE, j, 0, (i, j)))  # merge: needs corners j, j+1
-        schedule.append((j + 3, CORRECT, j, 0, (i, j)))  # correct: needs merged j-1..j+1
+        if wide:
+            schedule.append((j + 3, TRIAL, j, 0, (i, j)))  # trial: needs merged j-1..j+1
+        schedule.append((after + j + 3, CORRECT, j, 0, (i, j)))  # needs merged j-1..j+1
         c = plan.colour(i, j)
-        schedule.append((j + 4 + (j % 2), 4 + (j % 2), j, c, (i, j)))  # guarantee
+        schedule.append((after + j + 4 + (j % 2), LEGAL + (j % 2), j, c, (i, j)))
     finished = finished or {}
     if finished:
-        need = needed(plan, set(tiles) - set(finished))
-        kinds = {
-            INITIAL: "initial", DEPOSIT: "deposit", COARSE: "coarse", RELAX: "relax",
-            SEAMS: "seams", MERGE: "merge", CORRECT: "correct",
-        }  # fmt: skip
-        schedule = [e for e in schedule if e[4] in need[kinds.get(e[1], "legal")]]
+        need = needed(plan, set(tiles) - set(finished), wide)
+        schedule = [e for e in schedule if e[4] in need[KIND_NAMES.get(e[1], "legal")]]
     schedule.sort()
     held: dict = {}
 
@@ -234,6 +258,8 @@ def run_tiles(
     relaxed: dict = {}
     seams: dict = {}
     merged: dict = {}
+    trials: dict = {}
+    field = None
     corrected: dict = {}
     final: dict = {}
     kind_of: dict[Any, str] = {}
@@ -259,9 +285,19 @@ def run_tiles(
         elif kind == MERGE:
             results = [seams[c] for c in corners_of[i, j]]
             merged[i, j] = executor.submit("merge", key, apply_seams, relaxed[i, j], results)
+        elif kind == TRIAL:
+            around = [merged[u] for u in plan.neighbours(i, j)]
+            h = executor.submit("trial", key, trial_task, jobf, plan, merged[i, j], *around)
+            trials[i, j] = h
+            kind_of[id(h)] = "trial"
+        elif kind == WIDE:
+            parts = [trials[t] for t in tiles]
+            field = executor.submit("wide", "panel", wide_task, jobf, *parts)
         elif kind == CORRECT:
             around = [merged[u] for u in plan.neighbours(i, j)]
-            h = executor.submit("correct", key, correct_tile, jobf, plan, merged[i, j], *around)
+            h = executor.submit(
+                "correct", key, correct_tile, jobf, plan, field, merged[i, j], *around
+            )
             corrected[i, j] = h
             kind_of[id(h)] = "correct"
         else:
@@ -274,11 +310,12 @@ def run_tiles(
             final[i, j] = h
             kind_of[id(h)] = "legal"
     h = around = parts = results = None  # the loop's last handles: no longer held here
-    total = sum(_WEIGHTS.values()) * max(len(tiles) - len(finished), 1)
+    weights = {k: w for k, w in _WEIGHTS.items() if wide or k != "trial"}
+    total = sum(weights.values()) * max(len(tiles) - len(finished), 1)
     done = 0.0
     counts: dict[tuple[int, int], int] = {}
     tile_of = {id(h): t for t, h in final.items()}
-    watched = list(relaxed.values()) + list(corrected.values()) + list(final.values())
+    watched = [*relaxed.values(), *trials.values(), *corrected.values(), *final.values()]
     # The graph holds what it still needs: a relaxed, corrected or final tile is dropped
     # here once handed over, and its dots are freed when the last task reading them is
     # done (holding all of them to the end took the monitor panel, 27M dots, to 4 GiB).
@@ -286,12 +323,13 @@ def run_tiles(
     # with a dead worker is recomputed from the merged dots of nine tiles, which Dask
     # would otherwise have forgotten once every correction that read them was done
     # ("cancelled: already forgotten", seen with a frozen worker).
-    # So do the panel-wide field and the deposits it was solved from (a few cells a
-    # tile): a relaxation lost with a dead worker needs the field again.
-    keep = list(merged.values()) + list(seams.values()) + list(deposits.values()) + [coarse]
+    # So do the panel-wide fields and the deposits they were solved from (a few cells a
+    # tile): a relaxation or a correction lost with a dead worker needs its field again.
+    keep = [*merged.values(), *seams.values(), *deposits.values(), *trials.values()]
+    keep += [coarse, field]
     initial.clear(), relaxed.clear(), seams.clear(), merged.clear(), corrected.clear()
-    deposits.clear()
-    coarse = None
+    deposits.clear(), trials.clear()
+    coarse = field = None
     final.clear()
     n_done, n_relaxed = len(finished), 0
     held.clear()
