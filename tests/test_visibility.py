@@ -202,6 +202,20 @@ def test_the_clean_led_sample_reports_its_own_largest_jnd(led, tmp_path):
     assert top["kind"] == ("bright" if vis["max_jnd_signed"] > 0 else "dark")
 
 
+def test_the_corner_lit_sample_by_its_empty_corner_is_not_seen():
+    """The tsuno sample (an empty corner: a zero-fill border inside the panel) in one
+    process: its strongest blob under 0.7 JND. The wide correction pass solved on the
+    panel's lattice (half its blur a step, the map deposited as the dots are, nothing
+    across the walls' faces) leaves 0.43; on the first pass's half-spacing grid it left
+    1.10, a bright blob at the corner's border."""
+    from optdot.config.schema import load_job
+    from optdot.pipeline import generate, qa
+
+    job = load_job(SAMPLES / "tsuno" / "job.toml")
+    vis = qa(generate(job), job).metrics["visibility"]
+    assert vis["max_jnd"] < 0.7, vis["blobs"][:3]
+
+
 # --- job, CLI, gate ---------------------------------------------------------------------
 
 

@@ -352,6 +352,7 @@ def coarse_field(
     live = (target > 0) & (gt > 0)
     del got, target
     e = np.where(live, (gg - gt) / np.where(live, gt, 1.0), 0.0)
+    del gt, gg  # the panel's lattice: a few arrays of it are a worker's peak
     if live.any():
         e[live] -= e[live].mean()
     phi = neumann_potential(e, g.hx, g.hy)
