@@ -259,7 +259,7 @@ def run_tiles(
     seams: dict = {}
     merged: dict = {}
     trials: dict = {}
-    field = None
+    wide_field = None
     corrected: dict = {}
     final: dict = {}
     kind_of: dict[Any, str] = {}
@@ -292,11 +292,11 @@ def run_tiles(
             kind_of[id(h)] = "trial"
         elif kind == WIDE:
             parts = [trials[t] for t in tiles]
-            field = executor.submit("wide", "panel", wide_task, jobf, *parts)
+            wide_field = executor.submit("wide", "panel", wide_task, jobf, *parts)
         elif kind == CORRECT:
             around = [merged[u] for u in plan.neighbours(i, j)]
             h = executor.submit(
-                "correct", key, correct_tile, jobf, plan, field, merged[i, j], *around
+                "correct", key, correct_tile, jobf, plan, wide_field, merged[i, j], *around
             )
             corrected[i, j] = h
             kind_of[id(h)] = "correct"
@@ -326,10 +326,10 @@ def run_tiles(
     # So do the panel-wide fields and the deposits they were solved from (a few cells a
     # tile): a relaxation or a correction lost with a dead worker needs its field again.
     keep = [*merged.values(), *seams.values(), *deposits.values(), *trials.values()]
-    keep += [coarse, field]
+    keep += [coarse, wide_field]
     initial.clear(), relaxed.clear(), seams.clear(), merged.clear(), corrected.clear()
     deposits.clear(), trials.clear()
-    coarse = field = None
+    coarse = wide_field = None
     final.clear()
     n_done, n_relaxed = len(finished), 0
     held.clear()
