@@ -84,10 +84,8 @@ def _own_window_only(job_, plan_, dots, *around):
 def test_a_correction_solved_tile_by_tile_is_seen_on_the_seams(led, monkeypatch):
     """The same run with each tile moved by its own window's field alone and no wide pass
     after it: its error piles onto the seams."""
-    from optdot.tiling import tasks
-
     job, plan = led
-    monkeypatch.setattr(tasks, "_first_pass", _own_window_only)
+    monkeypatch.setattr(tiling_run, "correct_tile", _own_window_only)
     monkeypatch.setattr(tiling_run, "wide_sigma", lambda job: None)
     got = _profile(job, plan, _tiled(job, plan))
     assert got["seam_rms"] > 1.6 * got["inner_rms"], got
@@ -96,10 +94,8 @@ def test_a_correction_solved_tile_by_tile_is_seen_on_the_seams(led, monkeypatch)
 def test_the_wide_pass_removes_what_the_tiles_first_pass_leaves_on_seams(led, monkeypatch):
     """The same tile-by-tile first pass, then the wide pass over the panel: one field for
     every tile, so it has no seams to leave, and it takes the first pass's away."""
-    from optdot.tiling import tasks
-
     job, plan = led
-    monkeypatch.setattr(tasks, "_first_pass", _own_window_only)
+    monkeypatch.setattr(tiling_run, "correct_tile", _own_window_only)
     got = _profile(job, plan, _tiled(job, plan))
     assert got["seam_rms"] < 1.2 * got["inner_rms"], got
     assert got["rms"] < 4.5e-4, got

@@ -553,7 +553,7 @@ class _Watching(InProcess):
     """Keeps a weak reference to every relaxed, corrected and final tile it makes."""
 
     def __init__(self) -> None:
-        self.refs: dict[str, list] = {"relax": [], "correct": [], "legal": []}
+        self.refs: dict[str, list] = {"relax": [], "correct": [], "shift": [], "legal": []}
 
     def submit(self, kind, key, fn, *args):
         out = fn(*args)
@@ -584,6 +584,8 @@ def test_a_tiled_run_lets_go_of_each_tile_once_handed_over():
             )
 
     run_tiles(job, plan, ex, sink)
-    assert plan.count == 4 and len(ex.refs["relax"]) == 4
-    # only the tile in the sink's hands is alive
-    assert alive_at_last == {"relax": 0, "correct": 0, "legal": 1}
+    assert plan.count == 4 and len(ex.refs["relax"]) == 4 and len(ex.refs["shift"]) == 4
+    # only the tile in the sink's hands is alive, and the tiles' first correction passes
+    # (3: one tile is empty): the wide pass's shifts are made from them, and they are
+    # kept to the end for a shift lost with a dead worker
+    assert alive_at_last == {"relax": 0, "correct": 3, "shift": 0, "legal": 1}

@@ -41,7 +41,8 @@ from .tasks import (
     legalize_tile,
     relax_seams,
     relax_tile,
-    trial_task,
+    wide_deposit_task,
+    wide_shift,
     wide_task,
 )
 
@@ -52,15 +53,15 @@ Sink = Callable[[tuple[int, int], np.ndarray, Any], None]
 TileProgress = Callable[[float, str], None]
 
 #: Share of a tile's time each kind of task takes (for the ETA), measured at 150k dots.
-_WEIGHTS = {"relax": 1.0, "seams": 0.25, "merge": 0.0, "trial": 0.2, "correct": 0.2, "legal": 0.08}
+_WEIGHTS = {"relax": 1.0, "seams": 0.25, "merge": 0.0, "correct": 0.2, "shift": 0.01, "legal": 0.08}
 
 #: Kinds of task in the schedule, in the order a wave submits them (the guarantee
 #: passes: ``LEGAL`` and ``LEGAL + 1``, by row parity).
-INITIAL, DEPOSIT, COARSE, RELAX, SEAMS, MERGE, TRIAL, WIDE, CORRECT, LEGAL = range(-3, 7)
+INITIAL, DEPOSIT, COARSE, RELAX, SEAMS, MERGE, CORRECT, WDEPOSIT, WIDE, SHIFT, LEGAL = range(-3, 8)
 #: Names of the kinds in :func:`needed`.
 KIND_NAMES = {
     INITIAL: "initial", DEPOSIT: "deposit", COARSE: "coarse", RELAX: "relax", SEAMS: "seams",
-    MERGE: "merge", TRIAL: "trial", WIDE: "wide", CORRECT: "correct",
+    MERGE: "merge", CORRECT: "correct", WDEPOSIT: "wdeposit", WIDE: "wide", SHIFT: "shift",
 }  # fmt: skip
 
 
@@ -96,19 +97,30 @@ class InProcess:
 
 @dataclass
 class OnDask:
-    """Submits tasks to a ``distributed.Client``; a task whose worker dies is retried."""
+    """Submits tasks to a ``distributed.Client``; a task whose worker dies is retried.
+
+    Each task's priority is its place in the order of submission (the first highest):
+    Dask's own order for tasks submitted within ``fifo_timeout`` of each other (100 ms:
+    a whole schedule) is its graph order, which for separate submissions follows no
+    row. With the wide pass every correction is ready at once when its field is made,
+    and without priorities the workers took them in no order, corrected tiles far
+    ahead of their guarantee passes (notebook: 44 corrected against 30 final at the
+    peak)."""
 
     client: Any
     retries: int = 2
     run_id: str = field(default_factory=lambda: uuid.uuid4().hex[:8])
+    submitted: int = 0
 
     def share(self, value: Any) -> Any:
         return self.client.scatter(value, broadcast=True, hash=False)
 
     def submit(self, kind: str, key: str, fn: Callable, *args: Any) -> Any:
+        self.submitted += 1
         return self.client.submit(
-            _run, fn, *args, key=f"optdot-{kind}-{key}-{self.run_id}", retries=self.retries
-        )
+            _run, fn, *args, key=f"optdot-{kind}-{key}-{self.run_id}", retries=self.retries,
+            priority=-self.submitted,
+        )  # fmt: skip
 
     def finished(self, handles: list[Any]):
         """The handles as they finish; the wait wakes every 0.1 s, so a stop asked for
@@ -143,28 +155,28 @@ def needed(
     plan: TilePlan, todo: set[tuple[int, int]], wide: bool = False
 ) -> dict[str, set[tuple[int, int]]]:
     """The tasks that tiles ``todo`` need, when every other tile is finished (a resumed
-    run): ``{"initial", "deposit", "coarse", "relax", "seams", "merge", "trial", "wide",
-    "correct", "legal": tiles or grid points}`` (``coarse``, ``wide``: ``{(0, 0)}``, one
-    task, or empty).
+    run): ``{"initial", "deposit", "coarse", "relax", "seams", "merge", "correct",
+    "wdeposit", "wide", "shift", "legal": tiles or grid points}`` (``coarse``, ``wide``:
+    ``{(0, 0)}``, one task, or empty).
 
     A tile's guarantee pass holds its earlier-colour neighbours' final dots (read from
     the finished parts when finished) and its later-colour neighbours' corrected dots
-    (made again: the uninterrupted run held those too); a correction needs the merged
-    dots of its tile and the tiles around it, and with ``wide`` (the job's correction
-    has a wide pass) the wide field, which needs every tile's trial correction, so every
-    tile's merged dots; merged dots need the tile's relaxation and its corners' seams, a
-    seam square the relaxation of the tiles meeting there, a relaxation the initial dots
-    of the tiles around it and the panel-wide field, which needs every tile's initial
-    dots (cheap: a throw). Every task is a pure function of the job and its inputs, so
-    what is made again is what was made before.
+    (made again: the uninterrupted run held those too). With ``wide`` (the job's
+    correction has a wide pass) corrected dots are a tile's first pass moved along the
+    wide field, which needs every tile's first pass; a first pass needs the merged dots
+    of its tile and the tiles around it, merged dots the tile's relaxation and its
+    corners' seams, a seam square the relaxation of the tiles meeting there, a relaxation
+    the initial dots of the tiles around it and the panel-wide field, which needs every
+    tile's initial dots (cheap: a throw). Every task is a pure function of the job and
+    its inputs, so what is made again is what was made before.
     """
-    correct = set(todo)
+    held = set(todo)
     for t in todo:
         c = plan.colour(*t)
-        correct |= {u for u in plan.neighbours(*t) if plan.colour(*u) > c}
-    trial = set(plan.tiles()) if wide and correct else set()
-    merge = correct | trial
-    for t in correct | trial:
+        held |= {u for u in plan.neighbours(*t) if plan.colour(*u) > c}
+    correct = set(plan.tiles()) if wide and held else held
+    merge = set(correct)
+    for t in correct:
         merge |= set(plan.neighbours(*t))
     corner_set = set(plan.corners())
     seams = {(i + a, j + b) for i, j in merge for b in (0, 1) for a in (0, 1)} & corner_set
@@ -182,9 +194,10 @@ def needed(
         "relax": relax,
         "seams": seams,
         "merge": merge,
-        "trial": trial,
-        "wide": {(0, 0)} if trial else set(),
         "correct": correct,
+        "wdeposit": correct if wide else set(),
+        "wide": {(0, 0)} if wide and held else set(),
+        "shift": held if wide else set(),
         "legal": set(todo),
     }
 
@@ -217,8 +230,9 @@ def run_tiles(
         for t in tiles
     }
     wide = wide_sigma(job) is not None
-    # the correction waves: with a wide pass, every tile's trial correction, then the
-    # field (a barrier: it needs all of them), then the corrections and guarantee passes
+    # with a wide pass: every tile's first correction pass and its deposit, then the
+    # wide field (a barrier: it needs all of them), then row by row each tile's
+    # corrected dots moved along it and the guarantee passes
     after = plan.ny + 3 if wide else 0  # the wave of the wide field
     schedule: list[tuple[int, int, int, int, tuple[int, int]]] = []
     for i, j in tiles:
@@ -234,11 +248,12 @@ def run_tiles(
         schedule.append((j + 1, SEAMS, j, 0, (i, j)))  # seams of corner row j: relax j-1, j
     for i, j in tiles:
         schedule.append((j + 2, MERGE, j, 0, (i, j)))  # merge: needs corners j, j+1
+        schedule.append((j + 3, CORRECT, j, 0, (i, j)))  # correct: needs merged j-1..j+1
         if wide:
-            schedule.append((j + 3, TRIAL, j, 0, (i, j)))  # trial: needs merged j-1..j+1
-        schedule.append((after + j + 3, CORRECT, j, 0, (i, j)))  # needs merged j-1..j+1
+            schedule.append((j + 3, WDEPOSIT, j, 0, (i, j)))
+            schedule.append((after + j + 1, SHIFT, j, 0, (i, j)))
         c = plan.colour(i, j)
-        schedule.append((after + j + 4 + (j % 2), LEGAL + (j % 2), j, c, (i, j)))
+        schedule.append((after + j + 4 + (j % 2), LEGAL + (j % 2), j, c, (i, j)))  # guarantee
     finished = finished or {}
     if finished:
         need = needed(plan, set(tiles) - set(finished), wide)
@@ -258,7 +273,8 @@ def run_tiles(
     relaxed: dict = {}
     seams: dict = {}
     merged: dict = {}
-    trials: dict = {}
+    firsts: dict = {}  # the first correction pass (the corrected dots, without a wide pass)
+    wdeposits: dict = {}
     wide_field = None
     corrected: dict = {}
     final: dict = {}
@@ -285,21 +301,23 @@ def run_tiles(
         elif kind == MERGE:
             results = [seams[c] for c in corners_of[i, j]]
             merged[i, j] = executor.submit("merge", key, apply_seams, relaxed[i, j], results)
-        elif kind == TRIAL:
-            around = [merged[u] for u in plan.neighbours(i, j)]
-            h = executor.submit("trial", key, trial_task, jobf, plan, merged[i, j], *around)
-            trials[i, j] = h
-            kind_of[id(h)] = "trial"
-        elif kind == WIDE:
-            parts = [trials[t] for t in tiles]
-            wide_field = executor.submit("wide", "panel", wide_task, jobf, *parts)
         elif kind == CORRECT:
             around = [merged[u] for u in plan.neighbours(i, j)]
-            h = executor.submit(
-                "correct", key, correct_tile, jobf, plan, wide_field, merged[i, j], *around
-            )
-            corrected[i, j] = h
+            h = executor.submit("correct", key, correct_tile, jobf, plan, merged[i, j], *around)
+            firsts[i, j] = h
+            if not wide:
+                corrected[i, j] = h
             kind_of[id(h)] = "correct"
+        elif kind == WDEPOSIT:
+            h = executor.submit("wdeposit", key, wide_deposit_task, jobf, firsts[i, j])
+            wdeposits[i, j] = h
+        elif kind == WIDE:
+            parts = [wdeposits[t] for t in tiles]
+            wide_field = executor.submit("wide", "panel", wide_task, jobf, *parts)
+        elif kind == SHIFT:
+            h = executor.submit("shift", key, wide_shift, jobf, wide_field, firsts[i, j])
+            corrected[i, j] = h
+            kind_of[id(h)] = "shift"
         else:
             c = plan.colour(i, j)
             around = [
@@ -310,25 +328,32 @@ def run_tiles(
             final[i, j] = h
             kind_of[id(h)] = "legal"
     h = around = parts = results = None  # the loop's last handles: no longer held here
-    weights = {k: w for k, w in _WEIGHTS.items() if wide or k != "trial"}
+    weights = {k: w for k, w in _WEIGHTS.items() if wide or k != "shift"}
     total = sum(weights.values()) * max(len(tiles) - len(finished), 1)
     done = 0.0
     counts: dict[tuple[int, int], int] = {}
     tile_of = {id(h): t for t, h in final.items()}
-    watched = [*relaxed.values(), *trials.values(), *corrected.values(), *final.values()]
+    watched = [*relaxed.values(), *firsts.values()]
+    watched += [*(corrected.values() if wide else ()), *final.values()]
     # The graph holds what it still needs: a relaxed, corrected or final tile is dropped
     # here once handed over, and its dots are freed when the last task reading them is
     # done (holding all of them to the end took the monitor panel, 27M dots, to 4 GiB).
-    # The merged dots and the seam moves stay referenced to the end: a correction lost
-    # with a dead worker is recomputed from the merged dots of nine tiles, which Dask
-    # would otherwise have forgotten once every correction that read them was done
-    # ("cancelled: already forgotten", seen with a frozen worker).
+    # What the corrected dots are made from stays referenced to the end: a correction
+    # lost with a dead worker is made again from it, which Dask would otherwise have
+    # forgotten once every correction that read it was done ("cancelled: already
+    # forgotten", seen with a frozen worker). Without a wide pass that is the merged dots
+    # of nine tiles (and the seam moves); with one, the tile's first pass and the wide
+    # field (the merged dots, 32 B a dot, are then let go once every first pass is made:
+    # the wide pass holds every tile's first pass across its barrier instead).
     # So do the panel-wide fields and the deposits they were solved from (a few cells a
     # tile): a relaxation or a correction lost with a dead worker needs its field again.
-    keep = [*merged.values(), *seams.values(), *deposits.values(), *trials.values()]
-    keep += [coarse, wide_field]
+    keep = [*deposits.values(), coarse]
+    if wide:
+        keep += [*firsts.values(), *wdeposits.values(), wide_field]
+    else:
+        keep += [*merged.values(), *seams.values()]
     initial.clear(), relaxed.clear(), seams.clear(), merged.clear(), corrected.clear()
-    deposits.clear(), trials.clear()
+    deposits.clear(), firsts.clear(), wdeposits.clear()
     coarse = wide_field = None
     final.clear()
     n_done, n_relaxed = len(finished), 0

@@ -75,17 +75,18 @@ runs over the whole panel; a task only chooses which dots are mobile and which a
    over the whole panel at once: 0.066 %). Windows reach 10 spacings past their
    tile-sized core (``plan.margin``): 4 gave 0.098 %, 30 0.089 % and 40 % more time.
 
-   **The wide pass** (:func:`trial_task`, :func:`wide_task`). The single process runs a
-   second pass, 3 spacings wide, off the dots the first moved; it is what settles the
-   panel's edges (notebook panel: strongest blob 2.66 JND tiled with one pass, 1.48 in
-   one process with two). Its error is a sum of per-dot deposits, so it is solved over
-   the whole panel like the throw's field: every tile's first pass is made once as a
-   trial and deposited (:func:`optdot.stages.wide_part`), one task solves the field from
-   all of them, and each correction task makes its first pass again (the same bytes) and
-   moves the dots along the field. A barrier: no guarantee pass starts before every tile
-   is merged and tried. Notebook crop tiled at 15 mm: strongest blob 1.18 -> 0.51 JND,
-   p99 0.65 -> 0.18 (one process 0.87 / 0.23); led tiled: coverage RMS (0.5 mm) 0.065 %
-   -> 0.029 %, seams 0.021 % against 0.032 % inside.
+   **The wide pass** (:func:`wide_deposit_task`, :func:`wide_task`, :func:`wide_shift`).
+   The single process runs a second pass, 3 spacings wide, off the dots the first moved;
+   it is what settles the panel's edges (notebook panel: strongest blob 2.66 JND tiled
+   with one pass, 1.48 in one process with two). Its error is a sum of per-dot deposits,
+   so it is solved over the whole panel like the throw's field: every tile's corrected
+   dots are deposited (:func:`optdot.stages.wide_part`), one task solves the field from
+   all of them, and each tile's corrected dots move along it. A barrier: no guarantee
+   pass starts before every tile is corrected, so every tile's corrected dots are held
+   at once; the merged dots, needed by no task after the corrections, are let go
+   instead. Notebook crop tiled at 15 mm: strongest blob 1.18 -> 0.51 JND, p99 0.65 ->
+   0.18 (one process 0.87 / 0.23); led tiled: coverage RMS (0.5 mm) 0.065 % -> 0.029 %,
+   seams 0.021 % against 0.032 % inside.
 
 5. **guarantee** (:func:`legalize_tile`). The formulation's hard-core iterations (which
    clear the pairs under 60 µm the correction made), then :func:`optdot.stages.finish`:
@@ -279,38 +280,30 @@ def coarse_task(job: Job, *parts: LatticePart) -> CoarseField | None:
     return stages.coarse_solve(job, list(parts))
 
 
-def correct_tile(
-    job: Job, plan: TilePlan, wide: CoarseField | None, dots: TileDots, *around: TileDots
-) -> TileDots:
-    """Phase 3: tile ``dots`` moved by the long-wavelength correction, blended across its
-    borders (see the module doc), with the phase-2 dots of the tiles ``around`` it, then
-    along the panel's wide field ``wide`` (:func:`wide_task`; None: the first pass
-    alone)."""
-    first = _first_pass(job, plan, dots, *around)
-    if wide is None or not len(first.xy):
-        return first
-    return TileDots(first.tile, first.xy0, first.xy + wide.displacement(first.xy))
-
-
-def trial_task(job: Job, plan: TilePlan, dots: TileDots, *around: TileDots) -> LatticePart:
-    """Tile ``dots`` after the first correction pass (:func:`correct_tile` without the
-    wide field), deposited on the wide pass's lattice for :func:`wide_task`. The
-    corrected dots are dropped: the correction runs again once the field is known
-    (~13 % more tile time), which costs no memory, where holding every tile's corrected
-    dots until the last one is made would cost 16-32 B a dot (0.4-0.9 GB on a 27-inch
-    monitor's 27M dots)."""
-    first = _first_pass(job, plan, dots, *around)
-    return stages.wide_part(job, first.xy, stages.thrown_areas(job, first.xy0))
+def wide_deposit_task(job: Job, dots: TileDots) -> LatticePart | None:
+    """A tile's dots after its first correction pass (:func:`correct_tile`) deposited on
+    the wide pass's lattice (:func:`optdot.stages.wide_part`), for :func:`wide_task`."""
+    return stages.wide_part(job, dots.xy, stages.thrown_areas(job, dots.xy0))
 
 
 def wide_task(job: Job, *parts: LatticePart) -> CoarseField | None:
-    """The wide pass's field over the panel from every tile's :func:`trial_task`, in the
-    plan's tile order (:func:`optdot.stages.wide_solve`)."""
+    """The wide pass's field over the panel from every tile's :func:`wide_deposit_task`,
+    in the plan's tile order (:func:`optdot.stages.wide_solve`)."""
     return stages.wide_solve(job, list(parts))
 
 
-def _first_pass(job: Job, plan: TilePlan, dots: TileDots, *around: TileDots) -> TileDots:
-    """The first correction pass of :func:`correct_tile`: the blended windows."""
+def wide_shift(job: Job, wide: CoarseField, dots: TileDots) -> TileDots:
+    """A tile's dots after its first correction pass moved along the panel's wide field
+    (:func:`wide_task`): the correction's second pass."""
+    if not len(dots.xy):
+        return TileDots(dots.tile, dots.xy0, dots.xy.copy())
+    return TileDots(dots.tile, dots.xy0, dots.xy + wide.displacement(dots.xy))
+
+
+def correct_tile(job: Job, plan: TilePlan, dots: TileDots, *around: TileDots) -> TileDots:
+    """Phase 3: tile ``dots`` moved by the first pass of the long-wavelength correction,
+    blended across its borders (see the module doc), with the phase-2 dots of the tiles
+    ``around`` it."""
     n = len(dots.xy)
     if n == 0:
         return dots
