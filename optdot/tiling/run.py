@@ -3,12 +3,14 @@
 Every tile's throw and its deposit come first (the panel-wide field the first relaxation
 needs is solved from all of them; the throws are held until their relaxations take them,
 16 B a dot). Then tasks are submitted in waves along the panel's rows (relax row j, its
-seams, its merge, its trial correction), which is also Dask's priority order, so only a
-few rows of relaxed tiles are held at once; the wide field from every trial (a barrier);
-then row by row the corrections and the guarantee passes of the rows behind them, so only
-a few rows of corrected tiles are held (the merged dots, 32 B a dot, are kept to the end:
-see :func:`run_tiles`). Without a wide pass (a formulation of one correction pass) there
-is no trial and no barrier. Finished
+seams, its merge, its correction, then the guarantee pass of the rows behind it), each
+task's Dask priority its place in that order (:class:`OnDask`), so only a few rows of
+relaxed and corrected tiles are held at once (the merged dots, 32 B a dot, are kept to
+the end: see :func:`run_tiles`). With a wide correction pass (the default formulation)
+the correction is split by a barrier: every tile's first pass and its deposit, the wide
+field from all of them, then row by row the first passes moved along it and the
+guarantee passes; the first passes are held across the barrier and kept to the end in
+place of the merged dots, which are let go. Finished
 tiles are handed to ``sink`` one at a time, in the order they finish; what the sink writes
 depends only on the tile, so the output is the same whatever the order.
 """
