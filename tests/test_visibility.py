@@ -216,6 +216,23 @@ def test_the_corner_lit_sample_by_its_empty_corner_is_not_seen():
     assert vis["max_jnd"] < 0.7, vis["blobs"][:3]
 
 
+def test_an_outline_filled_exactly_is_not_seen():
+    """The outline sample's map delivered exactly inside its outline (a dense cloud):
+    under 0.5 JND (0.32; the cloud's own steps at the curved edges). Against the cells'
+    area shares inside the outline it read 1.2 JND at the notch, and 1.0 with the share
+    deposited but not weighed by the map, which is steep there."""
+    from optdot.config.schema import load_job
+
+    job = load_job(SAMPLES / "outline" / "job.toml")
+    view = viewing("notebook")
+    xy, area = _map_as_points(job.density, per_mm=100)
+    keep = job.domain.contains(xy)
+    g = LuminanceGrid.over(job.density, view)
+    g.add(xy[keep], area[keep])
+    metrics, _ = visibility(g, job.density, job.domain, view)
+    assert metrics["max_jnd"] < 0.5, metrics["blobs"][:3]
+
+
 # --- job, CLI, gate ---------------------------------------------------------------------
 
 

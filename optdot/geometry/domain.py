@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse
 import shapely
 from shapely.geometry import MultiPolygon, Polygon
 from shapely.geometry.polygon import orient
@@ -94,6 +95,63 @@ class Domain:
     ) -> np.ndarray:
         """``[ny, nx]`` share of each grid cell's area inside the domain."""
         return polygon_cell_fractions(self.geometry, x0, y0, cw, ch, nx, ny, self.rectangle)
+
+    def deposited_fractions(
+        self, x0: float, y0: float, cw: float, ch: float, nx: int, ny: int, weight=None
+    ) -> np.ndarray:
+        """``[ny, nx]``: the share of a cloud-in-cell deposit of the fill ``weight`` (a
+        :class:`optdot.geometry.density.DensityMap`, or None: a uniform fill) that comes
+        from inside the domain, in each cell of the grid (the rectangle: its
+        :meth:`cell_fractions`). The map cut by the outline, as the dots' deposit sees
+        it, is the map's deposit times this.
+
+        The dots are deposited that way (bilinear weights to the four nearest cell
+        centres, all of a dot's weight kept past the outermost centres), so a map cut by
+        an outline must be too: against the cells' area shares a deposit of dots that
+        fills the domain exactly reads a dipole along every edge inside the box, which a
+        1 mm blur turns into 1.2 JND at the outline sample's notch (and where the map is
+        steep by an edge, the share must weigh it: 1.0 JND unweighted). Computed on
+        sub-cells a quarter of a cell a side (:data:`SUB_CELLS`), each a point mass at
+        its centre: exact where the domain's edges are straight within a sub-cell and
+        the map's cells are whole sub-cells."""
+        if self.rectangle:
+            return self.cell_fractions(x0, y0, cw, ch, nx, ny)
+        k = SUB_CELLS
+        wx = _deposit_weights(nx, k)  # [nx, nx k]
+        inside = np.zeros((ny, nx))
+        whole = np.zeros((ny, nx))
+        step = max(1, (1 << 22) // max(1, nx * k * k))  # rows of cells a strip
+        for r0 in range(0, ny, step):
+            r1 = min(ny, r0 + step)
+            args = (x0, y0 + r0 * ch, cw / k, ch / k, nx * k, (r1 - r0) * k)
+            w = np.ones((args[5], args[4])) if weight is None else weight.resampled(*args)
+            # the sub-rows' weights to the cell rows around them (clamped at the grid's)
+            u = (r0 * k + np.arange((r1 - r0) * k) + 0.5) / k - 0.5
+            i = np.floor(u).astype(np.int64)
+            t = (u - i)[:, None]
+            for out, sub in ((inside, self.cell_fractions(*args) * w), (whole, w)):
+                rows = (wx @ sub.T).T  # [(r1 - r0) k, nx]
+                np.add.at(out, np.clip(i, 0, ny - 1), (1.0 - t) * rows)
+                np.add.at(out, np.clip(i + 1, 0, ny - 1), t * rows)
+        return np.where(whole > 0, inside / np.where(whole > 0, whole, 1.0), 0.0)
+
+
+#: Sub-cells a side per cell in :meth:`Domain.deposited_fractions` (even: the bilinear
+#: weights' kinks fall on sub-cell borders, so the sum over sub-cells is exact).
+SUB_CELLS = 4
+
+
+def _deposit_weights(n: int, k: int) -> scipy.sparse.csr_matrix:
+    """``[n, n k]`` sparse: the cloud-in-cell weights of ``n k`` sub-cell centres (``k`` a
+    cell) to the ``n`` cell centres of one axis, all weight kept past the outermost
+    centres."""
+    u = (np.arange(n * k) + 0.5) / k - 0.5
+    i = np.floor(u).astype(np.int64)
+    t = u - i
+    cols = np.arange(n * k)
+    rows = np.concatenate([np.clip(i, 0, n - 1), np.clip(i + 1, 0, n - 1)])
+    w = np.concatenate([1.0 - t, t])
+    return scipy.sparse.csr_matrix((w, (rows, np.concatenate([cols, cols]))), shape=(n, n * k))
 
 
 def polygon_cell_fractions(

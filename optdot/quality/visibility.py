@@ -202,13 +202,15 @@ def visibility(
     g = grid
     cell_area = g.cw * g.ch
     if outline is None:
-        frac = np.ones((g.ny, g.nx))
+        frac = dep = np.ones((g.ny, g.nx))
     else:
         frac = outline.cell_fractions(g.x0, g.y0, g.cw, g.ch, g.nx, g.ny)
+        dep = outline.deposited_fractions(g.x0, g.y0, g.cw, g.ch, g.nx, g.ny, density)
     # the map as the dots' deposit sees it (a pixel mean would read the deposit's own
-    # smoothing as an error where the map is steep)
+    # smoothing as an error where the map is steep, and the cells' area shares inside an
+    # outline a dipole along its edges: the outline sample's notch read 1.2 JND)
     fill = density.deposited(g.x0, g.y0, g.cw, g.ch, g.nx, g.ny)
-    target = fill * frac
+    target = fill * dep
     got = g.sums / cell_area
     sp = _Spectral.of(g, _margin(view))
     psf = sp.gaussian(view.psf)

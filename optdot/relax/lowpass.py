@@ -344,8 +344,8 @@ def coarse_field(
     # coarse lattice mistakes the deposit's own smoothing for an error where the map is
     # steep or meets a wall (led sample, 0.16 mm cells: 3 % at the LED corner)
     target = density.deposited(g.x0, g.y0, g.hx, g.hy, g.nx, g.ny)
-    if domain is not None and not domain.rectangle:
-        target = target * domain.cell_fractions(g.x0, g.y0, g.hx, g.hy, g.nx, g.ny)
+    if domain is not None and not domain.rectangle:  # the outline deposited alike
+        target = target * domain.deposited_fractions(g.x0, g.y0, g.hx, g.hy, g.nx, g.ny, density)
     s = (sigma / g.hy, sigma / g.hx)
     gt = gaussian_filter(target, s, mode="constant")
     gg = gaussian_filter(got, s, mode="constant")
