@@ -174,7 +174,7 @@ def _run_tiled(job, plan, executor_cm, output, progress, announce=None) -> Patte
                     f"interrupted run (kept in {w.tmp})"
                 )
             with executor_cm as executor:
-                run = run_tiles(job, plan, executor, to_part, progress, finished)
+                run = run_tiles(job, plan, executor, to_part, progress, finished, w)
         return run
     got: dict = {}
     with executor_cm as executor:

@@ -294,13 +294,14 @@ def test_an_interrupted_tiled_run_leaves_the_previous_dataset(tiled, tmp_path):
 
 def _only_the_staging_dir_beside(out):
     """Beside ``out`` nothing but the run's staging directory (kept to resume from):
-    its resume record and finished parts, nothing else."""
-    from optdot.io.dataset_write import RESUME, staging_dir
+    its resume record, the fields it kept and finished parts, nothing else."""
+    from optdot.io.dataset_write import EXTRA, RESUME, staging_dir
 
     staging = staging_dir(out)
     assert sorted(p.name for p in out.parent.iterdir()) == sorted([out.name, staging.name])
-    inside = sorted(p.name for p in staging.iterdir())
-    assert inside[0] == RESUME and all(n.startswith("part-") for n in inside[1:]), inside
+    inside = [p.name for p in staging.iterdir() if not p.name.startswith(EXTRA)]
+    assert sorted(inside)[0] == RESUME, inside
+    assert all(n.startswith("part-") for n in sorted(inside)[1:]), inside
 
 
 def test_cluster_faults_are_one_line(tmp_path):
@@ -500,14 +501,18 @@ def test_an_interrupted_tiled_run_resumes_with_the_bytes_of_an_uninterrupted_one
     assert not out.exists()
     staging = staging_dir(out)
     kept = sorted(p.name for p in staging.iterdir())
-    assert len(kept) == 4 and kept[0] == "_resume.json"
-    assert all(k.startswith("part-") for k in kept[1:])
+    # the record, the throw's field and the wide pass's, the 3 parts
+    assert kept[:3] == ["_extra-coarse.npz", "_extra-wide.npz", "_resume.json"], kept
+    assert len(kept) == 6 and all(k.startswith("part-") for k in kept[3:])
     again = _Counting()
     said = []
     generate_tiled(job, out, plan=plan, executor=again, announce=said.append)
     assert again.kinds["legal"] == 5 and "resuming: 3 of 8 tiles" in said[0]
-    # the panel-wide field is made again from every tile's throw
-    assert again.kinds["deposit"] == 8 and again.kinds["coarse"] == 1
+    # the fields are read, not made again from every tile: only the 5 tiles' own
+    # corrections are made (all 8, and their deposits, to remake the wide field)
+    assert "coarse" not in again.kinds and "wide" not in again.kinds
+    assert "deposit" not in again.kinds and "wdeposit" not in again.kinds
+    assert again.kinds["correct"] == again.kinds["shift"] == 5, again.kinds
     assert not staging.exists()
     names = sorted(p.name for p in full.iterdir())
     assert names == sorted(p.name for p in out.iterdir())
@@ -519,6 +524,30 @@ def test_an_interrupted_tiled_run_resumes_with_the_bytes_of_an_uninterrupted_one
     other = _Counting()
     generate_tiled(job.with_overrides(seed=9), out, plan=plan, executor=other)
     assert other.kinds["legal"] == 8
+
+
+def test_a_damaged_kept_field_is_made_again(tmp_path):
+    """A kept field whose bytes no longer match its record is dropped and made again from
+    every tile; the result is still the uninterrupted run's."""
+    from optdot.io.dataset_write import staging_dir
+
+    job = load_job(LED).with_overrides(max_iter=15)
+    plan = plan_tiles(job, side=10.0)
+    full = tmp_path / "full.parquet"
+    generate_tiled(job, full, plan=plan, executor=InProcess())
+    out = tmp_path / "resumed.parquet"
+    with pytest.raises(KeyboardInterrupt):
+        generate_tiled(job, out, plan=plan, executor=_Counting(stop_after=3))
+    kept = staging_dir(out) / "_extra-wide.npz"
+    data = bytearray(kept.read_bytes())
+    data[-100] ^= 0xFF
+    kept.write_bytes(bytes(data))
+    again = _Counting()
+    generate_tiled(job, out, plan=plan, executor=again)
+    assert again.kinds["wide"] == 1 and again.kinds["wdeposit"] == 8
+    assert "coarse" not in again.kinds  # the other field was intact
+    for name in sorted(p.name for p in full.iterdir()):
+        assert (full / name).read_bytes() == (out / name).read_bytes(), name
 
 
 def test_a_foreign_directory_in_the_staging_place_is_never_removed(tmp_path):

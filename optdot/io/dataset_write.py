@@ -36,6 +36,8 @@ from .manifest import FORMAT, MANIFEST, VERSION, part_name, pattern_manifest, si
 
 #: The record of a resumable run's finished parts, in its staging directory only.
 RESUME = "_resume.json"
+#: Prefix of the files :meth:`DatasetWriter.write_extra` keeps in a staging directory.
+EXTRA = "_extra-"
 
 
 def _table(xy: np.ndarray, diameter: np.ndarray):
@@ -64,6 +66,35 @@ class DatasetWriter:
     resume_key: str | None = None
     #: parts a previous, interrupted run of the same job left, checked: ``{k: entry}``.
     resumed: dict[int, dict[str, Any]] = field(default_factory=dict)
+    #: what else a resumable run keeps beside its parts until it ends (the tiles' fields,
+    #: which a resumed run would otherwise remake from every tile): ``{name: entry}``.
+    extras: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+    def write_extra(self, name: str, arrays: dict[str, np.ndarray]) -> None:
+        """Keep ``arrays`` under ``name`` for a resumed run (nothing without a resume
+        key); a dataset never holds them."""
+        if self.resume_key is None:
+            return
+        check_interrupt()
+        path = self.tmp / f"{EXTRA}{name}.npz"
+        try:
+            with open(path, "wb") as fh:
+                np.savez(fh, **arrays)
+                fh.flush()
+                os.fsync(fh.fileno())
+            self.extras[name] = {"file": path.name, "sha256": sha256_file(path)}
+            self._record()
+        except OSError as e:
+            raise ExportError(f"{self.target}: cannot write ({e.strerror})") from None
+
+    def read_extra(self, name: str) -> dict[str, np.ndarray] | None:
+        """What :meth:`write_extra` kept under ``name`` in an interrupted run of the same
+        key, checked against its checksum when the staging directory was opened; None
+        when there is none."""
+        if name not in self.extras:
+            return None
+        with np.load(self.tmp / self.extras[name]["file"], allow_pickle=False) as z:
+            return {k: z[k] for k in z.files}
 
     def read_resumed(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         """A resumed part's dots: ``(xy [n, 2], diameter [n])``, mm."""
@@ -73,7 +104,11 @@ class DatasetWriter:
         """Write the resume record (atomically): the key and every part written so far."""
         if self.resume_key is None:
             return
-        doc = {"key": self.resume_key, "parts": {str(k): v for k, v in self.parts.items()}}
+        doc = {
+            "key": self.resume_key,
+            "parts": {str(k): v for k, v in self.parts.items()},
+            "extras": self.extras,
+        }
         tmp = self.tmp / (RESUME + ".tmp")
         with open(tmp, "w") as fh:
             json.dump(doc, fh)
@@ -150,15 +185,18 @@ def _resume_record(staging: Path) -> dict[str, Any] | None:
     return doc if ok and isinstance(doc.get("parts"), dict) else None
 
 
-def _open_staging(target: Path, key: str) -> tuple[Path, dict[int, dict[str, Any]]]:
-    """The staging directory of ``target`` and the parts in it a previous run of the same
-    ``key`` finished (each checked against its checksum; others are dropped). A staging
-    directory of another run is cleared; a path of that name that is not ours (no resume
-    record, a link, a file) is refused, never removed."""
+def _open_staging(
+    target: Path, key: str
+) -> tuple[Path, dict[int, dict[str, Any]], dict[str, dict[str, Any]]]:
+    """The staging directory of ``target``, the parts in it a previous run of the same
+    ``key`` finished and what else it kept (each checked against its checksum; others
+    are dropped). A staging directory of another run is cleared; a path of that name
+    that is not ours (no resume record, a link, a file) is refused, never removed."""
     staging = staging_dir(target)
     if staging.is_symlink() or (staging.exists() and not staging.is_dir()):
         raise ExportError(f"{staging}: is in the way of the run's staging directory")
     parts: dict[int, dict[str, Any]] = {}
+    extras: dict[str, dict[str, Any]] = {}
     if staging.is_dir():
         doc = _resume_record(staging)
         if doc is None:
@@ -173,15 +211,21 @@ def _open_staging(target: Path, key: str) -> tuple[Path, dict[int, dict[str, Any
                 f = staging / str(entry.get("file", ""))
                 if f.is_file() and f.parent == staging and sha256_file(f) == entry.get("sha256"):
                     parts[int(k)] = entry
+            kept = doc.get("extras")
+            for name, entry in (kept if isinstance(kept, dict) else {}).items():
+                f = staging / str(entry.get("file", ""))
+                ours = f.name.startswith(EXTRA) and f.parent == staging
+                if ours and f.is_file() and sha256_file(f) == entry.get("sha256"):
+                    extras[str(name)] = entry
     try:
         staging.mkdir(mode=0o700, exist_ok=True)
     except OSError as e:
         raise ExportError(f"{target}: cannot write here ({e.strerror})") from None
-    keep = {e["file"] for e in parts.values()} | {RESUME}
+    keep = {e["file"] for e in parts.values()} | {e["file"] for e in extras.values()} | {RESUME}
     for f in staging.iterdir():  # parts cut off by the interruption
         if f.name not in keep:
             f.unlink()
-    return staging, parts
+    return staging, parts, extras
 
 
 @contextlib.contextmanager
@@ -205,14 +249,15 @@ def write_dataset(
     directory = target.parent if str(target.parent) else Path(".")
     check_dataset_target(target)
     resumed: dict[int, dict[str, Any]] = {}
+    extras: dict[str, dict[str, Any]] = {}
     if resume_key is not None:
-        tmp, resumed = _open_staging(target, resume_key)
+        tmp, resumed, extras = _open_staging(target, resume_key)
     else:
         try:
             tmp = Path(tempfile.mkdtemp(prefix=f".{short_name(target.name)}.", dir=directory))
         except OSError as e:
             raise ExportError(f"{target}: cannot write here ({e.strerror})") from None
-    writer = DatasetWriter(tmp, target, resume_key=resume_key, resumed=resumed)
+    writer = DatasetWriter(tmp, target, resume_key=resume_key, resumed=resumed, extras=extras)
     writer.parts.update(resumed)
     try:
         writer._record()  # the staging directory is recognisably ours from the start
@@ -222,8 +267,10 @@ def write_dataset(
         writer._tally(writer.read_resumed(k)[1])
     try:
         yield writer
-        if resume_key is not None:
-            (tmp / RESUME).unlink(missing_ok=True)  # a dataset holds only what it lists
+        if resume_key is not None:  # a dataset holds only what it lists
+            for entry in writer.extras.values():
+                (tmp / entry["file"]).unlink(missing_ok=True)
+            (tmp / RESUME).unlink(missing_ok=True)
         parts = [writer.parts[k] for k in sorted(writer.parts)]
         doc = {"format": FORMAT, "version": VERSION, **manifest, "parts": parts}
         if doc["diameter_mm"] is None:  # sizes known once written: uniform, median

@@ -315,6 +315,20 @@ class CoarseField:
         g = self.lattice
         return (y - g.y0) / g.hy - 0.5, (x - g.x0) / g.hx - 0.5
 
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """The field as named arrays (:meth:`from_arrays` reads them back, bit for bit)."""
+        g = self.lattice
+        box = np.array([g.x0, g.y0, g.hx, g.hy, self.cap], np.float64)
+        return {"box": box, "shape": np.array([g.nx, g.ny], np.int64), "e": self.e,
+                "ux": self.ux, "uy": self.uy}  # fmt: skip
+
+    @classmethod
+    def from_arrays(cls, a: dict[str, np.ndarray]) -> CoarseField:
+        """The field :meth:`to_arrays` wrote."""
+        x0, y0, hx, hy, cap = (float(v) for v in a["box"])
+        nx, ny = (int(v) for v in a["shape"])
+        return cls(Lattice(x0, y0, hx, hy, nx, ny), a["e"], a["ux"], a["uy"], cap)
+
     def displacement(self, at: np.ndarray) -> np.ndarray:
         """``[m, 2]`` displacement (mm, capped at ``cap``) of the dots at ``at``."""
         row, col = self._coords(at[:, 0], at[:, 1])

@@ -21,12 +21,13 @@ import time
 import uuid
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from ..config.job import Job, OptimizeParams
 from ..geometry.density import DensityMap
+from ..relax.lowpass import CoarseField
 from ..runtime.cluster import single_threaded
 from ..runtime.stop import check_interrupt
 from ..stages import wide_sigma
@@ -65,6 +66,18 @@ KIND_NAMES = {
     INITIAL: "initial", DEPOSIT: "deposit", COARSE: "coarse", RELAX: "relax", SEAMS: "seams",
     MERGE: "merge", CORRECT: "correct", WDEPOSIT: "wdeposit", WIDE: "wide", SHIFT: "shift",
 }  # fmt: skip
+
+
+class FieldStore(Protocol):
+    """Where a resumable run keeps its panel-wide fields (``"coarse"``, ``"wide"``) as
+    named arrays, so that a resumed run need not remake them from every tile
+    (:class:`optdot.io.dataset_write.DatasetWriter`: its staging directory)."""
+
+    def read_extra(self, name: str) -> dict[str, np.ndarray] | None:
+        """What an interrupted run of the same job kept under ``name``, or None."""
+
+    def write_extra(self, name: str, arrays: dict[str, np.ndarray]) -> None:
+        """Keep ``arrays`` under ``name``."""
 
 
 def _run(fn: Callable, *args: Any) -> Any:
@@ -154,7 +167,10 @@ class TiledRun:
 
 
 def needed(
-    plan: TilePlan, todo: set[tuple[int, int]], wide: bool = False
+    plan: TilePlan,
+    todo: set[tuple[int, int]],
+    wide: bool = False,
+    given: frozenset[str] = frozenset(),
 ) -> dict[str, set[tuple[int, int]]]:
     """The tasks that tiles ``todo`` need, when every other tile is finished (a resumed
     run): ``{"initial", "deposit", "coarse", "relax", "seams", "merge", "correct",
@@ -169,14 +185,16 @@ def needed(
     of its tile and the tiles around it, merged dots the tile's relaxation and its
     corners' seams, a seam square the relaxation of the tiles meeting there, a relaxation
     the initial dots of the tiles around it and the panel-wide field, which needs every
-    tile's initial dots (cheap: a throw). Every task is a pure function of the job and
-    its inputs, so what is made again is what was made before.
+    tile's initial dots (cheap: a throw). A field in ``given`` (``"coarse"``, ``"wide"``:
+    kept by the interrupted run) needs none of that. Every task is a pure function of the
+    job and its inputs, so what is made again is what was made before.
     """
+    have_wide = "wide" in given
     held = set(todo)
     for t in todo:
         c = plan.colour(*t)
         held |= {u for u in plan.neighbours(*t) if plan.colour(*u) > c}
-    correct = set(plan.tiles()) if wide and held else held
+    correct = set(plan.tiles()) if wide and held and not have_wide else held
     merge = set(correct)
     for t in correct:
         merge |= set(plan.neighbours(*t))
@@ -188,17 +206,17 @@ def needed(
     initial = set(relax)
     for t in relax:
         initial |= set(plan.neighbours(*t))
-    deposit = set(plan.tiles()) if relax else set()
+    deposit = set(plan.tiles()) if relax and "coarse" not in given else set()
     return {
         "initial": initial | deposit,
         "deposit": deposit,
-        "coarse": {(0, 0)} if relax else set(),
+        "coarse": {(0, 0)} if deposit else set(),
         "relax": relax,
         "seams": seams,
         "merge": merge,
         "correct": correct,
-        "wdeposit": correct if wide else set(),
-        "wide": {(0, 0)} if wide and held else set(),
+        "wdeposit": correct if wide and not have_wide else set(),
+        "wide": {(0, 0)} if wide and held and not have_wide else set(),
         "shift": held if wide else set(),
         "legal": set(todo),
     }
@@ -211,12 +229,14 @@ def run_tiles(
     sink: Sink,
     progress: TileProgress | None = None,
     finished: dict[tuple[int, int], Callable[[], FinalDots]] | None = None,
+    fields: FieldStore | None = None,
 ) -> TiledRun:
     """Generate ``job`` tile by tile on ``executor``, handing each finished tile to ``sink``.
 
     ``finished``: tiles already done (a resumed run), each with a loader of its final
     dots; only the tasks the other tiles need are run (:func:`needed`), and the sink
-    gets only the other tiles.
+    gets only the other tiles. ``fields``: where the panel-wide fields are kept as they
+    are made, and found when an interrupted run made them (then not made again).
 
     Raises:
         GuaranteeError: a tile could not be made legal.
@@ -257,8 +277,13 @@ def run_tiles(
         c = plan.colour(i, j)
         schedule.append((after + j + 4 + (j % 2), LEGAL + (j % 2), j, c, (i, j)))  # guarantee
     finished = finished or {}
-    if finished:
-        need = needed(plan, set(tiles) - set(finished), wide)
+    given = {}
+    for name in ("coarse", "wide") if fields is not None else ():
+        arrays = fields.read_extra(name)
+        if arrays is not None:
+            given[name] = CoarseField.from_arrays(arrays)
+    if finished or given:
+        need = needed(plan, set(tiles) - set(finished), wide, frozenset(given))
         schedule = [e for e in schedule if e[4] in need[KIND_NAMES.get(e[1], "legal")]]
     schedule.sort()
     held: dict = {}
@@ -271,13 +296,14 @@ def run_tiles(
 
     initial: dict = {}
     deposits: dict = {}
-    coarse = None
+    coarse = executor.share(given["coarse"]) if "coarse" in given else None
     relaxed: dict = {}
     seams: dict = {}
     merged: dict = {}
     firsts: dict = {}  # the first correction pass (the corrected dots, without a wide pass)
     wdeposits: dict = {}
-    wide_field = None
+    wide_field = executor.share(given["wide"]) if "wide" in given else None
+    made = {}  # the fields made here, to keep for a resumed run
     corrected: dict = {}
     final: dict = {}
     kind_of: dict[Any, str] = {}
@@ -289,7 +315,7 @@ def run_tiles(
             deposits[i, j] = executor.submit("deposit", key, deposit_task, jobf, initial[i, j])
         elif kind == COARSE:
             parts = [deposits[t] for t in tiles]
-            coarse = executor.submit("coarse", "panel", coarse_task, jobf, *parts)
+            coarse = made["coarse"] = executor.submit("coarse", "panel", coarse_task, jobf, *parts)
         elif kind == RELAX:
             around = [initial[u] for u in plan.neighbours(i, j)]
             h = executor.submit(
@@ -315,7 +341,7 @@ def run_tiles(
             wdeposits[i, j] = h
         elif kind == WIDE:
             parts = [wdeposits[t] for t in tiles]
-            wide_field = executor.submit("wide", "panel", wide_task, jobf, *parts)
+            wide_field = made["wide"] = executor.submit("wide", "panel", wide_task, jobf, *parts)
         elif kind == SHIFT:
             h = executor.submit("shift", key, wide_shift, jobf, wide_field, firsts[i, j])
             corrected[i, j] = h
@@ -337,6 +363,10 @@ def run_tiles(
     tile_of = {id(h): t for t, h in final.items()}
     watched = [*relaxed.values(), *firsts.values()]
     watched += [*(corrected.values() if wide else ()), *final.values()]
+    if fields is not None:  # first: in process, handles are handed over in this order
+        for name, h in made.items():
+            kind_of[id(h)] = name
+        watched[:0] = made.values()
     # The graph holds what it still needs: a relaxed, corrected or final tile is dropped
     # here once handed over, and its dots are freed when the last task reading them is
     # done (holding all of them to the end took the monitor panel, 27M dots, to 4 GiB).
@@ -358,10 +388,17 @@ def run_tiles(
     deposits.clear(), firsts.clear(), wdeposits.clear()
     coarse = wide_field = None
     final.clear()
+    made.clear()
     n_done, n_relaxed = len(finished), 0
     held.clear()
     for h in executor.finished(watched):
         kind = kind_of[id(h)]
+        if kind in ("coarse", "wide"):
+            value = executor.result(h)
+            if value is not None:
+                fields.write_extra(kind, value.to_arrays())
+            del h, value
+            continue
         done += _WEIGHTS[kind] + (_WEIGHTS["seams"] if kind == "relax" else 0.0)
         n_relaxed += kind == "relax"
         if kind == "legal":
