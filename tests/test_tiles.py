@@ -550,6 +550,33 @@ def test_a_damaged_kept_field_is_made_again(tmp_path):
         assert (full / name).read_bytes() == (out / name).read_bytes(), name
 
 
+def test_a_resume_record_keeps_only_its_own_checked_extras(tmp_path):
+    """Extras named in a resume record are taken only when they are files of the staging
+    directory named as extras with their recorded checksum: an entry of another type, a
+    path out of it or a wrong checksum is dropped (and the file, if inside, removed)."""
+    from optdot.files import sha256_file
+    from optdot.io.dataset_write import RESUME, _open_staging, staging_dir
+
+    target = tmp_path / "x.parquet"
+    staging = staging_dir(target)
+    staging.mkdir()
+    (tmp_path / "secret.npz").write_bytes(b"not ours")
+    good = staging / "_extra-wide.npz"
+    good.write_bytes(b"field")
+    bad = staging / "_extra-coarse.npz"
+    bad.write_bytes(b"changed")
+    extras = {
+        "wide": {"file": good.name, "sha256": sha256_file(good)},
+        "coarse": {"file": bad.name, "sha256": "0" * 64},
+        "other": {"file": "../secret.npz", "sha256": sha256_file(tmp_path / "secret.npz")},
+        "odd": 5,
+    }
+    (staging / RESUME).write_text(json.dumps({"key": "k", "parts": {}, "extras": extras}))
+    _, parts, kept = _open_staging(target, "k")
+    assert parts == {} and list(kept) == ["wide"]
+    assert good.exists() and not bad.exists() and (tmp_path / "secret.npz").exists()
+
+
 def test_a_foreign_directory_in_the_staging_place_is_never_removed(tmp_path):
     from optdot.errors import ExportError
     from optdot.io.dataset_write import staging_dir

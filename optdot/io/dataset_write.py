@@ -213,6 +213,8 @@ def _open_staging(
                     parts[int(k)] = entry
             kept = doc.get("extras")
             for name, entry in (kept if isinstance(kept, dict) else {}).items():
+                if not isinstance(entry, dict):
+                    continue
                 f = staging / str(entry.get("file", ""))
                 ours = f.name.startswith(EXTRA) and f.parent == staging
                 if ours and f.is_file() and sha256_file(f) == entry.get("sha256"):
