@@ -101,11 +101,21 @@ def coverage_error(
     if domain is not None and not domain.rectangle:
         target = target * domain.cell_fractions(window[0], window[1], hx, hy, nx, ny)
     got = _deposit(xy, area, window[0], window[1], (hx, hy), (ny, nx)) / (hx * hy)
-    s = (sigma / hy, sigma / hx)
+    return _relative_error(got, target, (sigma / hy, sigma / hx))
+
+
+def _relative_error(got: np.ndarray, target: np.ndarray, s: tuple[float, float]) -> np.ndarray:
+    """``[ny, nx]`` (dots - map) / map, both blurred by a Gaussian of ``s`` cells (rows,
+    columns), where the map is not zero (else 0), less its mean there: the dots'
+    coverage ``got`` and the map's ``target`` on one grid, fill per cell. ``got`` and
+    ``target`` are not kept (on a panel's lattice a few such arrays are a worker's
+    peak)."""
     gt = gaussian_filter(target, s, mode="constant")
     gg = gaussian_filter(got, s, mode="constant")
     live = (target > 0) & (gt > 0)
+    del got, target
     e = np.where(live, (gg - gt) / np.where(live, gt, 1.0), 0.0)
+    del gt, gg
     if live.any():
         e[live] -= e[live].mean()
     return e
@@ -360,15 +370,8 @@ def coarse_field(
     target = density.deposited(g.x0, g.y0, g.hx, g.hy, g.nx, g.ny)
     if domain is not None and not domain.rectangle:  # the outline deposited alike
         target = target * domain.deposited_fractions(g.x0, g.y0, g.hx, g.hy, g.nx, g.ny, density)
-    s = (sigma / g.hy, sigma / g.hx)
-    gt = gaussian_filter(target, s, mode="constant")
-    gg = gaussian_filter(got, s, mode="constant")
-    live = (target > 0) & (gt > 0)
+    e = _relative_error(got, target, (sigma / g.hy, sigma / g.hx))
     del got, target
-    e = np.where(live, (gg - gt) / np.where(live, gt, 1.0), 0.0)
-    del gt, gg  # the panel's lattice: a few arrays of it are a worker's peak
-    if live.any():
-        e[live] -= e[live].mean()
     phi = neumann_potential(e, g.hx, g.hy)
     # the gradient on the cells' faces, 0 on the walls' (nothing flows across them): a
     # lattice cell is a few spacings, and a gradient at the border cells' centres, taken

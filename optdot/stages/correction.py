@@ -70,7 +70,7 @@ def wide_part(
     sigma = wide_sigma(job, formulation)
     if sigma is None:
         return None
-    return deposit_part(xy, area, Lattice.over(job.box, WIDE_STEP * sigma, WIDE_CELLS))
+    return deposit_part(xy, area, _wide_lattice(job, sigma))
 
 
 def wide_solve(
@@ -82,9 +82,13 @@ def wide_solve(
     sigma = wide_sigma(job, formulation)
     if sigma is None:
         return None
-    lattice = Lattice.over(job.box, WIDE_STEP * sigma, WIDE_CELLS)
     cap = MAX_SHIFT * job_spacing(job)
-    return coarse_field(list(parts), lattice, job.density, sigma, cap, job.domain)
+    return coarse_field(list(parts), _wide_lattice(job, sigma), job.density, sigma, cap, job.domain)
+
+
+def _wide_lattice(job: Job, sigma: float) -> Lattice:
+    """The wide pass's lattice over the job's box for a blur of ``sigma`` mm."""
+    return Lattice.over(job.box, WIDE_STEP * sigma, WIDE_CELLS)
 
 
 def correction_region(

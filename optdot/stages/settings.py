@@ -90,14 +90,21 @@ def job_spacing(job: Job) -> float:
 def thrown_areas(job: Job, xy0: np.ndarray) -> np.ndarray:
     """``[n]`` areas (mm²) of the dots thrown at ``xy0`` (``[n, 2]`` mm): their rule
     sizes, from their start cells."""
-    return areas(job, job.density.at(xy0), rule_diameters(job, xy0))[0]
+    return _dot_areas(job, rule_diameters(job, xy0), len(xy0))
+
+
+def _dot_areas(job: Job, diameters: np.ndarray | None, n: int) -> np.ndarray:
+    """``[n]`` areas (mm²) of ``n`` dots of ``diameters`` (``[n]`` mm, or None: the
+    job's)."""
+    d = np.broadcast_to(job.diameter if diameters is None else diameters, (n,))
+    return np.pi * 0.25 * d**2
 
 
 def areas(job: Job, rho: np.ndarray, diameters: np.ndarray | None) -> tuple[np.ndarray, float]:
     """``([n] dot areas mm², median hexagonal spacing mm)`` of dots at fills ``rho``
     (``[n]``) and of ``diameters`` (``[n]`` mm, or None: the job's)."""
     d = np.broadcast_to(job.diameter if diameters is None else diameters, (len(rho),))
-    area = np.pi * 0.25 * d**2
+    area = _dot_areas(job, diameters, len(rho))
     if not len(rho):  # no dots (a tile of an empty region): the map's spacing
         return area, job_spacing(job)
     return area, float(np.median(2.0 * hex_radius(rho, 0.5 * d)))
