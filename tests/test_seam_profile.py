@@ -55,13 +55,14 @@ def test_seams_carry_the_interiors_coverage(led):
     got = _profile(job, plan, _tiled(job, plan))
     assert abs(got["seam_mean"]) < 5e-4, got
     # the throws moved along the panel-wide field before relaxing: the seams, where the
-    # windows of two tiles meet, end smoother than the interior (0.021 % against 0.032 %;
+    # windows of two tiles meet, end smoother than the interior (0.011 % against 0.014 %;
     # without the field 0.074 % against 0.079 %)
     assert got["seam_rms"] < 0.8 * got["inner_rms"], got
-    # the wide pass solved over the panel from every tile's trial correction: 0.029 %
-    # overall, 0.032 % inside (without it 0.065 % and 0.071 %)
-    assert got["inner_rms"] < 4.5e-4, got
-    assert got["rms"] < 4.5e-4, got
+    # the wide pass solved over the panel from every tile's first pass, moving coverage
+    # over the live cells: 0.014 % overall and inside (relative error moved: 0.029 % and
+    # 0.032 %; no wide pass: 0.065 % and 0.071 %)
+    assert got["inner_rms"] < 2.5e-4, got
+    assert got["rms"] < 2.5e-4, got
 
 
 def _own_window_only(job_, plan_, dots, *around):
@@ -97,5 +98,7 @@ def test_the_wide_pass_removes_what_the_tiles_first_pass_leaves_on_seams(led, mo
     job, plan = led
     monkeypatch.setattr(tiling_run, "correct_tile", _own_window_only)
     got = _profile(job, plan, _tiled(job, plan))
-    assert got["seam_rms"] < 1.2 * got["inner_rms"], got
-    assert got["rms"] < 4.5e-4, got
+    # seams 0.021 % against 0.016 % inside, where the first pass alone leaves 0.19 %
+    # against 0.097 % (the test below)
+    assert got["seam_rms"] < 1.5 * got["inner_rms"], got
+    assert got["rms"] < 2.5e-4, got

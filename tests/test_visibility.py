@@ -187,19 +187,24 @@ def test_a_seam_of_missing_dots_is_seen_at_half_a_metre_not_from_a_tv_sofa(led):
 
 
 def test_the_clean_led_sample_reports_its_own_largest_jnd(led, tmp_path):
-    """The report states the clean pattern's largest |JND|, its first blob, and it is
-    under 1: nothing a viewer sees. With two fine correction passes (no wide one) the LED
-    edge, where the map is at its lowest (0.03), read 2.2 JND."""
+    """The report states the clean pattern's largest |JND|, well under 1, and lists a
+    blob only from :data:`BLOB_JND` on. The LED edge, where the map is at its lowest
+    (0.03) and steep, reads 0.48 with the wide pass moving coverage over the map's fill;
+    0.96 when it moved relative error, 2.2 with two fine passes and no wide one."""
     from optdot.pipeline import qa
+    from optdot.quality.visibility import BLOB_JND
 
     job, pattern = led
     vis = qa(pattern, job).metrics["visibility"]
     assert vis["view"] == "notebook" and vis["psf_sigma_mm"] == 1.0
-    assert 0.1 < vis["max_jnd"] < 1.0
-    top = vis["blobs"][0]
-    assert abs(top["jnd"]) == pytest.approx(vis["max_jnd"])
-    assert top["jnd"] == pytest.approx(vis["max_jnd_signed"])
-    assert top["kind"] == ("bright" if vis["max_jnd_signed"] > 0 else "dark")
+    assert 0.1 < vis["max_jnd"] < 0.7
+    listed = vis["blobs"]
+    assert all(abs(b["jnd"]) >= BLOB_JND for b in listed), listed
+    assert bool(listed) == (vis["max_jnd"] >= BLOB_JND), listed
+    for top in listed[:1]:
+        assert abs(top["jnd"]) == pytest.approx(vis["max_jnd"])
+        assert top["jnd"] == pytest.approx(vis["max_jnd_signed"])
+        assert top["kind"] == ("bright" if vis["max_jnd_signed"] > 0 else "dark")
 
 
 def test_the_corner_lit_sample_by_its_empty_corner_is_not_seen():
@@ -212,6 +217,18 @@ def test_the_corner_lit_sample_by_its_empty_corner_is_not_seen():
     from optdot.pipeline import generate, qa
 
     job = load_job(SAMPLES / "tsuno" / "job.toml")
+    vis = qa(generate(job), job).metrics["visibility"]
+    assert vis["max_jnd"] < 0.7, vis["blobs"][:3]
+
+
+def test_the_outline_sample_is_not_seen_at_its_notch():
+    """The outline sample (a notch, a hole, curved edges) in one process: its strongest
+    blob under 0.7 JND (0.41). With the wide pass's flow free to cross the notch, which
+    the dots cannot, its convex corner at (23.8, 6.8) mm read -1.41 JND, 0.23 % short."""
+    from optdot.config.schema import load_job
+    from optdot.pipeline import generate, qa
+
+    job = load_job(SAMPLES / "outline" / "job.toml")
     vis = qa(generate(job), job).metrics["visibility"]
     assert vis["max_jnd"] < 0.7, vis["blobs"][:3]
 

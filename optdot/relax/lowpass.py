@@ -18,6 +18,32 @@ map is not zero. The continuity equation, linearised, says moving every dot by `
 the sparse ones. ``φ`` is solved by a cosine transform (Neumann walls: nothing flows
 across the panel's box) and ``u`` interpolated at the dots. The dots and their
 containers move together; the local relaxation that follows tidies the short range.
+
+Blurs mirror the grid at its border (:data:`BLUR_MODE`), the image the Neumann walls
+imply: an error beside a wall is blurred over the panel's side alone, and the step
+removes all of it. Blurred against zeros past the wall (and divided by the map blurred
+alike, half the map's there) an excess in the first row along a wall is spread over a
+kernel half outside, and a step removes ln 2 = 69 % of it.
+
+The panel's pass (:func:`coarse_field`) goes further, because it is the last word on
+what the eye sees (session 18, BENCHMARKS.md):
+
+- It moves *coverage*, not relative error: the flux ``F = ∇ψ`` with ``∇²ψ`` the
+  blurred coverage error (fill, not relative), each dot moved by ``F / c`` (``c`` the
+  map's blurred fill). Moving dots by ``∇φ`` with ``∇²φ`` the relative error changes
+  the coverage by ``-c e - ∇c·∇φ``: where the map is steep (an LED edge: fill 0.03 to
+  0.17 within 1.25 mm of the wall) the second term is as large as the first and the
+  step misses. The led sample's strongest blob 0.96 -> 0.48 JND, p99 0.49 -> 0.24.
+- Its error is the cells' excess each divided by the share of the blur that falls on
+  live cells around it (the lit cells inside the outline) before it is blurred: every
+  cell's excess is then spread over live cells whole, as the mirror does at the box,
+  at a hole's or a zero region's border too.
+- Its potential lives on the live cells: nothing flows across a face to a cell with no
+  map (a hole, a notch, a zero region), solved by conjugate gradients preconditioned by
+  the box's cosine transform (:func:`live_potential`); the box's transform alone, when
+  every cell is live. A flow through a notch the dots cannot follow left the outline
+  sample 0.23 % short at the notch's convex corner (-1.41 JND); now +0.41 JND there
+  and nowhere over 0.5.
 """
 
 from __future__ import annotations
@@ -28,6 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.fft import dctn, idctn, next_fast_len
 from scipy.ndimage import gaussian_filter, map_coordinates
+from scipy.sparse.linalg import LinearOperator, cg
 
 from ..geometry.density import DensityMap
 from ..geometry.domain import Domain
@@ -36,6 +63,16 @@ from ..geometry.domain import Domain
 MAX_CELLS = 1 << 25
 #: Largest displacement, in dot spacings.
 MAX_SHIFT = 0.1
+#: How a blur extends the grid past its border: mirrored about it, the image the Neumann
+#: walls imply (module docstring). A tile's region border that is not a wall lies 4
+#: sigmas or more from the windows it is solved for, past the Gaussian's reach.
+BLUR_MODE = "reflect"
+#: Smallest share of a cell's blur on live cells its excess is divided by (a convex
+#: corner's is a quarter): an isolated live cell's error is not amplified past 4 times.
+MIN_SHARE = 0.25
+#: Conjugate-gradient iterations of :func:`live_potential` at most, and its tolerance.
+CG_ITER = 60
+CG_RTOL = 1e-6
 
 
 def grid_step(density: DensityMap, spacing: float) -> float:
@@ -110,8 +147,8 @@ def _relative_error(got: np.ndarray, target: np.ndarray, s: tuple[float, float])
     coverage ``got`` and the map's ``target`` on one grid, fill per cell. ``got`` and
     ``target`` are not kept (on a panel's lattice a few such arrays are a worker's
     peak)."""
-    gt = gaussian_filter(target, s, mode="constant")
-    gg = gaussian_filter(got, s, mode="constant")
+    gt = gaussian_filter(target, s, mode=BLUR_MODE)
+    gg = gaussian_filter(got, s, mode=BLUR_MODE)
     live = (target > 0) & (gt > 0)
     del got, target
     e = np.where(live, (gg - gt) / np.where(live, gt, 1.0), 0.0)
@@ -133,6 +170,50 @@ def neumann_potential(e: np.ndarray, hx: float, hy: float) -> np.ndarray:
     c /= lam
     c[0, 0] = 0.0
     return idctn(c, type=2, norm="ortho")
+
+
+def live_potential(a: np.ndarray, live: np.ndarray, hx: float, hy: float) -> np.ndarray:
+    """``ψ`` with ``∇²ψ = a`` on the ``live`` cells (``[ny, nx]`` bool), no flow across a
+    face to a dead cell or across the grid's border, ``[ny, nx]`` (0 on dead cells).
+
+    ``a`` must have zero mean over the live cells. The box's cosine transform
+    (:func:`neumann_potential`) when every cell is live; else conjugate gradients on the
+    live cells' 5-point Laplacian, preconditioned by that transform (exact but for the
+    faces to dead cells, so a few tens of iterations; at most :data:`CG_ITER`)."""
+    if live.all():
+        return neumann_potential(a, hx, hy)
+    ny, nx = a.shape
+    wx = (live[:, 1:] & live[:, :-1]) / (hx * hx)
+    wy = (live[1:, :] & live[:-1, :]) / (hy * hy)
+    dead = ~live
+
+    def minus_laplacian(v: np.ndarray) -> np.ndarray:
+        p = v.reshape(ny, nx)
+        out = np.zeros_like(p)
+        d = (p[:, 1:] - p[:, :-1]) * wx
+        out[:, :-1] -= d
+        out[:, 1:] += d
+        d = (p[1:, :] - p[:-1, :]) * wy
+        out[:-1, :] -= d
+        out[1:, :] += d
+        out[dead] = p[dead]  # dead cells decoupled: identity, right-hand side 0
+        return out.ravel()
+
+    def box_inverse(v: np.ndarray) -> np.ndarray:
+        r = v.reshape(ny, nx).copy()
+        r[dead] = 0.0
+        r[live] -= r[live].mean()
+        z = -neumann_potential(r, hx, hy)
+        z[dead] = 0.0
+        return z.ravel()
+
+    b = np.where(live, -a, 0.0)
+    n = nx * ny
+    psi, _ = cg(
+        LinearOperator((n, n), matvec=minus_laplacian, dtype=float), b.ravel(),
+        rtol=CG_RTOL, maxiter=CG_ITER, M=LinearOperator((n, n), matvec=box_inverse, dtype=float),
+    )  # fmt: skip
+    return np.where(live, psi.reshape(ny, nx), 0.0)
 
 
 def displacement(
@@ -213,8 +294,8 @@ class RegionError:
             target = target * domain.cell_fractions(ox, oy, h, h, nx, ny)
         got = _deposit(xy, area, ox, oy, (h, h), (ny, nx)) / (h * h)
         s = sigma / h
-        gt = gaussian_filter(target, s, mode="constant")
-        gg = gaussian_filter(got, s, mode="constant")
+        gt = gaussian_filter(target, s, mode=BLUR_MODE)
+        gg = gaussian_filter(got, s, mode=BLUR_MODE)
         self.live = (target > 0) & (gt > 0)
         self.e = np.where(self.live, (gg - gt) / np.where(self.live, gt, 1.0), 0.0)
 
@@ -354,7 +435,8 @@ def coarse_field(
     domain: Domain | None = None,
 ) -> CoarseField:  # fmt: skip
     """The panel's coverage error blurred by ``sigma`` mm from the deposits ``parts`` (added
-    in the order given) of all its dots, and the Neumann field that removes it.
+    in the order given) of all its dots, and the displacement that removes it: the flow
+    of coverage over the live cells divided by the map's fill (module docstring).
 
     Like :func:`coverage_error` and :func:`displacement` over the panel's box, but from
     parts each deposited by one tile, so the panel's dots never meet in one process."""
@@ -370,14 +452,31 @@ def coarse_field(
     target = density.deposited(g.x0, g.y0, g.hx, g.hy, g.nx, g.ny)
     if domain is not None and not domain.rectangle:  # the outline deposited alike
         target = target * domain.deposited_fractions(g.x0, g.y0, g.hx, g.hy, g.nx, g.ny, density)
-    e = _relative_error(got, target, (sigma / g.hy, sigma / g.hx))
-    del got, target
-    phi = neumann_potential(e, g.hx, g.hy)
-    # the gradient on the cells' faces, 0 on the walls' (nothing flows across them): a
-    # lattice cell is a few spacings, and a gradient at the border cells' centres, taken
-    # as it is out to the wall, slid the whole first strip of dots into the wall
+    s = (sigma / g.hy, sigma / g.hx)
+    live = target > 0
+    # each cell's excess divided by the share of its blur that lands on live cells, then
+    # blurred (module docstring): spread whole over the live cells around it
+    share = gaussian_filter(live.astype(np.float64), s, mode=BLUR_MODE)
+    a = np.where(live, (got - target) / np.maximum(share, MIN_SHARE), 0.0)
+    del got, share
+    a = np.where(live, gaussian_filter(a, s, mode=BLUR_MODE), 0.0)
+    if live.any():
+        a[live] -= a[live].mean()
+    cover = gaussian_filter(target, s, mode=BLUR_MODE)  # the map's fill at the blur
+    del target
+    e = np.where(live, a / np.maximum(cover, 1e-300), 0.0).astype(np.float32)
+    psi = live_potential(a, live, g.hx, g.hy)
+    del a
+    # the flux on the cells' faces over the map's fill there, 0 on the walls' and on
+    # faces to dead cells (nothing flows across them): a lattice cell is a few spacings,
+    # and a gradient at the border cells' centres, taken as it is out to the wall, slid
+    # the whole first strip of dots into the wall
+    floor = 0.05 * float(cover[live].mean()) if live.any() else 1.0
     ux = np.zeros((g.ny, g.nx + 1), np.float32)
     uy = np.zeros((g.ny + 1, g.nx), np.float32)
-    ux[:, 1:-1] = np.diff(phi, axis=1) / g.hx
-    uy[1:-1, :] = np.diff(phi, axis=0) / g.hy
+    cx = np.maximum(0.5 * (cover[:, 1:] + cover[:, :-1]), floor)
+    ux[:, 1:-1] = np.diff(psi, axis=1) / g.hx / cx * (live[:, 1:] & live[:, :-1])
+    del cx
+    cy = np.maximum(0.5 * (cover[1:, :] + cover[:-1, :]), floor)
+    uy[1:-1, :] = np.diff(psi, axis=0) / g.hy / cy * (live[1:, :] & live[:-1, :])
     return CoarseField(g, e.astype(np.float32), ux, uy, cap)
