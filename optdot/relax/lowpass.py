@@ -70,6 +70,10 @@ BLUR_MODE = "reflect"
 #: Smallest share of a cell's blur on live cells its excess is divided by (a convex
 #: corner's is a quarter): an isolated live cell's error is not amplified past 4 times.
 MIN_SHARE = 0.25
+#: The map's fill a face's flux is divided by, at least, as a share of its mean over the
+#: live cells (a face in a zero region's penumbra, where few dots stand; the cap bounds
+#: what they are moved by).
+MIN_FILL = 0.05
 #: Conjugate-gradient iterations of :func:`live_potential` at most, and its tolerance.
 CG_ITER = 60
 CG_RTOL = 1e-6
@@ -471,7 +475,7 @@ def coarse_field(
     # faces to dead cells (nothing flows across them): a lattice cell is a few spacings,
     # and a gradient at the border cells' centres, taken as it is out to the wall, slid
     # the whole first strip of dots into the wall
-    floor = 0.05 * float(cover[live].mean()) if live.any() else 1.0
+    floor = MIN_FILL * float(cover[live].mean()) if live.any() else 1.0
     ux = np.zeros((g.ny, g.nx + 1), np.float32)
     uy = np.zeros((g.ny + 1, g.nx), np.float32)
     cx = np.maximum(0.5 * (cover[:, 1:] + cover[:, :-1]), floor)
