@@ -53,7 +53,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.fft import dctn, idctn, next_fast_len
-from scipy.ndimage import gaussian_filter, map_coordinates
+from scipy.ndimage import gaussian_filter, label, map_coordinates
 from scipy.sparse.linalg import LinearOperator, cg
 
 from ..geometry.density import DensityMap
@@ -180,7 +180,8 @@ def live_potential(a: np.ndarray, live: np.ndarray, hx: float, hy: float) -> np.
     """``ψ`` with ``∇²ψ = a`` on the ``live`` cells (``[ny, nx]`` bool), no flow across a
     face to a dead cell or across the grid's border, ``[ny, nx]`` (0 on dead cells).
 
-    ``a`` must have zero mean over the live cells. The box's cosine transform
+    ``a`` is taken less its mean over each connected piece of live cells (nothing flows
+    between them). The box's cosine transform
     (:func:`neumann_potential`) when every cell is live; else conjugate gradients on the
     live cells' 5-point Laplacian, preconditioned by that transform (exact but for the
     faces to dead cells, so a few tens of iterations; at most :data:`CG_ITER`)."""
@@ -212,6 +213,12 @@ def live_potential(a: np.ndarray, live: np.ndarray, hx: float, hy: float) -> np.
         return z.ravel()
 
     b = np.where(live, -a, 0.0)
+    # each piece of live cells cut off from the others (an island in a zero region) keeps
+    # its own coverage: its right-hand side has zero mean of its own
+    pieces, count = label(live)
+    if count > 1:
+        means = np.bincount(pieces.ravel(), b.ravel()) / np.bincount(pieces.ravel())
+        b = np.where(live, b - means[pieces], 0.0)
     n = nx * ny
     psi, _ = cg(
         LinearOperator((n, n), matvec=minus_laplacian, dtype=float), b.ravel(),
