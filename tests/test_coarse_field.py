@@ -49,6 +49,19 @@ def test_parts_deposited_tile_by_tile_add_up_to_one_deposit(seed):
     np.testing.assert_allclose(summed, whole, rtol=0, atol=1e-12)
 
 
+def test_a_dot_past_a_wall_keeps_its_weight_in_the_panels_lattice():
+    """A dot a few micrometres past the box (the relaxation's soft walls let one out
+    until the guarantee pass brings it back) is deposited whole at the box's edge."""
+    box = (0.0, 0.0, 6.0, 4.0)
+    lattice = Lattice.over(box, 0.25, 1 << 16)
+    xy = np.array([[3.0, -0.005], [-0.004, 2.0], [6.003, 4.002], [6.0, 4.0], [2.0, 2.0]])
+    w = np.array([1.0, 2.0, 3.0, 4.0, 5.0])
+    part = deposit_part(xy, w, lattice)
+    assert part.w.sum() == pytest.approx(w.sum(), rel=1e-12)
+    one = deposit_part(xy[:1], w[:1], lattice)  # all of it on the bottom row
+    assert one.j0 == 0 and one.w[0].sum() == pytest.approx(1.0, rel=1e-12)
+
+
 def _planted(job, amplitude: float):
     """The led job's dots on a jittered square lattice whose density varies by
     ``amplitude`` along x at a 10 mm wavelength, and the field :func:`coarse_field` finds."""

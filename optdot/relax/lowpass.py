@@ -381,13 +381,25 @@ class LatticePart:
 
 
 def deposit_part(xy: np.ndarray, weight: np.ndarray, lattice: Lattice) -> LatticePart:
-    """Cloud-in-cell deposit of ``weight`` (``[n]``) at ``xy`` (``[n, 2]`` mm, inside the
-    lattice's box) on the cells around the dots' bounds: the parts of disjoint sets of
-    dots added in a fixed order equal (to rounding) one deposit of all of them, and each
-    part is only as large as its dots' box."""
+    """Cloud-in-cell deposit of ``weight`` (``[n]``) at ``xy`` (``[n, 2]`` mm) on the
+    cells around the dots' bounds: the parts of disjoint sets of dots added in a fixed
+    order equal (to rounding) one deposit of all of them, and each part is only as large
+    as its dots' box.
+
+    The lattice is the panel's: a dot past its box (the relaxation's soft walls let a
+    dot by a wall a few micrometres out, until the guarantee pass brings it back) is
+    deposited at the box's edge with all its weight. Left out, the notebook panel's one
+    dot 5 µm past its LED edge read as a dot missing to the wide pass, which pulled its
+    neighbours in; the guarantee pass then put it back 0.2 mm inside, one dot too many
+    there: 1.90 JND, the panel's strongest blob."""
     g = lattice
     if not len(xy):
         return LatticePart(0, 0, np.zeros((0, 0)))
+    x1, y1 = g.x0 + g.nx * g.hx, g.y0 + g.ny * g.hy
+    edge = 1e-9 * max(g.hx, g.hy)  # inside the last cell, not on its far face
+    xy = np.column_stack([
+        np.clip(xy[:, 0], g.x0, x1 - edge), np.clip(xy[:, 1], g.y0, y1 - edge),
+    ])  # fmt: skip
     lo, hi = xy.min(axis=0), xy.max(axis=0)
     # one cell past the cells each dot's cloud reaches: no weight is clipped at a part's
     # side unless that side is the lattice's own (where a full deposit clips it too)
