@@ -211,3 +211,30 @@ def test_qa_reports_the_grain_on_the_densest_patch(tmp_path):
     assert 0.8 < p < 1.25, p
     write_html(ours, tmp_path / "r.html")
     assert "Grain: structure factor S = " in (tmp_path / "r.html").read_text()
+
+
+def test_a_margins_share_made_up_beyond_it_reads_flat():
+    """A job's edge margin keeps every disc off its first 0.02 mm; a pattern that makes
+    the margin's coverage up in the 0.1 mm beyond it (what the correction does: the count
+    is the map's) reads flat, the first band spanning the margin and one band. In plain
+    bands from the wall it reads -4 % and +4 %: the margin, then the make-up."""
+    from optdot.geometry.domain import Domain
+
+    side, m, b, fill, s = 4.0, 0.02, 0.1, 0.2, 0.005
+    density = DensityMap(np.full((4, 4), fill), side, side)
+    g = np.arange(m + s / 2, side - m, s)
+    xy = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)
+    d = np.minimum(np.minimum(xy[:, 0], side - xy[:, 0]), np.minimum(xy[:, 1], side - xy[:, 1]))
+
+    def inside(t: float) -> float:  # area within t of the square's edges
+        return side**2 - (side - 2 * t) ** 2
+
+    area = np.full(len(xy), fill * s * s)
+    strip = d < m + b
+    area[strip] *= inside(m + b) / (inside(m + b) - inside(m))  # the margin's share
+    diameter = np.sqrt(4 * area / math.pi)
+    margined = wall_profile(xy, diameter, density, Domain.rect(0, 0, side, side, m), reach=1.0)
+    np.testing.assert_allclose(margined.edges[:3], [0.0, m + b, m + 2 * b])
+    assert np.nanmax(np.abs(margined.relative)) < 0.005, margined.relative
+    plain = wall_profile(xy, diameter, density, Domain.rect(0, 0, side, side), reach=1.0)
+    assert plain.relative[0] < -0.03 and plain.relative[1] > 0.03, plain.relative

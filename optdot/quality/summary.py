@@ -142,7 +142,8 @@ def _walls(prof: WallProfile, nominal: float) -> dict[str, Any]:
     dots = prof.target * prof.area / disc_area(nominal)
     fewest = float(np.min(dots[prof.area > 0])) if (prof.area > 0).any() else 0.0
     return {
-        "band_mm": float(prof.edges[1] - prof.edges[0]),
+        "band_mm": float(prof.edges[-1] - prof.edges[-2]),
+        "first_band_mm": float(prof.edges[1]),
         "reach_mm": float(prof.edges[-1]),
         "relative": [None if not np.isfinite(v) else float(v) for v in rel],
         "worst_relative": worst,

@@ -14,6 +14,14 @@ cut by lines parallel to the wall at the dot's distance, read from the block's d
 raster; walls taken straight at the dot's scale). Dots come in any order and any number
 of calls (:meth:`WallProfiler.add`), so a dataset is measured part by part.
 
+A job's ``edge_margin`` keeps every disc off the first ``edge_margin`` mm along the
+domain's edges, by request: that strip carries no coverage, and the correction makes
+its share up in the dots just beyond it (the count is the map's, and a viewer sees the
+sum). So the first band spans the margin and one band beyond it, and the bands from
+there on are ``band`` wide: measured from the wall in plain bands, the outline sample
+(margin 0.02 mm) read −10.5 % in its first band and +7.9 % in the next, the two together
+−1.3 %; measured from the margin's inner side, +17.4 % (the make-up alone).
+
 All lengths in mm.
 """
 
@@ -80,7 +88,8 @@ class WallProfiler:
     Args:
         density: the map (its box and zero cells are walls).
         domain: the panel (an outline's edges are walls); None or a rectangle: the box.
-        band: band width, mm. reach: how far from the walls, mm.
+        band: band width, mm (the first band: the domain's edge margin and one band).
+        reach: how far past the margin, mm.
         px: raster pixel, mm (default ``band / 5``).
     """
 
@@ -94,7 +103,8 @@ class WallProfiler:
     ) -> None:
         self.density = density
         self.outline = None if domain is None or domain.rectangle else domain
-        self.edges = np.arange(0.0, reach + 0.5 * band, band)
+        margin = 0.0 if domain is None else float(domain.edge_margin)
+        self.edges = np.concatenate([[0.0], margin + np.arange(band, reach + 0.5 * band, band)])
         self.reach = float(self.edges[-1])
         self.px = px or band / 5.0
         side = min(BLOCK_MM, max(density.width, density.height))
