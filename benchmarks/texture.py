@@ -13,6 +13,9 @@ nearest-neighbour distance over a, pairs closer than 60 µm and than 46 µm, the
 0.1 mm band within 2 mm of any wall (coverage / map - 1), seconds. Statistics use the
 central 80 % of the box (walls: the whole panel).
 
+``--time-rounds N`` times the default against ``optdot 0.3`` instead (the issue's time
+target), alternated in one warm process.
+
 Rows: ``optdot`` (the default), ``optdot 0.3`` (the default before issue 24: no phantoms,
 no long-wavelength correction), ``paper``, ``md`` (the §2.2 baseline), and on the uniform
 map the peers: ``sobol`` (the initial throw, unrelaxed), ``poisson``, ``scipy
@@ -125,6 +128,24 @@ def measure(xy, diameter, job, uniform: bool, whole: bool) -> dict:
     }
 
 
+def time_against(job, old, rounds: int, name: str) -> None:
+    """The issue's time target: ``generate()`` for the default and for ``old``, each
+    warmed once, then alternated ``rounds`` times; medians and their ratio."""
+    generate(job)
+    generate(job, formulation=old)
+    then, now = [], []
+    for _ in range(rounds):
+        t = time.perf_counter()
+        generate(job, formulation=old)
+        then.append(time.perf_counter() - t)
+        t = time.perf_counter()
+        generate(job)
+        now.append(time.perf_counter() - t)
+    a, b = float(np.median(then)), float(np.median(now))
+    print(f"# {machine()}")
+    print(f"{name}: optdot 0.3 {a:.3f} s, optdot {b:.3f} s, ratio {b / a:.2f} ({rounds} rounds)")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     maps = ["uniform", "led", "tsuno", "chokka", "walls"]
@@ -135,6 +156,11 @@ def main() -> None:
         help="a peer's points from another environment: FILE.npy of [n, 2] in the unit "
         "square (scaled to the map's box), measured as row NAME (uniform map only)",
     )  # fmt: skip
+    ap.add_argument(
+        "--time-rounds", type=int, default=0, metavar="N",
+        help="instead: time generate() for the default and for 'optdot 0.3', alternated N "
+        "times in one warm process, and print the medians and their ratio",
+    )  # fmt: skip
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp())
     path = {
@@ -143,6 +169,10 @@ def main() -> None:
     }.get(args.map, lambda: ROOT / "samples" / args.map / "job.toml")()
     job = load_job(path)
     uniform = args.map == "uniform"
+    old = dataclasses.replace(PRESETS["optdot"], phantoms=False, lowpass=0, lowpass_core_iter=0)
+    if args.time_rounds:
+        time_against(job, old, args.time_rounds, args.map)
+        return
     print(f"# {machine()}")
     print(f"# map {args.map}: {path}")
     head = ["pattern", "dots", "coverage RMS 0.5 mm", "S 0.3–1", "S 1–3", "S 3–10 a"]
@@ -171,7 +201,6 @@ def main() -> None:
         p = generate(j, formulation=form)
         row(name, p.xy, p.diameter, time.perf_counter() - t)
 
-    old = dataclasses.replace(PRESETS["optdot"], phantoms=False, lowpass=0, lowpass_core_iter=0)
     run("optdot")
     run("optdot 0.3", old)
     run("paper", PRESETS["paper"])
