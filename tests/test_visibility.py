@@ -324,6 +324,11 @@ def test_the_strongest_dark_blob_is_the_planted_dip(led):
     top = dark[0]
     assert math.hypot(top["x_mm"] - CENTRE[0], top["y_mm"] - CENTRE[1]) < 3
     assert top["jnd"] <= -1.5
+    # the other half: a 0.2 % dip reads under 1 JND where it is
+    faint = 0.2 * dip
+    _, img, x, y = _jnd(job, pattern.xy, area * (1 - faint), view)
+    near = np.hypot(*np.meshgrid(x - CENTRE[0], y - CENTRE[1])) < 5
+    assert 0.1 < np.abs(img[near]).max() < 1.0
 
 
 def _zero_strip_delivered(view) -> tuple[DensityMap, LuminanceGrid]:
