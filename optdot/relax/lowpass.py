@@ -502,4 +502,4 @@ def coarse_field(
     del cx
     cy = np.maximum(0.5 * (cover[1:, :] + cover[:-1, :]), floor)
     uy[1:-1, :] = np.diff(psi, axis=0) / g.hy / cy * (live[1:, :] & live[:-1, :])
-    return CoarseField(g, e.astype(np.float32), ux, uy, cap)
+    return CoarseField(g, e, ux, uy, cap)
