@@ -283,7 +283,9 @@ def qa(
     else:
         outline = None if job.domain.rectangle else job.domain
         gap = job.optimize.gap  # dots of varying size collide below it
-        result = run_qa(dots, job.density, params, collision, gap, job.box, outline)
+        result = run_qa(
+            dots, job.density, params, collision, gap, job.box, outline, job.viewing_area
+        )
     source = dots.label or None
     seed = dots.meta.get("seed")
     if seed is None and job is not None and source is None:

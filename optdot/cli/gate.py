@@ -316,9 +316,21 @@ def _print_checks(result, echo=click.echo) -> None:
             f"visibility ({vis['view']}, {vis['distance_mm']:g} mm, "
             f"{vis['luminance_cd_m2']:g} cd/m², PSF sigma {vis['psf_sigma_mm']:g} mm): "
             f"largest |JND| {vis['max_jnd']:.2f} at ({x:.2f}, {y:.2f}) mm, "
-            f"{vis['blobs_over_1_jnd']} blobs over 1 JND"
+            f"{vis['blobs_over_1_jnd']} blobs over 1 JND" + _panel_jnd(vis)
         )
     echo(f"verdict: {result.verdict}")
+
+
+def _panel_jnd(vis: dict) -> str:
+    """`` in the viewing area; the whole panel's largest ... at ...`` when the job names a
+    viewing area, else nothing."""
+    if "panel_max_jnd" not in vis:
+        return ""
+    px, py = vis["panel_max_jnd_at_mm"]
+    return (
+        f" in the viewing area; the whole panel's largest {vis['panel_max_jnd']:.2f} "
+        f"at ({px:.2f}, {py:.2f}) mm"
+    )
 
 
 if __name__ == "__main__":  # pragma: no cover

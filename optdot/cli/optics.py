@@ -35,9 +35,9 @@ RAYS = click.IntRange(1000, 10**10)
     "--border",
     "border_mm",
     type=Finite(0, 1000),
-    default=5.0,
-    show_default=True,
-    help="Left out of the RMS and min/max, mm from the outline.",
+    default=None,
+    help="Left out of the RMS and min/max, mm inside the outline (default 5), or inside "
+    "the job's viewing area ([domain] active_area or bezel; default 0).",
 )
 @click.option(
     "--json",
@@ -101,12 +101,20 @@ def _print_simulation(sim, seconds: float, echo=click.echo) -> None:
         f"9-point uniformity: {s['uniformity_9point']:.3f} ± "
         f"{s['uniformity_9point_sigma']:.3f} (spots of {s['spot_diameter_mm']:.3g} mm)"
     )
+    region = "the viewing area" if "viewing_area_mm" in s else "the panel"
+    less = f" less {s['border_mm']:g} mm" if s["border_mm"] else ""
     echo(
-        f"luminance over the panel less {s['border_mm']:g} mm, bins of "
+        f"luminance over {region}{less}, bins of "
         f"{s['bin_mm'][0]:.3g} x {s['bin_mm'][1]:.3g} mm: RMS {s['luminance_rms']:.2%} "
         f"(noise alone {s['luminance_rms_noise']:.2%}), min {s['luminance_min']:.3f}, "
         f"max {s['luminance_max']:.3f} of the mean"
     )
+    if "outside_max" in s:
+        x, y = s["outside_max_at_mm"]
+        echo(
+            f"outside {region}{less}: brightest bin {s['outside_max']:.3f} of the mean at "
+            f"({x:.2f}, {y:.2f}) mm" + (" (hidden by the bezel)" if "viewing_area_mm" in s else "")
+        )
 
 
 @main.command()

@@ -219,6 +219,10 @@ class Job:
             may not overwrite them.
         light_guide: the slab and LEDs ``simulate`` and ``design`` trace, or None.
         design: how ``design`` makes a map (``[design]``).
+        viewing_area: ``(x0, y0, x1, y1)`` mm, the part of the panel a viewer sees
+            (``[domain] active_area`` or ``bezel``), or None for the whole panel. QA's
+            visibility and ``simulate``'s figures are judged inside it; every geometric
+            check (collisions, protrusion, empty cells, coverage) covers the whole panel.
     """
 
     width: float
@@ -235,6 +239,7 @@ class Job:
     interpolation: str = "nearest"
     light_guide: LightGuide | None = None
     design: DesignParams = field(default_factory=DesignParams)
+    viewing_area: tuple[float, float, float, float] | None = None
 
     def __post_init__(self) -> None:
         where = str(self.source) if self.source else "job"

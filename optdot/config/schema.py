@@ -41,6 +41,8 @@ SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
         "keep_out": (list,),
         "keep_out_layer": (str,),
         "edge_margin": (int, float),
+        "active_area": (list,),
+        "bezel": (int, float, list),
     },
     "density": {
         "grid": (str,),
@@ -174,6 +176,7 @@ def job_from_dict(
                     f"box ({size:.6g} mm); with an outline the density grid covers that box, "
                     "so leave width/height out or check the outline's units (mm)"
                 )
+    area = viewing_area(dom, (x0, y0, x0 + width, y0 + height), where)
     guide = None
     if "light_guide" in sections:
         guide = light_guide_from(sections["light_guide"], (x0, y0, x0 + width, y0 + height), where)
@@ -227,7 +230,58 @@ def job_from_dict(
         interpolation=interpolation,
         light_guide=guide,
         design=design,
+        viewing_area=area,
     )
+
+
+def viewing_area(
+    dom: dict[str, Any], box: tuple[float, float, float, float], where: str
+) -> tuple[float, float, float, float] | None:
+    """The part of the panel a viewer sees, from ``[domain]``: ``active_area = [x0, y0,
+    x1, y1]`` (mm, panel coordinates) or ``bezel`` (mm hidden at every edge, or ``[left,
+    bottom, right, top]``), at most one; None when neither is given (the whole panel)."""
+    if "active_area" in dom and "bezel" in dom:
+        raise JobError(f"{where}: give domain.active_area or domain.bezel, not both")
+    bx0, by0, bx1, by1 = box
+    if "active_area" in dom:
+        v = dom["active_area"]
+        if len(v) != 4 or not all(_number(t) for t in v):
+            raise JobError(f"{where}: domain.active_area = {v!r} must be [x0, y0, x1, y1] in mm")
+        x0, y0, x1, y1 = (float(t) for t in v)
+        if not (x0 < x1 and y0 < y1):
+            raise JobError(
+                f"{where}: domain.active_area = {v!r} must have x0 < x1 and y0 < y1 (mm)"
+            )
+        tol = 1e-9 * max(bx1 - bx0, by1 - by0, 1.0)
+        if x0 < bx0 - tol or y0 < by0 - tol or x1 > bx1 + tol or y1 > by1 + tol:
+            raise JobError(
+                f"{where}: domain.active_area = {v!r} reaches past the panel "
+                f"[{bx0:g}, {by0:g}, {bx1:g}, {by1:g}] mm"
+            )
+        return (max(x0, bx0), max(y0, by0), min(x1, bx1), min(y1, by1))
+    if "bezel" in dom:
+        v = dom["bezel"]
+        sides = [v] * 4 if _number(v) else v
+        if not isinstance(sides, list) or len(sides) != 4 or not all(_number(t) for t in sides):
+            raise JobError(
+                f"{where}: domain.bezel = {v!r} must be mm hidden at every edge, or "
+                "[left, bottom, right, top] in mm"
+            )
+        left, bottom, right, top = (float(t) for t in sides)
+        if min(left, bottom, right, top) < 0:
+            raise JobError(f"{where}: domain.bezel = {v!r} must be >= 0 mm")
+        if left + right >= bx1 - bx0 or bottom + top >= by1 - by0:
+            raise JobError(
+                f"{where}: domain.bezel = {v!r} hides the whole panel "
+                f"({bx1 - bx0:g} x {by1 - by0:g} mm)"
+            )
+        return (bx0 + left, by0 + bottom, bx1 - right, by1 - top)
+    return None
+
+
+def _number(v: Any) -> bool:
+    """A finite int or float, not a bool."""
+    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
 
 
 def _dot_sizes(

@@ -26,6 +26,12 @@ Monte Carlo noise: the rays double from 1/16 of the final count each iteration (
 iterations only need the trend), ``q`` is smoothed with a Gaussian of ``smoothing`` cells
 (weighted by each cell's share inside the panel), and the last iteration runs the full
 count. Cells outside the panel (holes, keep-outs) hold no dots.
+
+With a viewing area (``[domain] active_area`` or ``bezel``) the luminance is judged where
+the viewer sees it: the level ``s`` is the mean over the area's cells, and the figures
+each iteration prints (9-point, RMS) are the area's (:func:`simulate` measures them
+there). The hidden cells follow the same rule, so the map stays smooth across the
+area's edge.
 """
 
 from __future__ import annotations
@@ -114,6 +120,7 @@ def design(
     phi = np.full((ny, nx), level) if start is None else np.array(start, np.float64)
     live = inside > 0.5
     phi[~live] = 0.0
+    seen = live & _in_area(job, nx, ny, dx, dy)
     history: list[dict] = []
     sim = None
     for it in range(n_iter):
@@ -128,7 +135,7 @@ def design(
         if last:
             break
         level = min(hi, level * LEVEL_GROWTH)
-        phi = _step(phi, sim.counts, inside, live, target, p.smoothing, lo, level)
+        phi = _step(phi, sim.counts, inside, live, target, p.smoothing, lo, level, seen)
     assert sim is not None
     return Designed(phi, (dx, dy), history, sim)
 
@@ -163,12 +170,27 @@ def _target(target: np.ndarray | None, ny: int, nx: int) -> np.ndarray:
     return np.maximum(t, 0.0) / max(float(t.mean()), 1e-300)
 
 
-def _step(phi, counts, inside, live, target, smoothing, lo, level) -> np.ndarray:
+def _in_area(job: Job, nx: int, ny: int, dx: float, dy: float) -> np.ndarray:
+    """``[ny, nx]`` bool: design cells whose centres lie in the job's viewing area
+    (every cell without one)."""
+    if job.viewing_area is None:
+        return np.ones((ny, nx), bool)
+    x0, y0 = job.box[:2]
+    ax0, ay0, ax1, ay1 = job.viewing_area
+    xc = x0 + (np.arange(nx) + 0.5) * dx
+    yc = y0 + (np.arange(ny) + 0.5) * dy
+    seen = ((yc >= ay0) & (yc <= ay1))[:, None] & ((xc >= ax0) & (xc <= ax1))[None, :]
+    return seen if seen.any() else np.ones((ny, nx), bool)
+
+
+def _step(phi, counts, inside, live, target, smoothing, lo, level, seen) -> np.ndarray:
     """One damped multiplicative update of the map, scaled so its largest fill is
-    ``level`` (see the module doc)."""
+    ``level``; the luminance's level ``s`` is taken over the ``seen`` cells (the viewing
+    area's; see the module doc)."""
     w = np.where(live, inside, 0.0)
     lum = counts / np.maximum(inside, 1e-9)
-    scale = float((lum * w).sum() / max((target * w).sum(), 1e-300))
+    ws = np.where(seen, w, 0.0)
+    scale = float((lum * ws).sum() / max((target * ws).sum(), 1e-300))
     want = scale * target
     q = np.where(live & (counts > 0), want / np.maximum(lum, 1e-300), MAX_STEP)
     q = np.clip(q, 1.0 / MAX_STEP, MAX_STEP)

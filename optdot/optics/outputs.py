@@ -94,6 +94,15 @@ def luminance_png(path: Path, sim: Simulation, title: str) -> None:
     )
     for sx, sy, _ in sim.spots:
         ax.add_patch(Circle((sx, sy), sim.spot / 2, fill=False, color="k", lw=0.8))
+    m = sim.measured
+    if m.any() and not m.all() and min(m.shape) > 1:  # the bins the figures are taken over
+        ny, nx = sim.measured.shape
+        ax.contour(
+            np.linspace(x0 + 0.5 * sim.bin[0], x1 - 0.5 * sim.bin[0], nx),
+            np.linspace(y0 + 0.5 * sim.bin[1], y1 - 0.5 * sim.bin[1], ny),
+            sim.measured.astype(float), levels=[0.5], colors="k", linewidths=0.9,
+            linestyles="--",
+        )  # fmt: skip
     fig.colorbar(im, ax=ax, label="luminance / mean", shrink=0.8)
     u9, _ = sim.uniformity9()
     rms, noise, _, _ = sim.rms()

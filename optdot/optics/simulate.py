@@ -10,8 +10,11 @@ Monte Carlo noise of each figure:
   or the bottom); binomial noise ``sqrt(p (1 - p) / injected)``.
 - **9-point uniformity**: min/max of the exitance over 9 discs at 1/6, 1/2, 5/6 of each
   side (the catalogue measure of backlights; spot diameter an option).
-- **luminance RMS and min/max** over bins of the panel less a border, and the RMS the
-  Monte Carlo noise alone would give (``sqrt(mean(1 / count))``).
+- **luminance RMS and min/max** over bins of the region a viewer sees (the job's
+  ``viewing_area``, else the panel less a border), and the RMS the Monte Carlo noise
+  alone would give (``sqrt(mean(1 / count))``); the brightest bin outside that region
+  (the LED hot spots a bezel hides) with where it is.
+- With a viewing area, the 9 spots sit at 1/6, 1/2, 5/6 of its sides, not the panel's.
 
 The exitance of the top face is what a diffuser sheet turns into luminance, so the map is
 called luminance (relative: 1 = the mean over the measured region).
@@ -34,6 +37,8 @@ from ..errors import JobError
 from ..pattern import DotSource
 from .trace import FATES, UNCOUPLED, trace
 
+#: Border left out of the figures when the job names no viewing area, mm.
+BORDER_MM = 5.0
 #: Rays per compiled call (outputs 9 bytes per ray).
 BATCH = 1 << 20
 #: Samples of a profile's cumulative distribution over 0..90 degrees.
@@ -64,6 +69,9 @@ class Simulation:
         measured: ``[nby, nbx]`` bool, the bins the RMS and min/max are taken over.
         spots: ``[9, 3]`` spot centre x, y (mm) and extracted rays in it; spot: diameter, mm.
         mode: ``"coverage"`` or ``"dots"``.
+        border: mm left out inside the measured region's edge.
+        area: ``(x0, y0, x1, y1)`` mm, the viewing area the figures are judged in, or None
+            (the panel).
     """
 
     rays: int
@@ -79,6 +87,7 @@ class Simulation:
     border: float
     seed: int
     extra: dict = field(default_factory=dict)
+    area: tuple[float, float, float, float] | None = None
 
     @property
     def efficiency(self) -> float:
@@ -111,6 +120,18 @@ class Simulation:
         noise = math.sqrt(float(np.mean(1.0 / np.maximum(c, 1.0))))
         return float(rel.std()), noise, float(rel.min()), float(rel.max())
 
+    def hidden_peak(self) -> tuple[float, tuple[float, float]] | None:
+        """The brightest bin outside the measured region that holds light (relative to
+        the measured mean) and its centre, mm; None when every lit bin is measured."""
+        lum = self.luminance
+        out = ~self.measured & (self.counts > 0)
+        if not out.any():
+            return None
+        k = int(np.argmax(np.where(out, lum, -np.inf)))
+        iy, ix = divmod(k, lum.shape[1])
+        x0, y0 = self.box[:2]
+        return float(lum[iy, ix]), (x0 + (ix + 0.5) * self.bin[0], y0 + (iy + 0.5) * self.bin[1])
+
     def summary(self) -> dict:
         """Every figure with its Monte Carlo sigma, JSON-ready."""
         eff = self.efficiency
@@ -118,6 +139,12 @@ class Simulation:
         u9, u9s = self.uniformity9()
         rms, noise, lo, hi = self.rms()
         shares = {k: v / inj for k, v in self.fates.items() if k != "not_coupled"}
+        hidden = self.hidden_peak()
+        outside = (
+            {"outside_max": hidden[0], "outside_max_at_mm": [round(v, 4) for v in hidden[1]]}
+            if hidden is not None
+            else {}
+        )
         return {
             "mode": self.mode,
             "rays": self.rays,
@@ -138,6 +165,8 @@ class Simulation:
             "luminance_max": hi,
             "bin_mm": list(self.bin),
             "border_mm": self.border,
+            **({"viewing_area_mm": list(self.area)} if self.area is not None else {}),
+            **outside,
             **self.extra,
         }
 
@@ -162,7 +191,7 @@ def simulate(
     coverage: Coverage | None = None,
     bin_mm: float | None = None,
     spot_mm: float | None = None,
-    border_mm: float = 5.0,
+    border_mm: float | None = None,
     bins: tuple[int, int] | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> Simulation:
@@ -176,7 +205,10 @@ def simulate(
         coverage: the raster of the coverage mode (default: the job's map).
         bin_mm: luminance bin size, mm (default: 1/20 of the shorter side, at most 5).
         spot_mm: 9-point spot diameter, mm (default: 1/6 of the shorter side, at most 10).
-        border_mm: excluded from the RMS and min/max, mm from the panel's outline.
+        border_mm: excluded from the RMS and min/max, mm inside the measured region's edge
+            (the job's viewing area, else the panel's outline; default 0 inside a viewing
+            area, else :data:`BORDER_MM`, or 0 where that leaves no bin). A border given
+            that leaves no bin is an error.
         bins: ``(nbx, nby)`` luminance bins over the box (instead of ``bin_mm``).
         progress: ``progress(done, total)`` after each batch.
     """
@@ -188,6 +220,10 @@ def simulate(
     if seed < 0:
         raise JobError(f"seed = {seed} must be >= 0")
     x0, y0, x1, y1 = box = job.box
+    area = job.viewing_area
+    given = border_mm is not None
+    if border_mm is None:
+        border_mm = 0.0 if area is not None else BORDER_MM
     short = min(x1 - x0, y1 - y0)
     bin_mm = min(5.0, short / 20) if bin_mm is None else float(bin_mm)
     spot_mm = min(10.0, short / 6) if spot_mm is None else float(spot_mm)
@@ -214,9 +250,20 @@ def simulate(
         nby = max(1, int(round((y1 - y0) / bin_mm)))
     else:
         nbx, nby = bins
+    measured = _measured(job, nbx, nby, border_mm)
+    if not measured.any() and not given and border_mm > 0:  # a panel narrower than two
+        border_mm = 0.0  # default borders: its figures over all of it (``border`` says so)
+        measured = _measured(job, nbx, nby, border_mm)
+    if not measured.any():
+        where = "the viewing area" if area is not None else "the panel"
+        raise JobError(
+            f"a border of {border_mm:g} mm leaves no {(x1 - x0) / nbx:.3g} x "
+            f"{(y1 - y0) / nby:.3g} mm bin of {where} to measure: give a smaller --border "
+            "or --bin"
+        )
     counts = np.zeros(nby * nbx, np.int64)
     fates = np.zeros(len(FATES), np.int64)
-    spots = _spot_centres(box)
+    spots = _spot_centres(area if area is not None else box)
     spot_counts = np.zeros(9, np.int64)
     r2 = (0.5 * spot_mm) ** 2
     for first in range(0, rays, BATCH):
@@ -257,12 +304,13 @@ def simulate(
         counts=counts,
         box=box,
         bin=((x1 - x0) / nbx, (y1 - y0) / nby),
-        measured=_measured(job, nbx, nby, border_mm),
+        measured=measured,
         spots=np.column_stack([spots, spot_counts]),
         spot=spot_mm,
         mode="dots" if explicit else "coverage",
         border=border_mm,
         seed=seed,
+        area=area,
     )
 
 
@@ -274,11 +322,15 @@ def _spot_centres(box) -> np.ndarray:
 
 
 def _measured(job: Job, nbx: int, nby: int, border: float) -> np.ndarray:
-    """Bins wholly inside the panel shrunk by ``border`` mm."""
+    """Bins wholly inside the panel (and the job's viewing area) shrunk by ``border``
+    mm."""
     import shapely
 
     x0, y0, x1, y1 = job.box
-    inner = job.domain.geometry.buffer(-border) if border > 0 else job.domain.geometry
+    region = job.domain.geometry
+    if job.viewing_area is not None:
+        region = region.intersection(shapely.box(*job.viewing_area))
+    inner = region.buffer(-border) if border > 0 else region
     xs = np.linspace(x0, x1, nbx + 1)
     ys = np.linspace(y0, y1, nby + 1)
     gx0, gy0 = np.meshgrid(xs[:-1], ys[:-1])

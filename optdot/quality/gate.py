@@ -101,6 +101,7 @@ def run_qa(
     collision_gap: float = 0.0,
     box=None,
     outline: Domain | None | bool = True,
+    area: tuple[float, float, float, float] | None = None,
 ) -> QAResult:
     """Measure ``dots`` (a pattern in memory, or a dataset tile by tile in bounded
     memory, its checksums verified first) and apply the gate.
@@ -112,9 +113,11 @@ def run_qa(
         collision: centre distance below which dots of one size collide, mm.
         collision_gap: edge gap below which dots of varying size collide, mm.
         box, outline: the panel (default: the dots' own; True keeps their outline).
+        area: ``(x0, y0, x1, y1)`` mm, the part of the panel a viewer sees (the job's
+            ``viewing_area``): visibility is judged there; None: the whole panel.
     """
     dots.verify()
-    return judge(source_of(dots, box, outline), density, params, collision, collision_gap)
+    return judge(source_of(dots, box, outline), density, params, collision, collision_gap, area)
 
 
 def judge(
@@ -123,6 +126,7 @@ def judge(
     params: QAParams,
     collision: float,
     collision_gap: float = 0.0,
+    area: tuple[float, float, float, float] | None = None,
 ) -> QAResult:
     """Measure ``src`` (:func:`optdot.quality.measure.measure`) and make the gate lines.
 
@@ -138,7 +142,7 @@ def judge(
     gaps = None
     if u is None:
         gaps = (params.effective_close_gap, collision_gap)
-    got = measure(src, density, params.smoothing, close, collision, gaps, params.viewing)
+    got = measure(src, density, params.smoothing, close, collision, gaps, params.viewing, area)
     m, w = got.metrics, got.where
     if gaps is None:
         collide_text = f"pairs closer than {collision * 1e3:.1f} µm (collisions)"
@@ -202,8 +206,8 @@ def judge(
         limit = params.max_jnd if gated else params.warn_jnd
         checks.append(
             Check(
-                f"largest |JND| at {params.viewing.describe()}"
-                + ("" if gated else " (advisory: a viewer sees it)"),
+                f"largest |JND|{' in the viewing area' if area else ''} at "
+                f"{params.viewing.describe()}" + ("" if gated else " (advisory: a viewer sees it)"),
                 vis["max_jnd"],
                 limit,
                 vis["max_jnd"] <= limit,

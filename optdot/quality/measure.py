@@ -89,6 +89,7 @@ def measure(
     collision: float,
     gaps: tuple[float, float] | None = None,
     view: Viewing | None = None,
+    area: tuple[float, float, float, float] | None = None,
 ) -> Measured:
     """Measure every QA number of ``src``.
 
@@ -102,6 +103,8 @@ def measure(
             and ``close``/``collision`` are not used. Required when sizes vary.
         view: the viewing condition of the visibility check
             (:mod:`optdot.quality.visibility`; needs ``density``); None skips it.
+        area: ``(x0, y0, x1, y1)`` mm, where the visibility is judged (the part of the
+            panel a viewer sees); None: the whole panel.
     """
     if src.uniform_diameter is None and src.n and gaps is None:
         raise ValueError("dots of varying size are judged by edge gaps: pass gaps")
@@ -111,7 +114,7 @@ def measure(
     second = _second_pass(src, density, first, close, collision, gaps)
     got = summarize(src, density, smoothing, close, collision, first, second, gaps)
     if first.luminance is not None and view is not None and density is not None:
-        vis, arrays = visibility(first.luminance, density, src.outline, view)
+        vis, arrays = visibility(first.luminance, density, src.outline, view, area)
         got.metrics["visibility"] = vis
         got.where["visibility"] = [vis["max_jnd_at_mm"]]
         got.arrays["jnd"] = arrays["jnd"]

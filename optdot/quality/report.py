@@ -162,6 +162,15 @@ def _visibility_section(result: QAResult) -> str:
         for b in vis["blobs"][:10]
     )
     x, y = vis["max_jnd_at_mm"]
+    where = ""
+    if "viewing_area_mm" in vis:
+        a = vis["viewing_area_mm"]
+        px, py = vis["panel_max_jnd_at_mm"]
+        where = (
+            f" in the viewing area ({a[0]:g}..{a[2]:g} x {a[1]:g}..{a[3]:g} mm, the dashed "
+            f"frame; the bezel hides the rest); over the whole panel {vis['panel_max_jnd']:.2f}"
+            f" at ({px:.2f}, {py:.2f}) mm"
+        )
     coarse = (
         " The grid was coarsened to bound memory; fine detail is smoothed."
         if vis["grid_coarsened"]
@@ -170,7 +179,7 @@ def _visibility_section(result: QAResult) -> str:
     return f"""<h2>Will a viewer see it?</h2>
 <p>Viewing: <b>{html.escape(str(vis["view"]))}</b>, {vis["distance_mm"]:g} mm,
 {vis["luminance_cd_m2"]:g} cd/m², stack blur (PSF sigma) {vis["psf_sigma_mm"]:g} mm.
-Largest |JND| <b>{vis["max_jnd"]:.2f}</b> at ({x:.2f}, {y:.2f}) mm;
+Largest |JND| <b>{vis["max_jnd"]:.2f}</b> at ({x:.2f}, {y:.2f}) mm{where};
 {vis["blobs_over_1_jnd"]} region(s) over 1 JND.{coarse}</p>
 <p>The map is the luminance the dots give after the stack's blur, relative to the target
 map (the intended gradient is not an error), as contrast against the eye's 2° surround,
@@ -271,6 +280,13 @@ def _jnd_figure(result: QAResult) -> str:
     for ring in result.arrays.get("rings", []):
         loop = np.vstack([ring, ring[:1]])
         ax.plot(loop[:, 0], loop[:, 1], color="k", lw=0.7)
+    area = result.metrics["visibility"].get("viewing_area_mm")
+    if area is not None:
+        ax.plot(
+            [area[0], area[2], area[2], area[0], area[0]],
+            [area[1], area[1], area[3], area[3], area[1]],
+            color="k", lw=1.0, ls="--",
+        )  # fmt: skip
     for b in result.metrics["visibility"]["blobs"][:10]:
         if abs(b["jnd"]) >= 1:
             ax.plot(b["x_mm"], b["y_mm"], marker="o", mfc="none", mec="k", ms=12)

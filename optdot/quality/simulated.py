@@ -28,6 +28,9 @@ FIGURES = (
     "luminance_max",
     "bin_mm",
     "border_mm",
+    "viewing_area_mm",
+    "outside_max",
+    "outside_max_at_mm",
 )
 
 

@@ -184,7 +184,11 @@ class _Spectral:
 
 
 def visibility(
-    grid: LuminanceGrid, density: DensityMap, outline, view: Viewing
+    grid: LuminanceGrid,
+    density: DensityMap,
+    outline,
+    view: Viewing,
+    area: tuple[float, float, float, float] | None = None,
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """The JND map of the pattern deposited in ``grid`` against ``density``.
 
@@ -192,6 +196,12 @@ def visibility(
         grid: every dot's area deposited (:meth:`LuminanceGrid.add`).
         density: the target fill map. outline: the panel's Domain, or None (a rectangle).
         view: the viewing condition.
+        area: ``(x0, y0, x1, y1)`` mm, the part of the panel a viewer sees (a bezel hides
+            the rest), or None for the whole panel. The JND map is made over the whole
+            panel (a hidden hot spot's response reaches into the area through the CSF,
+            which errs on the safe side); the largest JND, its percentiles and the blobs
+            are judged on the cells whose centres lie in the area, and the whole panel's
+            largest is reported beside them (``panel_max_jnd``).
 
     Returns:
         ``(metrics, arrays)``: JSON-ready numbers (``max_jnd``, ``max_jnd_at_mm``,
@@ -251,10 +261,31 @@ def visibility(
     jnd = sp.back(sp.forward(contrast) * barten_csf(u, view.luminance, FIELD_DEG), contrast)
     del u
     jnd[~valid] = 0.0
-    return _numbers(g, view, jnd, contrast, rel, valid)
+    if area is None:
+        return _numbers(g, view, jnd, contrast, rel, valid, jnd)
+    seen = area_cells(g, area)
+    m, arrays = _numbers(g, view, np.where(seen, jnd, 0.0), contrast, rel, valid & seen, jnd)
+    k = int(np.argmax(np.abs(jnd)))
+    iy, ix = divmod(k, g.nx)
+    m["viewing_area_mm"] = [float(v) for v in area]
+    m["panel_max_jnd"] = float(abs(jnd[iy, ix]))
+    m["panel_max_jnd_at_mm"] = [_x(g, ix), _y(g, iy)]
+    return m, arrays
 
 
-def _numbers(g: LuminanceGrid, view: Viewing, jnd, contrast, rel, valid):
+def area_cells(g: LuminanceGrid, area: tuple[float, float, float, float]) -> np.ndarray:
+    """``[ny, nx]`` bool: the grid cells whose centres lie in ``area`` (``(x0, y0, x1,
+    y1)`` mm)."""
+    xc = g.x0 + (np.arange(g.nx) + 0.5) * g.cw
+    yc = g.y0 + (np.arange(g.ny) + 0.5) * g.ch
+    inx = (xc >= area[0]) & (xc <= area[2])
+    iny = (yc >= area[1]) & (yc <= area[3])
+    return iny[:, None] & inx[None, :]
+
+
+def _numbers(g: LuminanceGrid, view: Viewing, jnd, contrast, rel, valid, image):
+    """The figures of ``jnd`` on the ``valid`` cells, and the picture of ``image`` (the
+    whole panel's JND map)."""
     absj = np.abs(jnd)
     k = int(np.argmax(absj))
     iy, ix = divmod(k, g.nx)
@@ -309,7 +340,7 @@ def _numbers(g: LuminanceGrid, view: Viewing, jnd, contrast, rel, valid):
     m["blobs"] = blobs
     m["max_semu"] = max((b["semu"] for b in blobs), default=0.0)
     extent = (g.x0, g.x0 + g.nx * g.cw, g.y0, g.y0 + g.ny * g.ch)
-    return m, {"jnd": (_pool(jnd), extent), "blobs": blobs}
+    return m, {"jnd": (_pool(image), extent), "blobs": blobs}
 
 
 def _x(g: LuminanceGrid, i) -> float:

@@ -82,7 +82,8 @@ def wide_solve(
     sigma = wide_sigma(job, formulation)
     if sigma is None:
         return None
-    cap = MAX_SHIFT * job_spacing(job)
+    form = formulation_for(job) if formulation is None else formulation
+    cap = (form.lowpass_last_cap or MAX_SHIFT) * job_spacing(job)
     return coarse_field(list(parts), _wide_lattice(job, sigma), job.density, sigma, cap, job.domain)
 
 
@@ -212,18 +213,20 @@ def correction_passes(job, form, res, xy0, rho, frozen, diameters, phantom):
     sigmas = form.lowpass_sigmas()
     wide = wide_sigma(job, form) is not None
     for k, sigma in enumerate(sigmas):
-        u = np.zeros_like(xy0)
-        if wide and k == len(sigmas) - 1:
-            part = wide_part(job, res.xy[real], area, form)
-            shift = wide_solve(job, [part], form).displacement(res.xy[real])
-        else:
-            shift = displacement(
-                res.xy[real], area, job.density, spacing, sigma, window, job.domain
-            )
-        u[real] = shift
-        u[~movers] = 0.0
-        xy0 = xy0 + u
-        res.xy = res.xy + u
+        last = k == len(sigmas) - 1
+        for _ in range(max(1, form.lowpass_last_steps) if wide and last else 1):
+            u = np.zeros_like(xy0)
+            if wide and last:
+                part = wide_part(job, res.xy[real], area, form)
+                shift = wide_solve(job, [part], form).displacement(res.xy[real])
+            else:
+                shift = displacement(
+                    res.xy[real], area, job.density, spacing, sigma, window, job.domain
+                )
+            u[real] = shift
+            u[~movers] = 0.0
+            xy0 = xy0 + u
+            res.xy = res.xy + u
         if form.lowpass_iter:
             more = relax_staged(
                 problem_of(job), form, xy0, rho, settings, None, start=res.xy, frozen=frozen,
