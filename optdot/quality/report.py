@@ -192,7 +192,7 @@ layering against the wall (see the wall profile below; patterns from optdot 0.4 
 layer: regenerate); speckle all over means the stack blurs less than the grain of
 the dots: smaller dots (<code>[dots] diameter = [lo, hi]</code>) or more diffusion. The
 PSF and the gate (<code>qa.max_jnd</code>, off by default) should be calibrated against a
-photographed test plate (README, "Visibility").</p>
+photographed test plate (README, "The verdict").</p>
 <figure><img style="max-width:100%" alt="JND map" src="data:image/png;base64,{jnd_png}">
 <figcaption>JND map over the panel</figcaption></figure>
 <table><tr><th>blob at (mm)</th><th>kind</th><th>area (mm²)</th><th>contrast (%)</th><th>JND</th>
