@@ -23,7 +23,7 @@ from optdot.pipeline import generate_tiled, qa
 from optdot.relax.legalize import legalize
 from optdot.testing import close_pairs
 from optdot.tiling.plan import plan_tiles, tile_integrals
-from optdot.tiling.run import InProcess
+from optdot.tiling.run import InProcess, field_name, wide_steps
 from optdot.tiling.tasks import initial_tile
 
 from .conftest import SAMPLES
@@ -501,18 +501,24 @@ def test_an_interrupted_tiled_run_resumes_with_the_bytes_of_an_uninterrupted_one
     assert not out.exists()
     staging = staging_dir(out)
     kept = sorted(p.name for p in staging.iterdir())
-    # the record, the throw's field and the wide pass's, the 3 parts
-    assert kept[:3] == ["_extra-coarse.npz", "_extra-wide.npz", "_resume.json"], kept
-    assert len(kept) == 6 and all(k.startswith("part-") for k in kept[3:])
+    # the record, the throw's field and every round's of the wide pass, the 3 parts
+    rounds = [field_name(r) for r in range(wide_steps(job))]
+    assert len(rounds) > 1
+    fields = ["_extra-coarse.npz", *(f"_extra-{n}.npz" for n in rounds), "_resume.json"]
+    assert kept[: len(fields)] == fields, kept
+    assert len(kept) == len(fields) + 3 and all(k.startswith("part-") for k in kept[-3:])
     again = _Counting()
     said = []
     generate_tiled(job, out, plan=plan, executor=again, announce=said.append)
     assert again.kinds["legal"] == 5 and "resuming: 3 of 8 tiles" in said[0]
     # the fields are read, not made again from every tile: only the 5 tiles' own
-    # corrections are made (all 8, and their deposits, to remake the wide field)
-    assert "coarse" not in again.kinds and "wide" not in again.kinds
-    assert "deposit" not in again.kinds and "wdeposit" not in again.kinds
+    # corrections are made and moved through the rounds (all 8, and their deposits, to
+    # remake the wide fields)
+    assert "coarse" not in again.kinds and not set(rounds) & set(again.kinds)
+    assert "deposit" not in again.kinds
+    assert not [k for k in again.kinds if k.startswith("wdeposit")], again.kinds
     assert again.kinds["correct"] == again.kinds["shift"] == 5, again.kinds
+    assert all(again.kinds[f"step{r}"] == 5 for r in range(1, len(rounds))), again.kinds
     assert not staging.exists()
     names = sorted(p.name for p in full.iterdir())
     assert names == sorted(p.name for p in out.iterdir())
@@ -544,7 +550,10 @@ def test_a_damaged_kept_field_is_made_again(tmp_path):
     kept.write_bytes(bytes(data))
     again = _Counting()
     generate_tiled(job, out, plan=plan, executor=again)
-    assert again.kinds["wide"] == 1 and again.kinds["wdeposit"] == 8
+    # every round is made again (each from the dots the round before moved)
+    rounds = [field_name(r) for r in range(wide_steps(job))]
+    assert all(again.kinds[n] == 1 for n in rounds) and again.kinds["wdeposit"] == 8
+    assert all(again.kinds[f"wdeposit{r}"] == 8 for r in range(1, len(rounds)))
     assert "coarse" not in again.kinds  # the other field was intact
     for name in sorted(p.name for p in full.iterdir()):
         assert (full / name).read_bytes() == (out / name).read_bytes(), name

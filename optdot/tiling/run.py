@@ -10,7 +10,10 @@ the end: see :func:`run_tiles`). With a wide correction pass (the default formul
 the correction is split by a barrier: every tile's first pass and its deposit, the wide
 field from all of them, then row by row the first passes moved along it and the
 guarantee passes; the first passes are held across the barrier and kept to the end in
-place of the merged dots, which are let go. Finished
+place of the merged dots, which are let go. The wide pass is solved as many times as the
+formulation says (``lowpass_last_steps``), each time from where the dots stand: every
+round but the last moves every tile's dots and deposits them again (``STEP``), a barrier
+each, and the last round's moves are the corrected dots. Finished
 tiles are handed to ``sink`` one at a time, in the order they finish; what the sink writes
 depends only on the tile, so the output is the same whatever the order.
 """
@@ -30,7 +33,7 @@ from ..geometry.density import DensityMap
 from ..relax.lowpass import CoarseField
 from ..runtime.cluster import single_threaded
 from ..runtime.stop import check_interrupt
-from ..stages import wide_sigma
+from ..stages import formulation_for, wide_sigma
 from .plan import TilePlan, plan_tiles
 from .tasks import (
     FinalDots,
@@ -46,6 +49,7 @@ from .tasks import (
     relax_tile,
     wide_deposit_task,
     wide_shift,
+    wide_step,
     wide_task,
 )
 
@@ -60,12 +64,28 @@ _WEIGHTS = {"relax": 1.0, "seams": 0.25, "merge": 0.0, "correct": 0.2, "shift": 
 
 #: Kinds of task in the schedule, in the order a wave submits them (the guarantee
 #: passes: ``LEGAL`` and ``LEGAL + 1``, by row parity).
-INITIAL, DEPOSIT, COARSE, RELAX, SEAMS, MERGE, CORRECT, WDEPOSIT, WIDE, SHIFT, LEGAL = range(-3, 8)
+INITIAL, DEPOSIT, COARSE, RELAX, SEAMS, MERGE, CORRECT, WDEPOSIT, WIDE, STEP, SHIFT, LEGAL = range(
+    -3, 9
+)
 #: Names of the kinds in :func:`needed`.
 KIND_NAMES = {
     INITIAL: "initial", DEPOSIT: "deposit", COARSE: "coarse", RELAX: "relax", SEAMS: "seams",
-    MERGE: "merge", CORRECT: "correct", WDEPOSIT: "wdeposit", WIDE: "wide", SHIFT: "shift",
+    MERGE: "merge", CORRECT: "correct", WDEPOSIT: "wdeposit", WIDE: "wide", STEP: "step",
+    SHIFT: "shift",
 }  # fmt: skip
+
+
+def wide_steps(job: Job) -> int:
+    """Rounds of the wide pass a tiled run of ``job`` makes (0 without a wide pass)."""
+    if wide_sigma(job) is None:
+        return 0
+    return max(1, formulation_for(job).lowpass_last_steps)
+
+
+def field_name(r: int) -> str:
+    """The name a resumable run keeps round ``r``'s wide field under (``"wide"``,
+    ``"wide2"``, ...)."""
+    return "wide" if r == 0 else f"wide{r + 1}"
 
 
 class FieldStore(Protocol):
@@ -84,6 +104,14 @@ def _run(fn: Callable, *args: Any) -> Any:
     """A task: numba on one thread, then ``fn(*args)``."""
     single_threaded()
     return fn(*args)
+
+
+def _first(pair: tuple) -> Any:
+    return pair[0]
+
+
+def _second(pair: tuple) -> Any:
+    return pair[1]
 
 
 def _legal(job: Job, plan: TilePlan, dots: TileDots, *neighbours: TileDots | FinalDots):
@@ -171,11 +199,13 @@ def needed(
     todo: set[tuple[int, int]],
     wide: bool = False,
     given: frozenset[str] = frozenset(),
+    steps: int = 1,
 ) -> dict[str, set[tuple[int, int]]]:
     """The tasks that tiles ``todo`` need, when every other tile is finished (a resumed
     run): ``{"initial", "deposit", "coarse", "relax", "seams", "merge", "correct",
-    "wdeposit", "wide", "shift", "legal": tiles or grid points}`` (``coarse``, ``wide``:
-    ``{(0, 0)}``, one task, or empty).
+    "wdeposit", "wide", "step", "shift", "legal": tiles or grid points}`` (``coarse``,
+    ``wide``: ``{(0, 0)}``, one task a round, or empty; ``wdeposit``, ``wide`` and
+    ``step`` stand for every round of the wide pass's ``steps``).
 
     A tile's guarantee pass holds its earlier-colour neighbours' final dots (read from
     the finished parts when finished) and its later-colour neighbours' corrected dots
@@ -186,10 +216,12 @@ def needed(
     corners' seams, a seam square the relaxation of the tiles meeting there, a relaxation
     the initial dots of the tiles around it and the panel-wide field, which needs every
     tile's initial dots (cheap: a throw). A field in ``given`` (``"coarse"``, ``"wide"``:
-    kept by the interrupted run) needs none of that. Every task is a pure function of the
-    job and its inputs, so what is made again is what was made before.
+    kept by the interrupted run) needs none of that; the wide pass's fields count only
+    when every round's is given (:func:`field_name`), and the rounds before the last then
+    move only the held tiles. Every task is a pure function of the job and its inputs,
+    so what is made again is what was made before.
     """
-    have_wide = "wide" in given
+    have_wide = all(field_name(r) in given for r in range(max(1, steps)))
     held = set(todo)
     for t in todo:
         c = plan.colour(*t)
@@ -217,6 +249,7 @@ def needed(
         "correct": correct,
         "wdeposit": correct if wide and not have_wide else set(),
         "wide": {(0, 0)} if wide and held and not have_wide else set(),
+        "step": (held if have_wide else correct) if wide and steps > 1 else set(),
         "shift": held if wide else set(),
         "legal": set(todo),
     }
@@ -251,39 +284,47 @@ def run_tiles(
         t: [c for c in ((t[0] + a, t[1] + b) for b in (0, 1) for a in (0, 1)) if c in corner_set]
         for t in tiles
     }
-    wide = wide_sigma(job) is not None
+    steps = wide_steps(job)
+    wide = steps > 0
     # with a wide pass: every tile's first correction pass and its deposit, then the
-    # wide field (a barrier: it needs all of them), then row by row each tile's
-    # corrected dots moved along it and the guarantee passes
-    after = plan.ny + 3 if wide else 0  # the wave of the wide field
-    schedule: list[tuple[int, int, int, int, tuple[int, int]]] = []
+    # wide field (a barrier: it needs all of them); each further round moves every
+    # tile's dots along the last field and deposits them again, then its field (a
+    # barrier); then row by row each tile's corrected dots moved along the last field
+    # and the guarantee passes
+    first = plan.ny + 3  # the wave of the first wide field
+    after = first + 2 * (steps - 1) if wide else 0  # the wave of the last
+    # (wave, kind, row, colour, tile, round of the wide pass)
+    schedule: list[tuple[int, int, int, int, tuple[int, int], int]] = []
     for i, j in tiles:
         # every tile's initial dots and their deposit first: the panel-wide field that
         # the first relaxation needs is solved from all of them
-        schedule.append((-2, INITIAL, j, 0, (i, j)))
-        schedule.append((-2, DEPOSIT, j, 0, (i, j)))
-        schedule.append((j + 1, RELAX, j, 0, (i, j)))  # needs initial j-1..j+1
-    schedule.append((-1, COARSE, 0, 0, (0, 0)))
-    if wide:
-        schedule.append((after, WIDE, 0, 0, (0, 0)))
+        schedule.append((-2, INITIAL, j, 0, (i, j), 0))
+        schedule.append((-2, DEPOSIT, j, 0, (i, j), 0))
+        schedule.append((j + 1, RELAX, j, 0, (i, j), 0))  # needs initial j-1..j+1
+    schedule.append((-1, COARSE, 0, 0, (0, 0), 0))
+    for r in range(steps):
+        schedule.append((first + 2 * r, WIDE, 0, 0, (0, 0), r))
     for i, j in corners:
-        schedule.append((j + 1, SEAMS, j, 0, (i, j)))  # seams of corner row j: relax j-1, j
+        schedule.append((j + 1, SEAMS, j, 0, (i, j), 0))  # seams of corner row j: relax j-1, j
     for i, j in tiles:
-        schedule.append((j + 2, MERGE, j, 0, (i, j)))  # merge: needs corners j, j+1
-        schedule.append((j + 3, CORRECT, j, 0, (i, j)))  # correct: needs merged j-1..j+1
+        schedule.append((j + 2, MERGE, j, 0, (i, j), 0))  # merge: needs corners j, j+1
+        schedule.append((j + 3, CORRECT, j, 0, (i, j), 0))  # correct: needs merged j-1..j+1
         if wide:
-            schedule.append((j + 3, WDEPOSIT, j, 0, (i, j)))
-            schedule.append((after + j + 1, SHIFT, j, 0, (i, j)))
+            schedule.append((j + 3, WDEPOSIT, j, 0, (i, j), 0))
+            for r in range(1, steps):  # moved along round r - 1's field, deposited again
+                schedule.append((first + 2 * r - 1, STEP, j, 0, (i, j), r))
+            schedule.append((after + j + 1, SHIFT, j, 0, (i, j), steps - 1))
         c = plan.colour(i, j)
-        schedule.append((after + j + 4 + (j % 2), LEGAL + (j % 2), j, c, (i, j)))  # guarantee
+        schedule.append((after + j + 4 + (j % 2), LEGAL + (j % 2), j, c, (i, j), 0))  # guarantee
     finished = finished or {}
     given = {}
-    for name in ("coarse", "wide") if fields is not None else ():
+    names = ["coarse", *(field_name(r) for r in range(steps))]
+    for name in names if fields is not None else ():
         arrays = fields.read_extra(name)
         if arrays is not None:
             given[name] = CoarseField.from_arrays(arrays)
     if finished or given:
-        need = needed(plan, set(tiles) - set(finished), wide, frozenset(given))
+        need = needed(plan, set(tiles) - set(finished), wide, frozenset(given), steps)
         schedule = [e for e in schedule if e[4] in need[KIND_NAMES.get(e[1], "legal")]]
     schedule.sort()
     held: dict = {}
@@ -301,13 +342,15 @@ def run_tiles(
     seams: dict = {}
     merged: dict = {}
     firsts: dict = {}  # the first correction pass (the corrected dots, without a wide pass)
-    wdeposits: dict = {}
-    wide_field = executor.share(given["wide"]) if "wide" in given else None
+    wdeposits: dict = {}  # (round, tile): deposit on the wide lattice
+    moved: dict = {}  # (round, tile): dots moved by the wide pass's rounds before it
+    have_wide = all(field_name(r) in given for r in range(steps))
+    wide_fields = {r: executor.share(given[field_name(r)]) for r in range(steps) if have_wide}
     made = {}  # the fields made here, to keep for a resumed run
     corrected: dict = {}
     final: dict = {}
     kind_of: dict[Any, str] = {}
-    for _, kind, _, _, (i, j) in schedule:
+    for _, kind, _, _, (i, j), r in schedule:
         key = f"{i}-{j}"
         if kind == INITIAL:
             initial[i, j] = executor.submit("initial", key, initial_task, jobf, plan, i, j)
@@ -338,12 +381,23 @@ def run_tiles(
             kind_of[id(h)] = "correct"
         elif kind == WDEPOSIT:
             h = executor.submit("wdeposit", key, wide_deposit_task, jobf, firsts[i, j])
-            wdeposits[i, j] = h
+            wdeposits[0, (i, j)] = h
         elif kind == WIDE:
-            parts = [wdeposits[t] for t in tiles]
-            wide_field = made["wide"] = executor.submit("wide", "panel", wide_task, jobf, *parts)
+            parts = [wdeposits[r, t] for t in tiles]
+            name = field_name(r)
+            h = executor.submit(name, "panel", wide_task, jobf, *parts)
+            wide_fields[r] = made[name] = h
+        elif kind == STEP:
+            dots = firsts[i, j] if r == 1 else moved[r - 1, (i, j)]
+            pair = executor.submit(f"step{r}", key, wide_step, jobf, wide_fields[r - 1], dots)
+            moved[r, (i, j)] = executor.submit(f"stepdots{r}", key, _first, pair)
+            if not have_wide:
+                h = executor.submit(f"wdeposit{r}", key, _second, pair)
+                wdeposits[r, (i, j)] = h
+            pair = None
         elif kind == SHIFT:
-            h = executor.submit("shift", key, wide_shift, jobf, wide_field, firsts[i, j])
+            dots = firsts[i, j] if r == 0 else moved[r, (i, j)]
+            h = executor.submit("shift", key, wide_shift, jobf, wide_fields[r], dots)
             corrected[i, j] = h
             kind_of[id(h)] = "shift"
         else:
@@ -355,7 +409,7 @@ def run_tiles(
             h = executor.submit("legal", key, _legal, jobf, plan, corrected[i, j], *around)
             final[i, j] = h
             kind_of[id(h)] = "legal"
-    h = around = parts = results = None  # the loop's last handles: no longer held here
+    h = around = parts = results = dots = None  # the loop's last handles: no longer held here
     weights = {k: w for k, w in _WEIGHTS.items() if wide or k != "shift"}
     total = sum(weights.values()) * max(len(tiles) - len(finished), 1)
     done = 0.0
@@ -381,19 +435,19 @@ def run_tiles(
     # tile): a relaxation or a correction lost with a dead worker needs its field again.
     keep = [*deposits.values(), coarse]
     if wide:
-        keep += [*firsts.values(), *wdeposits.values(), wide_field]
+        keep += [*firsts.values(), *wdeposits.values(), *wide_fields.values()]
     else:
         keep += [*merged.values(), *seams.values()]
     initial.clear(), relaxed.clear(), seams.clear(), merged.clear(), corrected.clear()
-    deposits.clear(), firsts.clear(), wdeposits.clear()
-    coarse = wide_field = None
+    deposits.clear(), firsts.clear(), wdeposits.clear(), moved.clear(), wide_fields.clear()
+    coarse = None
     final.clear()
     made.clear()
     n_done, n_relaxed = len(finished), 0
     held.clear()
     for h in executor.finished(watched):
         kind = kind_of[id(h)]
-        if kind in ("coarse", "wide"):
+        if kind in names:
             value = executor.result(h)
             if value is not None:
                 fields.write_extra(kind, value.to_arrays())

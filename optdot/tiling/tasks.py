@@ -300,6 +300,14 @@ def wide_shift(job: Job, wide: CoarseField, dots: TileDots) -> TileDots:
     return TileDots(dots.tile, dots.xy0, dots.xy + wide.displacement(dots.xy))
 
 
+def wide_step(job: Job, wide: CoarseField, dots: TileDots) -> tuple[TileDots, LatticePart | None]:
+    """A round of the wide pass before its last: a tile's dots moved along the round's
+    field (:func:`wide_shift`) and deposited again for the next round's field
+    (:func:`wide_deposit_task`)."""
+    moved = wide_shift(job, wide, dots)
+    return moved, wide_deposit_task(job, moved)
+
+
 def correct_tile(job: Job, plan: TilePlan, dots: TileDots, *around: TileDots) -> TileDots:
     """Phase 3: tile ``dots`` moved by the first pass of the long-wavelength correction,
     blended across its borders (see the module doc), with the phase-2 dots of the tiles
