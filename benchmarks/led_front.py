@@ -96,9 +96,8 @@ def main() -> None:
     if rays:
         print(f"coverage mode: {rays:,} rays in {time.perf_counter() - t:.1f} s")
     for steps in args.steps:
-        form = base if steps == base.lowpass_last_steps else dataclasses.replace(
-            base, lowpass_last_steps=steps, lowpass_last_cap=0.0 if steps == 1 else base.lowpass_last_cap
-        )  # fmt: skip
+        cap = 0.0 if steps == 1 else base.lowpass_last_cap
+        form = dataclasses.replace(base, lowpass_last_steps=steps, lowpass_last_cap=cap)
         formulation.PRESETS["optdot"] = form
         t = time.perf_counter()
         pattern = generate(job)
@@ -118,7 +117,8 @@ def main() -> None:
         if leds:
             mid = leds[len(leds) // 2]
             col = int(mid / RASTER)
-            prof = " ".join(f"{100 * err[int(y / RASTER), col + 15]:+.2f}" for y in np.arange(0.25, 6, 0.5))
+            ys = np.arange(0.25, 6, 0.5)
+            prof = " ".join(f"{100 * err[int(y / RASTER), col + 15]:+.2f}" for y in ys)
             print(f"  across the LED at x = {mid + 15 * RASTER:g} mm, y = 0.25..5.75: {prof} %")
         if rays:
             t = time.perf_counter()
@@ -128,7 +128,7 @@ def main() -> None:
             b = gaussian_filter(coverage, s, mode="mirror")
             diff = a / np.maximum(b, 1e-12) - 1
             # noise of a blurred count ratio: both counts Poisson
-            w2 = gaussian_filter(np.ones_like(dots), s / np.sqrt(2), mode="mirror") / (4 * np.pi * s**2)
+            w2 = 1.0 / (4 * np.pi * s**2)  # sum of a normalised 2-D Gaussian's squared weights
             noise = np.sqrt(w2 * (1 / np.maximum(a, 1) + 1 / np.maximum(b, 1)))
             y = (np.arange(dots.shape[0]) + 0.5) * BIN
             rows = (y > 0.5) & (y < NEAR)
