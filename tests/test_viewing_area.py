@@ -214,3 +214,25 @@ def test_design_levels_the_luminance_over_the_viewing_area():
     # raised as if too dark, the hidden ones lowered further
     judged_all = _step(phi, counts, inside, live, target, 0.0, 0.0, 0.3, np.ones_like(seen))
     assert judged_all[:2].mean() / judged_all[2:].mean() == pytest.approx(0.25**0.8)
+
+
+def test_the_report_judges_the_simulation_in_the_viewing_area(tmp_path):
+    """``qa --simulation`` of a job with a bezel: the report's luminance section says its
+    figures are the viewing area's and names the brightest bin outside it."""
+    path = _lgp_with(tmp_path, "bezel = [0, 3, 0, 0]")
+    np.savetxt(tmp_path / "map.csv", np.full((8, 12), 0.05), delimiter=",")  # 14k dots
+    rc, err, _ = cli("generate", path, "-o", tmp_path / "d.npz", "-q")
+    assert rc == 0, err
+    rc, err, _ = cli(
+        "simulate", path, tmp_path / "d.npz", "--rays", 100_000, "--json", tmp_path / "s.json"
+    )
+    assert rc == 0, err
+    rc, err, _ = cli(
+        "qa", tmp_path / "d.npz", "--job", path, "--simulation", tmp_path / "s.json",
+        "--html", tmp_path / "r.html", "--json", tmp_path / "r.json",
+    )  # fmt: skip
+    assert rc == 0, err
+    html = (tmp_path / "r.html").read_text()
+    assert "over the viewing area (dashed)" in html and "Outside it the brightest bin" in html
+    sim = json.loads((tmp_path / "r.json").read_text())["metrics"]["simulation"]
+    assert sim["viewing_area_mm"] == [0.0, 3.0, 30.0, 20.0] and sim["outside_max_at_mm"][1] < 3

@@ -244,8 +244,29 @@ def _simulation_section(result: QAResult) -> str:
                 (sx, sy), 0.5 * (sim.get("spot_diameter_mm") or 0), fill=False, color="k", lw=0.8
             )
         )
+    area = sim.get("viewing_area_mm")
+    if area:
+        ax.plot(
+            [area[0], area[2], area[2], area[0], area[0]],
+            [area[1], area[1], area[3], area[3], area[1]],
+            color="k", lw=1.0, ls="--",
+        )  # fmt: skip
     ax.set(xlabel="x (mm)", ylabel="y (mm)", title="Simulated luminance (circles: 9-point spots)")
     png = _png_base64(fig)
+    region = (
+        "the viewing area (dashed)"
+        if area
+        else f"the panel less {sim['border_mm']:g} mm"
+        if sim.get("border_mm")
+        else "the panel"
+    )
+    outside = ""
+    if sim.get("outside_max") is not None:
+        ox, oy = sim["outside_max_at_mm"]
+        outside = (
+            f" Outside it the brightest bin is {sim['outside_max']:.3f} of the mean, at "
+            f"({ox:.2f}, {oy:.2f}) mm."
+        )
     mode = "the real dots" if sim.get("mode") == "dots" else "the map's coverage"
     other = (
         ""
@@ -256,9 +277,9 @@ def _simulation_section(result: QAResult) -> str:
 <p>From <code>{html.escape(str(sim.get("file")))}</code>: {sim.get("rays", 0):,} rays through
 {mode}.{other} Efficiency <b>{sim["efficiency"]:.1%}</b> ± {sim["efficiency_sigma"]:.2%};
 9-point uniformity <b>{sim["uniformity_9point"]:.3f}</b> ± {sim["uniformity_9point_sigma"]:.3f};
-luminance RMS {sim["luminance_rms"]:.2%} over the panel less {sim["border_mm"]:g} mm
+luminance RMS {sim["luminance_rms"]:.2%} over {region}
 (Monte Carlo noise alone {sim["luminance_rms_noise"]:.2%}), min {sim["luminance_min"]:.3f},
-max {sim["luminance_max"]:.3f} of the mean. Compare it with the JND map above: the JND map
+max {sim["luminance_max"]:.3f} of the mean.{outside} Compare it with the JND map above: the JND map
 judges the dots against the map, this one the map and the dots against the LEDs.</p>
 <figure><img style="max-width:100%" alt="simulated luminance" src="data:image/png;base64,{png}"></figure>
 """

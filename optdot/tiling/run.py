@@ -11,9 +11,11 @@ the correction is split by a barrier: every tile's first pass and its deposit, t
 field from all of them, then row by row the first passes moved along it and the
 guarantee passes; the first passes are held across the barrier and kept to the end in
 place of the merged dots, which are let go. The wide pass is solved as many times as the
-formulation says (``lowpass_last_steps``), each time from where the dots stand: every
-round but the last moves every tile's dots and deposits them again (``STEP``), a barrier
-each, and the last round's moves are the corrected dots. Finished
+formulation says (``lowpass_last_steps``), each time from where the dots stand: each
+round after the first deposits every tile's first pass moved along the fields before it
+(``STEP``: the moves are made again from the first pass, which is held anyway, rather
+than a copy of every tile's dots held across each barrier), and its field is a barrier;
+the corrected dots are the first pass moved along every round's field in turn. Finished
 tiles are handed to ``sink`` one at a time, in the order they finish; what the sink writes
 depends only on the tile, so the output is the same whatever the order.
 """
@@ -104,14 +106,6 @@ def _run(fn: Callable, *args: Any) -> Any:
     """A task: numba on one thread, then ``fn(*args)``."""
     single_threaded()
     return fn(*args)
-
-
-def _first(pair: tuple) -> Any:
-    return pair[0]
-
-
-def _second(pair: tuple) -> Any:
-    return pair[1]
 
 
 def _legal(job: Job, plan: TilePlan, dots: TileDots, *neighbours: TileDots | FinalDots):
@@ -249,7 +243,7 @@ def needed(
         "correct": correct,
         "wdeposit": correct if wide and not have_wide else set(),
         "wide": {(0, 0)} if wide and held and not have_wide else set(),
-        "step": (held if have_wide else correct) if wide and steps > 1 else set(),
+        "step": correct if wide and steps > 1 and not have_wide else set(),
         "shift": held if wide else set(),
         "legal": set(todo),
     }
@@ -287,9 +281,9 @@ def run_tiles(
     steps = wide_steps(job)
     wide = steps > 0
     # with a wide pass: every tile's first correction pass and its deposit, then the
-    # wide field (a barrier: it needs all of them); each further round moves every
-    # tile's dots along the last field and deposits them again, then its field (a
-    # barrier); then row by row each tile's corrected dots moved along the last field
+    # wide field (a barrier: it needs all of them); each further round deposits every
+    # tile's first pass moved along the fields so far, then its field (a barrier); then
+    # row by row each tile's first pass moved along every field (the corrected dots)
     # and the guarantee passes
     first = plan.ny + 3  # the wave of the first wide field
     after = first + 2 * (steps - 1) if wide else 0  # the wave of the last
@@ -311,7 +305,7 @@ def run_tiles(
         schedule.append((j + 3, CORRECT, j, 0, (i, j), 0))  # correct: needs merged j-1..j+1
         if wide:
             schedule.append((j + 3, WDEPOSIT, j, 0, (i, j), 0))
-            for r in range(1, steps):  # moved along round r - 1's field, deposited again
+            for r in range(1, steps):  # moved along rounds 0..r-1's fields, deposited
                 schedule.append((first + 2 * r - 1, STEP, j, 0, (i, j), r))
             schedule.append((after + j + 1, SHIFT, j, 0, (i, j), steps - 1))
         c = plan.colour(i, j)
@@ -343,7 +337,6 @@ def run_tiles(
     merged: dict = {}
     firsts: dict = {}  # the first correction pass (the corrected dots, without a wide pass)
     wdeposits: dict = {}  # (round, tile): deposit on the wide lattice
-    moved: dict = {}  # (round, tile): dots moved by the wide pass's rounds before it
     have_wide = all(field_name(r) in given for r in range(steps))
     wide_fields = {r: executor.share(given[field_name(r)]) for r in range(steps) if have_wide}
     made = {}  # the fields made here, to keep for a resumed run
@@ -388,16 +381,12 @@ def run_tiles(
             h = executor.submit(name, "panel", wide_task, jobf, *parts)
             wide_fields[r] = made[name] = h
         elif kind == STEP:
-            dots = firsts[i, j] if r == 1 else moved[r - 1, (i, j)]
-            pair = executor.submit(f"step{r}", key, wide_step, jobf, wide_fields[r - 1], dots)
-            moved[r, (i, j)] = executor.submit(f"stepdots{r}", key, _first, pair)
-            if not have_wide:
-                h = executor.submit(f"wdeposit{r}", key, _second, pair)
-                wdeposits[r, (i, j)] = h
-            pair = None
+            fields_so_far = [wide_fields[k] for k in range(r)]
+            h = executor.submit(f"wdeposit{r}", key, wide_step, jobf, firsts[i, j], *fields_so_far)
+            wdeposits[r, (i, j)] = h
         elif kind == SHIFT:
-            dots = firsts[i, j] if r == 0 else moved[r, (i, j)]
-            h = executor.submit("shift", key, wide_shift, jobf, wide_fields[r], dots)
+            every = [wide_fields[k] for k in range(steps)]
+            h = executor.submit("shift", key, wide_shift, jobf, firsts[i, j], *every)
             corrected[i, j] = h
             kind_of[id(h)] = "shift"
         else:
@@ -409,7 +398,7 @@ def run_tiles(
             h = executor.submit("legal", key, _legal, jobf, plan, corrected[i, j], *around)
             final[i, j] = h
             kind_of[id(h)] = "legal"
-    h = around = parts = results = dots = None  # the loop's last handles: no longer held here
+    h = around = parts = results = fields_so_far = every = None  # no longer held here
     weights = {k: w for k, w in _WEIGHTS.items() if wide or k != "shift"}
     total = sum(weights.values()) * max(len(tiles) - len(finished), 1)
     done = 0.0
@@ -439,7 +428,7 @@ def run_tiles(
     else:
         keep += [*merged.values(), *seams.values()]
     initial.clear(), relaxed.clear(), seams.clear(), merged.clear(), corrected.clear()
-    deposits.clear(), firsts.clear(), wdeposits.clear(), moved.clear(), wide_fields.clear()
+    deposits.clear(), firsts.clear(), wdeposits.clear(), wide_fields.clear()
     coarse = None
     final.clear()
     made.clear()

@@ -292,20 +292,22 @@ def wide_task(job: Job, *parts: LatticePart) -> CoarseField | None:
     return stages.wide_solve(job, list(parts))
 
 
-def wide_shift(job: Job, wide: CoarseField, dots: TileDots) -> TileDots:
-    """A tile's dots after its first correction pass moved along the panel's wide field
-    (:func:`wide_task`): the correction's second pass."""
-    if not len(dots.xy):
-        return TileDots(dots.tile, dots.xy0, dots.xy.copy())
-    return TileDots(dots.tile, dots.xy0, dots.xy + wide.displacement(dots.xy))
+def wide_shift(job: Job, dots: TileDots, *fields: CoarseField) -> TileDots:
+    """A tile's dots after its first correction pass (:func:`correct_tile`) moved along
+    the panel's wide fields (:func:`wide_task`), one round after the other: the
+    correction's last pass."""
+    xy = dots.xy.copy()
+    if len(xy):
+        for f in fields:
+            xy += f.displacement(xy)
+    return TileDots(dots.tile, dots.xy0, xy)
 
 
-def wide_step(job: Job, wide: CoarseField, dots: TileDots) -> tuple[TileDots, LatticePart | None]:
-    """A round of the wide pass before its last: a tile's dots moved along the round's
-    field (:func:`wide_shift`) and deposited again for the next round's field
+def wide_step(job: Job, dots: TileDots, *fields: CoarseField) -> LatticePart | None:
+    """A round of the wide pass after the first: a tile's first-pass dots moved along the
+    rounds' fields before it (:func:`wide_shift`) and deposited for this round's field
     (:func:`wide_deposit_task`)."""
-    moved = wide_shift(job, wide, dots)
-    return moved, wide_deposit_task(job, moved)
+    return wide_deposit_task(job, wide_shift(job, dots, *fields))
 
 
 def correct_tile(job: Job, plan: TilePlan, dots: TileDots, *around: TileDots) -> TileDots:
