@@ -46,12 +46,15 @@ def input_problem(path: str | Path, max_bytes: int | None = None) -> str | None:
             :data:`TEXT_EXPANSION`).
 
     Returns:
-        ``"file not found"``, ``"is a FIFO, not a regular file"``, ``"is 3.2 GB, more
-        than ..."`` and the like, or None.
+        ``"file not found"`` (with the absolute path looked for, when ``path`` is
+        relative: a command pasted in another folder), ``"is a FIFO, not a regular
+        file"``, ``"is 3.2 GB, more than ..."`` and the like, or None.
     """
     try:
         st = os.stat(path)
     except FileNotFoundError:
+        if not os.path.isabs(path):
+            return f"file not found (looked for {os.path.abspath(path)})"
         return "file not found"
     except OSError as e:
         return f"cannot read ({e.strerror or e})"

@@ -236,3 +236,58 @@ def test_the_report_judges_the_simulation_in_the_viewing_area(tmp_path):
     assert "over the viewing area (dashed)" in html and "Outside it the brightest bin" in html
     sim = json.loads((tmp_path / "r.json").read_text())["metrics"]["simulation"]
     assert sim["viewing_area_mm"] == [0.0, 3.0, 30.0, 20.0] and sim["outside_max_at_mm"][1] < 3
+
+
+def _dashed_frames(monkeypatch):
+    """Record every dashed line and dashed contour a matplotlib figure draws."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.axes import Axes
+
+    drawn: list = []
+    plot, contour = Axes.plot, Axes.contour
+
+    def recording_plot(self, *args, **kw):
+        if kw.get("ls") == "--" or kw.get("linestyle") == "--":
+            drawn.append(("plot", args))
+        return plot(self, *args, **kw)
+
+    def recording_contour(self, *args, **kw):
+        if kw.get("linestyles") == "--":
+            drawn.append(("contour", args))
+        return contour(self, *args, **kw)
+
+    monkeypatch.setattr(Axes, "plot", recording_plot)
+    monkeypatch.setattr(Axes, "contour", recording_contour)
+    return drawn
+
+
+def test_the_jnd_figure_draws_the_viewing_area(monkeypatch):
+    from optdot.quality.gate import QAResult
+    from optdot.quality.report import _jnd_figure
+
+    view = viewing("notebook")
+    density, g = _map_with_bump((10.0, 1.0), view)
+    area = (0.0, 4.0, 20.0, 20.0)
+    drawn = _dashed_frames(monkeypatch)
+    for a in (None, area):
+        metrics, arrays = visibility(g, density, None, view, area=a)
+        result = QAResult(checks=[], metrics={"visibility": metrics}, arrays=arrays)
+        assert _jnd_figure(result)
+    assert len(drawn) == 1  # only the figure with a viewing area has a frame
+    xs, ys = drawn[0][1]
+    assert (min(xs), min(ys), max(xs), max(ys)) == area
+
+
+def test_the_luminance_plot_draws_the_measured_region(tmp_path, monkeypatch):
+    from optdot.optics.outputs import luminance_png
+    from optdot.optics.simulate import simulate
+
+    job = load_job(_lgp_with(tmp_path, "bezel = [0, 3, 0, 0]"))
+    sim = simulate(job, 20_000, seed=1, bin_mm=0.5)
+    drawn = _dashed_frames(monkeypatch)
+    luminance_png(tmp_path / "l.png", sim, "t")
+    assert len(drawn) == 1 and drawn[0][0] == "contour"
+    x, y, mask = drawn[0][1]
+    assert np.array_equal(mask, sim.measured.astype(float))

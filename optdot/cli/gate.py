@@ -246,7 +246,8 @@ def qa(
     outline_layer,
     quiet,
 ):
-    """Check PATTERN_FILE (csv, npz, gds, oas, dxf) before tooling: exit 0 pass, 1 fail."""
+    """Check PATTERN_FILE (csv, npz, a .parquet dataset, gds, oas, dxf) before tooling:
+    exit 0 pass, 1 fail."""
     from ..io.atomic import transaction
     from ..pipeline import qa as run_gate
     from ..quality.report import write_reports

@@ -40,6 +40,8 @@ def check(
 
     job = load_job_with(job_file, seed, max_iter, method, formulation)
     got = check_job(job, tiles, tile_size, workers)
+    if quiet:
+        return
     d = job.density.grid
     x0, y0, x1, y1 = job.box
     opt = job.optimize
@@ -72,6 +74,11 @@ def check(
         "disk: "
         + ", ".join(f"{fmt.upper()} {size / 1e6:,.1f} MB" for fmt, size in c.disk_bytes.items())
     )
+
+
+for _param in check.params:  # the shared --quiet speaks of a progress bar check has not
+    if _param.name == "quiet":
+        _param.help = "Print nothing: the exit code (0: it would run) and errors only."
 
 
 def _diameter_text(job) -> str:

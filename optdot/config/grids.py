@@ -38,7 +38,9 @@ def load_grid(path: Path) -> np.ndarray:
             rows.append([float(c) for c in row])
         except ValueError:
             bad = next(c for c in row if not _is_float(c))
-            raise JobError(f"{path}: line {lineno}: {bad.strip()!r} is not a number") from None
+            raise JobError(
+                f"{path}: line {lineno}: {bad.strip()[:40]!r} is not a number{_hint(row, rows)}"
+            ) from None
         if len(rows[-1]) != len(rows[0]):
             raise JobError(
                 f"{path}: line {lineno}: wrong grid shape, {len(rows[-1])} columns where "
@@ -95,12 +97,28 @@ def validate_grid(g: np.ndarray, where: str) -> None:
         raise JobError(f"{where}: negative fill fraction {g[iy, ix]} at row {iy}, column {ix}")
     if np.any(g >= HEX_PACKING_LIMIT):
         iy, ix = np.argwhere(g >= HEX_PACKING_LIMIT)[0]
+        percent = (
+            " (the map looks like percent, 0-100: divide it by 100)"
+            if g.max() <= 100 and g.max() > 1.0
+            else ""
+        )
         raise JobError(
             f"{where}: fill fraction {g[iy, ix]} at row {iy}, column {ix} is at or above the "
-            f"hexagonal packing limit {HEX_PACKING_LIMIT:.4f}"
+            f"hexagonal packing limit {HEX_PACKING_LIMIT:.4f}{percent}"
         )
     if not np.any(g > 0):
         raise JobError(f"{where}: the map is all zero, there is nothing to place")
+
+
+def _hint(row: list[str], rows: list[list[float]]) -> str:
+    """What a row that is not all numbers may be: another separator, or a header."""
+    cell = ",".join(row)
+    for sep, name in ((";", "semicolons"), ("\t", "tabs")):
+        if sep in cell and all(_is_float(c) for c in cell.split(sep) if c.strip()):
+            return f" (the values are separated by {name}: the grid must be comma-separated)"
+    if not rows and not any(_is_float(c) for c in row):
+        return " (a header row? the grid holds numbers only; start a comment line with #)"
+    return ""
 
 
 def _is_float(s: str) -> bool:

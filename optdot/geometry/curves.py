@@ -3,7 +3,7 @@
 A CAD outline is a chain of *segments*: straight lines, conic arcs (circles, arcs, bulges
 and ellipses, all the affine image of a circle arc) and sampled splines. A polygon made
 from them must lie inside the region the user drew, so that a dot keeping ``r0`` from the
-polygon keeps ``r0`` from the true curve (issue 14). For a conic arc whose region side is
+polygon keeps ``r0`` from the true curve. For a conic arc whose region side is
 its concave side (the region holds the centre: a rounded outer corner, a round panel) the
 flattening is *inscribed*: vertices on the curve, chords inside. Where the region is on the
 convex side (a round hole, a concave fillet) it is *circumscribed*: tangent lines, whose

@@ -1,4 +1,4 @@
-"""Panel domains: the rectangle, or a polygon with holes and keep-outs (issue 7).
+"""Panel domains: the rectangle, or a polygon with holes and keep-outs.
 
 A :class:`Domain` is a shapely (Multi)Polygon in mm plus an ``edge_margin``: every dot
 keeps ``r0 + edge_margin`` between its centre and every edge (outline, holes, keep-outs).

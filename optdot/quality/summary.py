@@ -179,7 +179,7 @@ def _grain(xy: np.ndarray, window, density: DensityMap | None) -> dict | None:
     """The long-wavelength structure factor on the densest region (a square of
     ``measure.GRAIN_MM``): S averaged over k·a 0.3-1 (wavelengths of 6-20 spacings, the
     grain a viewer sees through a diffuser) and 1-3; Poisson points give 1, the single
-    process on a uniform map ~1e-5 (BENCHMARKS.md, issue 24). None when the window holds
+    process on a uniform map ~1e-5 (BENCHMARKS.md). None when the window holds
     too few dots or spacings to resolve k·a 0.3."""
     if window is None or len(xy) < 2000:
         return None

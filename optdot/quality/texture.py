@@ -1,7 +1,7 @@
 """Texture of a pattern: its long-wavelength grain and its layering against walls.
 
 Three measures of what a viewer sees through a diffuser that the per-cell coverage
-misses (issue 24, ``../shared/quality.md``):
+misses (``../shared/quality.md``):
 
 * :func:`structure_factor`: ``S(k) = |Σ w_j exp(-i k·x_j)|² / Σ w_j²`` of the dot
   centres in a window, with a separable Hann taper ``w`` so the window's edges do not

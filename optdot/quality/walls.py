@@ -1,4 +1,4 @@
-"""Coverage against distance from the nearest wall, measured part by part (issue 24).
+"""Coverage against distance from the nearest wall, measured part by part.
 
 A wall is where dots may not go: the map's box, the outline's edges and holes, the
 borders of the zero-fill cells. Dots used to layer against walls (a bright first row, a

@@ -1,7 +1,7 @@
 """Formulations: how the map becomes circles, containers and penalty terms.
 
 ``paper`` is the paper as written (§3, §3.3). The other presets and every variant in
-``benchmarks/formulations.py`` are points in the same small space (issue 8): the radius
+``benchmarks/formulations.py`` are points in the same small space: the radius
 rule, a density-dependent compression, polydisperse circles, a hard core and a soft gap,
 how the panel edge and the zero-density cells are treated, and staged relaxation.
 """
@@ -219,13 +219,13 @@ class Formulation:
 #: hexagonal spacing: 0.93 a clamped to 61..64 µm where a >= 62.2 µm (61 / 0.98); the dot
 #: diameter (+ gap) elsewhere, where a core cannot clear 60 µm and would only add order.
 #: The 61 µm floor matters: a core just under 60 µm pins pairs just under 60 µm.
-#: Phantom dots beyond every wall (issue 24) keep the density flat up to the walls; two
+#: Phantom dots beyond every wall keep the density flat up to the walls; two
 #: passes of the long-wavelength correction cut the grain seen through a 0.5 mm blur from
 #: 0.28 % to 0.015 % RMS (uniform 0.20 map; the second pass takes the LED sample's
 #: largest JND from 3.7 to 3.0), and 10 iterations of the hard core alone after them
 #: clear most pairs under 60 µm. The second pass blurs over 3 spacings, not 0.7: the
 #: largest JND of led 2.18 -> 0.69, tsuno 1.84 -> 1.10, chokka 0.45 -> 0.29, the grain
-#: on the uniform map unchanged at 0.015 % (session 15, BENCHMARKS.md).
+#: on the uniform map unchanged at 0.015 % (BENCHMARKS.md).
 PRESETS: dict[str, Formulation] = {
     "paper": Formulation(),
     "optdot": Formulation(

@@ -6,7 +6,7 @@ few millimetres wide with 0.3 % too many dots raises the pressure so little that
 stops (its ``ftol`` plateau, ~60 iterations) long before such a mode relaxes, since the
 relaxation time of a density mode grows with the square of its wavelength. So the
 pattern keeps the long-wavelength grain of its initial throw (scrambled Sobol: 0.28 %
-RMS through a 0.5 mm Gaussian on a uniform 0.20 map; issue 24). The displacement that
+RMS through a 0.5 mm Gaussian on a uniform 0.20 map). The displacement that
 removes such a mode is tiny (0.3 % at 3 mm wavelength: ~1.5 µm), far inside every
 container; it only has to be computed globally.
 
@@ -26,7 +26,7 @@ alike, half the map's there) an excess in the first row along a wall is spread o
 kernel half outside, and a step removes ln 2 = 69 % of it.
 
 The panel's pass (:func:`coarse_field`) goes further, because it is the last word on
-what the eye sees (session 18, BENCHMARKS.md):
+what the eye sees (BENCHMARKS.md):
 
 - It moves *coverage*, not relative error: the flux ``F = ∇ψ`` with ``∇²ψ`` the
   blurred coverage error (fill, not relative), each dot moved by ``F / c`` (``c`` the

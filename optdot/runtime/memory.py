@@ -8,7 +8,7 @@ from ..errors import ResourceError
 
 #: Bytes per dot besides the L-BFGS history (positions, gradients, radii, containers,
 #: Verlet list, grid bins, temporaries). Calibrated on benchmarks/scaling.py: peak RSS
-#: 210 MB at 10⁵ dots, 680 MB at 1.2·10⁶, 4,355 MB at 10⁷ (session 3; estimates 293 MB,
+#: 210 MB at 10⁵ dots, 680 MB at 1.2·10⁶, 4,355 MB at 10⁷ (BENCHMARKS.md; estimates 293 MB,
 #: 772 MB, 4,599 MB; MB = 2²⁰ bytes), so it stays an upper bound, 6 % over at 10⁷.
 BYTES_PER_DOT = 360
 #: Fixed overhead of the interpreter, numpy/scipy/numba, bytes.

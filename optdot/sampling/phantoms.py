@@ -3,7 +3,7 @@
 Why. A dot near a wall (panel edge, hole, zero-fill border) misses the neighbours that
 would stand beyond it. With a hard wall in their place the relaxation layers the dots: a
 dense first row against the wall (+8 to +26 % coverage in the first 0.1 mm) and a
-depleted band behind it (issue 24). A smooth wall potential that stands for the missing
+depleted band behind it. A smooth wall potential that stands for the missing
 neighbours on average (a mean-field wall, tried first) moves the row but keeps it: every
 dot near a flat potential settles on the same equipotential. The missing neighbours
 themselves do better: phantom dots thrown beyond each wall at the fill of the nearest

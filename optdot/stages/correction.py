@@ -10,7 +10,7 @@ could not (each solves with its own mean and walls). The lattice is also what th
 pass wants: against the half-spacing grid of the first pass it leaves less at the walls,
 where the map is deposited as the dots are and nothing flows across the walls' faces
 (notebook strip 140 x 20 mm, one process: strongest blob 1.09 -> 0.54 JND, p99 0.35 ->
-0.21; the tsuno sample 1.10 -> 0.43; BENCHMARKS.md, session 17). Steps of 0.5 and 1
+0.21; the tsuno sample 1.10 -> 0.43; BENCHMARKS.md). Steps of 0.5 and 1
 spacing (a sixth and a third of the blur) left 0.72 and 0.62 JND on the strip's run
 of the pass on tiled dots (1.3 before it), 1.5 spacings 0.50.
 """
@@ -188,7 +188,7 @@ def long_wavelength(job, form, res, xy0, rho, frozen, diameters, phantom) -> Rel
     scale of a spacing too and pushes pairs that stood just outside the core under
     60 µm; with the compressed soft circles gone the core clears them (LED sample: 5,484
     pairs under 60 µm after the relaxation, 7,357 after a correction, 541 after 10 core
-    iterations) without bringing the grain back. Measured in BENCHMARKS.md (issue 24).
+    iterations) without bringing the grain back. Measured in BENCHMARKS.md.
     """
     res, xy0 = correction_passes(job, form, res, xy0, rho, frozen, diameters, phantom)
     res = core_iterations(job, form, res, xy0, rho, frozen, diameters, phantom)

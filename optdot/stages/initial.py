@@ -6,7 +6,7 @@ throw (:mod:`optdot.relax.lowpass`): one process removes it after relaxing, by o
 over the panel. A tile's correction (:func:`optdot.tiling.tasks.correct_tile`) solves
 over windows a tile wide, each with its own mean and walls, so it misses wavelengths of
 a tile and longer, and neighbouring windows disagree about them by 25-45 %
-(BENCHMARKS.md, issue 24): on a crop of the notebook panel tiled at 15 mm the strongest
+(BENCHMARKS.md): on a crop of the notebook panel tiled at 15 mm the strongest
 blob read 3.85 JND against 1.16 from one process. The grain is the throw's, so it is
 known before anything relaxes: every tile deposits its initial dots on one coarse
 lattice (:func:`coarse_part`), one task solves the panel's field from all of them

@@ -1,0 +1,60 @@
+"""What a new user meets first: messages that say what to do, help that says what an
+option does."""
+
+from __future__ import annotations
+
+import pytest
+
+from .conftest import SAMPLES, cli, one_error
+
+
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        ("0.1;0.2\n0.2;0.3\n", ["'0.1;0.2' is not a number", "semicolons", "comma-separated"]),
+        ("0.1\t0.2\n0.2\t0.3\n", ["tabs", "comma-separated"]),
+        ("left,right\n0.1,0.2\n", ["'left' is not a number", "a header row?", "#"]),
+        ("10,20\n30,40\n", ["10.0", "packing limit", "looks like percent"]),
+    ],
+)
+def test_a_csv_map_in_another_dialect_says_what_it_looks_like(tmp_path, text, words):
+    from .conftest import write_job
+
+    path = write_job(tmp_path, text)
+    msg = one_error(["check", path], 2, "density.csv")
+    assert all(w in msg for w in words), msg
+
+
+def test_a_real_typo_in_a_map_gets_no_hint(tmp_path):
+    from .conftest import write_job
+
+    path = write_job(tmp_path, "0.1,0.2\n0.2,x3\n")
+    msg = one_error(["check", path], 2, "line 2", "'x3' is not a number")
+    assert "(" not in msg.split("number", 1)[1], msg
+
+
+def test_a_relative_path_not_found_names_where_it_looked(tmp_path, monkeypatch):
+    """Pasting a walk-through in the wrong folder: the message shows the absolute path."""
+    monkeypatch.chdir(tmp_path)
+    msg = one_error(["check", "../samples/lgp/job.toml"], 2, "job file not found")
+    assert str(tmp_path.parent / "samples" / "lgp" / "job.toml") in msg, msg
+
+
+def test_check_quiet_prints_nothing_and_its_help_says_so():
+    rc, err, out = cli("check", SAMPLES / "led" / "job.toml", "-q")
+    assert rc == 0 and out == "" and err == []
+    rc, _, out = cli("check", "--help")
+    assert "progress bar" not in out and "Print nothing" in out
+
+
+@pytest.mark.parametrize("command", ["simulate", "design"])
+def test_every_seed_option_says_what_it_does(command):
+    rc, _, out = cli(command, "--help")
+    assert rc == 0
+    seed = out[out.index("--seed") :].split("\n  -")[0]
+    assert "Monte Carlo seed" in seed, seed
+
+
+def test_qa_help_names_the_dataset():
+    rc, _, out = cli("qa", "--help")
+    assert rc == 0 and "parquet" in out
