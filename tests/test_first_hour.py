@@ -58,3 +58,42 @@ def test_every_seed_option_says_what_it_does(command):
 def test_qa_help_names_the_dataset():
     rc, _, out = cli("qa", "--help")
     assert rc == 0 and "parquet" in out
+
+
+def test_a_pattern_judged_against_another_jobs_panel_is_refused(tmp_path, tiny_pattern):
+    """A pattern keeps its panel: QA, export and simulate with another job's panel say so
+    in one line (it read 250,244 dots as protruding and 22,805 JND before)."""
+    from optdot.io.patterns import save_pattern
+
+    save_pattern(tiny_pattern, tmp_path / "tiny.npz")
+    lgp = tmp_path / "lgp.toml"
+    np_map = "\n".join(",".join(["0.2"] * 30) for _ in range(20))
+    (tmp_path / "m.csv").write_text(np_map + "\n")
+    text = (SAMPLES / "lgp" / "job.toml").read_text()
+    lgp.write_text(text.replace("[dots]", '[density]\ngrid = "m.csv"\n\n[dots]'))
+    words = ("tiny.npz", "made for a panel of 3 x 2 mm", "30 x 20 mm", "the job it was made with")
+    one_error(["qa", tmp_path / "tiny.npz", "--job", lgp], 2, *words)
+    one_error(
+        ["export", tmp_path / "tiny.npz", "--job", lgp, "--gds", tmp_path / "x.gds"], 2, *words
+    )
+    one_error(["simulate", lgp, tmp_path / "tiny.npz", "--rays", 10_000], 2, *words)
+    assert not (tmp_path / "x.gds").exists()
+    # its own job is fine
+    rc, err, _ = cli("qa", tmp_path / "tiny.npz", "--job", SAMPLES / "tiny" / "job.toml", "-q")
+    assert rc == 0, err
+
+
+def test_failed_checks_name_their_places_as_numbers(tmp_path, tiny_pattern):
+    """A failed check's places print as ``(x, y) mm``, never numpy's repr."""
+    from optdot.io.patterns import save_pattern
+
+    save_pattern(tiny_pattern, tmp_path / "tiny.npz")
+    job = (SAMPLES / "tiny" / "job.toml").read_text()
+    (tmp_path / "density.csv").write_text(
+        "\n".join(",".join(["0.3"] * 12) for _ in range(8)) + "\n"
+    )
+    (tmp_path / "job.toml").write_text(job)
+    rc, _, out = cli("qa", tmp_path / "tiny.npz", "--job", tmp_path / "job.toml")
+    assert rc == 1 and "FAIL" in out
+    fails = [ln for ln in out.splitlines() if ln.startswith("FAIL") and " at " in ln]
+    assert fails and all(ln.endswith(" mm") and "np." not in ln for ln in fails), fails

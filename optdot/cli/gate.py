@@ -35,7 +35,33 @@ def _read_with_job(path: Path, job, opts=None):
     from ..exporters.readback import read_any
     from ..pipeline import with_job_panel
 
-    return with_job_panel(read_any(path, opts, box=job.box if job else None), job)
+    stored = path.suffix.lower() in (".npz", ".parquet")  # these keep their panel's box
+    pattern = read_any(path, opts, box=job.box if job and not stored else None)
+    made_for(path, pattern.box, job)
+    return with_job_panel(pattern, job)
+
+
+def made_for(path: Path, box, job) -> None:
+    """Refuse a pattern or dataset that stores its panel (``.npz``, ``.parquet``) when that
+    panel is not the job's: judged against another panel, its dots read as protruding or
+    missing by the hundred thousand (one line naming both panels instead).
+
+    Raises:
+        JobError: the panels differ by more than a micrometre.
+    """
+    if job is None or path.suffix.lower() not in (".npz", ".parquet"):
+        return
+    if all(abs(float(a) - float(b)) <= 1e-3 for a, b in zip(box, job.box, strict=True)):
+        return
+    from ..errors import JobError
+
+    def panel(b) -> str:
+        return f"{b[2] - b[0]:g} x {b[3] - b[1]:g} mm at ({b[0]:g}, {b[1]:g})"
+
+    raise JobError(
+        f"{path}: this pattern was made for a panel of {panel(box)}, not this job's "
+        f"{panel(job.box)} ({job.source or job.name}): give the job it was made with"
+    )
 
 
 @main.command()
@@ -159,6 +185,7 @@ def export(
         from ..io.dataset import open_dataset
 
         stream = open_dataset(source)  # gate and masks tile by tile
+        made_for(source, stream.box, job)
     else:
         pattern = _read_with_job(source, job)
     lines: list[str] = []
@@ -281,6 +308,7 @@ def qa(
 
         # a dataset is measured tile by tile with halos, in bounded memory
         dataset = open_dataset(pattern_file)
+        made_for(pattern_file, dataset.box, job)
         result = run_gate(
             None, job, collision, close, dataset=dataset, close_gap=close_gap, view=looks
         )
@@ -306,7 +334,7 @@ def _print_checks(result, echo=click.echo) -> None:
 
     for c in result.checks:
         mark = "PASS" if c.passed else ("WARN" if c.advisory else "FAIL")
-        where = f"  at {c.where[:3]}" if (c.where and not c.passed) else ""
+        where = f"  at {_places(c.where[:3])}" if (c.where and not c.passed) else ""
         echo(f"{mark}  {c.name}: {_num(c.value)} (limit {_num(c.limit)}){where}")
     for s in result.skipped:
         echo(f"SKIP  {s}")
@@ -320,6 +348,17 @@ def _print_checks(result, echo=click.echo) -> None:
             f"{vis['blobs_over_1_jnd']} blobs over 1 JND" + _panel_jnd(vis)
         )
     echo(f"verdict: {result.verdict}")
+
+
+def _places(where: list) -> str:
+    """Places as ``(x, y) mm, ...`` (mm, 3 decimals), whatever numbers they hold."""
+    out = []
+    for p in where:
+        try:
+            out.append("(" + ", ".join(f"{float(v):.3f}" for v in p) + ")")
+        except (TypeError, ValueError):
+            out.append(str(p))
+    return ", ".join(out) + " mm"
 
 
 def _panel_jnd(vis: dict) -> str:
