@@ -86,7 +86,7 @@ def test_a_dataset_holding_files_it_does_not_list_is_not_ours_to_replace(tiny, t
 def test_a_stray_part_in_a_dataset_is_refused(tiny, tiny_pattern):
     ds = tiny / "d.parquet"
     save_dataset(tiny_pattern, ds)
-    assert cli("qa", ds)[0] == 0
+    assert cli("qa", ds, "--no-job")[0] == 0
     shutil.copy(ds / "part-00000.parquet", ds / "part-00001.parquet")  # pandas reads both
     one_error(["qa", ds], 2, "part-00001.parquet", "not a part the manifest lists")
 

@@ -156,7 +156,9 @@ def test_outline_exports_read_back_by_klayout_and_ezdxf(tmp_path):
     areas = sorted(abs(Polygon(r).area) for r in rings)
     assert areas[1] - areas[0] == pytest.approx(dom.geometry.area, rel=1e-9)
     # QA of the mask alone rebuilds the outline from the OUTLINE layer
-    res = CliRunner().invoke(main, ["qa", str(gds), "-q", "--json", str(tmp_path / "q.json")])
+    res = CliRunner().invoke(
+        main, ["qa", str(gds), "-q", "--no-job", "--json", str(tmp_path / "q.json")]
+    )
     assert res.exit_code == 0, res.output
 
 

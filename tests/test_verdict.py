@@ -68,11 +68,17 @@ def test_a_pattern_a_viewer_sees_passes_with_warnings(led):
 
 
 def test_qa_without_a_job_names_what_it_did_not_check(led):
+    """Without a job the map's checks are skipped: the verdict says so and the exit code
+    is 5 (a script gating on 0 does not pass a pattern whose coverage nobody checked),
+    0 only when --no-job asks for the spacing alone."""
     rc, err, out = cli("qa", led / "p.csv")
-    assert rc == 0
+    assert rc == 5
+    assert len(err) == 1 and "incomplete" in err[0] and "--no-job" in err[0], err
     skips = [x for x in out.splitlines() if x.startswith("SKIP")]
     assert len(skips) == 3 and all("give --job" in x for x in skips)
     assert out.splitlines()[-1] == "verdict: PASS WITH WARNINGS"
+    rc, err, out = cli("qa", led / "p.csv", "--no-job")
+    assert rc == 0 and err == [] and out.splitlines()[-1] == "verdict: PASS WITH WARNINGS"
 
 
 def test_a_failing_gate_is_fail_and_numbers_are_not_reprs(tmp_path):

@@ -250,6 +250,12 @@ def export(
 @click.option("--distance", type=POSITIVE, help="Viewing distance, mm (overrides the preset).")
 @click.option("--luminance", type=POSITIVE, help="Screen luminance, cd/m² (overrides the preset).")
 @click.option("--psf", type=POSITIVE, help="Gaussian sigma of the stack's blur, mm (default 1.0).")
+@click.option(
+    "--no-job",
+    is_flag=True,
+    help="Judge the spacing alone, knowingly: without a job, coverage, empty cells and "
+    "visibility are not checked and the exit code is 5 unless this is given.",
+)
 @click.option("--max-jnd", type=POSITIVE, help="Gate: largest allowed |JND| (default: not gated).")
 @layer_options
 @click.option("--quiet", "-q", is_flag=True, help="Only the exit code.")
@@ -257,6 +263,7 @@ def export(
 def qa(
     pattern_file,
     job_path,
+    no_job,
     html_path,
     json_path,
     simulation_path,
@@ -274,7 +281,7 @@ def qa(
     quiet,
 ):
     """Check PATTERN_FILE (csv, npz, a .parquet dataset, gds, oas, dxf) before tooling:
-    exit 0 pass, 1 fail."""
+    exit 0 pass, 1 fail, 5 passed but incomplete (no --job: the map was not checked)."""
     from ..io.atomic import transaction
     from ..pipeline import qa as run_gate
     from ..quality.report import write_reports
@@ -323,7 +330,21 @@ def qa(
         write_reports(result, outs, title=f"optdot QA: {pattern_file.name}")
     if not quiet:
         _print_checks(result)
-    sys.exit(0 if result.passed else 1)
+    if not result.passed:
+        sys.exit(1)
+    if job is None and not no_job:
+        click.echo(
+            "optdot: incomplete: without --job the pattern's coverage, empty cells and "
+            "visibility were not checked (exit 5); give the job, or --no-job to judge the "
+            "spacing alone",
+            err=True,
+        )
+        sys.exit(INCOMPLETE)
+    sys.exit(0)
+
+
+#: Exit code of ``qa`` when the gate passed but the map's checks were skipped (no job).
+INCOMPLETE = 5
 
 
 def _print_checks(result, echo=click.echo) -> None:
