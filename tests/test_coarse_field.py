@@ -193,7 +193,7 @@ def test_a_moved_throw_stays_in_the_panel_and_out_of_zero_cells():
     # a field that pushes everything 0.4 mm down and left
     ux = np.full((g.ny, g.nx + 1), -0.4, np.float32)
     uy = np.full((g.ny + 1, g.nx), -0.4, np.float32)
-    push = CoarseField(g, np.zeros((g.ny, g.nx), np.float32), ux, uy, 10.0)
+    push = CoarseField(g, ux, uy, 10.0)
     moved = stages.coarse_shift(job, push, xy)
     assert not job.density.empty_mask(moved).any()
     assert (moved >= 0).all() and (moved <= 6.0).all()

@@ -348,3 +348,57 @@ def test_a_huge_value_is_not_echoed_whole(tmp_path):
     )
     err = one_error(["generate", tmp_path / "j.toml", "-o", tmp_path / "o.csv"], 2, "width")
     assert len(err) < 700 and " ... " in err
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_a_long_simulation_stops_at_the_next_batch(tmp_path, sig):
+    """``simulate --rays 1e10`` then Ctrl-C or SIGTERM: it kept tracing every ray (days);
+    now it stops at the next batch of rays, exit 130, and writes nothing."""
+    np.savetxt(tmp_path / "map.csv", np.full((20, 30), 0.2), delimiter=",")
+    text = (SAMPLES / "lgp" / "job.toml").read_text()
+    (tmp_path / "job.toml").write_text(
+        text.replace("[dots]", '[density]\ngrid = "map.csv"\n\n[dots]')
+    )
+    proc = subprocess.Popen(
+        [sys.executable, "-P", "-m", "optdot", "simulate", str(tmp_path / "job.toml"),
+         "--rays", str(10**10), "--json", str(tmp_path / "s.json")],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    time.sleep(4)  # imports, the kernels from the cache, the first batches
+    assert proc.poll() is None
+    t = time.monotonic()
+    proc.send_signal(sig)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert time.monotonic() - t < 30
+    assert err.strip().splitlines()[-1:] == ["optdot: interrupted"], err
+    assert not (tmp_path / "s.json").exists()
+
+
+def test_a_signal_after_the_command_ended_keeps_its_exit_code():
+    """SIGTERM in the last moments of a command whose outputs are complete ended the
+    process by the signal's default action (exit 143); after it ends, a signal exits 0,
+    and after a failure it is ignored (the failure's code stands)."""
+    from optdot.cli.app import user_errors
+    from optdot.errors import JobError
+
+    before = signal.getsignal(signal.SIGTERM)
+    try:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        assert user_errors(lambda: "made")() == "made"
+        handler = signal.getsignal(signal.SIGTERM)
+        assert callable(handler)
+        with pytest.raises(SystemExit) as e:
+            handler(signal.SIGTERM, None)
+        assert e.value.code == 0
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+        def fails():
+            raise JobError("bad")
+
+        with pytest.raises(SystemExit) as e:
+            user_errors(fails)()
+        assert e.value.code == 2
+        assert signal.getsignal(signal.SIGTERM) == signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGTERM, before)

@@ -653,3 +653,73 @@ def test_a_tiled_run_lets_go_of_each_tile_once_handed_over():
     # (3: one tile is empty): the wide pass's shifts are made from them, and they are
     # kept to the end for a shift lost with a dead worker
     assert alive_at_last == {"relax": 0, "correct": 3, "shift": 0, "legal": 1}
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_a_cluster_started_by_hand_gives_the_local_clusters_bytes(tmp_path):
+    """A ``dask scheduler`` without a dashboard and two ``dask worker`` processes started
+    by hand on this machine: ``--scheduler tcp://...`` writes the bytes the embedded local
+    cluster writes, and names no dashboard (the client's link template made one up)."""
+    import sys
+    import time
+
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    sched = subprocess.Popen(
+        [sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+         "--port", str(port), "--no-dashboard"], **quiet,
+    )  # fmt: skip
+    workers = [
+        subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "distributed.cli.dask_worker",
+                address,
+                "--nthreads",
+                "1",
+                "--no-dashboard",
+                "--memory-limit",
+                "2GB",
+            ],
+            **quiet,
+        )  # fmt: skip
+        for _ in range(2)
+    ]
+    try:
+        here = tmp_path / "local.parquet"
+        there = tmp_path / "remote.parquet"
+        optdot("generate", LED, *TILED, "--max-iter", "15", "-o", here)
+        deadline = time.monotonic() + 60
+        r = None
+        while time.monotonic() < deadline:  # the scheduler takes a moment to listen
+            r = optdot(
+                "generate", LED, *TILED, "--max-iter", "15", "--scheduler", address,
+                "-o", there, check=False,
+            )  # fmt: skip
+            if r.returncode != 4:
+                break
+            time.sleep(1)
+        assert r is not None and r.returncode == 0, r.stderr
+        said = r.stdout + r.stderr
+        assert "dashboard http" not in said and "dashboard n/a" in said, said
+        names = sorted(p.name for p in here.iterdir())
+        assert names == sorted(p.name for p in there.iterdir())
+        for name in names:
+            assert (here / name).read_bytes() == (there / name).read_bytes(), name
+    finally:
+        for p in [*workers, sched]:
+            p.terminate()
+        for p in [*workers, sched]:
+            try:
+                p.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                p.kill()

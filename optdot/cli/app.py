@@ -35,10 +35,12 @@ def user_errors(fn):
         from ..runtime.stop import interrupted
 
         previous = {s: signal.signal(s, _terminate) for s in (signal.SIGTERM, signal.SIGINT)}
+        done = False
         try:
             out = fn(*args, **kwargs)
             if interrupted():  # the interrupt was swallowed inside compiled code
                 raise KeyboardInterrupt
+            done = True
             return out
         except QAGateError as e:
             click.echo(f"optdot: {one_line(e)}", err=True)
@@ -58,9 +60,23 @@ def user_errors(fn):
             sys.exit(130)
         finally:
             for s, handler in previous.items():
-                signal.signal(s, handler)
+                # the default action (SIGTERM's: die, exit 143) would hide how the
+                # command ended from a signal that comes while the process exits
+                signal.signal(s, handler if handler != signal.SIG_DFL else _after(done))
 
     return wrapper
+
+
+def _after(done: bool):
+    """The handler for a signal that comes after the command ended: its outputs are
+    complete (exit 0) or it is already exiting with its error's code (ignored)."""
+    if not done:
+        return signal.SIG_IGN
+
+    def finished(signum, frame):
+        sys.exit(0)
+
+    return finished
 
 
 def _terminate(signum, frame):

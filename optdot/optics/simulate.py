@@ -35,6 +35,7 @@ from ..config.job import Job
 from ..config.light_guide import EDGE_FINISH, LightGuide
 from ..errors import JobError
 from ..pattern import DotSource
+from ..runtime.stop import check_interrupt
 from .trace import FATES, UNCOUPLED, trace
 
 #: Border left out of the figures when the job names no viewing area, mm.
@@ -267,6 +268,7 @@ def simulate(
     spot_counts = np.zeros(9, np.int64)
     r2 = (0.5 * spot_mm) ** 2
     for first in range(0, rays, BATCH):
+        check_interrupt()  # Ctrl-C or SIGTERM: stop at the next batch, nothing written
         count = min(BATCH, rays - first)
         fate, ex, ey = trace(
             seed,

@@ -81,13 +81,15 @@ class Formulation:
             saturates its cap on the first row's layering (a structure of one spacing
             that dots pinned ``r0`` from the wall cannot undo) and leaves the error along
             the wall at scales the eye sees; the wide pass sees past the row.
-        lowpass_last_steps: how many times the last (wide) pass is solved and applied, each
-            time from where the dots stand: one linear step misses where the map is steep
-            and sparse (a designed map's LED front: fill 0.01 beside 0.25 within 1 mm),
-            since a lattice cell then spans fills apart by 2x and the dots in it move by
-            one interpolated flux; the misses shrink step by step.
-        lowpass_last_cap: the last pass's displacement cap, in dot spacings (0: the first
-            passes' :data:`optdot.relax.lowpass.MAX_SHIFT`).
+        lowpass_last_steps: how many times the last (wide) pass is solved and applied on a
+            steep map (:func:`optdot.stages.wide_rounds`), each time from where the dots
+            stand: one linear step misses where the map is steep and sparse (a designed
+            map's LED front: fill 0.01 beside 0.25 within 1 mm), since a lattice cell then
+            spans fills apart by 2x and the dots in it move by one interpolated flux; the
+            misses shrink step by step.
+        lowpass_last_cap: the last pass's displacement cap in its rounds on a steep map, in
+            dot spacings (0, and on a map of one round: the first passes'
+            :data:`optdot.relax.lowpass.MAX_SHIFT`).
         lowpass_iter: L-BFGS iterations after each pass (0: none, the default: they bring
             grain back).
         lowpass_core_iter: L-BFGS iterations of the hard-core term alone after the

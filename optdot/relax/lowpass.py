@@ -414,13 +414,13 @@ def deposit_part(xy: np.ndarray, weight: np.ndarray, lattice: Lattice) -> Lattic
 @dataclass(frozen=True)
 class CoarseField:
     """The long-wavelength correction of a whole panel at once, solved on a coarse lattice
-    (:func:`coarse_field`): ``e`` ``[ny, nx]`` the blurred relative coverage error at the
-    cells' centres; ``ux`` ``[ny, nx + 1]`` and ``uy`` ``[ny + 1, nx]`` the displacement
-    that removes it (mm) on the cells' vertical and horizontal faces (0 on the walls), all
-    float32 on ``lattice``; ``cap`` the largest displacement, mm."""
+    (:func:`coarse_field`): ``ux`` ``[ny, nx + 1]`` and ``uy`` ``[ny + 1, nx]`` the
+    displacement that removes the blurred coverage error (mm) on the cells' vertical and
+    horizontal faces (0 on the walls), float32 on ``lattice``; ``cap`` the largest
+    displacement, mm. Every worker that moves dots holds each field a tiled run makes (the
+    wide pass's rounds), so it holds nothing more."""
 
     lattice: Lattice
-    e: np.ndarray
     ux: np.ndarray
     uy: np.ndarray
     cap: float
@@ -433,7 +433,7 @@ class CoarseField:
         """The field as named arrays (:meth:`from_arrays` reads them back, bit for bit)."""
         g = self.lattice
         box = np.array([g.x0, g.y0, g.hx, g.hy, self.cap], np.float64)
-        return {"box": box, "shape": np.array([g.nx, g.ny], np.int64), "e": self.e,
+        return {"box": box, "shape": np.array([g.nx, g.ny], np.int64),
                 "ux": self.ux, "uy": self.uy}  # fmt: skip
 
     @classmethod
@@ -441,7 +441,7 @@ class CoarseField:
         """The field :meth:`to_arrays` wrote."""
         x0, y0, hx, hy, cap = (float(v) for v in a["box"])
         nx, ny = (int(v) for v in a["shape"])
-        return cls(Lattice(x0, y0, hx, hy, nx, ny), a["e"], a["ux"], a["uy"], cap)
+        return cls(Lattice(x0, y0, hx, hy, nx, ny), a["ux"], a["uy"], cap)
 
     def displacement(self, at: np.ndarray) -> np.ndarray:
         """``[m, 2]`` displacement (mm, capped at ``cap``) of the dots at ``at``."""
@@ -451,6 +451,28 @@ class CoarseField:
         u[:, 1] = map_coordinates(self.uy, [row + 0.5, col], np.float64, order=1, mode="nearest")
         size = np.hypot(u[:, 0], u[:, 1])
         return u * np.minimum(1.0, self.cap / np.maximum(size, 1e-300))[:, None]
+
+
+def steepness(density: DensityMap, lattice: Lattice, sigma: float) -> float:
+    """The largest relative change of the map's fill (deposited on ``lattice`` and blurred
+    by ``sigma`` mm, as :func:`coarse_field` sees it) between two neighbouring live cells:
+    ``|c1 - c2| / min(c1, c2)``. Where it is large, the dots of one cell sit at fills far
+    apart and move by one interpolated flux, and one linear step of the field misses."""
+    g = lattice
+    target = density.deposited(g.x0, g.y0, g.hx, g.hy, g.nx, g.ny)
+    live = target > 0
+    c = gaussian_filter(target, (sigma / g.hy, sigma / g.hx), mode=BLUR_MODE)
+    del target
+    worst = 0.0
+    for a, b, la, lb in (
+        (c[:, 1:], c[:, :-1], live[:, 1:], live[:, :-1]),
+        (c[1:, :], c[:-1, :], live[1:, :], live[:-1, :]),
+    ):
+        both = la & lb
+        if both.any():
+            r = np.abs(a - b)[both] / np.maximum(np.minimum(a, b)[both], 1e-300)
+            worst = max(worst, float(r.max()))
+    return worst
 
 
 def coarse_field(
@@ -487,7 +509,6 @@ def coarse_field(
         a[live] -= a[live].mean()
     cover = gaussian_filter(target, s, mode=BLUR_MODE)  # the map's fill at the blur
     del target
-    e = np.where(live, a / np.maximum(cover, 1e-300), 0.0).astype(np.float32)
     psi = live_potential(a, live, g.hx, g.hy)
     del a
     # the flux on the cells' faces over the map's fill there, 0 on the walls' and on
@@ -502,4 +523,4 @@ def coarse_field(
     del cx
     cy = np.maximum(0.5 * (cover[1:, :] + cover[:-1, :]), floor)
     uy[1:-1, :] = np.diff(psi, axis=0) / g.hy / cy * (live[1:, :] & live[:-1, :])
-    return CoarseField(g, e, ux, uy, cap)
+    return CoarseField(g, ux, uy, cap)

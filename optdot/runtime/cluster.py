@@ -72,6 +72,15 @@ def single_threaded() -> None:
         numba.set_num_threads(1)
 
 
+def dashboard_of(client, sched: dict) -> str:
+    """The dashboard's address when the scheduler serves one (``services`` names it),
+    else "": a scheduler started with ``--no-dashboard`` has none, whatever address the
+    client's link template would make up."""
+    if "dashboard" not in (sched.get("services") or {}):
+        return ""
+    return client.dashboard_link or ""
+
+
 @dataclass
 class Cluster:
     """A connected Dask client and what it runs on.
@@ -266,9 +275,10 @@ def connect(
                 timeout + 5,
                 f"the Dask scheduler at {address}",
             )
-            info = client.scheduler_info(n_workers=-1)["workers"]
+            sched = client.scheduler_info(n_workers=-1)
+            info = sched["workers"]
             limits = [w.get("memory_limit") or 0 for w in info.values()]
-            yield Cluster(client, len(info), min(limits), client.dashboard_link or "", False)
+            yield Cluster(client, len(info), min(limits), dashboard_of(client, sched), False)
         except TimeoutError:
             raise ClusterError(f"the Dask scheduler at {address} has no workers") from None
         finally:

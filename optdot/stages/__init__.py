@@ -29,6 +29,7 @@ from .correction import (
     correction_region,
     hard_core,
     wide_part,
+    wide_rounds,
     wide_sigma,
     wide_solve,
 )
@@ -75,6 +76,7 @@ __all__ = [
     "thrown_areas",
     "throw",
     "wide_part",
+    "wide_rounds",
     "wide_sigma",
     "wide_solve",
 ]

@@ -35,7 +35,7 @@ from ..geometry.density import DensityMap
 from ..relax.lowpass import CoarseField
 from ..runtime.cluster import single_threaded
 from ..runtime.stop import check_interrupt
-from ..stages import formulation_for, wide_sigma
+from ..stages import wide_rounds
 from .plan import TilePlan, plan_tiles
 from .tasks import (
     FinalDots,
@@ -78,10 +78,9 @@ KIND_NAMES = {
 
 
 def wide_steps(job: Job) -> int:
-    """Rounds of the wide pass a tiled run of ``job`` makes (0 without a wide pass)."""
-    if wide_sigma(job) is None:
-        return 0
-    return max(1, formulation_for(job).lowpass_last_steps)
+    """Rounds of the wide pass a tiled run of ``job`` makes (0 without a wide pass;
+    :func:`optdot.stages.wide_rounds`)."""
+    return wide_rounds(job)
 
 
 def field_name(r: int) -> str:
