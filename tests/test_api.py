@@ -51,7 +51,7 @@ ALLOWED = {
         "stages",
         "tiling",
     },
-    "optics": {"config", "errors", "files", "geometry", "io", "pattern"},
+    "optics": {"config", "errors", "files", "geometry", "io", "pattern", "runtime"},
     "cli": {"config", "errors", "exporters", "io", "optics", "pipeline", "quality", "runtime"},
 }
 

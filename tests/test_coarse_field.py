@@ -218,3 +218,40 @@ def test_a_tiled_throw_loses_its_long_wavelength_grain():
         a = coverage_error(raw, area, job.density, 0.5 * sp, sigma * sp, job.box)
         b = coverage_error(moved, area, job.density, 0.5 * sp, sigma * sp, job.box)
         assert b.std() * gain < a.std(), sigma
+
+
+def test_only_a_steep_map_gets_the_wide_passs_rounds(tmp_path):
+    """The rounds (each a barrier over the tiles) go to maps whose blurred fill changes by
+    over 10 % between neighbouring lattice cells: a designed LED front does (0.4), a
+    panel's smooth gradient does not (0.02) and keeps one round; a uniform map reads 0."""
+    from optdot.config.schema import load_job
+    from optdot.relax.lowpass import steepness
+    from optdot.stages import wide_rounds
+    from optdot.stages.correction import STEEP, _wide_lattice
+    from optdot.stages.settings import formulation_for
+
+    from .conftest import write_job
+    from .test_visibility import _led_front_map
+
+    def job_of(grid, w, h, where):
+        where.mkdir()
+        return load_job(
+            write_job(where, grid, domain={"width": w, "height": h},
+                      density={"interpolation": '"linear"'})
+        )  # fmt: skip
+
+    steep = job_of(_led_front_map(), 16.0, 8.0, tmp_path / "a")
+    y = np.linspace(0, 1, 40)[:, None]
+    smooth = job_of(np.repeat(0.08 + 0.34 * y**1.5, 60, axis=1), 60.0, 40.0, tmp_path / "b")
+    flat = job_of(np.full((4, 6), 0.2), 6.0, 4.0, tmp_path / "c")
+    rounds = formulation_for(steep).lowpass_last_steps
+    assert rounds > 1
+    assert wide_rounds(steep) == rounds and wide_rounds(smooth) == 1 == wide_rounds(flat)
+    from optdot.stages import wide_sigma
+
+    def steep_of(job):
+        s = wide_sigma(job)
+        return steepness(job.density, _wide_lattice(job, s), s)
+
+    assert steep_of(steep) > 3 * STEEP and steep_of(smooth) < 0.5 * STEEP
+    assert steep_of(flat) == pytest.approx(0.0, abs=1e-9)

@@ -87,7 +87,7 @@ def test_a_correction_solved_tile_by_tile_is_seen_on_the_seams(led, monkeypatch)
     after it: its error piles onto the seams."""
     job, plan = led
     monkeypatch.setattr(tiling_run, "correct_tile", _own_window_only)
-    monkeypatch.setattr(tiling_run, "wide_sigma", lambda job: None)
+    monkeypatch.setattr(tiling_run, "wide_rounds", lambda job: 0)
     got = _profile(job, plan, _tiled(job, plan))
     assert got["seam_rms"] > 1.6 * got["inner_rms"], got
 

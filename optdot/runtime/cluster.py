@@ -73,12 +73,22 @@ def single_threaded() -> None:
 
 
 def dashboard_of(client, sched: dict) -> str:
-    """The dashboard's address when the scheduler serves one (``services`` names it),
-    else "": a scheduler started with ``--no-dashboard`` has none, whatever address the
-    client's link template would make up."""
-    if "dashboard" not in (sched.get("services") or {}):
+    """The dashboard's address when the scheduler serves one, else "". A scheduler started
+    with ``--no-dashboard`` still serves HTTP on the dashboard's port (health, metrics),
+    so ``services`` names it and the client's link template makes up an address: the
+    page is asked for (2 s at most, no proxy) and the address given only when it is
+    there."""
+    import urllib.request
+
+    link = client.dashboard_link or ""
+    if not link or "dashboard" not in (sched.get("services") or {}):
         return ""
-    return client.dashboard_link or ""
+    opener = urllib.request.build_opener(urllib.request.ProxyHandler({}))
+    try:
+        with opener.open(link, timeout=2) as r:
+            return link if r.status == 200 else ""
+    except (OSError, ValueError):
+        return ""
 
 
 @dataclass
