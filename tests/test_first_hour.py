@@ -97,3 +97,28 @@ def test_failed_checks_name_their_places_as_numbers(tmp_path, tiny_pattern):
     assert rc == 1 and "FAIL" in out
     fails = [ln for ln in out.splitlines() if ln.startswith("FAIL") and " at " in ln]
     assert fails and all(ln.endswith(" mm") and "np." not in ln for ln in fails), fails
+
+
+def test_the_reports_colour_bars_are_as_tall_as_their_plots():
+    """A wide map drawn at equal aspect is shorter than its axes' box; the report's colour
+    bar matches the map (a plain colour bar spans the box: taller than its plot)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from optdot.quality.report import _colorbar, _wrap
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    im = ax.imshow(np.zeros((10, 40)), extent=(0, 40, 0, 10))
+    _colorbar(fig, ax, im, "fill")
+    fig.canvas.draw()
+    cax = fig.axes[-1]
+    plot, bar = ax.get_window_extent(), cax.get_window_extent()
+    assert abs(bar.height - plot.height) < 0.02 * plot.height, (bar.height, plot.height)
+    assert 0 < bar.x0 - plot.x1 < 0.1 * plot.width  # beside it
+    plt.close(fig)
+    long = "Coverage against distance from walls (edges, holes, zero-fill borders)"
+    assert all(len(line) <= 52 for line in _wrap(long).splitlines())
+    assert _wrap(long).replace("\n", " ") == long

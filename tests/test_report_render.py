@@ -50,6 +50,11 @@ def test_html_report_screenshot(tmp_path):
     ).stdout
     shown = re.search(r'<div class="verdict" id="verdict">([^<]*)</div>', dom)
     assert shown and shown.group(1) == verdict
+    # the terms are explained; a table of blobs is shown only when there are blobs
+    assert 'id="terms"' in dom and "SEMU index" in dom and "limit, level" in dom
+    blobs = json.loads((tmp_path / "r.json").read_text())["metrics"]["visibility"]["blobs"]
+    assert ("<th>blob at (mm)</th>" in dom) == bool(blobs)
+    assert ('id="no-blobs"' in dom) == (not blobs)
     if verdict == "PASS WITH WARNINGS":
         assert "The gate passed, but:" in dom and "not checked" not in dom
     from PIL import Image

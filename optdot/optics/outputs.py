@@ -103,7 +103,10 @@ def luminance_png(path: Path, sim: Simulation, title: str) -> None:
             sim.measured.astype(float), levels=[0.5], colors="k", linewidths=0.9,
             linestyles="--",
         )  # fmt: skip
-    fig.colorbar(im, ax=ax, label="luminance / mean", shrink=0.8)
+    over = float(lum.max()) > 1 + span or float(lum.min()) < 1 - span  # hot spots: arrows
+    fig.colorbar(
+        im, ax=ax, label="luminance / mean", shrink=0.8, extend="both" if over else "neither"
+    )
     u9, _ = sim.uniformity9()
     rms, noise, _, _ = sim.rms()
     ax.set_title(

@@ -6,12 +6,14 @@ import base64
 import html
 import io
 import json
+import textwrap
 from pathlib import Path
 
 import numpy as np
 
 from ..io.atomic import atomic_path, expect_tail
 from .gate import QAResult
+from .visibility import BLOB_JND
 
 
 def write_json(result: QAResult, path: str | Path) -> None:
@@ -56,6 +58,30 @@ def _provenance_text(result: QAResult) -> str:
     rows += [("input", file(e)) for e in p.get("inputs", [])]
     body = "".join(f"<tr><th>{k}</th><td>{v}</td></tr>" for k, v in rows)
     return f"<table id='provenance' class='prov'>{body}</table>"
+
+
+#: The report's terms, in words (the report's last section before the numbers).
+GLOSSARY = """<h2 id="terms">Terms</h2><dl>
+<dt>limit, level</dt><dd>A gating check fails (✘, verdict FAIL) when its value is over its
+<i>limit</i>. An advisory check (marked "advisory", ⚠ when over) never fails the gate: its
+limit is the <i>level</i> above which the verdict is PASS WITH WARNINGS. "limit 1" on the
+JND line is such a level unless <code>qa.max_jnd</code> makes it a gate.</dd>
+<dt>JND</dt><dd>Just-noticeable difference: 1 is seen by half of the viewers at the
+viewing distance and luminance named, under 0.5 by nobody.</dd>
+<dt>SEMU index</dt><dd>A blob's contrast over the just-noticeable contrast SEMI D31
+gives for its area (1.97/S<sup>0.33</sup> + 0.72 %, S in mm²): a second opinion that
+ignores the viewing distance; over 1 is visible by that rule.</dd>
+<dt>ψ6 coherence</dt><dd>ψ6 is the six-fold bond order of each dot's neighbours (1 in a
+hexagonal lattice, near 0 in disorder); its mean over 2 mm patches measures local
+crystals whose orientation repeats: the moiré risk (optdot's patterns about 0.02; the gate's limit 0.1).</dd>
+<dt>coverage / map − 1 in the worst 0.1 mm band</dt><dd>The dots' area over the map's
+in bands 0.1 mm wide at the same distance from a wall (panel edge, hole, keep-out,
+zero-fill border), summed along every wall: the band furthest from 0, as a share. A
+bright line along the edges reads positive, a dark one negative.</dd>
+<dt>k·a, S</dt><dd>S is the structure factor (the dots' power spectrum, 1 for random
+dots); k·a a wavelength in units of the dot spacing a (k·a = 2π is one spacing). Low S at
+k·a under 1 (several spacings) means no long-wavelength grain a viewer could see.</dd>
+</dl>"""
 
 
 def _mark(c) -> str:
@@ -140,7 +166,7 @@ figure{{display:inline-block;margin:.5em}}img{{max-width:560px}}</style></head><
 <p>The overview shows the fill the dots realise, close pairs and defects; the zoom the
 densest region at true scale; the histogram the nearest-neighbour distances against the
 collision and too-close limits; the coverage map the error after smoothing; the spectrum a
-peak where the pattern orders (moiré risk).</p>{_grain_text(m)}{imgs}<h2>Numbers</h2>{numbers}</body></html>
+peak where the pattern orders (moiré risk).</p>{_grain_text(m)}{imgs}{GLOSSARY}<h2>Numbers</h2>{numbers}</body></html>
 """
     with atomic_path(path, expect_tail(b"</html>\n", str(path))) as tmp:
         tmp.write_text(doc, encoding="utf-8")
@@ -160,6 +186,12 @@ def _visibility_section(result: QAResult) -> str:
         f"<td>{b['area_mm2']:.3g}</td>"
         f"<td>{b['contrast_percent']:+.3f}</td><td>{b['jnd']:+.2f}</td><td>{b['semu']:.2f}</td></tr>"
         for b in vis["blobs"][:10]
+    )
+    table = (
+        "<table><tr><th>blob at (mm)</th><th>kind</th><th>area (mm²)</th><th>contrast (%)</th>"
+        "<th>JND</th><th>SEMU index |C|/C<sub>jnd</sub></th></tr>" + blobs + "</table>"
+        if blobs
+        else f"<p id='no-blobs'>No region reaches {BLOB_JND:g} JND: nothing to list.</p>"
     )
     x, y = vis["max_jnd_at_mm"]
     where = ""
@@ -195,8 +227,7 @@ PSF and the gate (<code>qa.max_jnd</code>, off by default) should be calibrated 
 photographed test plate (README, "The verdict").</p>
 <figure><img style="max-width:100%" alt="JND map" src="data:image/png;base64,{jnd_png}">
 <figcaption>JND map over the panel</figcaption></figure>
-<table><tr><th>blob at (mm)</th><th>kind</th><th>area (mm²)</th><th>contrast (%)</th><th>JND</th>
-<th>SEMU index |C|/C<sub>jnd</sub></th></tr>{blobs}</table>
+{table}
 <p>SEMU index: |C| over C<sub>jnd</sub> = 1.97/S<sup>0.33</sup> + 0.72 % (S the blob's
 area in mm²; the commonly cited form of SEMI D31), a second opinion that ignores distance;
 blobs are regions where |JND| ≥ 0.5, bright and dark ones apart (a bright line beside a
@@ -237,7 +268,8 @@ def _simulation_section(result: QAResult) -> str:
     fig, ax = plt.subplots(figsize=(10, max(2.5, min(8.0, 10 * h / max(w, 1e-9) + 1))))
     span = max(0.02, min(0.5, float(np.percentile(np.abs(lum - 1), 99)) if lum.size else 0.1))
     im = ax.imshow(lum, origin="lower", extent=ext, cmap="RdBu_r", vmin=1 - span, vmax=1 + span)
-    fig.colorbar(im, ax=ax, label="luminance / mean")
+    over = bool(lum.size) and (float(lum.max()) > 1 + span or float(lum.min()) < 1 - span)
+    _colorbar(fig, ax, im, "luminance / mean", "both" if over else "neither")
     for sx, sy, _ in spots:
         ax.add_patch(
             Circle(
@@ -251,7 +283,11 @@ def _simulation_section(result: QAResult) -> str:
             [area[1], area[1], area[3], area[3], area[1]],
             color="k", lw=1.0, ls="--",
         )  # fmt: skip
-    ax.set(xlabel="x (mm)", ylabel="y (mm)", title="Simulated luminance (circles: 9-point spots)")
+    ax.set(
+        xlabel="x (mm)",
+        ylabel="y (mm)",
+        title=_wrap("Simulated luminance (circles: 9-point spots)"),
+    )
     png = _png_base64(fig)
     region = (
         "the viewing area (dashed)"
@@ -297,7 +333,7 @@ def _jnd_figure(result: QAResult) -> str:
     v = max(2.0, float(np.abs(img).max()) if img.size else 2.0)
     v = min(v, 5.0)
     im = ax.imshow(img, origin="lower", extent=ext, cmap="RdBu_r", vmin=-v, vmax=v)
-    fig.colorbar(im, ax=ax, label="JND (1 = just visible)")
+    _colorbar(fig, ax, im, "JND (1 = just visible)", "both" if np.abs(img).max() > v else "neither")
     for ring in result.arrays.get("rings", []):
         loop = np.vstack([ring, ring[:1]])
         ax.plot(loop[:, 0], loop[:, 1], color="k", lw=0.7)
@@ -311,8 +347,25 @@ def _jnd_figure(result: QAResult) -> str:
     for b in result.metrics["visibility"]["blobs"][:10]:
         if abs(b["jnd"]) >= 1:
             ax.plot(b["x_mm"], b["y_mm"], marker="o", mfc="none", mec="k", ms=12)
-    ax.set(xlabel="x (mm)", ylabel="y (mm)", title="What a viewer sees (circles: over 1 JND)")
+    ax.set(
+        xlabel="x (mm)", ylabel="y (mm)", title=_wrap("What a viewer sees (circles: over 1 JND)")
+    )
     return _png_base64(fig)
+
+
+def _wrap(title: str, width: int = 52) -> str:
+    """A figure title broken into lines that fit the narrowest figure (5 in at 90 dpi)."""
+    return "\n".join(textwrap.wrap(title, width))
+
+
+def _colorbar(fig, ax, im, label: str, extend: str = "neither") -> None:
+    """A colour bar beside ``ax``, exactly as tall as the plot (an image of equal aspect
+    is shorter than its axes' box, which a plain colour bar spans); ``extend`` draws the
+    arrows of values beyond the scale (LED hot spots, say)."""
+    from mpl_toolkits.axes_grid1 import make_axes_locatable
+
+    cax = make_axes_locatable(ax).append_axes("right", size="4%", pad=0.08)
+    fig.colorbar(im, cax=cax, label=label, extend=extend)
 
 
 def _png_base64(fig) -> str:
@@ -343,7 +396,7 @@ def _figures(result: QAResult) -> list[tuple[str, str]]:
     img, ext = a["overview"]
     fig, ax = plt.subplots(figsize=(6, 4))
     im = ax.imshow(img, origin="lower", extent=ext, interpolation="nearest")
-    fig.colorbar(im, ax=ax, label="fill fraction")
+    _colorbar(fig, ax, im, "fill fraction")
     for ring in a["rings"]:
         loop = np.vstack([ring, ring[:1]])
         ax.plot(loop[:, 0], loop[:, 1], color="white", lw=0.7)
@@ -358,7 +411,7 @@ def _figures(result: QAResult) -> list[tuple[str, str]]:
     ax.set(
         xlabel="x (mm)",
         ylabel="y (mm)",
-        title="Overview: coverage; close pairs (orange), defects (x, +)",
+        title=_wrap("Overview: coverage; close pairs (orange), defects (x, +)"),
     )
     save(fig, "overview")
 
@@ -377,7 +430,7 @@ def _figures(result: QAResult) -> list[tuple[str, str]]:
         aspect="equal",
         xlabel="x (mm)",
         ylabel="y (mm)",
-        title="True-scale zoom of the densest region (close pairs in orange)",
+        title=_wrap("True-scale zoom of the densest region (close pairs in orange)"),
     )
     save(fig, "densest region")
 
@@ -390,7 +443,9 @@ def _figures(result: QAResult) -> list[tuple[str, str]]:
         ax.axvline(m["close_distance_mm"] * 1e3, color="orange", label="too close")
         ax.legend()
     ax.set(
-        xlabel="nearest-neighbour distance (µm)", ylabel="dots", title="Nearest-neighbour distances"
+        xlabel="nearest-neighbour distance (µm)",
+        ylabel="dots",
+        title=_wrap("Nearest-neighbour distances"),
     )
     save(fig, "nearest-neighbour histogram")
 
@@ -401,8 +456,8 @@ def _figures(result: QAResult) -> list[tuple[str, str]]:
         im = ax.imshow(
             rel * 100, origin="lower", extent=ext, cmap="RdBu_r", vmin=-v * 100, vmax=v * 100
         )
-        fig.colorbar(im, ax=ax, label="coverage error (%)")
-        ax.set(xlabel="x (mm)", ylabel="y (mm)", title="Coverage vs target (1 mm Gaussian)")
+        _colorbar(fig, ax, im, "coverage error (%)")
+        ax.set(xlabel="x (mm)", ylabel="y (mm)", title=_wrap("Coverage vs target (1 mm Gaussian)"))
         save(fig, "coverage error")
 
     if "walls" in a and "walls" in m:
@@ -416,7 +471,7 @@ def _figures(result: QAResult) -> list[tuple[str, str]]:
         ax.set(
             xlabel="distance from the nearest wall (mm)",
             ylabel="coverage / map - 1 (%)",
-            title="Coverage against distance from walls (edges, holes, zero-fill borders)",
+            title=_wrap("Coverage against distance from walls (edges, holes, zero-fill borders)"),
         )
         ax.legend()
         save(fig, "wall profile")
@@ -428,7 +483,7 @@ def _figures(result: QAResult) -> list[tuple[str, str]]:
         ax.set(
             xlabel="spatial frequency (1/mm)",
             ylabel="power (Poisson = 1)",
-            title="Radially averaged power spectrum, densest 2 mm tile",
+            title=_wrap("Radially averaged power spectrum, densest 2 mm tile"),
         )
         save(fig, "spectrum")
     return out
