@@ -13,16 +13,11 @@ import numpy as np
 
 from .config.job import Job
 from .errors import JobError, ResourceError
+from .geometry.limits import MAX_RANDOM_FILL
 from .runtime.cluster import embedded_workers
 from .runtime.cost import Cost, estimate_cost
 from .runtime.memory import BASE_BYTES, available_bytes, check_memory, estimate_bytes
 from .tiling.plan import TilePlan, plan_tiles
-
-#: Densest fill a random non-overlapping pattern reaches in practice, counting the gap
-#: (fill x ((diameter + gap) / diameter)²): OptDot's guarantee holds at 0.78 and fails at
-#: 0.80 on uniform maps (measured, 3 x 2 mm, 46 µm); random close packing of disks is
-#: ~0.82 (Berryman 1983), the hexagonal lattice 0.9069. Denser means a lattice: moiré.
-MAX_RANDOM_FILL = 0.80
 
 
 def _check_fill(job: Job, where: str) -> None:

@@ -33,7 +33,7 @@ ALLOWED = {
     "pattern": {"geometry"},
     "quality": {"config", "errors", "files", "geometry", "pattern", "io", "runtime", "spatial"},
     "exporters": {"errors", "files", "geometry", "io", "pattern", "runtime"},
-    "preflight": {"config", "errors", "runtime", "tiling"},
+    "preflight": {"config", "errors", "geometry", "runtime", "tiling"},
     "testing": {"relax"},
     "tiled": {"config", "errors", "files", "io", "pattern", "preflight", "runtime", "tiling"},
     "pipeline": {

@@ -393,3 +393,32 @@ def test_the_designed_job_is_the_original_with_its_map(tmp_path):
     a, b = load_job(src), load_job(tmp_path / "job.toml")
     assert np.array_equal(a.density.grid, b.density.grid)
     assert a.domain.geometry.equals(b.domain.geometry)
+
+
+@pytest.mark.parametrize("fill_range, iterations", [([0.3, 0.35], 1), ([0.3, 0.35], 3),
+                                                    ([0.0, 0.4], 3), ([0.0, 0.4], 2)])  # fmt: skip
+def test_design_honours_its_fill_range_with_few_iterations(tmp_path, fill_range, iterations):
+    """A floor above the continuation's start, or too few iterations to climb from 1/8 of
+    the top, gave maps under the floor (0.044 with [0.3, 0.35]) and tops far short of it
+    (0.11 of 0.4 in 3 iterations): the map stays in the range and reaches its top."""
+    text = (SAMPLES / "lgp" / "job.toml").read_text()
+    text = text.replace("fill_range = [0.0, 0.4]", f"fill_range = {fill_range}")
+    (tmp_path / "job.toml").write_text(text)
+    job = load_job(tmp_path / "job.toml", need_map=False)
+    fill = design(job, seed=1, rays=40_000, iterations=iterations).fill
+    lo, hi = fill_range
+    assert fill.min() >= lo - 1e-12 and fill.max() <= hi + 1e-12
+    if iterations > 1:
+        assert fill.max() == pytest.approx(hi)
+
+
+def test_design_never_writes_a_job_the_tool_refuses(tmp_path):
+    """fill_range up to 0.85 was taken and gave a job `check` refused (0.847 > 0.80):
+    the range's top must be under the densest fill a random pattern reaches."""
+    text = (SAMPLES / "lgp" / "job.toml").read_text()
+    (tmp_path / "job.toml").write_text(text.replace("[0.0, 0.4]", "[0.0, 0.85]"))
+    one_error(
+        ["design", tmp_path / "job.toml", "-o", tmp_path / "m.csv"], 2,
+        "design.fill_range", "< 0.8", "densest fill",
+    )  # fmt: skip
+    assert not (tmp_path / "m.csv").exists()

@@ -62,6 +62,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import JobError
+from ..geometry.limits import MAX_RANDOM_FILL
 
 EDGES = ("bottom", "top", "left", "right")
 DOT_SCATTER = ("lambertian", "extract")
@@ -319,10 +320,12 @@ def design_from(sec: dict[str, Any], base: Path, where: str) -> DesignParams:
     if not (
         len(fr) == 2
         and all(isinstance(v, int | float) and not isinstance(v, bool) for v in fr)
-        and 0 <= fr[0] < fr[1] <= 0.85
+        and 0 <= fr[0] < fr[1] < MAX_RANDOM_FILL
     ):
         raise JobError(
-            f"{where}: design.fill_range = {fr!r} must be [min, max] with 0 <= min < max <= 0.85"
+            f"{where}: design.fill_range = {fr!r} must be [min, max] with 0 <= min < max < "
+            f"{MAX_RANDOM_FILL:g} (the densest fill a random pattern reaches; 0.4 keeps 46 µm "
+            "dots 60 µm apart)"
         )
     iters = int(sec.get("iterations", 16))
     if not 1 <= iters <= 200:

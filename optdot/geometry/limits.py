@@ -14,6 +14,12 @@ MAX_EXTENT_MM = 10_000.0
 #: Dot diameters, mm (1 µm .. 10 mm).
 DIAMETER_RANGE_MM = (0.001, 10.0)
 
+#: Densest fill a random non-overlapping pattern reaches in practice, counting the gap
+#: (fill x ((diameter + gap) / diameter)²): OptDot's guarantee holds at 0.78 and fails at
+#: 0.80 on uniform maps (measured, 3 x 2 mm, 46 µm); random close packing of disks is
+#: ~0.82 (Berryman 1983), the hexagonal lattice 0.9069. Denser means a lattice: moiré.
+MAX_RANDOM_FILL = 0.80
+
 
 def validate_dots(path, xy: np.ndarray, diam: np.ndarray, box) -> None:
     """Refuse dots a mask cannot hold before any work is sized from them: NaN, diameters

@@ -116,7 +116,10 @@ def design(
     target = _target(p.target, ny, nx)
     total = rays or p.rays or RAYS_PER_CELL * nx * ny
     n_iter = iterations or p.iterations
-    level = hi * LEVEL_START if start is None else hi
+    # the level starts at LEVEL_START of the top (never under the floor) and reaches the
+    # top by the last update however few the iterations: fill_range is honoured
+    level = max(hi * LEVEL_START, lo) if start is None else hi
+    growth = max(LEVEL_GROWTH, (hi / level) ** (1.0 / max(1, n_iter - 2)))
     phi = np.full((ny, nx), level) if start is None else np.array(start, np.float64)
     live = inside > 0.5
     phi[~live] = 0.0
@@ -134,7 +137,7 @@ def design(
             report(figures)
         if last:
             break
-        level = min(hi, level * LEVEL_GROWTH)
+        level = min(hi, level * growth)
         phi = _step(phi, sim.counts, inside, live, target, p.smoothing, lo, level, seen)
     assert sim is not None
     return Designed(phi, (dx, dy), history, sim)
