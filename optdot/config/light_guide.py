@@ -283,6 +283,11 @@ def _leds(row: Any, k: int, box, where: str) -> Leds:
             )
     else:
         profile = _profile_table(profile, lab, where)
+    if profile == "collimated" and tilt == 0:
+        raise JobError(
+            f"{where}: {lab}.tilt = 0 with a collimated profile: the light runs parallel to "
+            "the guide's faces and never meets a dot (give a tilt > 0 degrees)"
+        )
     return Leds(edge, tuple(float(p) for p in pos), width, power, profile, tilt)
 
 

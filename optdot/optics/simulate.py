@@ -288,6 +288,12 @@ def simulate(
             *grid,
         )
         fates += np.bincount(fate, minlength=len(FATES))
+        if first == 0 and fates[UNCOUPLED] == count:
+            raise JobError(
+                f"{job.source or 'job'}: no light enters the guide: all {count:,} rays of "
+                "the first batch are turned back at the LED edge (a collimated tilt near "
+                "90 degrees meets the edge at grazing incidence)"
+            )
         out = fate == 0
         px, py = ex[out].astype(np.float64), ey[out].astype(np.float64)
         ix = np.clip(((px - x0) / (x1 - x0) * nbx).astype(np.int64), 0, nbx - 1)
