@@ -67,7 +67,7 @@ def simulate(job_file, pattern, rays, seed, bin_mm, spot_mm, border_mm, json_pat
     from ..optics.outputs import luminance_png, simulation_json, write_text
     from ..optics.simulate import simulate as run
 
-    job = load_job(job_file)
+    job = load_job(job_file, need_map=pattern is None)  # real dots need no map
     outs = {k: v for k, v in (("json", json_path), ("png", png_path)) if v is not None}
     inputs = (*job.inputs, *((pattern,) if pattern else ()))
     check_outputs(outs, inputs)

@@ -181,7 +181,7 @@ def job_from_dict(
     if "light_guide" in sections:
         guide = light_guide_from(sections["light_guide"], (x0, y0, x0 + width, y0 + height), where)
         if domain is not None:
-            check_leds_on(guide, domain.geometry, domain.box, where)
+            check_leds_on(guide, domain.slab or domain.geometry, domain.box, where)
     design = design_from(sections.get("design", {}), base, where)
     if "density" not in sections and "light_guide" in sections and not need_map:
         grid_path, grid = None, np.full((1, 1), 0.5 * sum(design.fill_range))
@@ -423,7 +423,8 @@ def _load_domain(dom: dict[str, Any], base: Path, where: str) -> Domain | None:
     if geom.is_empty or geom.area <= 0:
         raise GeometryError(f"{where}: nothing of the panel is left after the keep-outs")
     geom = orient_all(geom)
-    return Domain(geom, margin, False, str(base / dom["outline"]))
+    slab = orient_all(panel) if keep else None
+    return Domain(geom, margin, False, str(base / dom["outline"]), slab)
 
 
 def _floats(d: dict[str, Any]) -> dict[str, Any]:

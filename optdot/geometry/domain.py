@@ -31,12 +31,15 @@ class Domain:
         edge_margin: extra clearance of every dot from every edge, mm.
         rectangle: True for the plain ``[x0, x1] x [y0, y1]`` panel.
         source: where the outline came from (for messages).
+        slab: the panel before its keep-outs were cut out (the light guide's slab: a
+            keep-out is clear slab without dots), or None when it has none.
     """
 
     geometry: Polygon | MultiPolygon
     edge_margin: float = 0.0
     rectangle: bool = False
     source: str = "panel"
+    slab: Polygon | MultiPolygon | None = None
 
     @classmethod
     def rect(cls, x0: float, y0: float, x1: float, y1: float, edge_margin: float = 0.0) -> Domain:
@@ -52,6 +55,11 @@ class Domain:
     def polygons(self) -> list[Polygon]:
         """The polygons of the domain (one, unless keep-outs cut it apart)."""
         g = self.geometry
+        return list(g.geoms) if isinstance(g, MultiPolygon) else [g]
+
+    def slab_polygons(self) -> list[Polygon]:
+        """The polygons of the slab: the panel with its holes, keep-outs not cut out."""
+        g = self.geometry if self.slab is None else self.slab
         return list(g.geoms) if isinstance(g, MultiPolygon) else [g]
 
     def rings(self) -> list[np.ndarray]:

@@ -410,8 +410,9 @@ def _edge_frame(edge: str, pos: float, box):
 
 def _walls(job: Job) -> tuple[np.ndarray, np.ndarray]:
     """The side walls: the panel outline's outer ring as segments, with inward normals.
-    Holes and keep-outs are clear slab without dots."""
-    polys = job.domain.polygons
+    Holes and keep-outs are clear slab without dots (a keep-out touching the edge is no
+    notch in the slab)."""
+    polys = job.domain.slab_polygons()
     if len(polys) != 1:
         raise JobError(
             f"{job.source or 'job'}: the panel is {len(polys)} separate pieces; a light guide "
