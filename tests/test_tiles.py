@@ -723,3 +723,49 @@ def test_a_cluster_started_by_hand_gives_the_local_clusters_bytes(tmp_path):
                 p.wait(timeout=20)
             except subprocess.TimeoutExpired:
                 p.kill()
+
+
+def _edit_record(staging, edit) -> None:
+    from optdot.io.dataset_write import RESUME
+
+    doc = json.loads((staging / RESUME).read_text())
+    edit(doc)
+    (staging / RESUME).write_text(json.dumps(doc))
+
+
+def test_a_tampered_resume_record_remakes_the_parts_it_no_longer_vouches_for(tmp_path):
+    """A part entry turned into a string, a part key that is no number, an edited dot
+    count: each ended in an internal error (exit 70) or a message with no way forward;
+    the part is now remade, and the result is the uninterrupted run's."""
+    from optdot.errors import ExportError
+    from optdot.io.dataset_write import staging_dir
+
+    job = load_job(LED).with_overrides(max_iter=15)
+    plan = plan_tiles(job, side=10.0)
+    full = tmp_path / "full.parquet"
+    generate_tiled(job, full, plan=plan, executor=InProcess())
+    edits = {
+        "string": lambda d: d["parts"].update({k: "oops" for k in list(d["parts"])[:1]}),
+        "key": lambda d: d["parts"].update({"x": d["parts"].pop(next(iter(d["parts"])))}),
+        "count": lambda d: [e.update(count=e["count"] + 1) for e in list(d["parts"].values())[:1]],
+    }
+    for name, edit in edits.items():
+        out = tmp_path / f"{name}.parquet"
+        with pytest.raises(KeyboardInterrupt):
+            generate_tiled(job, out, plan=plan, executor=_Counting(stop_after=3))
+        _edit_record(staging_dir(out), edit)
+        again = _Counting()
+        generate_tiled(job, out, plan=plan, executor=again)
+        assert again.kinds["legal"] == 6, (name, again.kinds)  # 5, and the one dropped
+        for f in sorted(p.name for p in full.iterdir()):
+            assert (full / f).read_bytes() == (out / f).read_bytes(), (name, f)
+    # a directory of someone else's inside the staging directory: named, with the way out
+    out = tmp_path / "dir.parquet"
+    with pytest.raises(KeyboardInterrupt):
+        generate_tiled(job, out, plan=plan, executor=_Counting(stop_after=3))
+    (staging_dir(out) / "keep").mkdir()
+    with pytest.raises(ExportError) as e:
+        generate_tiled(job, out, plan=plan, executor=InProcess())
+    msg = str(e.value)
+    assert str(staging_dir(out)) in msg and "'keep'" in msg and "to start over" in msg, msg
+    assert (staging_dir(out) / "keep").is_dir()

@@ -208,9 +208,20 @@ def _open_staging(
             shutil.rmtree(staging)
         else:
             for k, entry in doc["parts"].items():
+                try:  # an entry edited or damaged by hand is dropped: the part is remade
+                    index = int(k)
+                except (TypeError, ValueError):
+                    continue
+                if not isinstance(entry, dict):
+                    continue
                 f = staging / str(entry.get("file", ""))
-                if f.is_file() and f.parent == staging and sha256_file(f) == entry.get("sha256"):
-                    parts[int(k)] = entry
+                if (
+                    f.is_file()
+                    and f.parent == staging
+                    and sha256_file(f) == entry.get("sha256")
+                    and _rows(f) == entry.get("count")
+                ):
+                    parts[index] = entry
             kept = doc.get("extras")
             for name, entry in (kept if isinstance(kept, dict) else {}).items():
                 if not isinstance(entry, dict):
@@ -226,8 +237,23 @@ def _open_staging(
     keep = {e["file"] for e in parts.values()} | {e["file"] for e in extras.values()} | {RESUME}
     for f in staging.iterdir():  # parts cut off by the interruption
         if f.name not in keep:
+            if f.is_dir() and not f.is_symlink():
+                raise ExportError(
+                    f"{staging}: holds a directory {f.name!r} that is not the run's: move it "
+                    f"out to resume, or delete {staging} to start over"
+                )
             f.unlink()
     return staging, parts, extras
+
+
+def _rows(path: Path) -> int:
+    """Rows a part file holds by its own footer (-1 when it cannot be read)."""
+    import pyarrow.parquet as pq
+
+    try:
+        return int(pq.ParquetFile(path).metadata.num_rows)
+    except Exception:  # noqa: BLE001 - any damage: the part is remade
+        return -1
 
 
 @contextlib.contextmanager
