@@ -10,6 +10,9 @@ from optdot.io.patterns import load_pattern
 
 from .conftest import SAMPLES, write_job
 
+#: the quick end-to-end check (README: ``pytest -m smoke``)
+pytestmark = pytest.mark.smoke
+
 TINY = SAMPLES / "tiny" / "job.toml"
 
 
