@@ -12,19 +12,21 @@ from .app import main, user_errors
 from .options import Finite
 
 RAYS = click.IntRange(1000, 10**10)
-
-
-@main.command()
-@click.argument("job_file", type=click.Path(path_type=Path))
-@click.argument("pattern", type=click.Path(path_type=Path), required=False)
-@click.option("--rays", type=RAYS, default=2_000_000, show_default=True, help="Rays to trace.")
-@click.option(
+#: ``--seed`` of ``simulate`` and ``design``.
+SEED = click.option(
     "--seed",
     type=click.IntRange(0, 2**63 - 1),
     default=0,
     show_default=True,
     help="Monte Carlo seed: the same job, rays and seed give the same figures.",
 )
+
+
+@main.command()
+@click.argument("job_file", type=click.Path(path_type=Path))
+@click.argument("pattern", type=click.Path(path_type=Path), required=False)
+@click.option("--rays", type=RAYS, default=2_000_000, show_default=True, help="Rays to trace.")
+@SEED
 @click.option(
     "--bin",
     "bin_mm",
@@ -147,13 +149,7 @@ def _print_simulation(sim, seconds: float, echo=click.echo) -> None:
     "--rays", type=RAYS, help="Rays of the last iteration (default: [design] rays or 400 per cell)."
 )
 @click.option("--iterations", type=click.IntRange(1, 200), help="Override design.iterations.")
-@click.option(
-    "--seed",
-    type=click.IntRange(0, 2**63 - 1),
-    default=0,
-    show_default=True,
-    help="Monte Carlo seed: the same job, rays and seed give the same figures.",
-)
+@SEED
 @click.option("--quiet", "-q", is_flag=True, help="No line per iteration.")
 @user_errors
 def design(job_file, output, png_path, job_out, rays, iterations, seed, quiet):
