@@ -190,3 +190,41 @@ def test_simulate_with_a_pattern_needs_no_map(tmp_path):
     )
     assert rc == 0 and "real dots" in out, err
     one_error(["simulate", SAMPLES / "lgp" / "job.toml", "--rays", 20_000], 2, "no [density] map")
+
+
+def test_a_pattern_of_another_panel_is_refused_in_any_format(tmp_path, tiny_pattern):
+    """A CSV (no panel of its own) whose dots lie far outside the job's panel: one line
+    naming how many, where they are and what to give (it read as 250,244 protruding dots
+    and 22,805 JND, or traced as 0 % efficiency)."""
+    from optdot.io.patterns import save_pattern
+    from optdot.pattern import Pattern
+
+    moved = Pattern(tiny_pattern.xy + [100.0, 0.0], tiny_pattern.diameter, (100, 0, 103, 2))
+    save_pattern(moved, tmp_path / "far.csv")
+    words = ("far.csv", "lie more than 1 mm outside", "the job it was made with")
+    one_error(["qa", tmp_path / "far.csv", "--job", SAMPLES / "tiny" / "job.toml"], 2, *words)
+
+
+def test_a_simulation_with_no_light_measured_writes_valid_json(tmp_path):
+    """Every measured bin dark gave "RMS nan%" and NaN in the JSON (which JSON readers
+    refuse): the figures of no light are null."""
+    import json
+
+    import numpy as np
+
+    from optdot.config.schema import load_job
+    from optdot.optics.outputs import simulation_json
+    from optdot.optics.simulate import simulate
+
+    np_map = "\n".join(",".join(["0.2"] * 30) for _ in range(20))
+    (tmp_path / "m.csv").write_text(np_map + "\n")
+    text = (SAMPLES / "lgp" / "job.toml").read_text()
+    (tmp_path / "job.toml").write_text(
+        text.replace("[dots]", '[density]\ngrid = "m.csv"\n\n[dots]')
+    )
+    sim = simulate(load_job(tmp_path / "job.toml"), 5_000, seed=1)
+    sim.counts = np.zeros_like(sim.counts)  # no light where it is measured
+    text = simulation_json(sim, load_job(tmp_path / "job.toml"), None, None)
+    assert "NaN" not in text
+    doc = json.loads(text, parse_constant=lambda c: pytest.fail(f"non-JSON constant {c}"))
+    assert doc["luminance_rms"] is None

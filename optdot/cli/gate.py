@@ -38,7 +38,38 @@ def _read_with_job(path: Path, job, opts=None):
     stored = path.suffix.lower() in (".npz", ".parquet")  # these keep their panel's box
     pattern = read_any(path, opts, box=job.box if job and not stored else None)
     made_for(path, pattern.box, job)
+    _on_the_panel(path, pattern, job)
     return with_job_panel(pattern, job)
+
+
+#: How far outside the job's panel a dot's centre may lie before the pattern is taken for
+#: another job's, mm (a dot a few micrometres out is a protrusion, for QA to report).
+FAR_OUT_MM = 1.0
+
+
+def _on_the_panel(path: Path, pattern, job) -> None:
+    """Refuse a pattern with dots far outside the job's panel (a CSV or mask of another
+    job: QA read them as protruding by the hundred thousand, the tracer lost them)."""
+    if job is None or not hasattr(pattern, "xy") or not len(pattern.xy):
+        return
+    from ..errors import JobError
+
+    x0, y0, x1, y1 = job.box
+    xy = pattern.xy
+    far = (
+        (xy[:, 0] < x0 - FAR_OUT_MM)
+        | (xy[:, 0] > x1 + FAR_OUT_MM)
+        | (xy[:, 1] < y0 - FAR_OUT_MM)
+        | (xy[:, 1] > y1 + FAR_OUT_MM)
+    )
+    n = int(far.sum())
+    if n:
+        lo, hi = xy.min(axis=0), xy.max(axis=0)
+        raise JobError(
+            f"{path}: {n:,} of its {len(xy):,} dots lie more than {FAR_OUT_MM:g} mm outside "
+            f"this job's panel [{x0:g}, {y0:g}, {x1:g}, {y1:g}] mm (the dots span "
+            f"[{lo[0]:.4g}, {lo[1]:.4g}, {hi[0]:.4g}, {hi[1]:.4g}]): give the job it was made with"
+        )
 
 
 def made_for(path: Path, box, job) -> None:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import tomllib
 from pathlib import Path
 
@@ -31,7 +32,19 @@ def simulation_json(sim: Simulation, job: Job, pattern: Path | None, dots: int |
         "luminance": np.round(sim.luminance, 5).tolist(),
         "luminance_rows": "row 0 = bottom (y = ymin)",
     }
-    return json.dumps(doc, indent=1, allow_nan=True) + "\n"
+    return json.dumps(_finite(doc), indent=1, allow_nan=False) + "\n"
+
+
+def _finite(v):
+    """``v`` with every NaN or infinity (a figure of no light: every bin dark) as null:
+    JSON has no NaN, and readers refuse it."""
+    if isinstance(v, float):
+        return v if math.isfinite(v) else None
+    if isinstance(v, dict):
+        return {k: _finite(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return [_finite(x) for x in v]
+    return v
 
 
 def read_simulation(path: Path) -> dict:

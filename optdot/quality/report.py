@@ -311,11 +311,11 @@ def _simulation_section(result: QAResult) -> str:
     )
     return f"""<h2>Simulated luminance</h2>
 <p>From <code>{html.escape(str(sim.get("file")))}</code>: {sim.get("rays", 0):,} rays through
-{mode}.{other} Efficiency <b>{sim["efficiency"]:.1%}</b> ± {sim["efficiency_sigma"]:.2%};
-9-point uniformity <b>{sim["uniformity_9point"]:.3f}</b> ± {sim["uniformity_9point_sigma"]:.3f};
-luminance RMS {sim["luminance_rms"]:.2%} over {region}
-(Monte Carlo noise alone {sim["luminance_rms_noise"]:.2%}), min {sim["luminance_min"]:.3f},
-max {sim["luminance_max"]:.3f} of the mean.{outside} Compare it with the JND map above: the JND map
+{mode}.{other} Efficiency <b>{_n(sim.get("efficiency"), ".1%")}</b> ± {_n(sim.get("efficiency_sigma"), ".2%")};
+9-point uniformity <b>{_n(sim.get("uniformity_9point"), ".3f")}</b> ± {_n(sim.get("uniformity_9point_sigma"), ".3f")};
+luminance RMS {_n(sim.get("luminance_rms"), ".2%")} over {region}
+(Monte Carlo noise alone {_n(sim.get("luminance_rms_noise"), ".2%")}), min {_n(sim.get("luminance_min"), ".3f")},
+max {_n(sim.get("luminance_max"), ".3f")} of the mean.{outside} Compare it with the JND map above: the JND map
 judges the dots against the map, this one the map and the dots against the LEDs.</p>
 <figure><img style="max-width:100%" alt="simulated luminance" src="data:image/png;base64,{png}"></figure>
 """
@@ -351,6 +351,12 @@ def _jnd_figure(result: QAResult) -> str:
         xlabel="x (mm)", ylabel="y (mm)", title=_wrap("What a viewer sees (circles: over 1 JND)")
     )
     return _png_base64(fig)
+
+
+def _n(v, spec: str) -> str:
+    """A figure of a simulation file in ``spec``, or "n/a" where it holds none (a JSON
+    null: no light reached the measured region)."""
+    return "n/a" if v is None else format(v, spec)
 
 
 def _wrap(title: str, width: int = 52) -> str:
