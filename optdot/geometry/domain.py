@@ -162,6 +162,16 @@ def _deposit_weights(n: int, k: int) -> scipy.sparse.csr_matrix:
     return scipy.sparse.csr_matrix((w, (rows, np.concatenate([cols, cols]))), shape=(n, n * k))
 
 
+def centres_in_box(x0: float, y0: float, cw: float, ch: float, nx: int, ny: int, box) -> np.ndarray:
+    """``[ny, nx]`` bool: the cells of a grid (lower-left corner ``x0, y0``, cells
+    ``cw x ch``, mm) whose centres lie in ``box`` (``(x0, y0, x1, y1)`` mm, edges in)."""
+    xc = x0 + (np.arange(nx) + 0.5) * cw
+    yc = y0 + (np.arange(ny) + 0.5) * ch
+    inx = (xc >= box[0]) & (xc <= box[2])
+    iny = (yc >= box[1]) & (yc <= box[3])
+    return iny[:, None] & inx[None, :]
+
+
 def polygon_cell_fractions(
     geom, x0: float, y0: float, cw: float, ch: float, nx: int, ny: int, rectangle: bool = False
 ) -> np.ndarray:

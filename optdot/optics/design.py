@@ -45,7 +45,7 @@ from scipy.ndimage import gaussian_filter, zoom
 
 from ..config.job import Job
 from ..errors import JobError
-from ..geometry.domain import polygon_cell_fractions
+from ..geometry.domain import centres_in_box, polygon_cell_fractions
 from .simulate import Coverage, Simulation, simulate
 
 #: Exponent of the multiplicative step.
@@ -179,10 +179,7 @@ def _in_area(job: Job, nx: int, ny: int, dx: float, dy: float) -> np.ndarray:
     if job.viewing_area is None:
         return np.ones((ny, nx), bool)
     x0, y0 = job.box[:2]
-    ax0, ay0, ax1, ay1 = job.viewing_area
-    xc = x0 + (np.arange(nx) + 0.5) * dx
-    yc = y0 + (np.arange(ny) + 0.5) * dy
-    seen = ((yc >= ay0) & (yc <= ay1))[:, None] & ((xc >= ax0) & (xc <= ax1))[None, :]
+    seen = centres_in_box(x0, y0, dx, dy, nx, ny, job.viewing_area)
     return seen if seen.any() else np.ones((ny, nx), bool)
 
 

@@ -277,12 +277,7 @@ def _simulation_section(result: QAResult) -> str:
             )
         )
     area = sim.get("viewing_area_mm")
-    if area:
-        ax.plot(
-            [area[0], area[2], area[2], area[0], area[0]],
-            [area[1], area[1], area[3], area[3], area[1]],
-            color="k", lw=1.0, ls="--",
-        )  # fmt: skip
+    _frame(ax, area)
     ax.set(
         xlabel="x (mm)",
         ylabel="y (mm)",
@@ -337,13 +332,7 @@ def _jnd_figure(result: QAResult) -> str:
     for ring in result.arrays.get("rings", []):
         loop = np.vstack([ring, ring[:1]])
         ax.plot(loop[:, 0], loop[:, 1], color="k", lw=0.7)
-    area = result.metrics["visibility"].get("viewing_area_mm")
-    if area is not None:
-        ax.plot(
-            [area[0], area[2], area[2], area[0], area[0]],
-            [area[1], area[1], area[3], area[3], area[1]],
-            color="k", lw=1.0, ls="--",
-        )  # fmt: skip
+    _frame(ax, result.metrics["visibility"].get("viewing_area_mm"))
     for b in result.metrics["visibility"]["blobs"][:10]:
         if abs(b["jnd"]) >= 1:
             ax.plot(b["x_mm"], b["y_mm"], marker="o", mfc="none", mec="k", ms=12)
@@ -351,6 +340,17 @@ def _jnd_figure(result: QAResult) -> str:
         xlabel="x (mm)", ylabel="y (mm)", title=_wrap("What a viewer sees (circles: over 1 JND)")
     )
     return _png_base64(fig)
+
+
+def _frame(ax, area) -> None:
+    """The viewing area ``(x0, y0, x1, y1)`` mm drawn dashed on ``ax`` (nothing for
+    None)."""
+    if area:
+        ax.plot(
+            [area[0], area[2], area[2], area[0], area[0]],
+            [area[1], area[1], area[3], area[3], area[1]],
+            color="k", lw=1.0, ls="--",
+        )  # fmt: skip
 
 
 def _n(v, spec: str) -> str:

@@ -56,6 +56,7 @@ from scipy import fft, ndimage
 
 from ..config.viewing import Viewing
 from ..geometry.density import DensityMap
+from ..geometry.domain import centres_in_box
 from .csf import barten_csf, cycles_per_degree, semu_threshold
 
 #: Highest spatial frequency the grid must carry, cycles/degree (the eye's optics cut
@@ -263,7 +264,7 @@ def visibility(
     jnd[~valid] = 0.0
     if area is None:
         return _numbers(g, view, jnd, contrast, rel, valid, jnd)
-    seen = area_cells(g, area)
+    seen = centres_in_box(g.x0, g.y0, g.cw, g.ch, g.nx, g.ny, area)
     m, arrays = _numbers(g, view, np.where(seen, jnd, 0.0), contrast, rel, valid & seen, jnd)
     k = int(np.argmax(np.abs(jnd)))
     iy, ix = divmod(k, g.nx)
@@ -271,16 +272,6 @@ def visibility(
     m["panel_max_jnd"] = float(abs(jnd[iy, ix]))
     m["panel_max_jnd_at_mm"] = [_x(g, ix), _y(g, iy)]
     return m, arrays
-
-
-def area_cells(g: LuminanceGrid, area: tuple[float, float, float, float]) -> np.ndarray:
-    """``[ny, nx]`` bool: the grid cells whose centres lie in ``area`` (``(x0, y0, x1,
-    y1)`` mm)."""
-    xc = g.x0 + (np.arange(g.nx) + 0.5) * g.cw
-    yc = g.y0 + (np.arange(g.ny) + 0.5) * g.ch
-    inx = (xc >= area[0]) & (xc <= area[2])
-    iny = (yc >= area[1]) & (yc <= area[3])
-    return iny[:, None] & inx[None, :]
 
 
 def _numbers(g: LuminanceGrid, view: Viewing, jnd, contrast, rel, valid, image):
