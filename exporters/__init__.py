@@ -17,12 +17,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from optdot.io.formats import EXPORTED
 from optdot.io.patterns import write_csv
 from optdot.pattern import DotSource
 
 from .options import ExportOptions
 
-FORMATS = ("gds", "oas", "dxf", "csv", "svg", "png", "speos")
+#: The formats :func:`write` writes (their records: :data:`optdot.io.formats.FORMATS`).
+FORMATS = EXPORTED
 
 
 def write(pattern: DotSource, fmt: str, path: str | Path, opts: ExportOptions | None = None) -> str:

@@ -28,6 +28,7 @@ from .errors import ExportError, JobError, QAGateError
 from .geometry.morton import spatial_order
 from .io.atomic import transaction
 from .io.dataset import is_dataset
+from .io.formats import FORMATS
 from .io.outputs import check_outputs
 from .io.patterns import save_pattern
 from .pattern import DotSource, Pattern
@@ -295,7 +296,6 @@ def qa(
 
 
 #: Formats written straight from a dataset's parts (hierarchical masks).
-STREAMED = ("gds", "oas", "dxf", "speos")
 
 
 def export(
@@ -306,6 +306,7 @@ def export(
     force: bool = False,
     stream=None,
     reports: Mapping[str, str | Path] | None = None,
+    overwrite: bool = True,
     written: Callable[[str, Path, str], None] | None = None,
     stage: Callable[[str], None] | None = None,
 ) -> QAResult:
@@ -319,9 +320,11 @@ def export(
         job: thresholds and map of the gate (None: default thresholds).
         options: :class:`optdot.exporters.ExportOptions` (None: defaults).
         force: write even if the gate fails.
+        overwrite: replace an existing mask (:data:`~optdot.io.formats.MASKS`) by a
+            different one; False keeps it (writing the same bytes again is allowed).
         stream: the :class:`~optdot.io.dataset.Dataset` the pattern is read from: the gate
-            then measures it tile by tile and the masks (:data:`STREAMED`) are written
-            from it tile by tile, hierarchically.
+            then measures it tile by tile and the streamed formats
+            (:data:`~optdot.io.formats.STREAMED`) are written from it tile by tile.
         reports: the gate's report, ``{"html": path, "json": path}`` (either or both),
             written with the outputs, also when the gate fails (then alone).
         written: told ``(format, path, what the file holds)`` for each output once all
@@ -333,9 +336,9 @@ def export(
 
     Raises:
         QAGateError: the gate failed and ``force`` is off; nothing was written.
-        ExportError: an output cannot be written, is given twice, or is an input of the
-            export (the job's files, the pattern's or dataset's own file); none was
-            replaced (one transaction).
+        ExportError: an output cannot be written, is given twice, is an input of the
+            export (the job's files, the pattern's or dataset's own file), or is a
+            different mask kept (``overwrite`` False); none was replaced (one transaction).
     """
     from . import exporters
     from .quality.report import write_reports
@@ -363,9 +366,10 @@ def export(
     options = replace(options or ExportOptions(), provenance=mask_lines(result.provenance))
     done: list[tuple[str, Path, str]] = []
     stage("writing")
-    with transaction():  # all outputs replaced together, or none
+    keep = () if overwrite else [p for f, p in outputs.items() if FORMATS[f].mask]
+    with transaction(keep, "give --overwrite to replace it, or another name"):
         for fmt, path in outputs.items():
-            if stream is not None and fmt in STREAMED:
+            if stream is not None and FORMATS[fmt].streamed:
                 src = stream
             else:
                 if pattern is None:

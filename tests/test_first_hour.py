@@ -3,6 +3,9 @@ option does."""
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
+
 import pytest
 
 from .conftest import SAMPLES, cli, one_error
@@ -228,3 +231,62 @@ def test_a_simulation_with_no_light_measured_writes_valid_json(tmp_path):
     assert "NaN" not in text
     doc = json.loads(text, parse_constant=lambda c: pytest.fail(f"non-JSON constant {c}"))
     assert doc["luminance_rms"] is None
+
+
+def test_an_existing_mask_is_kept_unless_overwrite(tmp_path):
+    """A signed-off mask is not replaced by a different one through a typo: the same run
+    again succeeds (same bytes), another pattern is refused and changes nothing (not even
+    the other outputs of the command), ``--overwrite`` replaces it."""
+    job = SAMPLES / "tiny" / "job.toml"
+    gds, oas, csv = tmp_path / "m.gds", tmp_path / "m.oas", tmp_path / "m.csv"
+    outs = ["--gds", gds, "--oas", oas, "--csv", csv, "-q"]
+    assert cli("export", job, *outs)[0] == 0
+    first = {p: p.read_bytes() for p in (gds, oas, csv)}
+    assert cli("export", job, *outs)[0] == 0  # same job, same seed: same bytes
+    msg = one_error(["export", job, "--seed", 7, *outs], 2, "m.gds", "--overwrite")
+    assert "nothing was written" in msg
+    assert {p: p.read_bytes() for p in (gds, oas, csv)} == first
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.csv", "m.gds", "m.oas"]
+    assert cli("export", job, "--seed", 7, *outs, "--overwrite")[0] == 0
+    assert gds.read_bytes() != first[gds] and csv.read_bytes() != first[csv]
+    # a CSV or a preview is no mask: replaced without the flag
+    assert cli("export", job, "--csv", csv, "-q")[0] == 0
+    assert csv.read_bytes() == first[csv]
+
+
+def test_a_guide_that_keeps_its_light_is_refused_in_a_second(tmp_path):
+    """Hardly a dot (a fill of 1e-5), no absorption, mirror edges: light that enters never
+    leaves (every ray ran to the event limit, days for a default run, Ctrl-C unheard). A
+    probe of the run's first rays refuses it in one line; the same guide with dots runs."""
+    import time
+
+    def job(fill: str) -> Path:
+        (tmp_path / "m.csv").write_text("\n".join([",".join([fill] * 30)] * 20) + "\n")
+        text = (SAMPLES / "lgp" / "job.toml").read_text()
+        text = text.replace("[dots]", '[density]\ngrid = "m.csv"\n\n[dots]')
+        for key, value in (("absorption", "0"), ("edge_reflectance", "1"), ("reflector", "1")):
+            text = re.sub(rf"^{key} = .*$", f"{key} = {value}", text, flags=re.M)
+        text = text.replace("[light_guide]", '[light_guide]\nedge_finish = "specular"')
+        (tmp_path / "job.toml").write_text(text)
+        return tmp_path / "job.toml"
+
+    t = time.perf_counter()
+    args = ["simulate", job("0.00001"), "--rays", 10**9, "--json", tmp_path / "s.json"]
+    msg = one_error(args, 2, "job.toml", "light cannot leave this guide", "absorption > 0")
+    assert time.perf_counter() - t < 30, msg  # not days
+    assert not (tmp_path / "s.json").exists()
+    rc, err, _ = cli("simulate", job("0.2"), "--rays", 20_000, "-q")
+    assert rc == 0, err
+
+
+def test_ray_counts_may_be_written_as_a_tracer_user_writes_them():
+    """``--rays 1e7`` (how BENCHMARKS and users write it) was refused as not an integer."""
+    import click
+
+    from optdot.cli.optics import RAYS
+
+    assert RAYS.convert("2e6", None, None) == 2_000_000
+    assert RAYS.convert("2_000_000", None, None) == RAYS.convert("2000000", None, None)
+    for bad in ("2.5", "1e11", "1e2", "nan", "e6"):
+        with pytest.raises(click.BadParameter):
+            RAYS.convert(bad, None, None)

@@ -20,6 +20,18 @@ from .options import (
 )
 
 
+def format_options(fn):
+    """One ``--<format> PATH`` option per format ``export`` writes
+    (:data:`optdot.io.formats.EXPORTED`), passed to the command by the format's name."""
+    from ..io.formats import EXPORTED, FORMATS
+
+    for name in reversed(EXPORTED):
+        fn = click.option(
+            f"--{name}", name, type=click.Path(path_type=Path), help=FORMATS[name].help
+        )(fn)
+    return fn
+
+
 def _inputs(source: Path, job_path) -> tuple:
     """(job or None, every input file): the job is ``source`` when it is a .toml file."""
     from ..config.schema import load_job
@@ -97,17 +109,7 @@ def made_for(path: Path, box, job) -> None:
 
 @main.command()
 @click.argument("source", type=click.Path(path_type=Path))
-@click.option("--gds", type=click.Path(path_type=Path), help="GDSII mask to write.")
-@click.option("--oas", type=click.Path(path_type=Path), help="OASIS mask to write.")
-@click.option("--dxf", type=click.Path(path_type=Path), help="DXF drawing to write.")
-@click.option("--csv", type=click.Path(path_type=Path), help="CSV pattern to write.")
-@click.option("--svg", type=click.Path(path_type=Path), help="SVG preview to write.")
-@click.option("--png", type=click.Path(path_type=Path), help="PNG preview to write.")
-@click.option(
-    "--speos",
-    type=click.Path(path_type=Path),
-    help="Ansys Speos 3D-texture mapping to write (.OPT3DMapping: position and scale per dot).",
-)
+@format_options
 @click.option(
     "--speos-reference-diameter",
     type=POSITIVE,
@@ -134,6 +136,11 @@ def made_for(path: Path, box, job) -> None:
 )
 @click.option("--force", is_flag=True, help="Write masks even if the QA gate fails.")
 @click.option(
+    "--overwrite",
+    is_flag=True,
+    help="Replace an existing mask (GDS/OAS/DXF) that differs from the new one.",
+)
+@click.option(
     "--html", "html_path", type=click.Path(path_type=Path), help="QA report (HTML) to write."
 )
 @click.option(
@@ -143,13 +150,6 @@ def made_for(path: Path, box, job) -> None:
 @user_errors
 def export(
     source,
-    gds,
-    oas,
-    dxf,
-    csv,
-    svg,
-    png,
-    speos,
     speos_reference_diameter,
     job_path,
     tolerance,
@@ -160,6 +160,7 @@ def export(
     top_cell,
     dxf_version,
     force,
+    overwrite,
     html_path,
     json_path,
     seed,
@@ -167,31 +168,24 @@ def export(
     method,
     formulation,
     quiet,
+    **paths,
 ):
     """Write masks and previews of SOURCE (a job file, or a pattern .csv/.npz/.parquet).
 
-    Existing output files are replaced (atomically: a failed run leaves them as they were).
+    An existing mask (GDS/OAS/DXF) is kept unless the new one has the same bytes (a
+    repeated run) or --overwrite is given; other outputs are replaced. Either way the
+    outputs are replaced together and atomically: a failed run leaves them as they were.
     Masks are written only if the QA gate passes, unless --force; the verdict is printed,
     and --html/--json keep the gate's report (written also when the gate fails).
     """
     from ..exporters.options import ExportOptions
     from ..pipeline import export as export_pattern
 
-    outputs = {
-        k: v
-        for k, v in (
-            ("gds", gds),
-            ("oas", oas),
-            ("dxf", dxf),
-            ("csv", csv),
-            ("svg", svg),
-            ("png", png),
-            ("speos", speos),
-        )
-        if v is not None
-    }
+    outputs = {k: v for k, v in paths.items() if v is not None}
     if not outputs:
-        raise click.UsageError("give at least one of --gds --oas --dxf --csv --svg --png --speos")
+        raise click.UsageError(
+            "give at least one of " + " ".join(f"--{k}" for k in paths)
+        )
     opts = ExportOptions(
         tolerance_um=tolerance,
         flatten=flatten,
@@ -230,6 +224,7 @@ def export(
             job,
             opts,
             force=force,
+            overwrite=overwrite,
             stream=stream,
             reports=reports,
             written=lambda fmt, path, what: lines.append(f"{path}: {what}"),

@@ -9,9 +9,9 @@ from pathlib import Path
 import click
 
 from .app import main, user_errors
-from .options import Finite
+from .options import Count, Finite
 
-RAYS = click.IntRange(1000, 10**10)
+RAYS = Count(1000, 10**10)
 #: ``--seed`` of ``simulate`` and ``design``.
 SEED = click.option(
     "--seed",

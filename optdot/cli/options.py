@@ -22,6 +22,22 @@ class Finite(click.FloatRange):
         return v
 
 
+class Count(click.IntRange):
+    """A whole number that may be written as a Monte Carlo user writes it: ``2000000``,
+    ``2e6`` or ``2_000_000`` (a value with a fraction, ``2.5``, is refused)."""
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, str):
+            text = value.strip().replace("_", "")
+            try:
+                number = float(text)
+            except ValueError:
+                number = None
+            if number is not None and number.is_integer() and "e" in text.lower():
+                value = int(number)
+        return super().convert(value, param, ctx)
+
+
 #: A number > 0 (mm, cd/m², JND...); a GDS/OAS layer or datatype number.
 POSITIVE = Finite(0.0, None, min_open=True)
 LAYER = click.IntRange(0, 65535)

@@ -12,20 +12,23 @@ A directory output (a dataset) is built beside its target and put in place whole
 
 Several outputs of one command form one :func:`transaction`: each is written and verified
 to its temporary file, and only when all are ready are they renamed, together; a failure or
-an interrupt before that replaces none of them and leaves no temporary file.
+an interrupt before that replaces none of them and leaves no temporary file. A
+transaction may keep some targets (signed-off masks): an existing file among them is
+replaced only by the same bytes, else none of the outputs is.
 """
 
 from __future__ import annotations
 
 import contextlib
 import contextvars
+import filecmp
 import ctypes
 import ctypes.util
 import os
 import shutil
 import stat
 import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
 from ..errors import ExportError
@@ -153,16 +156,26 @@ _PENDING: contextvars.ContextVar[list[tuple[Path, Path]] | None] = contextvars.C
 
 
 @contextlib.contextmanager
-def transaction() -> Iterator[None]:
+def transaction(keep: Iterable[str | Path] = (), hint: str = "") -> Iterator[None]:
     """Make every :func:`atomic_path` inside the block one all-or-nothing set of outputs.
 
     Each file is written and verified as usual, but renamed onto its target only when the
     block ends without an exception; on any exception (``KeyboardInterrupt`` included)
     every temporary file is removed and no target changes. Nested blocks join the outer one.
+
+    Args:
+        keep: targets that must not change: when one exists and its new content differs
+            byte for byte, nothing is replaced (writing the same bytes again is allowed,
+            so a repeated run succeeds).
+        hint: what the user gives to replace a kept file anyway (for the message).
+
+    Raises:
+        ExportError: a kept target would change (one line naming it and ``hint``).
     """
     if _PENDING.get() is not None:
         yield
         return
+    kept = {_real(p) for p in keep}
     pending: list[tuple[Path, Path]] = []
     token = _PENDING.set(pending)
     try:
@@ -181,8 +194,13 @@ def transaction() -> Iterator[None]:
         raise KeyboardInterrupt
     done = 0
     try:
-        for _, target in pending:
+        for tmp, target in pending:
             writable_target(target)
+            if _real(target) in kept and target.exists() and not filecmp.cmp(tmp, target, False):
+                raise ExportError(
+                    f"{target}: a different file is already there and is kept"
+                    f"{f' ({hint})' if hint else ''}; nothing was written"
+                )
         for tmp, target in pending:
             os.replace(tmp, target)
             done += 1
@@ -220,6 +238,11 @@ def expect_tail(tail: bytes, what: str) -> Verifier:
                 raise ExportError(f"{what}: the file is incomplete (no closing record)")
 
     return check
+
+
+def _real(path: str | Path) -> Path:
+    """``path`` with symbolic links and ``..`` resolved (how two names of one file compare)."""
+    return Path(os.path.realpath(path))
 
 
 def _mode_of(target: Path) -> int:

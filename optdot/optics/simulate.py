@@ -36,7 +36,7 @@ from ..config.light_guide import EDGE_FINISH, LightGuide
 from ..errors import JobError
 from ..pattern import DotSource
 from ..runtime.stop import check_interrupt
-from .trace import FATES, UNCOUPLED, trace
+from .trace import FATES, MAX_EVENTS, UNCOUPLED, UNFINISHED, trace
 
 #: Border left out of the figures when the job names no viewing area, mm.
 BORDER_MM = 5.0
@@ -267,26 +267,12 @@ def simulate(
     spots = _spot_centres(area if area is not None else box)
     spot_counts = np.zeros(9, np.int64)
     r2 = (0.5 * spot_mm) ** 2
+    scene = (emit, emit_start, theta, cdf, modes, walls, normals, phys, explicit, phi, g, *grid)
+    _check_light_leaves(job, seed, rays, scene)
     for first in range(0, rays, BATCH):
         check_interrupt()  # Ctrl-C or SIGTERM: stop at the next batch, nothing written
         count = min(BATCH, rays - first)
-        fate, ex, ey = trace(
-            seed,
-            first,
-            count,
-            emit,
-            emit_start,
-            theta,
-            cdf,
-            modes,
-            walls,
-            normals,
-            phys,
-            explicit,
-            phi,
-            g,
-            *grid,
-        )
+        fate, ex, ey = trace(seed, first, count, *scene)
         fates += np.bincount(fate, minlength=len(FATES))
         if first == 0 and fates[UNCOUPLED] == count:
             raise JobError(
@@ -320,6 +306,37 @@ def simulate(
         seed=seed,
         area=area,
     )
+
+
+#: Rays of the probe that checks, before the run, that light can leave the guide.
+PROBE_RAYS = 1000
+#: Events after which a probe ray counts as trapped.
+PROBE_EVENTS = 1 << 12
+
+
+def _check_light_leaves(job, seed: int, rays: int, scene: tuple) -> None:
+    """Refuse a set-up that keeps its light: a guide with nothing that lets light out
+    (no dots, no absorption, mirror edges) traces every ray to :data:`MAX_EVENTS`, days
+    for a default run. The first :data:`PROBE_RAYS` rays (the run's own) are traced with
+    at most :data:`PROBE_EVENTS` events each; when half of those that entered are still
+    inside, the run is refused.
+
+    Raises:
+        JobError: light stays in the guide (one line: the share, and what lets it out).
+    """
+    probe = np.array(scene[7], dtype=np.float64)
+    probe[8] = PROBE_EVENTS
+    count = min(rays, PROBE_RAYS)
+    fate, _, _ = trace(seed, 0, count, *scene[:7], probe, *scene[8:])
+    entered = int(np.count_nonzero(fate != UNCOUPLED))
+    inside = int(np.count_nonzero(fate == UNFINISHED))
+    if entered and inside >= 0.5 * entered:
+        raise JobError(
+            f"{job.source or 'job'}: light cannot leave this guide: {inside:,} of the first "
+            f"{entered:,} rays that entered are still inside after {PROBE_EVENTS:,} "
+            "reflections; give it a way out (dots on the map, absorption > 0, "
+            "edge_reflectance < 1, a reflector < 1)"
+        )
 
 
 def _spot_centres(box) -> np.ndarray:
@@ -359,7 +376,7 @@ def _physics(guide: LightGuide) -> np.ndarray:
             guide.reflector,
             guide.edge_reflectance,
             float(EDGE_FINISH.index(guide.edge_finish)),
-            0.0,
+            float(MAX_EVENTS),
         ]
     )
 

@@ -44,8 +44,9 @@ FATES = (
     "not_coupled",
     "unfinished",
 )
-#: Events after which a ray is given up (``unfinished``; reported, never silently dropped).
-MAX_EVENTS = 1 << 20
+#: Events (reflections, scatterings) after which a ray is given up (``unfinished``;
+#: reported, never silently dropped).
+MAX_EVENTS = 1 << 16
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
@@ -93,6 +94,21 @@ def _lambert_in(state, n):
         return state, False, 0.0, 0.0, 0.0
     sin_g = sin_a / n
     return state, True, math.sqrt(1.0 - sin_g * sin_g), sin_g, 2.0 * math.pi * v
+
+
+@nb.njit(cache=True, inline="always")
+def emitter_of(i, emit_start, n_emit):
+    """The emitter of global ray ``i``: the last ``k < n_emit`` with ``emit_start[k] <= i``
+    (``emit_start`` non-decreasing from 0; an emitter given no rays repeats its successor's
+    start), by bisection: log(LEDs) steps a ray, not one per LED."""
+    lo, hi = 0, n_emit
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if emit_start[mid] <= i:
+            lo = mid
+        else:
+            hi = mid
+    return lo
 
 
 @nb.njit(cache=True)
@@ -175,7 +191,7 @@ def trace(
         walls: ``[m, 4]`` segments (ax, ay, bx, by), mm. normals: ``[m, 2]`` inward.
         phys: ``[9]`` thickness mm, index, absorption 1/mm, dot albedo, extract (0/1),
             reflector, edge reflectance, edge finish (0 diffuse, 1 specular,
-            2 absorbing), unused.
+            2 absorbing), events after which a ray is given up (``unfinished``).
         explicit: trace real dots (True) or the coverage map ``phi``.
         phi: ``[ny, nx]`` coverage; g: ``[4]`` its x0, y0, dx, dy, mm.
         start: ``[cells + 1]`` CSR of dots by cell; dx_, dy_: ``[n]`` centres; r2: ``[n]``
@@ -191,15 +207,14 @@ def trace(
     ey = np.empty(count, np.float32)
     t, n, absorb, albedo = phys[0], phys[1], phys[2], phys[3]
     extract_mode, refl, edge_r, edge_mode = phys[4] > 0.5, phys[5], phys[6], int(phys[7])
+    max_events = int(phys[8])
     cos_c = math.sqrt(1.0 - 1.0 / (n * n))  # cosine of the critical angle
     n_emit = emit.shape[0]
     for j in nb.prange(count):
         i = first + j
         state = _mix(np.uint64(seed) * _M1 ^ np.uint64(i) * _M2 + _GOLDEN)
         # -- birth
-        k = 0
-        while k + 1 < n_emit and emit_start[k + 1] <= i:
-            k += 1
+        k = emitter_of(i, emit_start, n_emit)
         state, u = _uniform(state)
         state, zz = _uniform(state)
         off = (u - 0.5) * emit[k, 6]
@@ -244,7 +259,7 @@ def trace(
         wall = -1
         h = 1.0
         ux = uy = 0.0
-        for _ in range(MAX_EVENTS):
+        for _ in range(max_events):
             if new_leg:
                 h = math.sqrt(dxn * dxn + dyn * dyn)
                 if h > 1e-12:

@@ -10,15 +10,14 @@ its cores where the work spreads over them:
   on 2 workers), plus ~8 s to start the cluster and compile on it;
 - memory: :func:`optdot.runtime.memory.estimate_bytes` per process (one process), or per
   worker for its largest tile plus ~0.5 GiB for the command, scheduler and results held;
-- disk, bytes per dot, measured on the led sample (111,215 dots): Parquet dataset 18.7,
-  CSV 28.2, GDSII 28.0 (one reference a dot), OASIS 5.4, DXF 111.7 (a CIRCLE entity's
-  text), Speos 109.2; NPZ 16 (two float64).
+- disk: bytes per dot of each format (:data:`optdot.io.formats.FORMATS`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from ..io.formats import FORMATS
 from .memory import estimate_bytes
 
 #: Dots per second of one process at 200 iterations (2 cores).
@@ -29,16 +28,6 @@ TILED_DOTS_PER_S_PER_WORKER = 45_000
 SINGLE_START_S, TILED_START_S = 1.0, 8.0
 #: Memory of the command, scheduler and tiles held while a tiled run writes, bytes.
 TILED_BASE_BYTES = 512 * 2**20
-#: Bytes on disk per dot of each output format.
-DISK_BYTES_PER_DOT = {
-    "parquet": 19,
-    "npz": 16,
-    "csv": 29,
-    "gds": 28,
-    "oas": 6,
-    "dxf": 112,
-    "speos": 110,
-}
 
 
 @dataclass(frozen=True)
@@ -73,5 +62,9 @@ def estimate_cost(
     else:
         seconds = TILED_START_S + work / (TILED_DOTS_PER_S_PER_WORKER * max(workers, 1))
         peak = TILED_BASE_BYTES + workers * estimate_bytes(tile_dots, lbfgs_memory)
-    disk = {f: DISK_BYTES_PER_DOT[f] * n_dots for f in formats if f in DISK_BYTES_PER_DOT}
+    disk = {
+        f: FORMATS[f].bytes_per_dot * n_dots
+        for f in formats
+        if f in FORMATS and FORMATS[f].bytes_per_dot is not None
+    }
     return Cost(seconds, int(peak), disk)
