@@ -183,9 +183,7 @@ def export(
 
     outputs = {k: v for k, v in paths.items() if v is not None}
     if not outputs:
-        raise click.UsageError(
-            "give at least one of " + " ".join(f"--{k}" for k in paths)
-        )
+        raise click.UsageError("give at least one of " + " ".join(f"--{k}" for k in paths))
     opts = ExportOptions(
         tolerance_um=tolerance,
         flatten=flatten,

@@ -21,9 +21,9 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
-import filecmp
 import ctypes
 import ctypes.util
+import filecmp
 import os
 import shutil
 import stat

@@ -48,8 +48,7 @@ FORMATS: dict[str, Format] = {
         Format("png", "PNG preview to write.", None),
         Format(
             "speos",
-            "Ansys Speos 3D-texture mapping to write (.OPT3DMapping: position and scale "
-            "per dot).",
+            "Ansys Speos 3D-texture mapping to write (.OPT3DMapping: position and scale per dot).",
             110,
             streamed=True,
         ),
