@@ -109,14 +109,15 @@ def _placement(ref) -> np.ndarray:
 
 def _origins(path, rep, origin: np.ndarray, budget: list[int], gds: bool) -> np.ndarray:
     """``[k, 2]`` positions of a (repeated) placement, file units, in its parent cell."""
-    if rep.size <= 1:
-        return origin[None, :]
     cols, rows = rep.columns, rep.rows
+    # before the size: gdstk reads COLROW 0xFFFF as 2**64 - 1, whose square wraps to 1
     if gds and cols is not None and (cols > GDS_MAX_COLROW or rows > GDS_MAX_COLROW):
         raise PatternFileError(
-            f"{path}: an array reference of {cols} x {rows} exceeds GDSII's "
-            f"{GDS_MAX_COLROW} columns/rows (an overflowed AREF)"
+            f"{path}: an array reference of {cols & 0xFFFF} x {rows & 0xFFFF} (COLROW) "
+            f"exceeds GDSII's {GDS_MAX_COLROW} columns/rows (an overflowed AREF)"
         )
+    if rep.size <= 1:
+        return origin[None, :]
     budget[0] -= int(rep.size)
     if budget[0] < 0:
         raise ResourceError(

@@ -167,6 +167,27 @@ def test_an_overflowed_gdsii_array_is_refused(tmp_path):
         read_any(tmp_path / "a.gds")
 
 
+@pytest.mark.parametrize("colrow", [(0xFFFF, 0xFFFF), (0xFFFF, 1), (0x8000, 2)])
+def test_an_aref_whose_colrow_wrapped_is_refused_not_read_as_one_dot(tmp_path, colrow):
+    """COLROW 0xFFFF x 0xFFFF: gdstk reads each as 2**64 - 1, whose product wraps to a
+    size of 1, and the array was read as one dot (qa passed it)."""
+    import struct
+
+    lib = gdstk.Library(unit=1e-6, precision=1e-9)
+    dot = gdstk.Cell("DOT")
+    dot.add(gdstk.ellipse((0, 0), 23, tolerance=0.01, layer=1))
+    top = gdstk.Cell("TOP")
+    top.add(gdstk.Reference(dot, (100, 100), columns=3, rows=2, spacing=(60, 60)))
+    lib.add(dot, top)
+    lib.write_gds(str(tmp_path / "a.gds"))
+    raw = bytearray((tmp_path / "a.gds").read_bytes())
+    at = raw.find(bytes([0, 8, 0x13, 2]))  # the COLROW record: 8 bytes, type 0x1302
+    raw[at + 4 : at + 8] = struct.pack(">HH", *colrow)
+    (tmp_path / "a.gds").write_bytes(bytes(raw))
+    with pytest.raises(PatternFileError, match="overflowed AREF"):
+        read_any(tmp_path / "a.gds")
+
+
 def test_a_dot_beyond_the_gdsii_range_is_refused_whatever_box_it_claims(tmp_path):
     shutil.copytree(SAMPLES / "tiny", tmp_path / "tiny")
     (tmp_path / "far.csv").write_text("x_mm,y_mm,diameter_mm\n1,1,0.046\n3000,1,0.046\n")

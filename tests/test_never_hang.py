@@ -6,6 +6,7 @@ Each case here hung, filled the memory, printed tracebacks or ended in an intern
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -54,34 +55,68 @@ def test_a_garbage_scheduler_in_the_environment_is_named(monkeypatch):
     assert scheduler_address("tcp://10.0.0.1:8786") == "tcp://10.0.0.1:8786"
 
 
-def test_a_silent_scheduler_is_given_up_on_in_bounded_time():
+@contextlib.contextmanager
+def _server(banner: bytes):
+    """A TCP server on a free loopback port that accepts every connection and says
+    ``banner`` (nothing when empty): its address."""
     server = socket.socket()
     server.bind(("127.0.0.1", 0))
     server.listen(8)
     server.settimeout(0.2)
     held, stop = [], threading.Event()
 
-    def accept_and_say_nothing():
+    def accept():
         while not stop.is_set():
             try:
-                held.append(server.accept()[0])
+                c = server.accept()[0]
+                held.append(c)
+                if banner:
+                    c.sendall(banner)
             except OSError:
                 pass
 
-    t = threading.Thread(target=accept_and_say_nothing, daemon=True)
+    t = threading.Thread(target=accept, daemon=True)
     t.start()
     try:
-        t0 = time.monotonic()
-        with pytest.raises(ClusterError, match="did not answer|cannot reach"):
-            with connect(f"tcp://127.0.0.1:{server.getsockname()[1]}", timeout=1.0):
-                pass
-        assert time.monotonic() - t0 < 15  # the 10 s connect timeout never applied before
+        yield f"tcp://127.0.0.1:{server.getsockname()[1]}"
     finally:
         stop.set()
         t.join(2)
         for c in held:
             c.close()
         server.close()
+
+
+def test_a_silent_scheduler_is_given_up_on_in_bounded_time():
+    with _server(b"") as address:
+        t0 = time.monotonic()
+        with pytest.raises(ClusterError, match="did not answer|cannot reach"):
+            with connect(address, timeout=1.0):
+                pass
+        assert time.monotonic() - t0 < 15  # the 10 s connect timeout never applied before
+
+
+@pytest.mark.parametrize("banner", [b"SSH-2.0-OpenSSH_9.6\r\n", b"HTTP/1.1 400 Bad\r\n\r\n"])
+def test_a_server_that_speaks_first_is_not_taken_for_a_scheduler(tmp_path, banner):
+    """An SSH or HTTP server at the scheduler's address: its banner read as a frame
+    length made Dask ask for exabytes ("out of memory", exit 2); now the cluster's error,
+    exit 4, naming the address."""
+    with _server(banner) as address:
+        one_error(
+            [
+                "generate",
+                TINY,
+                "-o",
+                tmp_path / "d.parquet",
+                "--tiles",
+                "on",
+                "--scheduler",
+                address,
+            ],
+            4,
+            address,
+            "does not answer as a Dask scheduler",
+        )
 
 
 def test_the_embedded_cluster_is_private_loopback_tls_and_cleans_its_scratch():

@@ -26,7 +26,7 @@ from optdot.spatial.blocks import PairList
 from optdot.spatial.cellgrid import neighbor_pairs, pairs_within
 from optdot.stages import problem_of
 from optdot.testing import pairs_brute_force, penalty_reference
-from tests.conftest import SAMPLES, write_job
+from tests.conftest import SAMPLES, cli, write_job
 
 NOTCHED = [(0, 0), (4, 0), (4, 1.2), (3.2, 1.2), (3.2, 1.8), (4, 1.8), (4, 3), (0.6, 3), (0, 2.4)]
 
@@ -353,3 +353,51 @@ def test_deposited_fractions_are_the_clouds_deposit_inside_the_outline(weighted)
         rect.deposited_fractions(0.0, 0.0, cw, ch, nx, ny, weight),
         rect.cell_fractions(0.0, 0.0, cw, ch, nx, ny),
     )
+
+
+@pytest.mark.parametrize(
+    "suffix, hole",
+    [
+        (".wkt", [(0, 0), (3, 1), (1, 3)]),  # at the outer ring's corner vertex
+        (".wkt", [(5, 0), (6, 2), (4, 2)]),  # a hole vertex on an outer edge
+        (".dxf", [(0, 0), (3, 1), (1, 3)]),
+        (".dxf", [(10, 6), (7, 5), (9, 3)]),
+        (".geojson", [(5, 0), (6, 2), (4, 2)]),
+    ],
+)
+def test_a_hole_touching_the_outer_ring_at_a_point_exports_and_reads_back(
+    tmp_path, suffix, hole
+):
+    """A hole that meets the outline in one point (valid OGC geometry) went through
+    ``export`` and ``qa`` with exit 70 in a hostile round: every mask of it is written and
+    read back, with the job and without."""
+    import json
+
+    ring = [(0, 0), (10, 0), (10, 6), (0, 6)]
+    path = tmp_path / f"o{suffix}"
+    if suffix == ".wkt":
+        text = ", ".join(f"{x} {y}" for x, y in [*ring, ring[0]])
+        inner = ", ".join(f"{x} {y}" for x, y in [*hole, hole[0]])
+        path.write_text(f"POLYGON (({text}), ({inner}))\n")
+    elif suffix == ".geojson":
+        coords = [[list(p) for p in [*ring, ring[0]]], [list(p) for p in [*hole, hole[0]]]]
+        path.write_text(json.dumps({"type": "Polygon", "coordinates": coords}))
+    else:
+        doc = ezdxf.new()
+        doc.header["$INSUNITS"] = 4
+        doc.modelspace().add_lwpolyline(ring, close=True)
+        doc.modelspace().add_lwpolyline(hole, close=True)
+        doc.saveas(path)
+    (tmp_path / "d.csv").write_text("\n".join([",".join(["0.2"] * 10)] * 6) + "\n")
+    job = tmp_path / "job.toml"
+    job.write_text(
+        f'name = "hole"\n[domain]\noutline = "{path.name}"\n[density]\ngrid = "d.csv"\n'
+        "[dots]\ndiameter = 0.046\n"
+    )
+    masks = [tmp_path / n for n in ("m.gds", "m.oas", "m.dxf")]
+    rc, err, _ = cli("export", job, *sum([[f"--{m.suffix[1:]}", m] for m in masks], []), "-q")
+    assert rc == 0, err
+    for mask in masks:
+        for judged in (["--job", job], ["--no-job"]):
+            rc, err, _ = cli("qa", mask, *judged, "-q")
+            assert rc == 0, (mask.name, judged, err)

@@ -279,6 +279,13 @@ def connect(
                 raise ClusterError(
                     f"cannot reach the Dask scheduler at {address} ({one_line(e)})"
                 ) from None
+            except Exception as e:  # noqa: BLE001 - a server that is not a scheduler
+                # (an SSH or HTTP server speaks first: its banner read as a frame length
+                # asked for exabytes, a MemoryError, or garbage for the decoder)
+                raise ClusterError(
+                    f"{address} does not answer as a Dask scheduler ({one_line(e, True)}): "
+                    "is it the scheduler's address and port?"
+                ) from None
         try:
             _within(
                 lambda: client.wait_for_workers(1, timeout=timeout),
