@@ -365,9 +365,7 @@ def test_deposited_fractions_are_the_clouds_deposit_inside_the_outline(weighted)
         (".geojson", [(5, 0), (6, 2), (4, 2)]),
     ],
 )
-def test_a_hole_touching_the_outer_ring_at_a_point_exports_and_reads_back(
-    tmp_path, suffix, hole
-):
+def test_a_hole_touching_the_outer_ring_at_a_point_exports_and_reads_back(tmp_path, suffix, hole):
     """A hole that meets the outline in one point (valid OGC geometry) went through
     ``export`` and ``qa`` with exit 70 in a hostile round: every mask of it is written and
     read back, with the job and without."""
