@@ -46,17 +46,21 @@ SETTINGS = settings(
 WORK = Path(tempfile.mkdtemp(prefix="optdot-props-"))
 
 
-def outcome(fn, *args, valid: bool = False):
-    """Call ``fn``; an OptdotError is a fine answer, anything else fails the test. With
-    ``valid`` (the input is good by construction) a refusal fails the test too: refusing
-    everything must not pass these suites."""
+def outcome(fn, *args, valid: bool | None = None):
+    """Call ``fn``; an OptdotError (one line) is an answer, anything else fails the test.
+
+    ``valid`` is what the input is by construction: True (good) — a refusal fails the test,
+    so refusing everything cannot pass these suites; False (bad) — a load fails it, so
+    accepting everything cannot either; None (not decided by the strategy) — either."""
     try:
-        return fn(*args)
+        result = fn(*args)
     except OptdotError as e:
         text = str(e)
         assert text and "\n" not in text, repr(text)
-        assert not valid, f"a valid input was refused: {text}"
+        assert valid is not True, f"a valid input was refused: {text}"
         return None
+    assert valid is not False, f"an invalid input was accepted: {args!r:.300}"
+    return result
 
 
 NUMBER = re.compile(r"\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*")
@@ -163,6 +167,8 @@ csv_cells = st.one_of(
 @SETTINGS
 @given(st.lists(st.lists(csv_cells, min_size=0, max_size=5), max_size=6))
 @example([["0.1", "0.2", "0"], ["0.3", "0.45", " 1e-1"]])  # a good map is read as it is
+@example([["0.1", "0.2"], ["0.3", "-0.1"]])  # numbers, one negative: refused
+@example([["0.1", "0.2"], ["0.3"]])  # numbers, ragged: refused
 def test_any_grid_csv_loads_or_is_refused(rows):
     path = WORK / "grid.csv"
     path.write_text("\n".join(",".join(r) for r in rows), errors="surrogatepass")
@@ -174,6 +180,10 @@ def test_any_grid_csv_loads_or_is_refused(rows):
 
     nums = _numbers(rows)
     valid = bool(nums) and len({len(r) for r in nums}) == 1 and _valid_fills(nums)
+    if nums and not valid:  # plain numbers, but ragged or not fills: refused
+        valid = False
+    elif not valid:
+        valid = None  # blank cells, comments, text: decided by the reader's rules
     g = outcome(load, valid=valid)
     if valid:
         np.testing.assert_array_equal(g, np.array(nums))
@@ -220,7 +230,7 @@ def test_any_npy_grid_loads_or_is_refused(arr, damage, cut):
         and arr.dtype.kind in "biuf"
         and _valid_fills(arr.astype(np.float64))
     )
-    outcome(load, valid=valid)
+    outcome(load, valid=True if valid else (False if damage == 0 else None))
 
 
 # --- outlines -----------------------------------------------------------------------------
@@ -249,7 +259,7 @@ def test_any_wkt_outline_loads_or_is_refused(kind, rs, junk, close):
         body = "(" + body + ")"
     path = WORK / "o.wkt"
     path.write_text(f"{kind} {body}{junk}", errors="surrogatepass")
-    valid = False
+    valid = False if kind in ("LINESTRING", "POINT", "X") else None  # never a panel
     if (
         kind == "POLYGON"
         and rs
@@ -355,8 +365,8 @@ def test_any_pattern_csv_reads_or_is_refused(header, rows):
     path = WORK / "p.csv"
     path.write_text(header + "\n" + "\n".join(",".join(r) for r in rows), errors="surrogatepass")
     nums = _numbers([r for r in rows if r])
-    valid = header.lstrip("\ufeff") == "x_mm,y_mm,diameter_mm" and bool(nums)
-    if valid:
+    valid = None
+    if header.lstrip("\ufeff") == "x_mm,y_mm,diameter_mm" and nums:
         a = np.array(nums) if all(len(r) == 3 for r in nums) else None
         lo, hi = DIAMETER_RANGE_MM
         valid = a is not None and bool((a[:, 2] >= lo).all() and (a[:, 2] <= hi).all())
@@ -385,6 +395,10 @@ small_arrays = hnp.arrays(
 @example({"other": np.zeros(2)}, True)
 def test_any_pattern_npz_reads_or_is_refused(arrays, good_core):
     valid = good_core and set(arrays) <= {"other"}
+    if not good_core and "xy" not in arrays:
+        valid = False  # no dots at all: refused
+    elif not valid:
+        valid = None
     if good_core:  # a plausible core so the readers get past the first key
         arrays.setdefault("xy", np.array([[0.5, 0.5], [1.0, 1.0], [1.5, 0.5]]))
         arrays.setdefault("diameter", np.array(0.046))
@@ -431,6 +445,6 @@ def test_any_damaged_mask_reads_or_is_refused(masks, fmt, flips, cut):
     path = WORK / f"m.{fmt}"
     path.write_bytes(bytes(data))
     intact = bytes(data) == masks[fmt]
-    p = outcome(read_any, path, valid=intact)
+    p = outcome(read_any, path, valid=True if intact else None)
     if intact:
         assert p.n == 869
