@@ -1,8 +1,8 @@
 """Coverage against distance from the nearest wall, measured part by part.
 
 A wall is where dots may not go: the map's box, the outline's edges and holes, the
-borders of the zero-fill cells. Dots used to layer against walls (a bright first row, a
-dark band behind it); this profile shows that: coverage over the map's fill in bands of
+borders of the zero-fill cells. Dots packed against a wall layer there (a bright first
+row, a dark band behind it); this profile shows that: coverage over the map's fill in bands of
 ``band`` mm out to ``reach`` mm, summed along every wall so the noise averages out.
 
 How. The panel is cut into square blocks of :data:`BLOCK_MM`; only blocks with a wall

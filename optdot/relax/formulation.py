@@ -226,8 +226,8 @@ class Formulation:
 #: 0.28 % to 0.015 % RMS (uniform 0.20 map; the second pass takes the LED sample's
 #: largest JND from 3.7 to 3.0), and 10 iterations of the hard core alone after them
 #: clear most pairs under 60 µm. The second pass blurs over 3 spacings, not 0.7: the
-#: largest JND of led 2.18 -> 0.69, tsuno 1.84 -> 1.10, chokka 0.45 -> 0.29, the grain
-#: on the uniform map unchanged at 0.015 % (BENCHMARKS.md).
+#: largest JND of led 0.69 against 2.18, tsuno 1.10 against 1.84, chokka 0.29 against
+#: 0.45, the grain on the uniform map 0.015 % either way (BENCHMARKS.md).
 PRESETS: dict[str, Formulation] = {
     "paper": Formulation(),
     "optdot": Formulation(

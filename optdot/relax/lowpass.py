@@ -33,7 +33,7 @@ what the eye sees (BENCHMARKS.md):
   map's blurred fill). Moving dots by ``∇φ`` with ``∇²φ`` the relative error changes
   the coverage by ``-c e - ∇c·∇φ``: where the map is steep (an LED edge: fill 0.03 to
   0.17 within 1.25 mm of the wall) the second term is as large as the first and the
-  step misses. The led sample's strongest blob 0.96 -> 0.48 JND, p99 0.49 -> 0.24.
+  step misses: the led sample's strongest blob 0.96 JND, p99 0.49, against 0.48 and 0.24.
 - Its error is the cells' excess each divided by the share of the blur that falls on
   live cells around it (the lit cells inside the outline) before it is blurred: every
   cell's excess is then spread over live cells whole, as the mirror does at the box,
@@ -42,8 +42,8 @@ what the eye sees (BENCHMARKS.md):
   map (a hole, a notch, a zero region), solved by conjugate gradients preconditioned by
   the box's cosine transform (:func:`live_potential`); the box's transform alone, when
   every cell is live. A flow through a notch the dots cannot follow left the outline
-  sample 0.23 % short at the notch's convex corner (-1.41 JND); now +0.41 JND there
-  and nowhere over 0.5.
+  sample 0.23 % short at the notch's convex corner (-1.41 JND); on the live cells,
+  +0.41 JND there and nowhere over 0.5.
 """
 
 from __future__ import annotations

@@ -9,10 +9,10 @@ run adds every tile's part and gets the panel's field, where its windows a tile 
 could not (each solves with its own mean and walls). The lattice is also what the wide
 pass wants: against the half-spacing grid of the first pass it leaves less at the walls,
 where the map is deposited as the dots are and nothing flows across the walls' faces
-(notebook strip 140 x 20 mm, one process: strongest blob 1.09 -> 0.54 JND, p99 0.35 ->
-0.21; the tsuno sample 1.10 -> 0.43; BENCHMARKS.md). Steps of 0.5 and 1
-spacing (a sixth and a third of the blur) left 0.72 and 0.62 JND on the strip's run
-of the pass on tiled dots (1.3 before it), 1.5 spacings 0.50.
+(notebook strip 140 x 20 mm, one process: strongest blob 0.54 JND on the lattice, 1.09
+on the grid, p99 0.21 against 0.35; the tsuno sample 0.43 against 1.10; BENCHMARKS.md).
+Steps of 0.5 and 1 spacing (a sixth and a third of the blur) left 0.72 and 0.62 JND on
+the strip's run of the pass on tiled dots (1.3 without the pass), 1.5 spacings 0.50.
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ blob read 3.85 JND against 1.16 from one process. The grain is the throw's, so i
 known before anything relaxes: every tile deposits its initial dots on one coarse
 lattice (:func:`coarse_part`), one task solves the panel's field from all of them
 (:func:`coarse_solve`), and each tile's throw is moved along it (:func:`coarse_shift`)
-before it relaxes. Strongest blob 1.18 JND, p99 0.65 (1.30 before). The same field
+before it relaxes: strongest blob 1.18 JND, p99 0.65 (1.30 without the field). The same field
 applied at the correction instead (subtracted from the windows' error) read 1.28 JND,
 and on the led sample brought the wall bands' p99 from 1.49 to 1.70 JND: the throw's
 error by a wall is not the relaxed pattern's, which the phantoms reshape there; moved

@@ -32,7 +32,7 @@ runs over the whole panel; a task only chooses which dots are mobile and which a
    deposited on one coarse lattice, one task solves the panel's field from all the
    deposits (summed in tile order: the same bytes on any worker count), and each
    relaxation moves its throw and its halo's along it first
-   (:func:`optdot.stages.coarse_shift`; 1.18 JND, p99 1.30 -> 0.65). Every throw is
+   (:func:`optdot.stages.coarse_shift`; 1.18 JND, p99 0.65 against 1.30 without). Every throw is
    made before any tile relaxes; a resumed run throws every tile again for the field.
 
 2. **relax** (:func:`relax_tile`, phase 1). Each tile relaxes its own dots with the job's
@@ -84,9 +84,9 @@ runs over the whole panel; a task only chooses which dots are mobile and which a
    all of them, and each tile's corrected dots move along it. A barrier: no guarantee
    pass starts before every tile is corrected, so every tile's corrected dots are held
    at once; the merged dots, needed by no task after the corrections, are let go
-   instead. Notebook crop tiled at 15 mm: strongest blob 1.18 -> 0.51 JND, p99 0.65 ->
-   0.18 (one process 0.87 / 0.23); led tiled: coverage RMS (0.5 mm) 0.065 % -> 0.029 %,
-   seams 0.021 % against 0.032 % inside.
+   instead. Notebook crop tiled at 15 mm: strongest blob 0.51 JND, p99 0.18 (without the
+   pass 1.18 / 0.65; one process 0.87 / 0.23); led tiled: coverage RMS (0.5 mm) 0.029 %
+   (0.065 % without), seams 0.021 % against 0.032 % inside.
 
 5. **guarantee** (:func:`legalize_tile`). The formulation's hard-core iterations (which
    clear the pairs under 60 µm the correction made), then :func:`optdot.stages.finish`:
