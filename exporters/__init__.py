@@ -17,13 +17,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from optdot.io.formats import EXPORTED
+from optdot.formats import EXPORTED
 from optdot.io.patterns import write_csv
 from optdot.pattern import DotSource
 
 from .options import ExportOptions
 
-#: The formats :func:`write` writes (their records: :data:`optdot.io.formats.FORMATS`).
+#: The formats :func:`write` writes (their records: :data:`optdot.formats.FORMATS`).
 FORMATS = EXPORTED
 
 

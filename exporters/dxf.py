@@ -143,7 +143,8 @@ def write_dxf(pattern: DotSource, path: str | Path, opts: ExportOptions) -> None
         fh.write(head)
         chunk = 100_000
         done = 0
-        for _, part_xy, part_d in pattern.chunks():  # one part, or one per tile (datasets)
+        for _, part_xy, footprints in pattern.chunks():  # one part, or one per tile
+            part_d = footprints.diameter
             for a in range(0, len(part_xy), chunk):
                 xy = part_xy[a : a + chunk]
                 cols = [xy[:, 0].tolist(), xy[:, 1].tolist()]

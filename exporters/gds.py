@@ -23,6 +23,7 @@ import numpy as np
 
 from optdot.errors import ExportError
 from optdot.geometry.morton import spatial_order
+from optdot.geometry.shapes import CIRCLE, Footprints, Kind, polygon_vertices
 from optdot.io.atomic import atomic_path, expect_tail
 from optdot.pattern import DotSource
 
@@ -38,19 +39,13 @@ MIN_DOT_VERTICES = 8
 MAX_POINTS = 8190
 
 
-def circle_vertices(radius_um: float, tolerance_um: float) -> int:
-    """Vertices of a polygon within ``tolerance_um`` of a circle of ``radius_um`` (µm)."""
-    t = min(tolerance_um, radius_um)
-    return max(8, math.ceil(math.pi / math.acos(1.0 - t / radius_um)))
-
-
-def _check_extent(box, xy: np.ndarray | None = None, diameter=None) -> None:
+def _check_extent(box, xy: np.ndarray | None = None, dots: Footprints | None = None) -> None:
     """Refuse coordinates a 32-bit GDSII integer cannot hold at 1 nm (they would wrap:
     3000 mm reads back as -1294.97 mm): the panel box and, when given, the dots
-    themselves (``xy`` ``[n, 2]`` mm, ``diameter`` mm), whatever box they claim."""
+    themselves (``xy`` ``[n, 2]`` mm, their footprints), whatever box they claim."""
     far = max(abs(float(v)) for v in box)
     if xy is not None and len(xy):
-        r = 0.5 * float(np.max(diameter))
+        r = float(np.max(dots.extent()))
         far = max(far, float(np.max(np.abs(xy))) + r)
     if not far <= MAX_EXTENT_MM:
         raise ExportError(
@@ -88,13 +83,25 @@ def _placed(dot: gdstk.Cell | str, xy_um: np.ndarray) -> gdstk.Reference:
     return ref
 
 
-def dot_cell(name: str, r_um: float, opts: ExportOptions) -> gdstk.Cell:
-    """The cell of one dot: a circle polygon of radius ``r_um`` centred on the origin.
+def dot_cell(name: str, kind: Kind, size_um: np.ndarray, opts: ExportOptions) -> gdstk.Cell:
+    """The cell of one dot: its footprint (``kind`` of ``size_um``, µm, at angle 0)
+    centred on the origin, a polygon within the tolerance.
 
     Raises:
         ExportError: the tolerance needs too many vertices, or too few to read as round.
     """
-    nv = circle_vertices(r_um, opts.tolerance_um)
+    if kind is not CIRCLE:
+        dot = gdstk.Cell(name)
+        ring = kind.outline(np.asarray(size_um) * 1e-3, 0.0, opts.tolerance_um * 1e-3) * 1e3
+        if len(ring) > MAX_POINTS:
+            raise ExportError(
+                f"--tolerance {opts.tolerance_um} µm needs {len(ring)} vertices per dot "
+                f"(max {MAX_POINTS})"
+            )
+        dot.add(gdstk.Polygon(ring, layer=opts.layer, datatype=opts.datatype))
+        return dot
+    r_um = 0.5 * float(size_um[0])
+    nv = polygon_vertices(r_um, opts.tolerance_um)
     if nv > MAX_POINTS:
         raise ExportError(
             f"--tolerance {opts.tolerance_um} µm needs {nv} vertices per dot (max {MAX_POINTS})"
@@ -131,38 +138,42 @@ def _unique(name: str, what: str, names: dict[str, str]) -> str:
 
 
 class _Cells:
-    """The cells of a mask as a dot source's chunks come in: one dot cell per diameter
-    (rounded to the 1 nm database unit), created on first use, and the dots of each
-    chunk as references (one per size, an explicit repetition in Morton order: small
-    deltas) or, flattened, as plain polygons.
+    """The cells of a mask as a dot source's chunks come in: one dot cell per footprint
+    size (its parameters rounded to the 1 nm database unit), created on first use, and
+    the dots of each chunk as references (one per size, an explicit repetition in Morton
+    order: small deltas) or, flattened, as plain polygons.
 
     Args:
-        uniform: the one diameter of every dot, mm, or None when sizes vary.
+        src: the dot source: its kind, and its one diameter, mm, when every dot has it
+            (then the one cell is ``opts.dot_cell``, drawn at that diameter exactly).
     """
 
-    def __init__(self, uniform: float | None, opts: ExportOptions) -> None:
-        self.uniform = uniform
+    def __init__(self, src: DotSource, opts: ExportOptions) -> None:
+        self.kind = src.kind
+        self.uniform = src.uniform_diameter
         self.opts = opts
-        self.dots: dict[int, gdstk.Cell] = {}
+        self.dots: dict[tuple[int, ...], gdstk.Cell] = {}
         self.names = {opts.top_cell: "the top cell"}
 
-    def dot(self, size_nm: int) -> gdstk.Cell:
-        if size_nm not in self.dots:
+    def dot(self, key: tuple[int, ...]) -> gdstk.Cell:
+        """The cell of the footprint of size ``key`` (nm per parameter)."""
+        if key not in self.dots:
+            what = "x".join(str(v) for v in key)
             if self.uniform is not None:
-                name, r_um = self.opts.dot_cell, 0.5 * self.uniform * 1e3
+                name, size_um = self.opts.dot_cell, np.array([self.uniform * 1e3])
             else:
-                name, r_um = f"{self.opts.dot_cell}_{size_nm}", 0.5 * size_nm * 1e-3
-            name = _unique(name, f"the {size_nm} nm dot", self.names)
-            self.dots[size_nm] = dot_cell(name, r_um, self.opts)
-        return self.dots[size_nm]
+                name, size_um = f"{self.opts.dot_cell}_{what}", np.array(key) * 1e-3
+            name = _unique(name, f"the {what} nm dot", self.names)
+            self.dots[key] = dot_cell(name, self.kind, size_um, self.opts)
+        return self.dots[key]
 
-    def fill(self, cell: gdstk.Cell, xy: np.ndarray, diameter: np.ndarray) -> int:
-        """Put the dots ``xy`` (``[n, 2]`` mm, diameters ``[n]`` mm) into ``cell``;
+    def fill(self, cell: gdstk.Cell, xy: np.ndarray, dots: Footprints) -> int:
+        """Put the dots ``xy`` (``[n, 2]`` mm, their footprints) into ``cell``;
         returns the number of elements a GDSII file holds for them."""
-        d_nm = np.round(np.broadcast_to(diameter, (len(xy),)) * 1e6).astype(np.int64)
-        for size in np.unique(d_nm):
-            sel = xy[d_nm == size] * 1e3
-            cell.add(_placed(self.dot(int(size)), sel[spatial_order(sel)]))
+        keys = np.round(dots.size * 1e6).astype(np.int64)
+        for key in np.unique(keys, axis=0):
+            sel = xy[(keys == key).all(axis=1)] * 1e3
+            cell.add(_placed(self.dot(tuple(int(v) for v in key)), sel[spatial_order(sel)]))
         if self.opts.flatten:
             cell.flatten()
         return len(xy)
@@ -206,7 +217,7 @@ def write_gds(src: DotSource, path: str | Path, opts: ExportOptions) -> None:
     cell, a tiled dataset's into one cell ``T<i>_<j>`` per tile that the top cell places;
     the top cell also holds the outline. Written atomically, verified before it replaces
     anything (ENDLIB, the whole record stream, the reference and polygon counts)."""
-    cells = _Cells(src.uniform_diameter, opts)
+    cells = _Cells(src, opts)
     top = _top(src, opts, oasis=False)
     counts = {"refs": 0, "polys": 0}
 
@@ -245,7 +256,7 @@ def write_oas(src: DotSource, path: str | Path, opts: ExportOptions) -> None:
     one reference per size with an explicit repetition (16 B per dot: 1.9 GB at 1.2·10⁸
     dots). Offsets are relative to the chunk's first dot in Morton order, so the deltas
     gdstk rounds to the 1 nm grid are each exact (no drift across a tile)."""
-    cells = _Cells(src.uniform_diameter, opts)
+    cells = _Cells(src, opts)
     top = _top(src, opts, oasis=True)
     lib = gdstk.Library("OPTDOT", unit=1e-6, precision=1e-9)
     for label, xy, d, alone in _chunks(src):

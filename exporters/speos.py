@@ -56,7 +56,8 @@ def write_speos(pattern: DotSource, path: str | Path, opts: ExportOptions) -> No
     with atomic_path(path, _verify(path, lambda: written)) as tmp, open(tmp, "wb") as fh:
         fh.write(head)
         written += len(head)
-        for _, xy, d in pattern.chunks():  # one part, or one per tile (datasets)
+        for _, xy, footprints in pattern.chunks():  # one part, or one per tile (datasets)
+            d = footprints.diameter
             for a in range(0, len(xy), BATCH):
                 data = lines(xy[a : a + BATCH], d[a : a + BATCH])
                 fh.write(data)

@@ -13,9 +13,10 @@ from typing import Any, Protocol
 import numpy as np
 
 from .geometry.domain import Domain
+from .geometry.shapes import CIRCLE, Footprints, Kind
 
-#: ``(label, xy [n, 2] mm, diameter [n] mm)``: one chunk of a dot source (a tile).
-Chunk = tuple[tuple[int, int], np.ndarray, np.ndarray]
+#: ``(label, xy [n, 2] mm, footprints of the n dots)``: one chunk of a dot source (a tile).
+Chunk = tuple[tuple[int, int], np.ndarray, Footprints]
 
 
 class DotSource(Protocol):
@@ -31,6 +32,10 @@ class DotSource(Protocol):
     @property
     def box(self) -> tuple[float, float, float, float]:
         """Panel ``(xmin, ymin, xmax, ymax)``, mm."""
+
+    @property
+    def kind(self) -> Kind:
+        """The footprint kind of every dot (:mod:`optdot.geometry.shapes`)."""
 
     @property
     def uniform_diameter(self) -> float | None:
@@ -54,8 +59,8 @@ class DotSource(Protocol):
     def part_counts(self) -> list[int]:
         """Dots per chunk, in chunk order."""
 
-    def read_part(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """Chunk ``k`` alone: ``(xy [n, 2], diameter [n])``, mm (QA reads a chunk's
+    def read_part(self, k: int) -> tuple[np.ndarray, Footprints]:
+        """Chunk ``k`` alone: ``(xy [n, 2] mm, footprints)`` (QA reads a chunk's
         neighbours for its halo)."""
 
     @property
@@ -120,9 +125,19 @@ class Pattern:
         return [np.array([(x0, y0), (x1, y0), (x1, y1), (x0, y1)], dtype=np.float64)]
 
     def chunks(self) -> Iterator[Chunk]:
-        """``(label, xy [n, 2], diameter [n])`` parts of the dots: one, all of them (a
+        """``(label, xy [n, 2], footprints)`` parts of the dots: one, all of them (a
         :class:`~optdot.io.dataset.Dataset` yields one per tile; exporters stream either)."""
-        yield (0, 0), self.xy, self.diameter
+        yield (0, 0), self.xy, self.shape
+
+    @property
+    def kind(self) -> Kind:
+        """The footprint kind of every dot: the circle."""
+        return CIRCLE
+
+    @property
+    def shape(self) -> Footprints:
+        """The dots' footprints (discs of :attr:`diameter`)."""
+        return Footprints.circles(self.diameter)
 
     @property
     def n(self) -> int:
@@ -134,11 +149,11 @@ class Pattern:
         """One chunk: all the dots."""
         return [self.n]
 
-    def read_part(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """The one chunk (``k`` = 0): ``(xy, diameter)``."""
+    def read_part(self, k: int) -> tuple[np.ndarray, Footprints]:
+        """The one chunk (``k`` = 0): ``(xy, footprints)``."""
         if k != 0:
             raise IndexError(f"a pattern has one part, not part {k}")
-        return self.xy, self.diameter
+        return self.xy, self.shape
 
     @property
     def tiling(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -178,7 +193,7 @@ class Pattern:
     @property
     def areas(self) -> np.ndarray:
         """``[n]`` dot areas, mm²."""
-        return np.pi * (0.5 * self.diameter) ** 2
+        return self.shape.area()
 
 
 def coverage_image(

@@ -25,10 +25,10 @@ import numpy as np
 from . import stages
 from .config.job import Job, QAParams
 from .errors import ExportError, JobError, QAGateError
+from .formats import FORMATS
 from .geometry.morton import spatial_order
 from .io.atomic import transaction
 from .io.dataset import is_dataset
-from .io.formats import FORMATS
 from .io.outputs import check_outputs
 from .io.patterns import save_pattern
 from .pattern import DotSource, Pattern
@@ -320,11 +320,11 @@ def export(
         job: thresholds and map of the gate (None: default thresholds).
         options: :class:`optdot.exporters.ExportOptions` (None: defaults).
         force: write even if the gate fails.
-        overwrite: replace an existing mask (:data:`~optdot.io.formats.MASKS`) by a
+        overwrite: replace an existing mask (:data:`~optdot.formats.MASKS`) by a
             different one; False keeps it (writing the same bytes again is allowed).
         stream: the :class:`~optdot.io.dataset.Dataset` the pattern is read from: the gate
             then measures it tile by tile and the streamed formats
-            (:data:`~optdot.io.formats.STREAMED`) are written from it tile by tile.
+            (:data:`~optdot.formats.STREAMED`) are written from it tile by tile.
         reports: the gate's report, ``{"html": path, "json": path}`` (either or both),
             written with the outputs, also when the gate fails (then alone).
         written: told ``(format, path, what the file holds)`` for each output once all

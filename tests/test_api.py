@@ -19,9 +19,10 @@ ROOT = Path(__file__).resolve().parents[1]
 #: Stage -> stages it may import. The core never imports quality, exporters, pipeline or cli.
 ALLOWED = {
     "errors": set(),
+    "formats": set(),
     "__main__": {"cli"},
     "files": {"runtime"},
-    "runtime": {"errors"},
+    "runtime": {"errors", "formats"},
     "io": {"errors", "files", "pattern", "geometry", "runtime"},
     "geometry": {"errors", "files"},
     "config": {"errors", "files", "geometry", "runtime"},
@@ -32,11 +33,12 @@ ALLOWED = {
     "tiling": {"config", "errors", "geometry", "relax", "runtime", "spatial", "stages"},
     "pattern": {"geometry"},
     "quality": {"config", "errors", "files", "geometry", "pattern", "io", "runtime", "spatial"},
-    "exporters": {"errors", "files", "geometry", "io", "pattern", "runtime"},
+    "exporters": {"errors", "files", "formats", "geometry", "io", "pattern", "runtime"},
     "preflight": {"config", "errors", "geometry", "runtime", "tiling"},
     "testing": {"relax"},
     "tiled": {"config", "errors", "files", "io", "pattern", "preflight", "runtime", "tiling"},
     "pipeline": {
+        "formats",
         "io",
         "preflight",
         "tiled",
@@ -52,7 +54,17 @@ ALLOWED = {
         "tiling",
     },
     "optics": {"config", "errors", "files", "geometry", "io", "pattern", "runtime"},
-    "cli": {"config", "errors", "exporters", "io", "optics", "pipeline", "quality", "runtime"},
+    "cli": {
+        "config",
+        "errors",
+        "exporters",
+        "formats",
+        "io",
+        "optics",
+        "pipeline",
+        "quality",
+        "runtime",
+    },
 }
 
 

@@ -22,8 +22,8 @@ from .options import (
 
 def format_options(fn):
     """One ``--<format> PATH`` option per format ``export`` writes
-    (:data:`optdot.io.formats.EXPORTED`), passed to the command by the format's name."""
-    from ..io.formats import EXPORTED, FORMATS
+    (:data:`optdot.formats.EXPORTED`), passed to the command by the format's name."""
+    from ..formats import EXPORTED, FORMATS
 
     for name in reversed(EXPORTED):
         fn = click.option(

@@ -25,7 +25,8 @@ import numpy as np
 from ..errors import PatternFileError, one_line
 from ..files import sha256_file
 from ..geometry.limits import validate_dots
-from ..pattern import Pattern
+from ..geometry.shapes import CIRCLE, Footprints, Kind
+from ..pattern import Chunk, Pattern
 from .manifest import COLUMNS, MANIFEST, read_manifest
 
 __all__ = ["MANIFEST", "Dataset", "is_dataset", "load_dataset", "open_dataset", "read_part_file"]
@@ -109,9 +110,16 @@ class Dataset:
         x0, y0, x1, y1 = self.box
         return [np.array([(x0, y0), (x1, y0), (x1, y1), (x0, y1)], dtype=np.float64)]
 
-    def chunks(self) -> Iterator[tuple[tuple[int, int], np.ndarray, np.ndarray]]:
-        """``(tile, xy [n, 2], diameter [n])`` per part (what streamed exporters read)."""
-        return self.iter_parts()
+    def chunks(self) -> Iterator[Chunk]:
+        """``(tile, xy [n, 2], footprints)`` per part (what streamed exporters read)."""
+        for k, part in enumerate(self.parts):
+            xy, dots = self.read_part(k)
+            yield tuple(part["tile"]), xy, dots  # type: ignore[misc]
+
+    @property
+    def kind(self) -> Kind:
+        """The footprint kind of every dot: the circle."""
+        return CIRCLE
 
     @property
     def part_counts(self) -> list[int]:
@@ -140,8 +148,8 @@ class Dataset:
             out["seed"] = self.manifest["seed"]
         return out
 
-    def read_part(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """Part ``k`` (position in :attr:`parts`): ``(xy [n, 2], diameter [n])``, mm."""
+    def read_part(self, k: int) -> tuple[np.ndarray, Footprints]:
+        """Part ``k`` (position in :attr:`parts`): ``(xy [n, 2] mm, footprints)``."""
         part = self.parts[k]
         path = self.path / part["file"]
         xy, d = read_part_file(path, part["count"])
@@ -152,13 +160,7 @@ class Dataset:
                 f"{path}: dot {i} has diameter {float(d[i]):.6g} mm, the manifest says every "
                 f"dot is {u:.6g} mm"
             )
-        return xy, d
-
-    def iter_parts(self) -> Iterator[tuple[tuple[int, int], np.ndarray, np.ndarray]]:
-        """``(tile, xy, diameter)`` of every part, in order."""
-        for k, part in enumerate(self.parts):
-            xy, d = self.read_part(k)
-            yield tuple(part["tile"]), xy, d  # type: ignore[misc]
+        return xy, Footprints.circles(d)
 
     def verify(self) -> None:
         """Check every part's checksum against the manifest.
@@ -220,9 +222,9 @@ def load_dataset(path: str | Path, box=None):
     ds = open_dataset(path)
     ds.verify()
     xys, ds_ = [], []
-    for _, xy, d in ds.iter_parts():
+    for _, xy, dots in ds.chunks():
         xys.append(xy)
-        ds_.append(d)
+        ds_.append(dots.diameter)
     xy = np.concatenate(xys) if xys else np.zeros((0, 2))
     d = np.concatenate(ds_) if ds_ else np.zeros(0)
     the_box = box or ds.box

@@ -449,10 +449,10 @@ def _dot_grid(dots: DotSource, box) -> tuple:
     """The dots sorted into square cells at least one diameter wide (a point on a dot lies
     within the largest radius of the dot's cell): ``(start, x, y, r2, grid)``."""
     xs, ys, ds = [], [], []
-    for _, xy, d in dots.chunks():
+    for _, xy, footprints in dots.chunks():
         xs.append(np.asarray(xy[:, 0], np.float64))
         ys.append(np.asarray(xy[:, 1], np.float64))
-        ds.append(np.broadcast_to(np.asarray(d, np.float64), (len(xy),)))
+        ds.append(footprints.diameter)
     x = np.concatenate(xs) if xs else np.zeros(0)
     y = np.concatenate(ys) if ys else np.zeros(0)
     d = np.concatenate(ds) if ds else np.zeros(0)

@@ -71,7 +71,8 @@ def source_of(dots: DotSource, box=None, outline: Domain | None | bool = True) -
     label = dots.label
 
     def read(k: int):
-        xy, d = dots.read_part(k)
+        xy, footprints = dots.read_part(k)
+        d = footprints.diameter
         validate_dots(label or "the pattern", xy, d, the_box)
         return xy, d
 

@@ -10,14 +10,14 @@ its cores where the work spreads over them:
   on 2 workers), plus ~8 s to start the cluster and compile on it;
 - memory: :func:`optdot.runtime.memory.estimate_bytes` per process (one process), or per
   worker for its largest tile plus ~0.5 GiB for the command, scheduler and results held;
-- disk: bytes per dot of each format (:data:`optdot.io.formats.FORMATS`).
+- disk: bytes per dot of each format (:data:`optdot.formats.FORMATS`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ..io.formats import FORMATS
+from ..formats import FORMATS
 from .memory import estimate_bytes
 
 #: Dots per second of one process at 200 iterations (2 cores).

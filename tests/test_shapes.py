@@ -1,0 +1,94 @@
+"""The dot's footprint (:mod:`optdot.geometry.shapes`): each question answered by the
+kind against an independent answer (shapely's geometry, brute force), and the pattern,
+the dataset and every exporter asking it rather than a diameter."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from optdot.geometry.shapes import CIRCLE, KINDS, Footprints, polygon_vertices
+
+
+def _discs(n: int, seed: int) -> tuple[np.ndarray, Footprints]:
+    rng = np.random.default_rng(seed)
+    return rng.uniform(0, 0.5, (n, 2)), Footprints.circles(rng.uniform(0.02, 0.09, n))
+
+
+def test_circle_area_and_extent_are_the_discs():
+    xy, dots = _discs(50, 1)
+    d = dots.diameter
+    np.testing.assert_allclose(dots.area(), np.pi * (d / 2) ** 2, rtol=1e-15)
+    np.testing.assert_array_equal(dots.extent(), 0.5 * d)
+    for k in range(5):  # the polygon's area approaches the disc's from inside
+        poly = shapely.Polygon(dots.outline(k, 1e-6))
+        assert 0 < dots.area()[k] - poly.area < 1e-3 * dots.area()[k]
+        assert poly.is_valid and shapely.Polygon(dots.outline(k, 1e-6)).exterior.is_ccw
+
+
+@settings(max_examples=40, deadline=None, derandomize=True, database=None)
+@given(st.integers(2, 40), st.integers(0, 2**32 - 1))
+def test_circle_gaps_match_shapely_on_every_pair(n, seed):
+    """Edge-to-edge distance of every pair against shapely's distance between the two
+    polygons (disjoint pairs; polygons inscribed within 0.01 µm), and its sign against
+    whether they intersect."""
+    xy, dots = _discs(n, seed)
+    i, j = np.triu_indices(n, 1)
+    gap = dots.gap(xy, i, j)
+    polys = [shapely.Polygon(dots.outline(k, 1e-5) + xy[k]) for k in range(n)]
+    for a, b, g in zip(i, j, gap, strict=True):
+        meets = polys[a].intersects(polys[b])
+        if g > 2e-5:
+            assert not meets
+            assert polys[a].distance(polys[b]) == pytest.approx(g, abs=2e-5)
+        elif g < -2e-5:
+            assert meets
+
+
+def test_containment_is_within_the_radius_of_the_dot():
+    xy, dots = _discs(30, 4)
+    rng = np.random.default_rng(5)
+    k = rng.integers(0, 30, 4000)
+    pts = xy[k] + rng.uniform(-0.05, 0.05, (4000, 2))
+    inside = dots.contains(pts, k, xy)
+    want = np.hypot(*(pts - xy[k]).T) <= 0.5 * dots.diameter[k]
+    np.testing.assert_array_equal(inside, want)
+    assert 0 < inside.mean() < 1
+
+
+def test_footprints_take_and_broadcast():
+    dots = Footprints.circles(0.046, 5)
+    assert dots.n == 5 and dots.kind is CIRCLE and KINDS["circle"] is CIRCLE
+    assert dots.take(np.array([0, 3])).n == 2
+    assert dots.take(np.array([True, False, True, False, False])).diameter.tolist() == [
+        0.046,
+        0.046,
+    ]
+    assert np.all(dots.angles == 0)
+
+
+def test_polygon_vertices_hold_the_tolerance():
+    for r, tol in ((23.0, 0.01), (23.0, 1.0), (0.5, 0.01), (1.0, 5.0)):
+        n = polygon_vertices(r, tol)
+        assert n >= 8
+        assert r * (1 - np.cos(np.pi / n)) <= tol + 1e-12 or n == 8
+
+
+def test_pattern_and_dataset_chunks_carry_footprints(tmp_path, tiny_pattern):
+    """A pattern's and a dataset's chunks are footprints of the same dots."""
+    from optdot.io.dataset import open_dataset
+    from optdot.io.dataset_write import save_dataset
+
+    (_, xy, dots), *rest = list(tiny_pattern.chunks())
+    assert not rest and dots.kind is CIRCLE and tiny_pattern.kind is CIRCLE
+    np.testing.assert_array_equal(dots.diameter, tiny_pattern.diameter)
+    np.testing.assert_array_equal(tiny_pattern.areas, dots.area())
+    save_dataset(tiny_pattern, tmp_path / "d.parquet")
+    ds = open_dataset(tmp_path / "d.parquet")
+    got = [c for c in ds.chunks()]
+    assert ds.kind is CIRCLE and sum(c[2].n for c in got) == tiny_pattern.n
+    xy2, dots2 = ds.read_part(0)
+    assert isinstance(dots2, Footprints) and dots2.n == len(xy2)
