@@ -23,7 +23,7 @@ import numpy as np
 
 from optdot.errors import ExportError
 from optdot.geometry.morton import spatial_order
-from optdot.geometry.shapes import CIRCLE, Footprints, Kind, polygon_vertices
+from optdot.geometry.shapes import CIRCLE, MIN_VERTICES, Footprints, Kind, polygon_vertices
 from optdot.io.atomic import atomic_path, expect_tail
 from optdot.pattern import DotSource
 
@@ -34,7 +34,7 @@ TIMESTAMP = datetime.datetime(2000, 1, 1, 0, 0, 0)
 #: Largest coordinate a 32-bit GDSII integer holds at 1 nm, mm.
 MAX_EXTENT_MM = (2**31 - 1) * 1e-6
 #: Fewest vertices of a dot polygon (what ``optdot qa`` reads back as a circle).
-MIN_DOT_VERTICES = 8
+MIN_DOT_VERTICES = MIN_VERTICES
 #: Most vertices one GDSII boundary can hold.
 MAX_POINTS = 8190
 

@@ -18,12 +18,12 @@ from optdot.errors import GeometryError, PatternFileError, ResourceError, one_li
 from optdot.files import input_problem
 from optdot.geometry.domain import domain_from_rings
 from optdot.geometry.limits import validate_dots
+from optdot.geometry.shapes import CIRCLE
 from optdot.io.patterns import load_pattern
 from optdot.pattern import Pattern
 from optdot.runtime.isolate import ChildCrashed, in_child
 from optdot.runtime.memory import max_dots_read
 
-from .gds import MIN_DOT_VERTICES as MIN_VERTICES
 from .gds import quietly
 from .options import ExportOptions
 
@@ -196,19 +196,17 @@ def _collect(path, cell, place, opts, to_mm, centres, diameters, depth, budget, 
 
 def _circle(path: Path, pts: np.ndarray, what: str, to_mm: float) -> tuple[np.ndarray, float]:
     """``(centre [2] in the file's units, radius mm)`` of a dot polygon, or refuse it as
-    not a circle."""
-    c = pts.mean(axis=0)
-    rad = np.hypot(*(pts - c).T)
-    r = float(rad.mean())
-    spread = float(rad.max() - rad.min()) * to_mm
-    if len(pts) < MIN_VERTICES or spread > 2e-6 + RADIUS_SPREAD * r * to_mm:
-        at = c * to_mm
-        lo, hi = rad.min() * to_mm * 1e3, rad.max() * to_mm * 1e3
+    not a circle (:meth:`optdot.geometry.shapes.Circle.fit`: vertex radii within 2 nm
+    plus :data:`RADIUS_SPREAD` of the radius)."""
+    fit = CIRCLE.fit(pts, 2e-6 / to_mm, RADIUS_SPREAD)
+    if not fit.ok:
+        at = fit.centre * to_mm
+        lo, hi = (v * to_mm * 1e3 for v in fit.radii)
         raise PatternFileError(
             f"{path}: {what} at ({at[0]:.6g}, {at[1]:.6g}) mm on the dot layer is not a circle "
             f"({len(pts)} vertices, radii {lo:.4g}..{hi:.4g} µm); qa checks round dots only"
         )
-    return c, r * to_mm
+    return fit.centre, 0.5 * float(fit.size[0]) * to_mm
 
 
 def _read_dxf(path: Path) -> Pattern:

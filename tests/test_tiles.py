@@ -378,6 +378,7 @@ def test_a_small_job_writes_a_one_part_dataset_with_todays_dots(tmp_path, tiny_p
 
 def _parts_source(xy: np.ndarray, box, cuts: int):
     """``xy`` split into ``cuts x cuts`` parts by position, as a QA source."""
+    from optdot.geometry.shapes import Footprints
     from optdot.quality.source import Source
 
     ix = np.minimum((xy[:, 0] - box[0]) / (box[2] - box[0]) * cuts, cuts - 1).astype(int)
@@ -390,7 +391,7 @@ def _parts_source(xy: np.ndarray, box, cuts: int):
         uniform_diameter=0.046,
         nominal_diameter=0.046,
         counts=[len(p) for p in parts],
-        read=lambda k: (parts[k], np.full(len(parts[k]), 0.046)),
+        read=lambda k: (parts[k], Footprints.circles(0.046, len(parts[k]))),
         cache_parts=3,
     )
 

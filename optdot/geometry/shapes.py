@@ -68,6 +68,12 @@ class Kind:
         within ``tolerance`` mm of one footprint of ``size`` (``[k]``) at ``angle``."""
         raise NotImplementedError
 
+    def fit(self, points: np.ndarray, slack: float, share: float = 0.0) -> Fit:
+        """The footprint a polygon's vertices (``[v, 2]``, any unit) draw: what a mask
+        reader recognises a dot by. A vertex may stray from the fitted outline by
+        ``slack`` (same unit: the file's grid) plus ``share`` of the footprint's size."""
+        raise NotImplementedError
+
 
 class Circle(Kind):
     """A disc of ``diameter`` mm."""
@@ -95,12 +101,46 @@ class Circle(Kind):
         t = 2.0 * np.pi * np.arange(n) / n
         return r * np.column_stack([np.cos(t), np.sin(t)])
 
+    def fit(self, points: np.ndarray, slack: float, share: float = 0.0) -> Fit:
+        """Centre: the vertices' mean; diameter: twice their mean distance from it (a
+        polygon inscribed in the circle, snapped to a grid, recovers it to well under
+        the grid step); a fit when the vertex radii spread by at most ``slack + share
+        r`` and there are :data:`MIN_VERTICES` or more."""
+        c = points.mean(axis=0)
+        rad = np.hypot(*(points - c).T)
+        r = float(rad.mean())
+        spread = float(rad.max() - rad.min())
+        ok = len(points) >= MIN_VERTICES and spread <= slack + share * r
+        return Fit(ok, c, np.array([2.0 * r]), 0.0, (float(rad.min()), float(rad.max())))
+
+
+@dataclass(frozen=True)
+class Fit:
+    """A footprint recognised from a polygon (:meth:`Kind.fit`).
+
+    Attributes:
+        ok: whether the polygon is this kind. centre: ``[2]`` its centre. size: ``[k]``
+        its size parameters. angle: its orientation, rad. radii: the smallest and
+        largest distance of a vertex from the centre (for messages). All in the
+        polygon's unit.
+    """
+
+    ok: bool
+    centre: np.ndarray
+    size: np.ndarray
+    angle: float
+    radii: tuple[float, float]
+
+
+#: Fewest vertices a polygon needs to be read as a round dot (an octagon).
+MIN_VERTICES = 8
+
 
 def polygon_vertices(radius: float, tolerance: float) -> int:
     """Vertices of a regular polygon inscribed in a circle of ``radius`` that stays within
     ``tolerance`` of it (same unit), at least 8."""
     t = min(tolerance, radius)
-    return max(8, math.ceil(math.pi / math.acos(1.0 - t / radius)))
+    return max(MIN_VERTICES, math.ceil(math.pi / math.acos(1.0 - t / radius)))
 
 
 #: Every kind, by name.
@@ -154,6 +194,17 @@ class Footprints:
         """``[n]`` bounding radii, mm."""
         return self.kind.extent(self.size)
 
+    @classmethod
+    def concat(cls, parts: list[Footprints], kind: Kind = CIRCLE) -> Footprints:
+        """The footprints of ``parts`` one after the other (all of one kind; ``kind``
+        when there are none)."""
+        if not parts:
+            return cls(kind, np.zeros((0, len(kind.params))))
+        angle = None
+        if any(p.angle is not None for p in parts):
+            angle = np.concatenate([p.angles for p in parts])
+        return cls(parts[0].kind, np.concatenate([p.size for p in parts]), angle)
+
     def take(self, index) -> Footprints:
         """The footprints of the dots ``index`` (an index array or a boolean mask)."""
         return Footprints(
@@ -176,4 +227,13 @@ class Footprints:
         return self.kind.outline(self.size[k], float(self.angles[k]), tolerance)
 
 
-__all__ = ["CIRCLE", "KINDS", "Circle", "Footprints", "Kind", "polygon_vertices"]
+__all__ = [
+    "CIRCLE",
+    "KINDS",
+    "MIN_VERTICES",
+    "Circle",
+    "Fit",
+    "Footprints",
+    "Kind",
+    "polygon_vertices",
+]

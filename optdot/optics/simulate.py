@@ -446,19 +446,21 @@ def _walls(job: Job) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _dot_grid(dots: DotSource, box) -> tuple:
-    """The dots sorted into square cells at least one diameter wide (a point on a dot lies
-    within the largest radius of the dot's cell): ``(start, x, y, r2, grid)``."""
-    xs, ys, ds = [], [], []
+    """The dots sorted into square cells at least one footprint wide (a point on a dot
+    lies within the largest extent of the dot's cell): ``(start, x, y, r2, grid)``, r2
+    the squared extents (the discs' radii)."""
+    xs, ys, es = [], [], []
     for _, xy, footprints in dots.chunks():
         xs.append(np.asarray(xy[:, 0], np.float64))
         ys.append(np.asarray(xy[:, 1], np.float64))
-        ds.append(footprints.diameter)
+        es.append(footprints.extent())
     x = np.concatenate(xs) if xs else np.zeros(0)
     y = np.concatenate(ys) if ys else np.zeros(0)
-    d = np.concatenate(ds) if ds else np.zeros(0)
+    e = np.concatenate(es) if es else np.zeros(0)
     x0, y0, x1, y1 = box
     area = (x1 - x0) * (y1 - y0)
-    cell = max(float(d.max()) if len(d) else 1.0, 1.5 * math.sqrt(area / max(len(x), 1)))
+    rmax = float(e.max()) if len(e) else 0.0
+    cell = max(2.0 * rmax if len(e) else 1.0, 1.5 * math.sqrt(area / max(len(x), 1)))
     nx = max(1, int(math.ceil((x1 - x0) / cell)))
     ny = max(1, int(math.ceil((y1 - y0) / cell)))
     ix = np.clip(((x - x0) / cell).astype(np.int64), 0, nx - 1)
@@ -467,7 +469,6 @@ def _dot_grid(dots: DotSource, box) -> tuple:
     order = np.argsort(key, kind="stable")
     start = np.zeros(nx * ny + 1, np.int64)
     np.cumsum(np.bincount(key, minlength=nx * ny), out=start[1:])
-    r2 = (0.5 * d[order]) ** 2
-    rmax = 0.5 * float(d.max()) if len(d) else 0.0
+    r2 = e[order] ** 2
     grid = np.array([x0, y0, cell, cell, nx, ny, rmax], np.float64)
     return start, x[order], y[order], r2, grid

@@ -143,19 +143,20 @@ def _first_pass(src: Source, density: DensityMap | None, view: Viewing | None = 
         f.walls = WallProfiler(density, src.outline)
         f.band_sums = [0 if uniform is not None else 0.0 for _ in f.bands]
     for k in range(len(src.counts)):
-        xy, d = src.part(k)
+        xy, dots = src.part(k)
         if not len(xy):
             continue
+        d = dots.diameter
         f.boxes[k] = (*xy.min(axis=0), *xy.max(axis=0))
         if uniform is None:
             f.diameters.append(d)
-        area = None if uniform is not None else np.pi * (0.5 * d) ** 2
+        area = None if uniform is not None else dots.area()
         f.square_counts += squares.counts(xy)
         h, _, _ = np.histogram2d(
             xy[:, 1], xy[:, 0], bins=(ony, onx), range=((y0, y1), (x0, x1)), weights=area
         )
         f.overview += h
-        r = 0.5 * d
+        r = dots.extent()
         if src.outline is None:
             out = box_protruding(xy, src.box, r)
         else:
@@ -222,11 +223,13 @@ def _second_pass(
     zoom = (window[0], window[1], window[0] + zs, window[1] + zs)
     offsets = np.concatenate([[0], np.cumsum(src.counts)]).astype(np.int64)
     for k in range(len(src.counts)):
-        own, d = src.part(k)
+        own, dots = src.part(k)
         m = len(own)
         if m == 0:
             continue
-        hxy, hpart, hd = gather(src, boxes, k, halo)
+        d = dots.diameter
+        hxy, hpart, halo_dots = gather(src, boxes, k, halo)
+        hd = halo_dots.diameter
         pts = np.vstack([own, hxy]) if len(hxy) else own
         tree = cKDTree(pts)
         _check_pair_count(src, k, tree, reach)
@@ -274,12 +277,12 @@ def _second_pass(
         p_im += im
         nn_n = None
         if density is not None:
-            nn_n = nn_normalized(own, 0.5 * d, density, nn)  # NaN where not defined
+            nn_n = nn_normalized(own, dots.extent(), density, nn)  # NaN where not defined
             s.nn_norm.append(nn_n[~np.isnan(nn_n)])
         if src.tiling is not None:
             part = seam_sums(
                 own,
-                np.pi * (0.5 * d) ** 2,
+                dots.area(),
                 *src.tiling,
                 flag,
                 np.abs(psi),

@@ -12,6 +12,7 @@ import numpy as np
 
 from ..geometry.domain import Domain
 from ..geometry.limits import validate_dots
+from ..geometry.shapes import Footprints
 from ..pattern import DotSource
 from ..spatial.window import grown, in_rect
 
@@ -26,7 +27,7 @@ class Source:
         uniform_diameter: the one dot diameter, mm, or None when sizes vary.
         nominal_diameter: the uniform or median diameter, mm.
         counts: dots per part.
-        read: ``read(k) -> (xy [n_k, 2], diameter [n_k])``, mm.
+        read: ``read(k) -> (xy [n_k, 2] mm, footprints of the n_k dots)``.
         tiling: ``(xs, ys)`` tile edges of a tiled pattern (seam metrics), or None.
         label: the file, for messages.
         cache_parts: parts kept in memory while their neighbours are measured.
@@ -37,7 +38,7 @@ class Source:
     uniform_diameter: float | None
     nominal_diameter: float
     counts: list[int]
-    read: Callable[[int], tuple[np.ndarray, np.ndarray]]
+    read: Callable[[int], tuple[np.ndarray, Footprints]]
     tiling: tuple[np.ndarray, np.ndarray] | None = None
     label: str = ""
     cache_parts: int = 8
@@ -47,7 +48,7 @@ class Source:
     def n(self) -> int:
         return int(sum(self.counts))
 
-    def part(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+    def part(self, k: int) -> tuple[np.ndarray, Footprints]:
         """Part ``k``, through the cache."""
         if k in self._cache:
             self._cache.move_to_end(k)
@@ -72,9 +73,8 @@ def source_of(dots: DotSource, box=None, outline: Domain | None | bool = True) -
 
     def read(k: int):
         xy, footprints = dots.read_part(k)
-        d = footprints.diameter
-        validate_dots(label or "the pattern", xy, d, the_box)
-        return xy, d
+        validate_dots(label or "the pattern", xy, footprints.diameter, the_box)
+        return xy, footprints
 
     tiling = dots.tiling
     nx = 1 if tiling is None else len(tiling[0]) - 1
@@ -93,9 +93,9 @@ def source_of(dots: DotSource, box=None, outline: Domain | None | bool = True) -
 
 def gather(
     src: Source, boxes: np.ndarray, k: int, halo: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, Footprints]:
     """Dots of the other parts within the box of part ``k`` grown by ``halo``:
-    ``(xy [h, 2], part index [h], diameter [h])``."""
+    ``(xy [h, 2] mm, part index [h], their footprints)``."""
     g = grown(tuple(boxes[k]), halo)
     ok = ~np.isnan(boxes[:, 0])
     ok &= (
@@ -105,13 +105,13 @@ def gather(
         & (boxes[:, 3] >= g[1])
     )
     ok[k] = False
-    xys, parts, ds = [], [], []
+    xys, parts, fps = [], [], []
     for j in np.flatnonzero(ok):
-        xy, d = src.part(int(j))
+        xy, footprints = src.part(int(j))
         sel = in_rect(xy, g)
         xys.append(xy[sel])
         parts.append(np.full(int(sel.sum()), j, np.int64))
-        ds.append(np.broadcast_to(d, (len(xy),))[sel])
+        fps.append(footprints.take(sel))
     if not xys:
-        return np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0)
-    return np.vstack(xys), np.concatenate(parts), np.concatenate(ds)
+        return np.zeros((0, 2)), np.zeros(0, np.int64), Footprints.concat([])
+    return np.vstack(xys), np.concatenate(parts), Footprints.concat(fps)
