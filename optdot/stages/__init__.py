@@ -46,6 +46,7 @@ from .settings import (
     problem_of,
     rule_diameters,
     settings_for,
+    stage_settings,
     thrown_areas,
 )
 from .walls import job_phantoms, phantom_reach, phantoms_near
@@ -73,6 +74,7 @@ __all__ = [
     "relax",
     "rule_diameters",
     "settings_for",
+    "stage_settings",
     "thrown_areas",
     "throw",
     "wide_part",

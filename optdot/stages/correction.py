@@ -39,13 +39,14 @@ from ..relax.lowpass import (
 from ..relax.optdot import relax_staged
 from ..relax.result import RelaxResult
 from ..sampling.initial import Rect
-from .settings import areas, formulation_for, job_spacing, problem_of, rule_diameters, settings_for
+from .settings import areas, rule_diameters, stage_settings
 from .walls import with_phantoms
 
 
 def corrected(job: Job, form: Formulation) -> bool:
     """Whether ``job`` gets the long-wavelength correction."""
-    return job.optimize.method != "md" and form.lowpass > 0 and settings_for(job).max_iter > 0
+    iterations = stage_settings(job).relax.max_iter
+    return job.optimize.method != "md" and form.lowpass > 0 and iterations > 0
 
 
 #: Lattice step of the wide pass, in its blurs (two cells a sigma).
@@ -58,10 +59,11 @@ WIDE_CELLS = 1 << 23
 def wide_sigma(job: Job, formulation: Formulation | None = None) -> float | None:
     """The blur of the correction's last pass, mm, when it is solved over the whole panel
     (two passes or more); None otherwise."""
-    form = formulation_for(job) if formulation is None else formulation
+    s = stage_settings(job, formulation)
+    form = s.formulation
     if not corrected(job, form) or form.lowpass < 2:
         return None
-    return form.lowpass_sigmas()[-1] * job_spacing(job)
+    return form.lowpass_sigmas()[-1] * s.spacing
 
 
 def wide_part(
@@ -84,9 +86,10 @@ def wide_solve(
     sigma = wide_sigma(job, formulation)
     if sigma is None:
         return None
-    form = formulation_for(job) if formulation is None else formulation
+    s = stage_settings(job, formulation)
+    form = s.formulation
     rounds = wide_rounds(job, form) > 1  # a steep map: its own cap (one round: the first's)
-    cap = ((form.lowpass_last_cap if rounds else 0.0) or MAX_SHIFT) * job_spacing(job)
+    cap = ((form.lowpass_last_cap if rounds else 0.0) or MAX_SHIFT) * s.spacing
     return coarse_field(list(parts), _wide_lattice(job, sigma), job.density, sigma, cap, job.domain)
 
 
@@ -102,7 +105,7 @@ def wide_rounds(job: Job, formulation: Formulation | None = None) -> int:
     """How many rounds of the wide pass ``job`` gets (0 without a wide pass): the
     formulation's ``lowpass_last_steps`` where the map is steep (:data:`STEEP`), else one
     (each round in tiles is a barrier over the panel)."""
-    form = formulation_for(job) if formulation is None else formulation
+    form = stage_settings(job, formulation).formulation
     sigma = wide_sigma(job, form)
     if sigma is None:
         return 0
@@ -134,11 +137,12 @@ def correction_region(
     the lattice every tile shares: ``(RegionError, cap mm)``, or None when the formulation
     has no correction. Every dot in the region and within a lattice cell around it must be
     given."""
-    form = formulation_for(job) if formulation is None else formulation
+    s = stage_settings(job, formulation)
+    form = s.formulation
     if not corrected(job, form) or not len(xy0):
         return None
     area, _ = areas(job, job.density.at(xy0), rule_diameters(job, xy0))
-    spacing = job_spacing(job)
+    spacing = s.spacing
     h = max(grid_step(job.density, spacing), TILE_GRID * spacing)
     err = RegionError(xy, area, job.density, h, form.lowpass_sigma * spacing, region, job.domain)
     return err, MAX_SHIFT * spacing
@@ -154,8 +158,9 @@ def correction_pad(job: Job, formulation: Formulation | None = None) -> float:
     """How far beyond its windows a tile's correction deposits and blurs, mm (4 blur
     sigmas and 2 lattice cells): a window's error is then the same in every tile that
     solves it, whatever lies past its edge in the tile's region. At most 3.8 spacings."""
-    form = formulation_for(job) if formulation is None else formulation
-    spacing = job_spacing(job)
+    s = stage_settings(job, formulation)
+    form = s.formulation
+    spacing = s.spacing
     h = max(grid_step(job.density, spacing), TILE_GRID * spacing)
     return 4.0 * form.lowpass_sigma * spacing + 2.0 * h
 
@@ -174,10 +179,11 @@ def hard_core(
         held: ``(positions [h, 2] mm, diameters [h] or one, mm)`` of the neighbours (final
             for the tiles settled before, corrected for the others).
     """
-    form = formulation_for(job) if formulation is None else formulation
+    s = stage_settings(job, formulation)
+    form = s.formulation
     if job.optimize.method == "md" or not form.lowpass_core_iter or not len(xy0):
         return xy
-    if settings_for(job).max_iter == 0:
+    if s.relax.max_iter == 0:
         return xy
     n = len(xy0)
     diameters = rule_diameters(job, xy0)
@@ -239,7 +245,8 @@ def correction_passes(job, form, res, xy0, rho, frozen, diameters, phantom):
     # strip between the outermost centres and the walls, whose coverage they carry
     lo, hi = xy0[real].min(axis=0) - spacing, xy0[real].max(axis=0) + spacing
     window = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
-    settings = dataclasses.replace(settings_for(job), max_iter=form.lowpass_iter)
+    s = stage_settings(job)
+    settings = dataclasses.replace(s.relax, max_iter=form.lowpass_iter)
     sigmas = form.lowpass_sigmas()
     wide = wide_sigma(job, form) is not None
     for k, sigma in enumerate(sigmas):
@@ -259,7 +266,7 @@ def correction_passes(job, form, res, xy0, rho, frozen, diameters, phantom):
             res.xy = res.xy + u
         if form.lowpass_iter:
             more = relax_staged(
-                problem_of(job), form, xy0, rho, settings, None, start=res.xy, frozen=frozen,
+                s.problem, form, xy0, rho, settings, None, start=res.xy, frozen=frozen,
                 diameters=diameters, phantom=phantom,
             )  # fmt: skip
             res = continued(res, more)
@@ -276,9 +283,10 @@ def core_iterations(job, form, res, xy0, rho, frozen, diameters, phantom) -> Rel
         form, radius_factor=form.radius_factor * shrink,
         container_factor=form.container_factor / shrink,
     )  # fmt: skip
-    settings = dataclasses.replace(settings_for(job), max_iter=form.lowpass_core_iter)
+    s = stage_settings(job)
+    settings = dataclasses.replace(s.relax, max_iter=form.lowpass_core_iter)
     more = relax_staged(
-        problem_of(job), core_only, xy0, rho, settings, None, start=res.xy, frozen=frozen,
+        s.problem, core_only, xy0, rho, settings, None, start=res.xy, frozen=frozen,
         diameters=diameters, phantom=phantom,
     )  # fmt: skip
     return continued(res, more)

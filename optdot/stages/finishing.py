@@ -11,7 +11,7 @@ from ..config.job import Job
 from ..relax.legalize import LegalizeResult, make_legal
 from ..relax.resize import fit_sizes
 from ..sampling.initial import Rect
-from .settings import fit_sigma, fitted, rule_diameters
+from .settings import rule_diameters, stage_settings
 
 
 @dataclass
@@ -67,9 +67,10 @@ def finish(
     if d is None:
         radius, dmin = 0.5 * job.diameter, job.min_distance
     else:
-        if fitted(job):
+        s = stage_settings(job)
+        if s.fitted:
             fit = None if frozen is None else ~frozen
-            d = fit_sizes(xy, d, job.sizes, job.density, job.domain, fit_sigma(job), fit, window)
+            d = fit_sizes(xy, d, job.sizes, job.density, job.domain, s.fit_sigma, fit, window)
         radius, dmin = 0.5 * d, d + job.optimize.gap
     leg = make_legal(xy, job.density, home, job.domain, radius, dmin, where, frozen)
     diameter = job.diameter if d is None else d[:n]

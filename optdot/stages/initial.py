@@ -28,7 +28,7 @@ from ..config.job import Job
 from ..relax.lowpass import CoarseField, Lattice, LatticePart, coarse_field, deposit_part
 from ..sampling.initial import Rect, initial_dots_in
 from .correction import corrected
-from .settings import formulation_for, job_spacing, thrown_areas
+from .settings import stage_settings, thrown_areas
 
 
 def throw(job: Job, n: int, seed: int | Sequence[int], rect: Rect | None, where: str):
@@ -61,7 +61,7 @@ COARSE_CELLS = 1 << 23
 
 def coarse_lattice(job: Job) -> Lattice:
     """The lattice of the panel-wide field over the job's box."""
-    return Lattice.over(job.box, COARSE_STEP * job_spacing(job), COARSE_CELLS)
+    return Lattice.over(job.box, COARSE_STEP * stage_settings(job).spacing, COARSE_CELLS)
 
 
 def coarse_part(job: Job, xy0: np.ndarray) -> LatticePart:
@@ -75,9 +75,10 @@ def coarse_solve(job: Job, parts: list[LatticePart]) -> CoarseField | None:
     :func:`coarse_part`, added in the order given (the plan's tile order, so the bytes do
     not depend on who computed what); None when the job has no long-wavelength
     correction."""
-    if not corrected(job, formulation_for(job)):
+    s = stage_settings(job)
+    if not corrected(job, s.formulation):
         return None
-    spacing = job_spacing(job)
+    spacing = s.spacing
     return coarse_field(
         parts, coarse_lattice(job), job.density, COARSE_SIGMA * spacing, COARSE_SHIFT * spacing,
         job.domain,

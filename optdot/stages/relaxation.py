@@ -12,7 +12,7 @@ from ..relax.md import MDForce, md_relax
 from ..relax.optdot import Progress, relax_staged
 from ..relax.result import RelaxResult
 from .correction import long_wavelength
-from .settings import formulation_for, problem_of, rule_diameters, settings_for
+from .settings import rule_diameters, stage_settings
 from .walls import with_phantoms
 
 
@@ -56,7 +56,8 @@ def relax(
             xy0, law, job.box, r0, steps=opt.max_iter, step=opt.md_step, skin=opt.skin,
             callback=progress,
         )  # fmt: skip
-    form = formulation_for(job) if formulation is None else formulation
+    s = stage_settings(job, formulation)
+    form = s.formulation
     diameters = rule_diameters(job, xy0)
     phantom = None
     if form.phantoms and len(xy0):
@@ -64,18 +65,18 @@ def relax(
             job, form, xy0, rho, start, frozen, diameters
         )
     res = relax_staged(
-        problem_of(job),
+        s.problem,
         form,
         xy0,
         rho,
-        settings_for(job),
+        s.relax,
         progress,
         start=start,
         frozen=frozen,
         diameters=diameters,
         phantom=phantom,
     )
-    if lowpass and (form.lowpass or form.lowpass_core_iter) and settings_for(job).max_iter > 0:
+    if lowpass and (form.lowpass or form.lowpass_core_iter) and s.relax.max_iter > 0:
         res = long_wavelength(job, form, res, xy0, rho, frozen, diameters, phantom)
     if phantom is not None:
         res.xy = np.ascontiguousarray(res.xy[~phantom])

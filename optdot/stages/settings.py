@@ -1,8 +1,10 @@
 """What a job asks of every stage: its penalty problem, formulation, L-BFGS settings,
-size rule, halo and spacing. Pure functions of the job, shared by the panel and its tiles."""
+size rule, halo and spacing. Derived from the job once per run (:func:`stage_settings`)
+and shared by the panel and its tiles; the functions below are how each is derived."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -59,6 +61,45 @@ def halo_width(job: Job) -> float:
     widest = job.diameter if job.sizes is None else job.sizes.high
     width = 2.0 * (widest + job.optimize.gap)
     return max(width, reach(fit_sigma(job))) if fitted(job) else width
+
+
+@dataclass(frozen=True, eq=False)
+class StageSettings:
+    """What every stage of a run takes from its job, derived once.
+
+    Attributes:
+        problem: the fields a formulation builds its penalty terms from.
+        formulation: the job's (or a benchmark's) formulation.
+        relax: the L-BFGS settings.
+        spacing: the map's median hexagonal spacing, mm (:func:`job_spacing`).
+        fit_sigma: the Gaussian the dot sizes are fitted under, mm.
+        fitted: whether sizes are fitted after the relaxation.
+        halo: how far around a set of dots the guarantee pass holds dots still, mm.
+    """
+
+    problem: Problem
+    formulation: Formulation
+    relax: RelaxSettings
+    spacing: float
+    fit_sigma: float
+    fitted: bool
+    halo: float
+
+
+@lru_cache(maxsize=4)
+def stage_settings(job: Job, formulation: Formulation | None = None) -> StageSettings:
+    """The stage settings of ``job`` (with ``formulation`` instead of the job's, for
+    benchmarks trying variants), built on the first call of a run and reused by every
+    stage after it (in each worker process of a tiled run, once)."""
+    return StageSettings(
+        problem=problem_of(job),
+        formulation=formulation_for(job) if formulation is None else formulation,
+        relax=settings_for(job),
+        spacing=job_spacing(job),
+        fit_sigma=fit_sigma(job),
+        fitted=fitted(job),
+        halo=halo_width(job),
+    )
 
 
 def rule_diameters(job: Job, xy0: np.ndarray) -> np.ndarray | None:

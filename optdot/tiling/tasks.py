@@ -372,7 +372,7 @@ def legalize_tile(
     n = len(dots.xy)
     if n == 0:
         return FinalDots(dots.xy, job.diameter if job.sizes is None else np.zeros(0))
-    width = stages.halo_width(job)
+    width = stages.stage_settings(job).halo
     box = grown(bounds(dots.xy), width)
     xs, ds = [], []
     for xy, d in neighbours:
