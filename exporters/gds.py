@@ -170,10 +170,9 @@ class _Cells:
     def fill(self, cell: gdstk.Cell, xy: np.ndarray, dots: Footprints) -> int:
         """Put the dots ``xy`` (``[n, 2]`` mm, their footprints) into ``cell``;
         returns the number of elements a GDSII file holds for them."""
-        keys = np.round(dots.size * 1e6).astype(np.int64)
-        for key in np.unique(keys, axis=0):
-            sel = xy[(keys == key).all(axis=1)] * 1e3
-            cell.add(_placed(self.dot(tuple(int(v) for v in key)), sel[spatial_order(sel)]))
+        for key, index in dots.groups(1e6):  # sizes in nm
+            sel = xy[index] * 1e3
+            cell.add(_placed(self.dot(key), sel[spatial_order(sel)]))
         if self.opts.flatten:
             cell.flatten()
         return len(xy)

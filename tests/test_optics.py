@@ -16,7 +16,7 @@ import pytest
 from optdot.config.schema import load_job
 from optdot.optics.design import design
 from optdot.optics.simulate import Coverage, simulate
-from optdot.optics.trace import FATES, _fresnel, emitter_of
+from optdot.optics.trace import FATES, _fresnel, last_at_most
 
 from .conftest import SAMPLES, cli, one_error
 
@@ -190,7 +190,7 @@ def test_each_ray_goes_to_the_emitter_its_index_falls_in():
         start = np.concatenate([[0], np.cumsum(share)]).astype(np.int64)
         for i in range(int(start[-1])):
             want = int(np.searchsorted(start[:n], i, side="right") - 1)
-            assert emitter_of(i, start, n) == want, (n, i)
+            assert last_at_most(start, i, n) == want, (n, i)
 
 
 def test_same_seed_same_counts_on_any_thread_count(lossy):

@@ -92,3 +92,15 @@ def test_pattern_and_dataset_chunks_carry_footprints(tmp_path, tiny_pattern):
     assert ds.kind is CIRCLE and sum(c[2].n for c in got) == tiny_pattern.n
     xy2, dots2 = ds.read_part(0)
     assert isinstance(dots2, Footprints) and dots2.n == len(xy2)
+
+
+def test_groups_are_the_distinct_sizes_in_order():
+    rng = np.random.default_rng(2)
+    d = rng.choice([0.03, 0.046, 0.0460004, 0.09], 500)
+    dots = Footprints.circles(d)
+    got = list(dots.groups(1e6))
+    assert [k for k, _ in got] == [(30000,), (46000,), (90000,)]  # 0.0460004 -> 46000 nm
+    idx = np.concatenate([i for _, i in got])
+    assert sorted(idx.tolist()) == list(range(500))
+    for key, i in got:
+        assert np.all(np.diff(i) > 0) and np.all(np.round(d[i] * 1e6) == key[0])

@@ -22,6 +22,7 @@ diameter; a new kind is one :class:`Kind` in :data:`KINDS`.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -204,6 +205,22 @@ class Footprints:
         if any(p.angle is not None for p in parts):
             angle = np.concatenate([p.angles for p in parts])
         return cls(parts[0].kind, np.concatenate([p.size for p in parts]), angle)
+
+    def groups(self, per_mm: float) -> Iterator[tuple[tuple[int, ...], np.ndarray]]:
+        """The dots grouped by size, each parameter rounded to a whole number of units of
+        ``1 / per_mm`` mm (a mask's database unit: 1e6 for nm): ``(key, index [m])`` per
+        distinct size, keys (the sizes in those units) ascending, each group's indices
+        ascending. One sort, whatever the number of sizes."""
+        keys = np.round(self.size * per_mm).astype(np.int64)
+        if keys.shape[1] == 1:
+            uniq, inverse = np.unique(keys[:, 0], return_inverse=True)
+            uniq = uniq[:, None]
+        else:
+            uniq, inverse = np.unique(keys, axis=0, return_inverse=True)
+        order = np.argsort(inverse.ravel(), kind="stable")
+        bounds = np.searchsorted(inverse.ravel()[order], np.arange(len(uniq) + 1))
+        for g, key in enumerate(uniq):
+            yield tuple(int(v) for v in key), order[bounds[g] : bounds[g + 1]]
 
     def take(self, index) -> Footprints:
         """The footprints of the dots ``index`` (an index array or a boolean mask)."""

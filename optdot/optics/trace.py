@@ -97,14 +97,15 @@ def _lambert_in(state, n):
 
 
 @nb.njit(cache=True, inline="always")
-def emitter_of(i, emit_start, n_emit):
-    """The emitter of global ray ``i``: the last ``k < n_emit`` with ``emit_start[k] <= i``
-    (``emit_start`` non-decreasing from 0; an emitter given no rays repeats its successor's
-    start), by bisection: log(LEDs) steps a ray, not one per LED."""
-    lo, hi = 0, n_emit
+def last_at_most(a, value, n):
+    """The last ``k < n`` with ``a[k] <= value`` (``a`` non-decreasing, ``a[0] <=
+    value``), by bisection: a ray's emitter among ``emit_start`` (an emitter given no rays
+    repeats its successor's start; log(LEDs) steps, not one per LED), a draw's bin of a
+    cumulative distribution."""
+    lo, hi = 0, n
     while hi - lo > 1:
         mid = (lo + hi) // 2
-        if emit_start[mid] <= i:
+        if a[mid] <= value:
             lo = mid
         else:
             hi = mid
@@ -214,7 +215,7 @@ def trace(
         i = first + j
         state = _mix(np.uint64(seed) * _M1 ^ np.uint64(i) * _M2 + _GOLDEN)
         # -- birth
-        k = emitter_of(i, emit_start, n_emit)
+        k = last_at_most(emit_start, i, n_emit)
         state, u = _uniform(state)
         state, zz = _uniform(state)
         off = (u - 0.5) * emit[k, 6]
@@ -229,13 +230,8 @@ def trace(
             psi = 0.5 * math.pi if v < 0.5 else -0.5 * math.pi
         else:
             cdf = prof_cdf[p]
-            lo, hi = 0, cdf.shape[0] - 1
-            while hi - lo > 1:
-                mid = (lo + hi) // 2
-                if cdf[mid] <= u:
-                    lo = mid
-                else:
-                    hi = mid
+            lo = last_at_most(cdf, u, cdf.shape[0] - 1)
+            hi = lo + 1
             span = cdf[hi] - cdf[lo]
             f = (u - cdf[lo]) / span if span > 0 else 0.0
             theta = prof_theta[lo] + f * (prof_theta[hi] - prof_theta[lo])
