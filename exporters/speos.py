@@ -5,8 +5,9 @@ of elements, then one line per element ``x y z ix iy iz jx jy jz kx ky kz``: the
 element's origin in the texture's axis system, its X and Y directions, and its scale
 along x, y and z (1 = 100 % of the pattern element's size).
 
-optdot writes, per dot: its centre in mm with z = 0, X = (1, 0, 0) and Y = (0, 1, 0) (the
-panel's axes), and the scale ``d_i / reference`` on all three axes, ``reference`` being
+optdot writes, per dot: its centre in mm with z = 0, X = (cos a, sin a, 0) and Y =
+(-sin a, cos a, 0) for its footprint's orientation a (a circle's is 0: the panel's
+axes), and the scale ``d_i / reference`` on all three axes, ``reference`` being
 the diameter the Speos pattern element was drawn at (default: the pattern's nominal
 diameter, so fixed-size dots all have scale 1). Scaling z too keeps the element's shape
 (a moulded micro-dot's depth follows its diameter); a texture whose depth is fixed edits
@@ -43,12 +44,13 @@ def write_speos(pattern: DotSource, path: str | Path, opts: ExportOptions) -> No
     ref = opts.speos_reference_mm or pattern.nominal_diameter
     written = 0
 
-    def lines(xy: np.ndarray, d: np.ndarray) -> bytes:
+    def lines(xy: np.ndarray, d: np.ndarray, angle: np.ndarray) -> bytes:
         n = len(xy)
         rows = np.zeros((n, 12))
         rows[:, :2] = xy
-        rows[:, 3] = 1.0  # X direction
-        rows[:, 7] = 1.0  # Y direction
+        c, s = np.cos(angle), np.sin(angle)
+        rows[:, 3], rows[:, 4] = c, s  # X direction
+        rows[:, 6], rows[:, 7] = 0.0 - s, c  # Y direction (0 - s: no "-0.000000")
         rows[:, 9:] = (d / ref)[:, None]
         return format_fixed6(rows).replace(b",", b" ")
 
@@ -57,9 +59,9 @@ def write_speos(pattern: DotSource, path: str | Path, opts: ExportOptions) -> No
         fh.write(head)
         written += len(head)
         for _, xy, footprints in pattern.chunks():  # one part, or one per tile (datasets)
-            d = footprints.diameter
+            d, angle = footprints.diameter, footprints.angles
             for a in range(0, len(xy), BATCH):
-                data = lines(xy[a : a + BATCH], d[a : a + BATCH])
+                data = lines(xy[a : a + BATCH], d[a : a + BATCH], angle[a : a + BATCH])
                 fh.write(data)
                 written += len(data)
 

@@ -104,3 +104,35 @@ def test_groups_are_the_distinct_sizes_in_order():
     assert sorted(idx.tolist()) == list(range(500))
     for key, i in got:
         assert np.all(np.diff(i) > 0) and np.all(np.round(d[i] * 1e6) == key[0])
+
+
+def test_speos_directions_follow_the_footprints_orientation(tmp_path):
+    """Each mapping line's X and Y directions are the footprint's axes: (cos a, sin a, 0)
+    and (-sin a, cos a, 0); a circle (a = 0) keeps the panel's axes with no "-0"."""
+    from optdot.exporters.options import ExportOptions
+    from optdot.exporters.speos import write_speos
+
+    angles = np.array([0.0, np.pi / 6, -np.pi / 2])
+
+    class Turned:  # a dot source whose footprints carry orientations
+        n = 3
+        nominal_diameter = 0.05
+
+        def chunks(self):
+            dots = Footprints.circles(np.array([0.05, 0.05, 0.1]))
+            yield (
+                (0, 0),
+                np.array([[1.0, 2.0], [3.0, 4.0], [5.0, 6.0]]),
+                Footprints(dots.kind, dots.size, angles),
+            )
+
+    write_speos(Turned(), tmp_path / "m.OPT3DMapping", ExportOptions())
+    lines = (tmp_path / "m.OPT3DMapping").read_text().splitlines()
+    assert lines[0] == "3"
+    rows = np.array([[float(v) for v in ln.split()] for ln in lines[1:]])
+    np.testing.assert_allclose(rows[:, 3:5], np.column_stack([np.cos(angles), np.sin(angles)]),
+                               atol=1e-6)  # fmt: skip
+    np.testing.assert_allclose(rows[:, 6:8], np.column_stack([-np.sin(angles), np.cos(angles)]),
+                               atol=1e-6)  # fmt: skip
+    np.testing.assert_allclose(rows[:, 9], [1, 1, 2])
+    assert "-0.000000" not in lines[1]
