@@ -60,13 +60,14 @@ def input_problem(path: str | Path, max_bytes: int | None = None) -> str | None:
         return f"cannot read ({e.strerror or e})"
     if not stat.S_ISREG(st.st_mode):
         return f"is {KINDS.get(stat.S_IFMT(st.st_mode), 'not a regular file')}, not a file"
+    why = "this reader accepts"
     if max_bytes is None:
         from .runtime.memory import available_bytes
 
         max_bytes = available_bytes() // TEXT_EXPANSION
+        why = "this reader can hold in memory here"
     if st.st_size > max_bytes:
         return (
-            f"is {st.st_size / 1e6:,.1f} MB, more than the {max_bytes / 1e6:,.1f} MB this "
-            "reader can hold in memory here"
+            f"is {st.st_size / 1e6:,.1f} MB, more than the {max_bytes / 1e6:,.1f} MB {why}"
         )
     return None

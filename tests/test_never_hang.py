@@ -169,6 +169,7 @@ def test_toml_nested_too_deep_and_a_huge_job_are_one_line(tmp_path):
     huge.write_text('name = "' + "x" * (3 << 20) + '"\n')
     err = one_error(["generate", huge, "-o", tmp_path / "o.csv"], 2, "job file is")
     assert len(err) < 300  # no 3 MB value echoed
+    assert "1.0 MB this reader accepts" in err and "memory" not in err  # a cap, not the RAM
 
 
 def test_a_device_or_fifo_as_an_input_is_refused_before_reading(tmp_path):
