@@ -116,6 +116,11 @@ def _origins(path, rep, origin: np.ndarray, budget: list[int], gds: bool) -> np.
             f"{path}: an array reference of {cols & 0xFFFF} x {rows & 0xFFFF} (COLROW) "
             f"exceeds GDSII's {GDS_MAX_COLROW} columns/rows (an overflowed AREF)"
         )
+    if gds and cols is not None and (cols == 0 or rows == 0):
+        raise PatternFileError(
+            f"{path}: an array reference of {cols} x {rows} (COLROW) places no dot; "
+            "an AREF has at least 1 column and 1 row"
+        )
     if rep.size <= 1:
         return origin[None, :]
     budget[0] -= int(rep.size)

@@ -67,7 +67,5 @@ def input_problem(path: str | Path, max_bytes: int | None = None) -> str | None:
         max_bytes = available_bytes() // TEXT_EXPANSION
         why = "this reader can hold in memory here"
     if st.st_size > max_bytes:
-        return (
-            f"is {st.st_size / 1e6:,.1f} MB, more than the {max_bytes / 1e6:,.1f} MB {why}"
-        )
+        return f"is {st.st_size / 1e6:,.1f} MB, more than the {max_bytes / 1e6:,.1f} MB {why}"
     return None

@@ -63,5 +63,22 @@ EXPORTED: tuple[str, ...] = tuple(k for k, f in FORMATS.items() if f.exported)
 STREAMED: tuple[str, ...] = tuple(k for k, f in FORMATS.items() if f.streamed)
 #: The formats that are masks.
 MASKS: tuple[str, ...] = tuple(k for k, f in FORMATS.items() if f.mask)
+#: File name endings of masks (any case): a file so named is kept from being replaced by
+#: a different one, whatever option names it (a report or a CSV given a mask's name).
+MASK_SUFFIXES = (".gds", ".gds2", ".gdsii", ".oas", ".oasis", ".dxf")
 
-__all__ = ["EXPORTED", "FORMATS", "MASKS", "STREAMED", "Format"]
+
+def looks_like_mask(path) -> bool:
+    """Whether ``path``'s name ends like a mask's (:data:`MASK_SUFFIXES`, any case)."""
+    return str(path).lower().endswith(MASK_SUFFIXES)
+
+
+__all__ = [
+    "EXPORTED",
+    "FORMATS",
+    "MASKS",
+    "MASK_SUFFIXES",
+    "STREAMED",
+    "Format",
+    "looks_like_mask",
+]

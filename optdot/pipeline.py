@@ -367,7 +367,8 @@ def export(
     done: list[tuple[str, Path, str]] = []
     stage("writing")
     keep = () if overwrite else [p for f, p in outputs.items() if FORMATS[f].mask]
-    with transaction(keep, "give --overwrite to replace it, or another name"):
+    hint = "give --overwrite to replace it, or another name"
+    with transaction(keep, hint, replace_masks=overwrite):
         for fmt, path in outputs.items():
             if stream is not None and FORMATS[fmt].streamed:
                 src = stream

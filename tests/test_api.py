@@ -23,7 +23,7 @@ ALLOWED = {
     "__main__": {"cli"},
     "files": {"runtime"},
     "runtime": {"errors", "formats"},
-    "io": {"errors", "files", "pattern", "geometry", "runtime"},
+    "io": {"errors", "files", "formats", "pattern", "geometry", "runtime"},
     "geometry": {"errors", "files"},
     "config": {"errors", "files", "geometry", "runtime"},
     "sampling": {"errors", "geometry"},

@@ -96,7 +96,14 @@ def test_a_silent_scheduler_is_given_up_on_in_bounded_time():
         assert time.monotonic() - t0 < 15  # the 10 s connect timeout never applied before
 
 
-@pytest.mark.parametrize("banner", [b"SSH-2.0-OpenSSH_9.6\r\n", b"HTTP/1.1 400 Bad\r\n\r\n"])
+@pytest.mark.parametrize(
+    "banner",
+    [
+        b"SSH-2.0-OpenSSH_9.6\r\n",
+        b"HTTP/1.1 400 Bad\r\n\r\n",
+        (6 << 30).to_bytes(8, "little") + bytes(1 << 16),  # a 6 GiB frame Dask would allocate
+    ],
+)
 def test_a_server_that_speaks_first_is_not_taken_for_a_scheduler(tmp_path, banner):
     """An SSH or HTTP server at the scheduler's address: its banner read as a frame
     length made Dask ask for exabytes ("out of memory", exit 2); now the cluster's error,
@@ -117,6 +124,7 @@ def test_a_server_that_speaks_first_is_not_taken_for_a_scheduler(tmp_path, banne
             address,
             "does not answer as a Dask scheduler",
         )
+    assert list(tmp_path.iterdir()) == []  # no staging directory left with nothing in it
 
 
 def test_the_embedded_cluster_is_private_loopback_tls_and_cleans_its_scratch():

@@ -33,7 +33,9 @@ class Count(click.IntRange):
                 number = float(text)
             except ValueError:
                 number = None
-            if number is not None and number.is_integer() and "e" in text.lower():
+            if number is not None and "e" in text.lower():
+                if not (number.is_integer() and abs(number) < 2**63):
+                    self.fail(f"{value[:40]!r} is not a whole number in range", param, ctx)
                 value = int(number)
         return super().convert(value, param, ctx)
 

@@ -13,8 +13,8 @@ A directory output (a dataset) is built beside its target and put in place whole
 Several outputs of one command form one :func:`transaction`: each is written and verified
 to its temporary file, and only when all are ready are they renamed, together; a failure or
 an interrupt before that replaces none of them and leaves no temporary file. A
-transaction may keep some targets (signed-off masks): an existing file among them is
-replaced only by the same bytes, else none of the outputs is.
+transaction keeps masks (a target named like one, and the targets it is told to keep): an
+existing one is replaced only by the same bytes, else none of the outputs is.
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ from pathlib import Path
 
 from ..errors import ExportError
 from ..files import KINDS
+from ..formats import looks_like_mask
 from ..runtime.stop import check_interrupt, interrupted, mark_interrupted
 
 __all__ = [
@@ -156,7 +157,9 @@ _PENDING: contextvars.ContextVar[list[tuple[Path, Path]] | None] = contextvars.C
 
 
 @contextlib.contextmanager
-def transaction(keep: Iterable[str | Path] = (), hint: str = "") -> Iterator[None]:
+def transaction(
+    keep: Iterable[str | Path] = (), hint: str = "", replace_masks: bool = False
+) -> Iterator[None]:
     """Make every :func:`atomic_path` inside the block one all-or-nothing set of outputs.
 
     Each file is written and verified as usual, but renamed onto its target only when the
@@ -166,8 +169,10 @@ def transaction(keep: Iterable[str | Path] = (), hint: str = "") -> Iterator[Non
     Args:
         keep: targets that must not change: when one exists and its new content differs
             byte for byte, nothing is replaced (writing the same bytes again is allowed,
-            so a repeated run succeeds).
+            so a repeated run succeeds). Every target named like a mask
+            (:func:`optdot.formats.looks_like_mask`) is kept too, unless ``replace_masks``.
         hint: what the user gives to replace a kept file anyway (for the message).
+        replace_masks: let targets named like masks be replaced (``export --overwrite``).
 
     Raises:
         ExportError: a kept target would change (one line naming it and ``hint``).
@@ -196,10 +201,12 @@ def transaction(keep: Iterable[str | Path] = (), hint: str = "") -> Iterator[Non
     try:
         for tmp, target in pending:
             writable_target(target)
-            if _real(target) in kept and target.exists() and not filecmp.cmp(tmp, target, False):
+            guarded = _real(target) in kept or (not replace_masks and looks_like_mask(target))
+            if guarded and target.exists() and not filecmp.cmp(tmp, target, False):
                 raise ExportError(
                     f"{target}: a different file is already there and is kept"
-                    f"{f' ({hint})' if hint else ''}; nothing was written"
+                    f" ({hint or 'a mask is not replaced here: give another name'}); "
+                    "nothing was written"
                 )
         for tmp, target in pending:
             os.replace(tmp, target)

@@ -326,7 +326,8 @@ def write_dataset(
             check_dataset_target(target)
         install_directory(tmp, target)
     except BaseException:
-        if resume_key is None or (tmp / MANIFEST).exists():
+        nothing_to_resume = not writer.parts and not writer.extras  # e.g. no cluster
+        if resume_key is None or (tmp / MANIFEST).exists() or nothing_to_resume:
             shutil.rmtree(tmp, ignore_errors=True)
         raise
 

@@ -144,6 +144,39 @@ def scheduler_address(option: str | None) -> str | None:
     return address
 
 
+#: Largest first message a Dask scheduler's handshake may announce, bytes (it is a few
+#: hundred): a server announcing more is not a scheduler, and Dask would allocate it.
+MAX_HANDSHAKE_BYTES = 1 << 24
+
+
+def _announced_bytes(address: str, seconds: float) -> int | None:
+    """The length a plain-TCP server at ``address`` announces in the first 8 bytes it
+    sends on a new connection (a Dask scheduler sends its handshake at once, framed by its
+    byte count as a native uint64), or None: TLS, nothing sent within ``seconds``, or the
+    connection refused (then Dask's own connect says why)."""
+    import socket
+    import struct
+
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    scheme, location = parse_address(address, strict=False)
+    if scheme != "tcp":
+        return None
+    host, port = parse_host_port(location)
+    try:
+        with socket.create_connection((host, port), timeout=seconds) as s:
+            s.settimeout(seconds)
+            head = b""
+            while len(head) < 8:
+                got = s.recv(8 - len(head))
+                if not got:
+                    return None
+                head += got
+    except OSError:
+        return None
+    return struct.unpack("Q", head)[0]
+
+
 #: Seconds without a heartbeat after which the embedded scheduler drops a worker (a
 #: frozen one: stopped, swapped out, deadlocked) and gives its tasks to the others; Dask's
 #: own default is 5 minutes. ``DASK_DISTRIBUTED__SCHEDULER__WORKER_TTL`` overrides it.
@@ -268,6 +301,12 @@ def connect(
 
     logging.getLogger("distributed").setLevel(SILENT)
     if address:
+        claim = _announced_bytes(address, min(timeout, 2.0))
+        if claim is not None and claim > MAX_HANDSHAKE_BYTES:
+            raise ClusterError(
+                f"{address} does not answer as a Dask scheduler (its first message "
+                f"announces {claim:,} bytes): is it the scheduler's address and port?"
+            )
         with dask.config.set({"distributed.comm.timeouts.connect": f"{timeout}s"}):
             try:
                 client = _within(
@@ -280,11 +319,11 @@ def connect(
                     f"cannot reach the Dask scheduler at {address} ({one_line(e)})"
                 ) from None
             except Exception as e:  # noqa: BLE001 - a server that is not a scheduler
-                # (an SSH or HTTP server speaks first: its banner read as a frame length
-                # asked for exabytes, a MemoryError, or garbage for the decoder)
+                # (garbage for Dask's decoder, or a frame length it could not allocate)
+                what = "a reply it cannot read" if isinstance(e, MemoryError) else one_line(e)
                 raise ClusterError(
-                    f"{address} does not answer as a Dask scheduler ({one_line(e, True)}): "
-                    "is it the scheduler's address and port?"
+                    f"{address} does not answer as a Dask scheduler ({what}): is it the "
+                    "scheduler's address and port?"
                 ) from None
         try:
             _within(
