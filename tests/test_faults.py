@@ -144,7 +144,7 @@ def test_an_interrupt_in_the_middle_of_a_set_replaces_nothing(tmp_path, tiny_pat
     assert calls == ["gds", "csv", "svg"]
     assert all(p.read_bytes() == b"OLD" for p in outs.values())
     assert len(list(tmp_path.iterdir())) == 3
-    with transaction():  # and a set that completes replaces all of them
+    with transaction(replace_masks=True):  # and a set that completes replaces all of them
         for fmt, path in outs.items():
             real(tiny_pattern, fmt, path)
     assert all(p.read_bytes() != b"OLD" for p in outs.values())
