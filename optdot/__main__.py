@@ -1,5 +1,5 @@
 """``python -m optdot``: the same command line as ``optdot``."""
 
-from .cli import main
+from .console import run
 
-main(prog_name="optdot")
+run()

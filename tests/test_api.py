@@ -20,7 +20,8 @@ ROOT = Path(__file__).resolve().parents[1]
 ALLOWED = {
     "errors": set(),
     "formats": set(),
-    "__main__": {"cli"},
+    "__main__": {"console"},
+    "console": {"cli", "runtime"},
     "files": {"runtime"},
     "runtime": {"errors", "formats"},
     "io": {"errors", "files", "formats", "pattern", "geometry", "runtime"},

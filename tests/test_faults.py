@@ -150,7 +150,17 @@ def test_an_interrupt_in_the_middle_of_a_set_replaces_nothing(tmp_path, tiny_pat
     assert all(p.read_bytes() != b"OLD" for p in outs.values())
 
 
-@pytest.mark.parametrize("signame,delay", [("SIGTERM", 0.6), ("SIGTERM", 1.2), ("SIGINT", 0.9)])
+@pytest.mark.parametrize(
+    "signame,delay",
+    [
+        ("SIGINT", 0.15),
+        ("SIGTERM", 0.15),
+        ("SIGINT", 0.3),
+        ("SIGTERM", 0.6),
+        ("SIGTERM", 1.2),
+        ("SIGINT", 0.9),
+    ],
+)
 def test_a_signal_during_export_leaves_the_old_files(tmp_path, signame, delay):
     """At any point of the run (imports, numba's cache load, relaxation, writing): exit 130,
     one line, old files byte-identical, no temporary file left."""

@@ -37,6 +37,8 @@ def user_errors(fn):
         previous = {s: signal.signal(s, _terminate) for s in (signal.SIGTERM, signal.SIGINT)}
         done = False
         try:
+            if interrupted():  # a signal before this handler (while modules loaded)
+                raise KeyboardInterrupt
             out = fn(*args, **kwargs)
             if interrupted():  # the interrupt was swallowed inside compiled code
                 raise KeyboardInterrupt
