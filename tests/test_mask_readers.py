@@ -155,14 +155,19 @@ def test_reference_transforms_are_applied_as_klayout_applies_them(tmp_path, fmt)
     assert metrics["pairs_below_collision"] == 3
 
 
-def test_an_overflowed_gdsii_array_is_refused(tmp_path):
+def _aref_gds(path, columns: int, rows: int) -> None:
+    """A GDSII file whose top cell places a 46 µm dot cell by one array reference."""
     lib = gdstk.Library(unit=1e-6, precision=1e-9)
     dot = gdstk.Cell("DOT")
     dot.add(gdstk.ellipse((0, 0), 23, tolerance=0.01, layer=1))
     top = gdstk.Cell("TOP")
-    top.add(gdstk.Reference(dot, (0, 0), columns=40000, rows=1, spacing=(100, 100)))
+    top.add(gdstk.Reference(dot, (100, 100), columns=columns, rows=rows, spacing=(60, 60)))
     lib.add(dot, top)
-    lib.write_gds(str(tmp_path / "a.gds"))
+    lib.write_gds(str(path))
+
+
+def test_an_overflowed_gdsii_array_is_refused(tmp_path):
+    _aref_gds(tmp_path / "a.gds", 40000, 1)
     with pytest.raises(PatternFileError, match="32767"):
         read_any(tmp_path / "a.gds")
 
@@ -175,13 +180,7 @@ def test_an_aref_whose_colrow_wrapped_is_refused_not_read_as_one_dot(tmp_path, c
     size of 1, and the array was read as one dot (qa passed it)."""
     import struct
 
-    lib = gdstk.Library(unit=1e-6, precision=1e-9)
-    dot = gdstk.Cell("DOT")
-    dot.add(gdstk.ellipse((0, 0), 23, tolerance=0.01, layer=1))
-    top = gdstk.Cell("TOP")
-    top.add(gdstk.Reference(dot, (100, 100), columns=3, rows=2, spacing=(60, 60)))
-    lib.add(dot, top)
-    lib.write_gds(str(tmp_path / "a.gds"))
+    _aref_gds(tmp_path / "a.gds", 3, 2)
     raw = bytearray((tmp_path / "a.gds").read_bytes())
     at = raw.find(bytes([0, 8, 0x13, 2]))  # the COLROW record: 8 bytes, type 0x1302
     raw[at + 4 : at + 8] = struct.pack(">HH", *colrow)
