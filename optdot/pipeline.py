@@ -295,9 +295,6 @@ def qa(
     return result
 
 
-#: Formats written straight from a dataset's parts (hierarchical masks).
-
-
 def export(
     pattern: DotSource | None,
     outputs: Mapping[str, str | Path],

@@ -267,8 +267,10 @@ def simulate(
     spots = _spot_centres(area if area is not None else box)
     spot_counts = np.zeros(9, np.int64)
     r2 = (0.5 * spot_mm) ** 2
-    scene = (emit, emit_start, theta, cdf, modes, walls, normals, phys, explicit, phi, g, *grid)
-    _check_light_leaves(job, seed, rays, scene)
+    sources = (emit, emit_start, theta, cdf, modes, walls, normals)
+    dots_seen = (explicit, phi, g, *grid)
+    scene = (*sources, phys, *dots_seen)  # trace()'s arguments after the ray range
+    _check_light_leaves(job, seed, rays, sources, phys, dots_seen)
     for first in range(0, rays, BATCH):
         check_interrupt()  # Ctrl-C or SIGTERM: stop at the next batch, nothing written
         count = min(BATCH, rays - first)
@@ -314,7 +316,9 @@ PROBE_RAYS = 1000
 PROBE_EVENTS = 1 << 12
 
 
-def _check_light_leaves(job, seed: int, rays: int, scene: tuple) -> None:
+def _check_light_leaves(
+    job, seed: int, rays: int, sources: tuple, phys: np.ndarray, dots_seen: tuple
+) -> None:
     """Refuse a set-up that keeps its light: a guide with nothing that lets light out
     (no dots, no absorption, mirror edges) traces every ray to :data:`MAX_EVENTS`, days
     for a default run. The first :data:`PROBE_RAYS` rays (the run's own) are traced with
@@ -324,13 +328,17 @@ def _check_light_leaves(job, seed: int, rays: int, scene: tuple) -> None:
     refused when that is over half (``s`` over 0.958): a guide whose light leaves slowly
     but leaves runs, its few unfinished rays reported.
 
+    Args:
+        sources, phys, dots_seen: :func:`trace`'s arguments before, as and after its
+            physics array (whose last entry, the event limit, the probe lowers).
+
     Raises:
         JobError: light stays in the guide (one line: the share, and what lets it out).
     """
-    probe = np.array(scene[7], dtype=np.float64)
+    probe = np.array(phys, dtype=np.float64)
     probe[8] = PROBE_EVENTS
     count = min(rays, PROBE_RAYS)
-    fate, _, _ = trace(seed, 0, count, *scene[:7], probe, *scene[8:])
+    fate, _, _ = trace(seed, 0, count, *sources, probe, *dots_seen)
     entered = int(np.count_nonzero(fate != UNCOUPLED))
     inside = int(np.count_nonzero(fate == UNFINISHED))
     share = inside / entered if entered else 0.0
