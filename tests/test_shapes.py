@@ -136,3 +136,87 @@ def test_speos_directions_follow_the_footprints_orientation(tmp_path):
                                atol=1e-6)  # fmt: skip
     np.testing.assert_allclose(rows[:, 9], [1, 1, 2])
     assert "-0.000000" not in lines[1]
+
+
+#: Shaped dots the tests try: an 80 × 40 µm ellipse and a needle of 16:1, a 120 × 30 µm
+#: rectangle with 5 µm corners, a capsule, a sharp square (mm).
+SHAPED = [
+    ("ellipse", (0.08, 0.04)),
+    ("ellipse", (0.16, 0.01)),
+    ("rounded_rectangle", (0.12, 0.03, 0.005)),
+    ("rounded_rectangle", (0.1, 0.04, 0.02)),
+    ("rounded_rectangle", (0.05, 0.05, 0.0)),
+]
+
+
+def _shaped(name: str, size, n: int, seed: int, spread: float = 0.2):
+    rng = np.random.default_rng(seed)
+    dots = Footprints(KINDS[name], np.tile(size, (n, 1)), rng.uniform(-np.pi, np.pi, n))
+    return rng.uniform(0, spread, (n, 2)), dots
+
+
+@pytest.mark.parametrize(("name", "size"), SHAPED)
+def test_shaped_gaps_match_shapely_and_bound_every_direction(name, size):
+    """The exact edge-to-edge distance of oriented shapes against shapely's distance
+    between polygons 5e-8 mm from them, its sign against whether they intersect, and
+    the separation along 2,000 directions never exceeding it (it is their maximum)."""
+    xy, dots = _shaped(name, size, 30, 7)
+    i, j = np.triu_indices(30, 1)
+    gap = dots.gap(xy, i, j)
+    polys = [shapely.Polygon(dots.outline(k, 5e-8) + xy[k]) for k in range(30)]
+    apart = 0
+    for a, b, g in zip(i, j, gap, strict=True):
+        if polys[a].intersects(polys[b]):
+            assert g <= 1e-7
+        else:
+            assert polys[a].distance(polys[b]) == pytest.approx(g, abs=1.2e-7)
+            apart += 1
+    assert 60 < apart < len(i)  # both cases met
+    kind, t = dots.kind, np.linspace(0, 2 * np.pi, 2000, endpoint=False)
+    d = xy[j] - xy[i]
+    f = d[:, :1] * np.cos(t) + d[:, 1:] * np.sin(t)
+    for k in (i, j):
+        f = f - np.array([kind.support(t, dots.size[q], dots.angles[q]) for q in k])
+    assert np.all(f.max(axis=1) <= gap + 1e-12)
+    # the sampling's own error: second order in the step for ellipses, first at corners
+    np.testing.assert_allclose(f.max(axis=1), gap, atol=1e-5 if name == "ellipse" else 1e-3)
+
+
+@pytest.mark.parametrize(("name", "size"), SHAPED)
+def test_shaped_area_extent_containment_and_outline_agree_with_shapely(name, size):
+    xy, dots = _shaped(name, size, 12, 3)
+    rng = np.random.default_rng(4)
+    k = rng.integers(0, 12, 2000)
+    pts = xy[k] + rng.uniform(-0.09, 0.09, (2000, 2))
+    inside = dots.contains(pts, k, xy)
+    polys = [shapely.Polygon(dots.outline(q, 1e-8) + xy[q]) for q in range(12)]
+    shapely.prepare(polys)
+    want = shapely.covers(np.array(polys)[k], shapely.points(pts))
+    np.testing.assert_array_equal(inside, want)
+    assert 0.02 < inside.mean() < 0.9
+    for q in range(12):
+        coarse = shapely.Polygon(dots.outline(q, 1e-4) + xy[q])
+        assert coarse.is_valid and coarse.exterior.is_ccw
+        assert polys[q].hausdorff_distance(coarse) <= 1.05e-4  # within the tolerance
+        assert polys[q].area == pytest.approx(dots.area()[q], rel=1e-6)
+        far = np.hypot(*(np.asarray(polys[q].exterior.coords) - xy[q]).T).max()
+        assert far == pytest.approx(dots.extent()[q], rel=1e-6)
+
+
+@pytest.mark.parametrize(("name", "size"), SHAPED)
+def test_a_mask_polygon_is_read_back_as_its_footprint(name, size):
+    """``fit`` recovers size and orientation (an axis: modulo 180°, or 90° for a square)
+    from the polygon a mask holds, snapped to a 1 nm grid."""
+    kind = KINDS[name]
+    for angle in (0.0, 0.3, -1.2, 1.5707963):
+        ring = np.round((kind.outline(np.array(size), angle, 1e-5) + [3.0, -2.0]) * 1e6) * 1e-6
+        fit = kind.fit(ring, 1e-5 + 2e-6)  # the outline's tolerance and the grid
+        assert fit.ok
+        np.testing.assert_allclose(fit.centre, [3.0, -2.0], atol=2e-6)
+        np.testing.assert_allclose(fit.size[:2], size[:2], atol=2e-5)
+        period = np.pi / 2 if size[0] == size[1] else np.pi
+        turn = (fit.angle - angle + period / 2) % period - period / 2
+        assert abs(turn) < 1e-4
+        assert not CIRCLE.fit(ring, 1e-5 + 2e-6).ok  # nor is it read as a disc
+        # the corner radius from a chord: within √2 tolerances over (2 - √2)
+        np.testing.assert_allclose(fit.size, size, atol=1e-5 * np.sqrt(2) / (2 - np.sqrt(2)) + 2e-6)

@@ -21,6 +21,7 @@ diameter; a new kind is one :class:`Kind` in :data:`KINDS`.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -115,6 +116,282 @@ class Circle(Kind):
         return Fit(ok, c, np.array([2.0 * r]), 0.0, (float(rad.min()), float(rad.max())))
 
 
+def _rotate(p: np.ndarray, angle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(x, y)`` of points ``p`` (``[m, 2]``) in frames turned by ``angle`` (``[m]`` rad):
+    the coordinates along and across each dot's long axis."""
+    c, s = np.cos(angle), np.sin(angle)
+    return c * p[:, 0] + s * p[:, 1], -s * p[:, 0] + c * p[:, 1]
+
+
+class Ellipse(Kind):
+    """An ellipse of ``length`` (long axis) × ``width`` mm, ``length >= width``."""
+
+    name = "ellipse"
+    params = ("length", "width")
+
+    def area(self, size: np.ndarray) -> np.ndarray:
+        return np.pi * 0.25 * size[:, 0] * size[:, 1]
+
+    def extent(self, size: np.ndarray) -> np.ndarray:
+        return 0.5 * size[:, 0]
+
+    @staticmethod
+    def support(theta: np.ndarray, size: np.ndarray, angle: np.ndarray, order: int = 0):
+        """The support function ``h`` (mm) of the ellipses in the directions ``theta``
+        (rad) and, for ``order`` 2, its first and second derivatives in ``theta``."""
+        a2, b2 = (0.5 * size[..., 0]) ** 2, (0.5 * size[..., 1]) ** 2
+        c2 = np.cos(2.0 * (theta - angle))
+        p = 0.5 * (a2 + b2) + 0.5 * (a2 - b2) * c2
+        h = np.sqrt(p)
+        if order == 0:
+            return h
+        dp = -(a2 - b2) * np.sin(2.0 * (theta - angle))
+        ddp = -2.0 * (a2 - b2) * c2
+        return h, dp / (2.0 * h), ddp / (2.0 * h) - dp * dp / (4.0 * h**3)
+
+    def gap(self, d, size_i, angle_i, size_j, angle_j) -> np.ndarray:
+        """The separation ``max_u <d, u> - h_i(u) - h_j(u)`` over unit directions ``u``
+        (both ellipses are centrally symmetric): the edge-to-edge distance when they are
+        apart, minus the depth of the shallowest escape when they overlap. Any ``u``
+        bounds it from below, so the value returned never exceeds the true distance: the
+        best of :func:`gap_samples` directions, then Newton steps in the angle, which
+        converge because the function is strictly concave wherever it exceeds minus the
+        two ellipses' smallest radii of curvature (``b²/a``)."""
+        if not len(d):
+            return np.zeros(0)
+
+        def pair(t, order):
+            si, ai, sj, aj = size_i, angle_i, size_j, angle_j
+            if t.ndim == 2:  # [m, k] directions per pair
+                si, ai, sj, aj = si[:, None], ai[:, None], sj[:, None], aj[:, None]
+            h = self.support(t, si, ai, order), self.support(t, sj, aj, order)
+            return h[0] + h[1] if order == 0 else tuple(x + y for x, y in zip(*h, strict=True))
+
+        aspect = float(
+            np.max(np.concatenate([size_i[:, 0] / size_i[:, 1], size_j[:, 0] / size_j[:, 1]]))
+        )
+        return _support_gap(d, pair, gap_samples(aspect))
+
+    def contains(self, p, size, angle) -> np.ndarray:
+        x, y = _rotate(p, angle)
+        return (x / (0.5 * size[:, 0])) ** 2 + (y / (0.5 * size[:, 1])) ** 2 <= 1.0
+
+    def outline(self, size, angle, tolerance) -> np.ndarray:
+        """Vertices evenly spaced in the ellipse's parameter, as many as a circle of the
+        long half-axis needs: the chord error is largest at the ends of the long axis,
+        where it equals that circle's."""
+        a, b = 0.5 * float(size[0]), 0.5 * float(size[1])
+        n = polygon_vertices(a, tolerance)
+        t = 2.0 * np.pi * np.arange(n) / n
+        return _turned(np.column_stack([a * np.cos(t), b * np.sin(t)]), angle)
+
+    def fit(self, points: np.ndarray, slack: float, share: float = 0.0) -> Fit:
+        """Centre: the vertices' mean; axes: the vertices' second moments (vertices evenly
+        spaced in the parameter have covariance ``diag(a², b²) / 2``); a fit when every
+        vertex lies within ``slack + share a`` of that ellipse."""
+        c = points.mean(axis=0)
+        q = points - c
+        w, v = np.linalg.eigh(q.T @ q / len(q))
+        a, b = np.sqrt(2.0 * np.maximum(w[::-1], 0.0))
+        ang = _axis_angle(v[:, 1])
+        size = np.array([2.0 * a, 2.0 * b])
+        if not (len(points) >= MIN_VERTICES and b > 0):
+            return Fit(False, c, size, ang, (0.0, 0.0))
+        x, y = _rotate(q, np.full(len(q), ang))
+        # distance to the ellipse, to first order: the level's excess over its gradient
+        lev = np.hypot(x / a, y / b)
+        err = np.abs(lev - 1.0) / np.hypot(x / a**2, y / b**2) * lev
+        ok = float(err.max()) <= slack + share * a
+        rad = np.hypot(*q.T)
+        return Fit(ok, c, size, ang, (float(rad.min()), float(rad.max())))
+
+
+class RoundedRect(Kind):
+    """A rectangle of ``length`` × ``width`` mm (``length >= width``) with corners rounded
+    to ``corner_radius`` mm (``0 <= corner_radius <= width / 2``): a square when length
+    equals width, a capsule when the radius is half the width."""
+
+    name = "rounded_rectangle"
+    params = ("length", "width", "corner_radius")
+
+    @staticmethod
+    def _core(size: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(hx, hy, rc)``: the half sides of the rectangle the corners round, and the
+        radius (the footprint is that rectangle grown by ``rc``)."""
+        rc = size[..., 2]
+        return 0.5 * size[..., 0] - rc, 0.5 * size[..., 1] - rc, rc
+
+    def area(self, size: np.ndarray) -> np.ndarray:
+        return size[:, 0] * size[:, 1] - (4.0 - np.pi) * size[:, 2] ** 2
+
+    def extent(self, size: np.ndarray) -> np.ndarray:
+        hx, hy, rc = self._core(size)
+        return np.hypot(hx, hy) + rc
+
+    @classmethod
+    def support(cls, theta, size, angle) -> np.ndarray:
+        """The support function (mm) of the footprints in the directions ``theta``."""
+        hx, hy, rc = cls._core(size)
+        return hx * np.abs(np.cos(theta - angle)) + hy * np.abs(np.sin(theta - angle)) + rc
+
+    def gap(self, d, size_i, angle_i, size_j, angle_j) -> np.ndarray:
+        """Exact: the two inner rectangles' Minkowski sum is a convex polygon whose edge
+        normals are the rectangles' axes and whose vertices are sums of their corners,
+        so the separation ``max_u <d, u> - h_i(u) - h_j(u)`` is attained at one of the 8
+        axis directions (an edge nearest) or at a direction from one of the 16 corner
+        sums to ``d`` (a vertex nearest); the radii add to both."""
+        hxi, hyi, rci = self._core(size_i)
+        hxj, hyj, rcj = self._core(size_j)
+        ei = np.stack([np.cos(angle_i), np.sin(angle_i)], axis=1)  # long axes, [m, 2]
+        ej = np.stack([np.cos(angle_j), np.sin(angle_j)], axis=1)
+        fi, fj = ei[:, ::-1] * [-1.0, 1.0], ej[:, ::-1] * [-1.0, 1.0]  # short axes
+        cand = [ei, fi, ej, fj, -ei, -fi, -ej, -fj]
+        for si, ti, sj, tj in itertools.product((1.0, -1.0), repeat=4):
+            v = (si * hxi)[:, None] * ei + (ti * hyi)[:, None] * fi
+            v += (sj * hxj)[:, None] * ej + (tj * hyj)[:, None] * fj
+            w = d - v
+            n = np.hypot(w[:, 0], w[:, 1])
+            cand.append(w / np.where(n > 0, n, 1.0)[:, None])
+        u = np.stack(cand, axis=1)  # [m, 24, 2]
+
+        def along(e):
+            return np.abs(u[..., 0] * e[:, None, 0] + u[..., 1] * e[:, None, 1])
+
+        f = (
+            u[..., 0] * d[:, None, 0]
+            + u[..., 1] * d[:, None, 1]
+            - hxi[:, None] * along(ei)
+            - hyi[:, None] * along(fi)
+            - hxj[:, None] * along(ej)
+            - hyj[:, None] * along(fj)
+        )
+        return f.max(axis=1) - rci - rcj
+
+    def contains(self, p, size, angle) -> np.ndarray:
+        x, y = _rotate(p, angle)
+        hx, hy, rc = self._core(size)
+        qx, qy = np.abs(x) - hx, np.abs(y) - hy
+        out = np.hypot(np.maximum(qx, 0.0), np.maximum(qy, 0.0))
+        return out + np.minimum(np.maximum(qx, qy), 0.0) <= rc
+
+    def outline(self, size, angle, tolerance) -> np.ndarray:
+        """The four sides and, at each corner, a quarter of the polygon a circle of the
+        corner radius needs (one vertex when the corner is sharp)."""
+        hx, hy, rc = (float(v) for v in self._core(np.asarray(size, float)))
+        q = 0 if rc <= 0 else max(1, -(-polygon_vertices(rc, tolerance) // 4))
+        ring = []
+        for k, (cx, cy) in enumerate(((hx, hy), (-hx, hy), (-hx, -hy), (hx, -hy))):
+            t = 0.5 * np.pi * (k + np.arange(q + 1) / max(q, 1)) if q else np.zeros(1)
+            ring.append(np.column_stack([cx + rc * np.cos(t), cy + rc * np.sin(t)]))
+        pts = np.concatenate(ring)
+        keep = np.ones(len(pts), bool)  # a capsule's or a square's repeated vertices
+        keep[1:] = np.hypot(*np.diff(pts, axis=0).T) > 1e-12 * max(hx + rc, 1e-300)
+        pts = pts[keep]
+        if len(pts) > 1 and np.hypot(*(pts[-1] - pts[0])) <= 1e-12 * (hx + rc):
+            pts = pts[:-1]
+        return _turned(pts, angle)
+
+    def fit(self, points: np.ndarray, slack: float, share: float = 0.0) -> Fit:
+        """Angle: the longest edge's; sides: the vertices' extent along and across it;
+        corner radius: how far the corners reach along their diagonals; a fit when every
+        vertex lies within ``slack + share L`` of that footprint."""
+        q = points - 0.5 * (points.max(axis=0) + points.min(axis=0))
+        e = np.roll(points, -1, axis=0) - points
+        k = int(np.argmax(np.hypot(*e.T)))
+        ang = _axis_angle(e[k])
+        x, y = _rotate(q, np.full(len(q), ang))
+        mid = np.array([0.5 * (x.max() + x.min()), 0.5 * (y.max() + y.min())])
+        length, width = float(x.max() - x.min()), float(y.max() - y.min())
+        if width > length:
+            length, width, ang = width, length, _axis_angle(np.array([-e[k, 1], e[k, 0]]))
+        c, s = math.cos(ang), math.sin(ang)
+        centre = 0.5 * (points.max(axis=0) + points.min(axis=0)) + np.array(
+            [c * mid[0] - s * mid[1], s * mid[0] + c * mid[1]]
+        )
+        # the corner's point at 45° reaches |x| + |y| = L/2 + W/2 - (2 - √2) rc
+        reach = float((np.abs(x - mid[0]) + np.abs(y - mid[1])).max())
+        rc = (0.5 * (length + width) - reach) / (2.0 - math.sqrt(2.0))
+        size = np.array([length, width, min(max(rc, 0.0), 0.5 * width)])
+        rel = points - centre
+        x, y = _rotate(rel, np.full(len(rel), ang))
+        hx, hy, rc = self._core(size)
+        qx, qy = np.abs(x) - hx, np.abs(y) - hy
+        dist = np.hypot(np.maximum(qx, 0), np.maximum(qy, 0)) + np.minimum(np.maximum(qx, qy), 0)
+        ok = (
+            len(points) >= 4
+            and width > 0
+            and float(np.abs(dist - rc).max()) <= slack + share * length
+        )
+        rad = np.hypot(*rel.T)
+        return Fit(ok, centre, size, ang, (float(rad.min()), float(rad.max())))
+
+
+def _corner(hx, hy, angle, sx: int, sy: int) -> np.ndarray:
+    """``[m, 2]`` the corner ``(sx hx, sy hy)`` of rectangles turned by ``angle``."""
+    c, s = np.cos(angle), np.sin(angle)
+    x, y = sx * hx, sy * hy
+    return np.stack([c * x - s * y, s * x + c * y], axis=1)
+
+
+def _turned(ring: np.ndarray, angle: float) -> np.ndarray:
+    """``ring`` (``[v, 2]``) turned counter-clockwise by ``angle`` rad about the origin."""
+    if angle == 0.0:
+        return ring
+    c, s = math.cos(angle), math.sin(angle)
+    return ring @ np.array([[c, s], [-s, c]])
+
+
+def _axis_angle(v: np.ndarray) -> float:
+    """The angle of the axis along ``v`` (``[2]``), rad, in ``(-π/2, π/2]``."""
+    a = math.atan2(float(v[1]), float(v[0]))
+    if a <= -0.5 * math.pi:
+        a += math.pi
+    elif a > 0.5 * math.pi:
+        a -= math.pi
+    return a
+
+
+#: Fewest directions :meth:`Ellipse.gap` tries before its Newton steps.
+GAP_SAMPLES = 16
+
+
+def gap_samples(aspect: float) -> int:
+    """Directions to try for ellipses of up to ``aspect`` (length / width): so many that
+    the best lies where the separation is concave (above minus the smallest radius of
+    curvature ``b²/a``), the curvature of the pair's support being at most ``2 a²/b``:
+    spacing ``sqrt(4 (b/a)³)``, at least :data:`GAP_SAMPLES`."""
+    return max(GAP_SAMPLES, math.ceil(2.0 * math.pi / math.sqrt(4.0 * aspect**-3)))
+
+
+#: Newton steps after them (quadratic convergence: a handful reach machine precision).
+GAP_NEWTON = 8
+#: Pairs per block of the vectorised search (bounds its memory).
+GAP_BLOCK = 1 << 14
+
+
+def _support_gap(d: np.ndarray, support, samples: int) -> np.ndarray:
+    """``[m]`` ``max_θ d·u(θ) - H(θ)`` for smooth pair supports ``H = support(θ, order)``
+    (``order`` 0: ``H`` of ``[m, k]`` angles; 2: ``(H, H', H'')`` of ``[m]`` angles)."""
+    m = len(d)
+    theta = 2.0 * np.pi * np.arange(samples) / samples
+    t = np.broadcast_to(theta, (m, samples))
+    f = d[:, :1] * np.cos(t) + d[:, 1:] * np.sin(t) - support(t, 0) if m else np.zeros((0, 1))
+    best_t = theta[np.argmax(f, axis=1)] if m else np.zeros(0)
+    best = f.max(axis=1) if m else np.zeros(0)
+    step = 2.0 * np.pi / samples
+    t = best_t
+    for _ in range(GAP_NEWTON):
+        c, s = np.cos(t), np.sin(t)
+        h, dh, ddh = support(t, 2)
+        g1 = -d[:, 0] * s + d[:, 1] * c - dh
+        g2 = -d[:, 0] * c - d[:, 1] * s - ddh
+        dt = np.where(g2 < 0, -g1 / np.where(g2 < 0, g2, -1.0), np.sign(g1) * step)
+        t = t + np.clip(dt, -step, step)
+        val = d[:, 0] * np.cos(t) + d[:, 1] * np.sin(t) - support(t, 0)
+        best = np.maximum(best, val)
+    return best
+
+
 @dataclass(frozen=True)
 class Fit:
     """A footprint recognised from a polygon (:meth:`Kind.fit`).
@@ -145,7 +422,7 @@ def polygon_vertices(radius: float, tolerance: float) -> int:
 
 
 #: Every kind, by name.
-KINDS: dict[str, Kind] = {k.name: k for k in (Circle(),)}
+KINDS: dict[str, Kind] = {k.name: k for k in (Circle(), Ellipse(), RoundedRect())}
 #: The circle, the kind of every pattern that does not name one.
 CIRCLE = KINDS["circle"]
 
@@ -232,7 +509,13 @@ class Footprints:
         """``[m]`` edge-to-edge distances of the pairs ``(i[m], j[m])`` of dots centred at
         ``xy`` (``[n, 2]`` mm), mm; negative where they overlap."""
         a = self.angles
-        return self.kind.gap(xy[j] - xy[i], self.size[i], a[i], self.size[j], a[j])
+        out = np.empty(len(i))
+        for s in range(0, len(i), GAP_BLOCK):  # bounded memory for the search
+            ii, jj = i[s : s + GAP_BLOCK], j[s : s + GAP_BLOCK]
+            out[s : s + len(ii)] = self.kind.gap(
+                xy[jj] - xy[ii], self.size[ii], a[ii], self.size[jj], a[jj]
+            )
+        return out
 
     def contains(self, points: np.ndarray, k: np.ndarray, xy: np.ndarray) -> np.ndarray:
         """``[m]`` whether ``points`` (``[m, 2]`` mm) lie on the dots ``k`` (``[m]``)
@@ -249,8 +532,10 @@ __all__ = [
     "KINDS",
     "MIN_VERTICES",
     "Circle",
+    "Ellipse",
     "Fit",
     "Footprints",
     "Kind",
+    "RoundedRect",
     "polygon_vertices",
 ]
