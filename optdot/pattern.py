@@ -93,6 +93,9 @@ class Pattern:
             only; timings live in :attr:`stats`.
         stats: run statistics that may vary between runs (seconds, memory).
         outline: the panel outline with holes and keep-outs, when it is not the box.
+        dots: the footprints of shaped dots (their kind, sizes and angles), or None for
+            discs of :attr:`diameter`; with them, :attr:`diameter` is each footprint's
+            bounding disc's.
     """
 
     xy: np.ndarray
@@ -101,12 +104,17 @@ class Pattern:
     meta: dict[str, Any] = field(default_factory=dict)
     stats: dict[str, Any] = field(default_factory=dict)
     outline: Domain | None = None
+    dots: Footprints | None = None
 
     def __post_init__(self) -> None:
         xy = np.ascontiguousarray(self.xy, dtype=np.float64)
         if xy.ndim != 2 or xy.shape[1] != 2:
             raise ValueError(f"xy must have shape [n, 2], got {xy.shape}")
         xy.setflags(write=False)
+        if self.dots is not None:
+            if self.dots.n != len(xy):
+                raise ValueError(f"dots must hold {len(xy)} footprints, got {self.dots.n}")
+            object.__setattr__(self, "diameter", self.dots.diameter)
         d = np.asarray(self.diameter, dtype=np.float64)
         if d.ndim > 1 or (d.ndim == 1 and len(d) != len(xy)):
             raise ValueError(f"diameter must be a number or shape [{len(xy)}], got {d.shape}")
@@ -131,13 +139,13 @@ class Pattern:
 
     @property
     def kind(self) -> Kind:
-        """The footprint kind of every dot: the circle."""
-        return CIRCLE
+        """The footprint kind of every dot."""
+        return CIRCLE if self.dots is None else self.dots.kind
 
     @property
     def shape(self) -> Footprints:
-        """The dots' footprints (discs of :attr:`diameter`)."""
-        return Footprints.circles(self.diameter)
+        """The dots' footprints (:attr:`dots`, or discs of :attr:`diameter`)."""
+        return Footprints.circles(self.diameter) if self.dots is None else self.dots
 
     @property
     def n(self) -> int:
@@ -173,9 +181,10 @@ class Pattern:
 
     @property
     def uniform_diameter(self) -> float | None:
-        """The one diameter of every dot, mm, or None when sizes vary (or no dots)."""
+        """The one diameter of every disc, mm, or None when sizes vary (or no dots, or
+        the dots are shaped)."""
         d = self.diameter
-        if len(d) == 0 or d.min() != d.max():
+        if len(d) == 0 or d.min() != d.max() or self.dots is not None:
             return None
         return float(d[0])
 

@@ -147,7 +147,14 @@ def generate(
         stats["relaxed_xy"] = np.empty_like(relaxed.xy)
         stats["relaxed_xy"][order] = relaxed.xy
     outline = None if job.domain.rectangle else job.domain
-    return Pattern(xy=xy, diameter=diameter, box=job.box, meta=meta, stats=stats, outline=outline)
+    dots = None
+    if done.dots is not None:
+        dots = done.dots.take(np.argsort(order))  # back to generation order, as xy
+        meta["shape"] = job.shape.kind.name
+        meta["orientation"] = job.orientation.mode
+    return Pattern(
+        xy=xy, diameter=diameter, box=job.box, meta=meta, stats=stats, outline=outline, dots=dots
+    )
 
 
 #: Pattern files :func:`generate_to` writes, by suffix.

@@ -49,7 +49,7 @@ def _check_room(job: Job, n: int, where: str) -> None:
         _check_fill(job, where)
     if job.domain.rectangle and job.domain.edge_margin == 0:
         return  # fill fractions below the packing limit always fit
-    room = job.domain.max_dots(0.5 * job.diameter, job.min_distance)
+    room = job.domain.max_dots(job.dot_radius, job.min_distance)
     if n > room:
         margin = job.domain.edge_margin
         what = f"domain.edge_margin = {margin:g} mm leaves" if margin > 0 else "the panel has"

@@ -12,8 +12,9 @@ from ..files import input_problem
 from ..geometry.density import HEX_PACKING_LIMIT
 
 
-def load_grid(path: Path) -> np.ndarray:
-    """Read a fill-fraction grid from CSV (comma-separated, row 0 = bottom) or ``.npy``.
+def load_grid(path: Path, what: str = "density grid") -> np.ndarray:
+    """Read a fill-fraction grid from CSV (comma-separated, row 0 = bottom) or ``.npy``
+    (``what`` names it in messages).
 
     Returns:
         ``[ny, nx]`` float64 (not yet range-checked; see :func:`validate_grid`).
@@ -21,13 +22,13 @@ def load_grid(path: Path) -> np.ndarray:
     binary = path.suffix.lower() == ".npy"  # sized from its header below
     problem = input_problem(path, 1 << 62 if binary else None)
     if problem is not None:
-        raise JobError(f"{path}: density grid {problem}")
+        raise JobError(f"{path}: {what} {problem}")
     if binary:
-        return _load_npy(path)
+        return _load_npy(path, what)
     try:
         text = path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as e:
-        raise JobError(f"{path}: cannot read density grid ({e})") from None
+        raise JobError(f"{path}: cannot read {what} ({e})") from None
     rows: list[list[float]] = []
     for lineno, row in enumerate(csv.reader(text.splitlines()), start=1):
         if not row or all(not c.strip() for c in row):
@@ -47,11 +48,11 @@ def load_grid(path: Path) -> np.ndarray:
                 f"line 1 has {len(rows[0])}"
             )
     if not rows:
-        raise JobError(f"{path}: density grid is empty")
+        raise JobError(f"{path}: {what} is empty")
     return np.array(rows, dtype=np.float64)
 
 
-def _load_npy(path: Path) -> np.ndarray:
+def _load_npy(path: Path, what: str = "density grid") -> np.ndarray:
     """A 2-D real ``.npy`` grid; the header is checked against the file before any
     memory is taken (a header may claim any size)."""
     fmt = np.lib.format
@@ -81,7 +82,7 @@ def _load_npy(path: Path) -> np.ndarray:
                 )
         g = np.load(path, allow_pickle=False)
     except OSError as e:
-        raise JobError(f"{path}: cannot read density grid ({e.strerror or e})") from None
+        raise JobError(f"{path}: cannot read {what} ({e.strerror or e})") from None
     except ValueError as e:
         raise JobError(f"{path}: not a readable .npy array ({one_line(e)})") from None
     return np.asarray(g, dtype=np.float64)

@@ -19,6 +19,8 @@ from ..errors import JobError
 from ..geometry.density import DensityMap
 from ..geometry.domain import Domain
 from ..geometry.limits import DIAMETER_RANGE_MM, MAX_EXTENT_MM
+from ..geometry.orientation import Orientation
+from ..geometry.shapes import DotShape, Footprints
 from ..geometry.sizes import DotSizes, dots_per_cell
 from .grids import validate_grid
 from .light_guide import DesignParams, LightGuide
@@ -223,6 +225,9 @@ class Job:
             (``[domain] active_area`` or ``bezel``), or None for the whole panel. QA's
             visibility and ``simulate``'s figures are judged inside it; every geometric
             check (collisions, protrusion, empty cells, coverage) covers the whole panel.
+        shape: the dot's kind and size when it is not a circle (``[dots] shape``), or
+            None; :attr:`diameter` is then the disc of the same area's.
+        orientation: where shaped dots' long axes point (``[orientation]``).
     """
 
     width: float
@@ -240,6 +245,8 @@ class Job:
     light_guide: LightGuide | None = None
     design: DesignParams = field(default_factory=DesignParams)
     viewing_area: tuple[float, float, float, float] | None = None
+    shape: DotShape | None = None
+    orientation: Orientation = field(default_factory=Orientation)
 
     def __post_init__(self) -> None:
         where = str(self.source) if self.source else "job"
@@ -279,8 +286,23 @@ class Job:
     @property
     def min_distance(self) -> float:
         """Smallest allowed centre distance, mm (diameter + gap; with ``sizes``, of two
-        dots of the smallest size)."""
-        return self.diameter + self.optimize.gap
+        dots of the smallest size; for shaped dots, their bounding discs' diameter +
+        gap: the hard core the relaxation keeps, which holds whatever their angles)."""
+        return 2.0 * self.dot_radius + self.optimize.gap
+
+    @property
+    def dot_radius(self) -> float:
+        """How far a dot reaches from its centre, mm: the radius (the smallest, with
+        ``sizes``), or a shaped dot's bounding radius."""
+        return 0.5 * self.diameter if self.shape is None else self.shape.extent
+
+    def footprints(self, xy: np.ndarray, diameter: np.ndarray | float) -> Footprints:
+        """The footprints of dots centred at ``xy`` (``[n, 2]`` mm): discs of
+        ``diameter`` (``[n]`` or one, mm), or the job's shape turned by its orientation
+        field where each dot stands."""
+        if self.shape is None:
+            return Footprints.circles(diameter, len(xy))
+        return self.shape.footprints(self.orientation.at(xy))
 
     @cached_property
     def cell_diameters(self) -> np.ndarray | None:

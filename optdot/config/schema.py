@@ -30,6 +30,7 @@ from .light_guide import (
     design_from,
     light_guide_from,
 )
+from .shaping import DOT_SHAPE_KEYS, ORIENTATION_KEYS, dot_shape, orientation
 
 SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
     "": {"name": (str,)},
@@ -56,7 +57,9 @@ SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
         "spacing": (int, float),
         "diameter_grid": (str,),
         "diameter_step": (int, float),
+        **DOT_SHAPE_KEYS,
     },
+    "orientation": ORIENTATION_KEYS,
     "optimize": {
         "method": (str,),
         "max_iter": (int,),
@@ -94,7 +97,7 @@ SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
     "light_guide": LIGHT_GUIDE_KEYS,
     "design": DESIGN_KEYS,
 }
-_REQUIRED = {"dots": ("diameter",)}
+_REQUIRED: dict[str, tuple[str, ...]] = {"dots": ()}
 
 
 #: Largest job file read, bytes (a job is a few hundred bytes; values are short).
@@ -150,7 +153,7 @@ def job_from_dict(
                     f"{', '.join(allowed)})"
                 )
             types = allowed[key]
-            if isinstance(value, bool) or not isinstance(value, types):
+            if (isinstance(value, bool) and bool not in types) or not isinstance(value, types):
                 names = " or ".join(t.__name__ for t in types)
                 raise JobError(f"{where}: {label} = {value!r} must be {names}")
     for sec, keys in _REQUIRED.items():
@@ -210,7 +213,22 @@ def job_from_dict(
     if interpolation == "linear":
         density = density.interpolated()
     dots = sections["dots"]
-    diameter, sizes, size_file = _dot_sizes(dots, sections.get("qa", {}), qa, base, where)
+    shape = dot_shape(dots, where)
+    if shape is None:
+        if "diameter" not in dots:
+            raise JobError(f"{where}: missing required key dots.diameter")
+        diameter, sizes, size_file = _dot_sizes(dots, sections.get("qa", {}), qa, base, where)
+    else:
+        diameter, sizes, size_file = shape.equivalent_diameter, None, None
+    turn = orientation(
+        sections.get("orientation", {}),
+        shape,
+        guide,
+        (x0, y0, x0 + width, y0 + height),
+        base,
+        opt.seed,
+        where,
+    )
     return Job(
         domain=domain,
         width=width,
@@ -231,6 +249,8 @@ def job_from_dict(
         light_guide=guide,
         design=design,
         viewing_area=area,
+        shape=shape,
+        orientation=turn,
     )
 
 

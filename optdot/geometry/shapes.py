@@ -427,6 +427,40 @@ KINDS: dict[str, Kind] = {k.name: k for k in (Circle(), Ellipse(), RoundedRect()
 CIRCLE = KINDS["circle"]
 
 
+@dataclass(frozen=True)
+class DotShape:
+    """A job's dot: one kind at one size (``[dots] shape`` and its sizes).
+
+    Attributes:
+        kind: the :class:`Kind`.
+        size: its size parameters, mm (``kind.params`` in order).
+    """
+
+    kind: Kind
+    size: tuple[float, ...]
+
+    @property
+    def area(self) -> float:
+        """The footprint's area, mm²."""
+        return float(self.kind.area(np.array([self.size]))[0])
+
+    @property
+    def extent(self) -> float:
+        """The radius of its bounding disc, mm."""
+        return float(self.kind.extent(np.array([self.size]))[0])
+
+    @property
+    def equivalent_diameter(self) -> float:
+        """The diameter of the disc of the same area, mm: what sets the spacing and the
+        count (one footprint per ``area / fill``)."""
+        return 2.0 * math.sqrt(self.area / math.pi)
+
+    def footprints(self, angle: np.ndarray) -> Footprints:
+        """The footprints of ``len(angle)`` dots at ``angle`` (``[n]`` rad)."""
+        n = len(angle)
+        return Footprints(self.kind, np.tile(np.asarray(self.size, float), (n, 1)), angle)
+
+
 @dataclass(frozen=True, eq=False)
 class Footprints:
     """The footprints of ``n`` dots of one kind.
@@ -532,6 +566,7 @@ __all__ = [
     "KINDS",
     "MIN_VERTICES",
     "Circle",
+    "DotShape",
     "Ellipse",
     "Fit",
     "Footprints",

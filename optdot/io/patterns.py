@@ -1,10 +1,14 @@
 """Pattern files written by ``optdot generate`` and read by ``export`` and ``qa``.
 
-* CSV: header ``x_mm,y_mm,diameter_mm``, one dot a row, 6 decimals (1 nm).
+* CSV: header ``x_mm,y_mm,diameter_mm``, one dot a row, 6 decimals (1 nm). Shaped dots:
+  ``x_mm,y_mm``, the kind's sizes (``length_mm,width_mm`` for an ellipse, then
+  ``corner_radius_mm`` for a rounded rectangle) and ``angle_deg`` (the long axis from +x,
+  counter-clockwise, 1e-6°); the header names the kind.
 * NPZ: arrays ``xy`` ``[n, 2]`` (mm), ``diameter`` (mm: a 0-d array when every dot has
   the same size, else ``[n]``), ``box`` ``[4]`` (mm) and ``meta`` (JSON text), plus
-  ``outline_wkb``/``edge_margin`` for outlines; a zip with fixed timestamps so equal
-  patterns give equal bytes.
+  ``outline_wkb``/``edge_margin`` for outlines; shaped dots hold ``shape`` (the kind's
+  name), ``size`` (mm, ``[k]`` or ``[n, k]``) and ``angle_deg`` ``[n]`` instead of
+  ``diameter``. A zip with fixed timestamps so equal patterns give equal bytes.
 """
 
 from __future__ import annotations
@@ -24,12 +28,25 @@ from ..errors import ExportError, PatternFileError, one_line
 from ..files import input_problem
 from ..geometry.domain import Domain, orient_all
 from ..geometry.limits import validate_dots
+from ..geometry.orientation import degrees
+from ..geometry.shapes import CIRCLE, KINDS, Footprints, Kind
 from ..pattern import Pattern
 from .atomic import atomic_path, expect_size
 from .dataset import load_dataset
 from .dataset_write import save_dataset
 
 CSV_HEADER = "x_mm,y_mm,diameter_mm"
+
+
+def csv_header(kind: Kind) -> str:
+    """The CSV header of dots of ``kind`` (:data:`CSV_HEADER` for circles)."""
+    if kind is CIRCLE:
+        return CSV_HEADER
+    return ",".join(["x_mm", "y_mm", *(f"{p}_mm" for p in kind.params), "angle_deg"])
+
+
+#: Each header a pattern CSV may have, and its kind.
+CSV_KINDS = {csv_header(k): k for k in KINDS.values()}
 
 
 def save_pattern(pattern: Pattern, path: str | Path) -> None:
@@ -77,9 +94,14 @@ def _verify_npz(path: Path):
 
 
 def pattern_csv_bytes(pattern: Pattern) -> bytes:
-    """The CSV text of a pattern, as bytes (``x,y,d`` in mm with 6 decimals = 1 nm)."""
-    data = np.column_stack([pattern.xy, pattern.diameter])
-    return (CSV_HEADER + "\n").encode("ascii") + format_fixed6(data)
+    """The CSV text of a pattern, as bytes (``x,y,d`` in mm with 6 decimals = 1 nm;
+    shaped dots: ``x,y``, sizes, angle in degrees)."""
+    dots = pattern.dots
+    if dots is None:
+        data = np.column_stack([pattern.xy, pattern.diameter])
+    else:
+        data = np.column_stack([pattern.xy, dots.size, degrees(dots.angles)])
+    return (csv_header(pattern.kind) + "\n").encode("ascii") + format_fixed6(data)
 
 
 def format_fixed6(values: np.ndarray) -> bytes:
@@ -134,14 +156,18 @@ def _format_micro(micro, negative):  # pragma: no cover - compiled
 
 
 def _write_npz(pattern: Pattern, path: Path) -> None:
-    arrays = {
-        "xy": pattern.xy,
-        "diameter": np.array(pattern.uniform_diameter)
-        if pattern.uniform_diameter is not None
-        else pattern.diameter,
-        "box": np.array(pattern.box),
-        "meta": np.array(json.dumps(pattern.meta, sort_keys=True)),
-    }
+    arrays = {"xy": pattern.xy}
+    dots = pattern.dots
+    if dots is None:
+        u = pattern.uniform_diameter
+        arrays["diameter"] = np.array(u) if u is not None else pattern.diameter
+    else:
+        one = bool(np.all(dots.size == dots.size[:1]))
+        arrays["shape"] = np.array(dots.kind.name)
+        arrays["size"] = dots.size[0] if one else dots.size
+        arrays["angle_deg"] = degrees(dots.angles)
+    arrays["box"] = np.array(pattern.box)
+    arrays["meta"] = np.array(json.dumps(pattern.meta, sort_keys=True))
     if pattern.outline is not None:
         # WKB keeps every coordinate bit-exact (WKT text does not)
         wkb = shapely.to_wkb(pattern.outline.geometry, byte_order=1)
@@ -191,9 +217,11 @@ def _load_csv(path: Path, box: tuple[float, float, float, float] | None) -> Patt
         # utf-8-sig: a byte-order mark (spreadsheets write one) is read over
         with open(path, encoding="utf-8-sig") as fh:
             header = fh.readline().strip()
-            if header != CSV_HEADER:
+            if header not in CSV_KINDS:
                 raise PatternFileError(
-                    f"{path}: line 1: header must be {CSV_HEADER!r}, got {header[:60]!r}"
+                    f"{path}: line 1: header must be {CSV_HEADER!r} (or a shaped dot's, "
+                    f"{', '.join(repr(h) for h in CSV_KINDS if h != CSV_HEADER)}), "
+                    f"got {header[:60]!r}"
                 )
             with warnings.catch_warnings():  # "no data" is reported below, in one line
                 warnings.simplefilter("ignore", UserWarning)
@@ -204,9 +232,15 @@ def _load_csv(path: Path, box: tuple[float, float, float, float] | None) -> Patt
         raise PatternFileError(f"{path}: cannot read ({e.strerror})") from None
     if data.size == 0:
         raise PatternFileError(f"{path}: no dots in the file")
-    if data.shape[1] != 3:
-        raise PatternFileError(f"{path}: expected 3 columns ({CSV_HEADER}), got {data.shape[1]}")
-    return _validated(path, data[:, :2], data[:, 2], box, {})
+    kind = CSV_KINDS[header]
+    if data.shape[1] != header.count(",") + 1:
+        raise PatternFileError(
+            f"{path}: expected {header.count(',') + 1} columns ({header}), got {data.shape[1]}"
+        )
+    if kind is CIRCLE:
+        return _validated(path, data[:, :2], data[:, 2], box, {})
+    dots = _shaped(path, kind, data[:, 2:-1], data[:, -1])
+    return _validated(path, data[:, :2], dots.diameter, box, {}, dots)
 
 
 def _check_npz_sizes(path: Path, z) -> None:
@@ -238,7 +272,25 @@ def _load_npz(path: Path, box: tuple[float, float, float, float] | None) -> Patt
                 raise PatternFileError(f"{path}: a .npy array, not a pattern .npz archive")
             _check_npz_sizes(path, z)
             xy = _real(path, z, "xy")
-            diameter = _real(path, z, "diameter")
+            dots = None
+            if "shape" in z:
+                name = str(z["shape"])
+                if name not in KINDS or KINDS[name] is CIRCLE:
+                    raise PatternFileError(
+                        f"{path}: shape = {name[:40]!r} is not a shaped dot's kind "
+                        f"({', '.join(k for k in KINDS if k != 'circle')})"
+                    )
+                size, angle = _real(path, z, "size"), _real(path, z, "angle_deg")
+                k = len(KINDS[name].params)
+                if size.shape not in ((k,), (len(xy), k)) or angle.shape != (len(xy),):
+                    raise PatternFileError(
+                        f"{path}: size must be [{k}] or [{len(xy)}, {k}] and angle_deg "
+                        f"[{len(xy)}], got {size.shape} and {angle.shape}"
+                    )
+                dots = _shaped(path, KINDS[name], np.broadcast_to(size, (len(xy), k)), angle)
+                diameter = dots.diameter
+            else:
+                diameter = _real(path, z, "diameter")
             file_box = _real(path, z, "box")
             meta = json.loads(str(z["meta"])) if "meta" in z else {}
             if not isinstance(meta, dict):
@@ -275,7 +327,7 @@ def _load_npz(path: Path, box: tuple[float, float, float, float] | None) -> Patt
             f"got shape {diameter.shape}"
         )
     the_box = box or tuple(file_box.tolist())
-    p = _validated(path, xy, np.broadcast_to(diameter, (len(xy),)), the_box, meta)
+    p = _validated(path, xy, np.broadcast_to(diameter, (len(xy),)), the_box, meta, dots)
     return p if outline is None else replace(p, outline=outline)
 
 
@@ -287,7 +339,25 @@ def _real(path: Path, z, name: str) -> np.ndarray:
     return a.astype(np.float64)
 
 
-def _validated(path, xy, diam, box, meta) -> Pattern:
+def _shaped(path: Path, kind: Kind, size: np.ndarray, angle_deg: np.ndarray) -> Footprints:
+    """The footprints a file holds, refused in one line when they cannot be drawn: NaN,
+    a length under the width, a corner radius over half the width."""
+    size = np.ascontiguousarray(size, dtype=np.float64)
+    if not (np.all(np.isfinite(size)) and np.all(np.isfinite(angle_deg))):
+        raise PatternFileError(f"{path}: NaN or infinite size or angle_deg")
+    bad = (size[:, 1] <= 0) | (size[:, 0] < size[:, 1])
+    if kind.name == "rounded_rectangle":
+        bad |= (size[:, 2] < 0) | (size[:, 2] > 0.5 * size[:, 1])
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise PatternFileError(
+            f"{path}: dot {i + 1}: a {kind.name} of {tuple(size[i].tolist())} mm cannot be "
+            "drawn (width > 0, length >= width, corner radius <= width / 2)"
+        )
+    return Footprints(kind, size, np.radians(angle_deg))
+
+
+def _validated(path, xy, diam, box, meta, dots: Footprints | None = None) -> Pattern:
     validate_dots(path, xy, diam, box)
     if box is None:
         lo = (xy - diam[:, None] / 2).min(axis=0)
@@ -295,4 +365,4 @@ def _validated(path, xy, diam, box, meta) -> Pattern:
         box = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
     if not (box[2] > box[0] and box[3] > box[1]):
         raise PatternFileError(f"{path}: empty panel box {box}")
-    return Pattern(xy=xy, diameter=diam, box=box, meta={**meta, "source": str(path)})
+    return Pattern(xy=xy, diameter=diam, box=box, meta={**meta, "source": str(path)}, dots=dots)

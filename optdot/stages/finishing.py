@@ -8,6 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config.job import Job
+from ..geometry.orientation import degrees
+from ..geometry.shapes import Footprints
 from ..relax.legalize import LegalizeResult, make_legal
 from ..relax.resize import fit_sizes
 from ..sampling.initial import Rect
@@ -22,11 +24,14 @@ class Finished:
         xy: ``[n, 2]`` final positions, mm, rounded to 1 nm.
         diameter: the one diameter, mm, or ``[n]`` per dot.
         legalize: the guarantee pass's facts (sweeps, fixes).
+        dots: shaped dots' footprints, turned by the job's orientation field where each
+            dot ended (angles rounded to 1e-6°, what files hold), or None for discs.
     """
 
     xy: np.ndarray
     diameter: float | np.ndarray
     legalize: LegalizeResult
+    dots: Footprints | None = None
 
 
 def finish(
@@ -65,7 +70,7 @@ def finish(
         if d is not None:
             d = np.concatenate([d, np.broadcast_to(held[1], (len(held[0]),))])
     if d is None:
-        radius, dmin = 0.5 * job.diameter, job.min_distance
+        radius, dmin = job.dot_radius, job.min_distance
     else:
         s = stage_settings(job)
         if s.fitted:
@@ -74,4 +79,9 @@ def finish(
         radius, dmin = 0.5 * d, d + job.optimize.gap
     leg = make_legal(xy, job.density, home, job.domain, radius, dmin, where, frozen)
     diameter = job.diameter if d is None else d[:n]
-    return Finished(np.ascontiguousarray(leg.xy[:n]), diameter, leg)
+    xy = np.ascontiguousarray(leg.xy[:n])
+    dots = None
+    if job.shape is not None:
+        dots = job.footprints(xy, diameter)
+        dots = Footprints(dots.kind, dots.size, np.radians(degrees(dots.angles)))
+    return Finished(xy, diameter, leg, dots)

@@ -25,7 +25,7 @@ def problem_of(job: Job) -> Problem:
     return Problem(
         domain=job.domain,
         density=job.density,
-        dot_radius=0.5 * job.diameter,
+        dot_radius=job.dot_radius,
         min_distance=job.min_distance,
         close_target=job.close_target,
         seed=job.optimize.seed,

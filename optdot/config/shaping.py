@@ -1,0 +1,171 @@
+"""``[dots] shape`` and ``[orientation]``: a job's non-circular dot and where it points.
+
+``[dots]``::
+
+    shape = "ellipse"            # "circle" (default), "ellipse", "rounded_rectangle"
+    length = 0.080               # mm, the long axis
+    width = 0.040                # mm, across it (<= length)
+    corner_radius = 0.005        # mm, rounded_rectangle only (0 .. width/2; width/2: capsule)
+
+``[orientation]`` (one of, for shapes with a long axis; default ``angle = 0``)::
+
+    angle = 30                   # degrees from +x, counter-clockwise, everywhere
+    toward = "leds"              # the [light_guide]'s nearest LED ...
+    relative = "perpendicular"   # ... long axis across ("perpendicular") or along it
+    map = "angles.csv"           # degrees per cell over the panel box, row 0 = bottom
+    random = true                # uniform, seeded by optimize.seed
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import JobError
+from ..geometry.limits import DIAMETER_RANGE_MM
+from ..geometry.orientation import Orientation, led_centres
+from ..geometry.shapes import CIRCLE, KINDS, DotShape
+from .grids import load_grid
+
+DOT_SHAPE_KEYS: dict[str, tuple[type, ...]] = {
+    "shape": (str,),
+    "length": (int, float),
+    "width": (int, float),
+    "corner_radius": (int, float),
+}
+ORIENTATION_KEYS: dict[str, tuple[type, ...]] = {
+    "angle": (int, float),
+    "toward": (str,),
+    "relative": (str,),
+    "map": (str,),
+    "random": (bool,),
+}
+#: Longest footprint drawn, as length over width.
+MAX_ASPECT = 50.0
+
+
+def dot_shape(dots: dict[str, Any], where: str) -> DotShape | None:
+    """The ``[dots]`` shape, or None for circles (``shape`` absent or ``"circle"``).
+
+    Raises:
+        JobError: an unknown kind, a size that is missing, not a length or cannot be
+            drawn (length under width, a corner radius over half the width, an aspect
+            over :data:`MAX_ASPECT`).
+    """
+    name = dots.get("shape", "circle")
+    sized = [k for k in ("length", "width", "corner_radius") if k in dots]
+    if name not in KINDS:
+        raise JobError(f"{where}: dots.shape = {name!r} must be one of {', '.join(KINDS)}")
+    if KINDS[name] is CIRCLE:
+        if sized:
+            raise JobError(
+                f"{where}: dots.{sized[0]} is a shaped dot's size; circles take dots.diameter "
+                '(or set dots.shape = "ellipse" or "rounded_rectangle")'
+            )
+        return None
+    kind = KINDS[name]
+    if "diameter" in dots:
+        raise JobError(
+            f"{where}: dots.diameter is a circle's; a {name} takes "
+            + ", ".join(f"dots.{p}" for p in kind.params)
+        )
+    lo, hi = DIAMETER_RANGE_MM
+    size = []
+    for p in kind.params:
+        if p not in dots:
+            raise JobError(f"{where}: dots.shape = {name!r} needs dots.{p} (mm)")
+        v = float(dots[p])
+        least = 0.0 if p == "corner_radius" else lo
+        if not (math.isfinite(v) and least <= v <= hi):
+            raise JobError(
+                f"{where}: dots.{p} = {dots[p]!r} must be in mm, {least:g} <= x <= {hi:g}"
+            )
+        size.append(v)
+    for p in sized:
+        if p not in kind.params:
+            raise JobError(f"{where}: dots.{p} does not apply to a {name}")
+    length, width = size[0], size[1]
+    if width > length:
+        raise JobError(
+            f"{where}: dots.width = {width:g} exceeds dots.length = {length:g}: the length is "
+            "the long axis (turn the dot with [orientation] angle instead)"
+        )
+    if length > MAX_ASPECT * width:
+        raise JobError(
+            f"{where}: dots.length / dots.width = {length / width:.4g} cannot be drawn "
+            f"(at most {MAX_ASPECT:g})"
+        )
+    if name == "rounded_rectangle" and size[2] > 0.5 * width:
+        raise JobError(
+            f"{where}: dots.corner_radius = {size[2]:g} cannot be drawn on a dot "
+            f"{width:g} mm wide (at most width / 2 = {0.5 * width:g}: a capsule)"
+        )
+    return DotShape(kind, tuple(size))
+
+
+def orientation(
+    sec: dict[str, Any],
+    shape: DotShape | None,
+    guide,
+    box: tuple[float, float, float, float],
+    base: Path,
+    seed: int,
+    where: str,
+) -> Orientation:
+    """The ``[orientation]`` field (default: every dot at 0°).
+
+    Raises:
+        JobError: a section for round dots, two ways given, an unknown ``toward`` or
+            ``relative``, ``toward = "leds"`` without LEDs, a non-finite angle, an angle
+            map that cannot be read or holds NaN.
+    """
+    if not sec:
+        return Orientation()
+    if shape is None:
+        raise JobError(
+            f"{where}: [orientation] turns shaped dots; circles have no long axis "
+            '(set dots.shape = "ellipse" or "rounded_rectangle")'
+        )
+    ways = [k for k in ("toward", "map", "random") if k in sec]
+    if len(ways) > 1:
+        raise JobError(f"{where}: give one of orientation.{', orientation.'.join(ways)}")
+    if "relative" in sec and "toward" not in sec:
+        raise JobError(f'{where}: orientation.relative needs orientation.toward = "leds"')
+    angle = float(sec.get("angle", 0.0))
+    if not (math.isfinite(angle) and abs(angle) <= 360.0):
+        raise JobError(f"{where}: orientation.angle = {sec['angle']!r} must be degrees, -360..360")
+    if "random" in sec:
+        if "angle" in sec:
+            raise JobError(f"{where}: orientation.random and orientation.angle exclude each other")
+        if not sec["random"]:
+            return Orientation("constant", 0.0)
+        return Orientation("random", seed=seed)
+    if "toward" in sec:
+        if sec["toward"] != "leds":
+            raise JobError(f'{where}: orientation.toward = {sec["toward"]!r} must be "leds"')
+        rel = sec.get("relative", "perpendicular")
+        if rel not in ("perpendicular", "parallel"):
+            raise JobError(
+                f'{where}: orientation.relative = {rel!r} must be "perpendicular" or "parallel"'
+            )
+        if guide is None:
+            raise JobError(
+                f'{where}: orientation.toward = "leds" needs a [light_guide] with its LEDs'
+            )
+        turn = 0.5 * math.pi if rel == "perpendicular" else 0.0
+        return Orientation("leds", math.radians(angle) + turn, leds=led_centres(guide, box))
+    if "map" in sec:
+        path = base / sec["map"]
+        grid = load_grid(path, "orientation map")
+        bad = ~np.isfinite(grid)
+        if bad.any():
+            iy, ix = np.argwhere(bad)[0]
+            raise JobError(
+                f"{path}: orientation.map: row {iy + 1}, column {ix + 1} is not a finite angle "
+                "(degrees)"
+            )
+        return Orientation("map", math.radians(angle), grid=np.radians(grid), box=box)
+    return Orientation("constant", math.radians(angle))
