@@ -291,8 +291,9 @@ def qa(
     else:
         outline = None if job.domain.rectangle else job.domain
         gap = job.optimize.gap  # dots of varying size collide below it
+        field = job.orientation if job.shape and job.orientation.follows_position else None
         result = run_qa(
-            dots, job.density, params, collision, gap, job.box, outline, job.viewing_area
+            dots, job.density, params, collision, gap, job.box, outline, job.viewing_area, field
         )
     source = dots.label or None
     seed = dots.meta.get("seed")

@@ -220,3 +220,21 @@ def test_a_mask_polygon_is_read_back_as_its_footprint(name, size):
         assert not CIRCLE.fit(ring, 1e-5 + 2e-6).ok  # nor is it read as a disc
         # the corner radius from a chord: within √2 tolerances over (2 - √2)
         np.testing.assert_allclose(fit.size, size, atol=1e-5 * np.sqrt(2) / (2 - np.sqrt(2)) + 2e-6)
+
+
+@pytest.mark.parametrize(("name", "size"), [*SHAPED, ("circle", (0.05,))])
+def test_the_separation_direction_is_the_gaps_gradient(name, size):
+    """Moving j by ``h u`` widens the gap by ``h`` (the direction is the gap's gradient in
+    the centre difference, Danskin's theorem), and no other unit step widens it more."""
+    xy, dots = _shaped(name, size, 20, 9, spread=0.15)
+    i, j = np.triu_indices(20, 1)
+    gap, u = dots.separation(xy, i, j)
+    np.testing.assert_allclose(np.hypot(*u.T), 1.0, rtol=1e-12)
+    h = 1e-7
+    a, s = dots.angles, dots.size
+    moved = dots.kind.gap(xy[j] - xy[i] + h * u, s[i], a[i], s[j], a[j])
+    np.testing.assert_allclose((moved - gap) / h, 1.0, atol=1e-3)
+    for t in np.linspace(0, 2 * np.pi, 12, endpoint=False):
+        v = np.array([np.cos(t), np.sin(t)])
+        other = dots.kind.gap(xy[j] - xy[i] + h * v, s[i], a[i], s[j], a[j])
+        assert np.all((other - gap) / h <= 1.0 + 1e-3)

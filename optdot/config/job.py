@@ -281,14 +281,27 @@ class Job:
                     f"{where}: optimize.method = 'md' takes one dot size (the baseline of "
                     "Idé et al. has one); give dots.diameter as a number or use 'optdot'"
                 )
+        if self.shape is not None:
+            if self.optimize.method == "md":
+                raise JobError(
+                    f"{where}: optimize.method = 'md' places discs (the baseline of Idé et al.); "
+                    "shaped dots use 'optdot'"
+                )
+            if 2.0 * self.shape.extent >= min(self.width, self.height):
+                raise JobError(
+                    f"{where}: dots.length = {self.shape.size[0]} does not fit the panel"
+                )
         validate_grid(self.density.grid, f"{where}: density.grid")
 
     @property
     def min_distance(self) -> float:
         """Smallest allowed centre distance, mm (diameter + gap; with ``sizes``, of two
-        dots of the smallest size; for shaped dots, their bounding discs' diameter +
-        gap: the hard core the relaxation keeps, which holds whatever their angles)."""
-        return 2.0 * self.dot_radius + self.optimize.gap
+        dots of the smallest size; for shaped dots, the width + gap: nearer, two
+        footprints are too close at any angles; the guarantee pass then holds their
+        exact edge gaps to ``optimize.gap``)."""
+        if self.shape is not None:
+            return 2.0 * self.shape.inner_radius + self.optimize.gap
+        return self.diameter + self.optimize.gap
 
     @property
     def dot_radius(self) -> float:
@@ -296,13 +309,15 @@ class Job:
         ``sizes``), or a shaped dot's bounding radius."""
         return 0.5 * self.diameter if self.shape is None else self.shape.extent
 
-    def footprints(self, xy: np.ndarray, diameter: np.ndarray | float) -> Footprints:
+    def footprints(
+        self, xy: np.ndarray, diameter: np.ndarray | float, thrown: np.ndarray | None = None
+    ) -> Footprints:
         """The footprints of dots centred at ``xy`` (``[n, 2]`` mm): discs of
         ``diameter`` (``[n]`` or one, mm), or the job's shape turned by its orientation
-        field where each dot stands."""
+        field where each dot stands (``random``: drawn from where it was ``thrown``)."""
         if self.shape is None:
             return Footprints.circles(diameter, len(xy))
-        return self.shape.footprints(self.orientation.at(xy))
+        return self.shape.footprints(self.orientation.at(xy, thrown))
 
     @cached_property
     def cell_diameters(self) -> np.ndarray | None:

@@ -9,8 +9,8 @@ point of the panel, so a dot's orientation follows it wherever the dot ends up:
 - ``map``: an angle grid (degrees per cell over the panel box, row 0 = bottom),
   interpolated bilinearly between cell centres as axes (the doubled angle's unit vector
   is interpolated, so 179° and 1° blend to 0°, not 90°);
-- ``random``: uniform, from a hash of the dot's position (1 nm) and the seed, so the
-  same dot gets the same angle whatever order, tile or worker computes it.
+- ``random``: uniform, from a hash of where the dot was thrown (1 nm) and the seed, so
+  the same dot keeps its angle as it moves, whatever order, tile or worker computes it.
 """
 
 from __future__ import annotations
@@ -44,14 +44,20 @@ class Orientation:
     box: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0)
     seed: int = 0
 
-    def at(self, xy: np.ndarray) -> np.ndarray:
+    @property
+    def follows_position(self) -> bool:
+        """Whether the angle is a function of where a dot stands (not ``random``)."""
+        return self.mode != "random"
+
+    def at(self, xy: np.ndarray, thrown: np.ndarray | None = None) -> np.ndarray:
         """``[n]`` angles (rad, in ``(-π/2, π/2]``) of dots centred at ``xy`` (``[n, 2]``
-        mm)."""
+        mm), thrown at ``thrown`` (``[n, 2]`` mm; ``random`` draws from it, default
+        ``xy``)."""
         n = len(xy)
         if self.mode == "constant":
             return axis(np.full(n, self.angle))
         if self.mode == "random":
-            return axis(np.pi * _unit_hash(xy, self.seed))
+            return axis(np.pi * _unit_hash(xy if thrown is None else thrown, self.seed))
         if self.mode == "leds":
             return axis(self._from_leds(xy) + self.angle)
         return axis(self._from_map(xy) + self.angle)

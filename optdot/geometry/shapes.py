@@ -58,6 +58,19 @@ class Kind:
     ) -> np.ndarray:
         """``[m]`` edge-to-edge distances of pairs whose centres differ by ``d`` (``[m,
         2]`` mm, j minus i), mm; negative: the footprints overlap."""
+        return self.separation(d, size_i, angle_i, size_j, angle_j)[0]
+
+    def separation(
+        self,
+        d: np.ndarray,
+        size_i: np.ndarray,
+        angle_i: np.ndarray,
+        size_j: np.ndarray,
+        angle_j: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``(gap [m] mm, u [m, 2])``: :meth:`gap` and the unit direction it is measured
+        along (from i toward j): moving j along ``u`` widens the gap at rate 1, the
+        gap's gradient in ``d``."""
         raise NotImplementedError
 
     def contains(self, p: np.ndarray, size: np.ndarray, angle: np.ndarray) -> np.ndarray:
@@ -90,8 +103,10 @@ class Circle(Kind):
     def extent(self, size: np.ndarray) -> np.ndarray:
         return 0.5 * size[:, 0]
 
-    def gap(self, d, size_i, angle_i, size_j, angle_j) -> np.ndarray:
-        return np.hypot(d[:, 0], d[:, 1]) - 0.5 * (size_i[:, 0] + size_j[:, 0])
+    def separation(self, d, size_i, angle_i, size_j, angle_j):
+        n = np.hypot(d[:, 0], d[:, 1])
+        u = np.where(n[:, None] > 0, d / np.where(n > 0, n, 1.0)[:, None], [1.0, 0.0])
+        return n - 0.5 * (size_i[:, 0] + size_j[:, 0]), u
 
     def contains(self, p, size, angle) -> np.ndarray:
         r = 0.5 * size[:, 0]
@@ -149,7 +164,7 @@ class Ellipse(Kind):
         ddp = -2.0 * (a2 - b2) * c2
         return h, dp / (2.0 * h), ddp / (2.0 * h) - dp * dp / (4.0 * h**3)
 
-    def gap(self, d, size_i, angle_i, size_j, angle_j) -> np.ndarray:
+    def separation(self, d, size_i, angle_i, size_j, angle_j):
         """The separation ``max_u <d, u> - h_i(u) - h_j(u)`` over unit directions ``u``
         (both ellipses are centrally symmetric): the edge-to-edge distance when they are
         apart, minus the depth of the shallowest escape when they overlap. Any ``u``
@@ -158,7 +173,7 @@ class Ellipse(Kind):
         converge because the function is strictly concave wherever it exceeds minus the
         two ellipses' smallest radii of curvature (``b²/a``)."""
         if not len(d):
-            return np.zeros(0)
+            return np.zeros(0), np.zeros((0, 2))
 
         def pair(t, order):
             si, ai, sj, aj = size_i, angle_i, size_j, angle_j
@@ -234,7 +249,7 @@ class RoundedRect(Kind):
         hx, hy, rc = cls._core(size)
         return hx * np.abs(np.cos(theta - angle)) + hy * np.abs(np.sin(theta - angle)) + rc
 
-    def gap(self, d, size_i, angle_i, size_j, angle_j) -> np.ndarray:
+    def separation(self, d, size_i, angle_i, size_j, angle_j):
         """Exact: the two inner rectangles' Minkowski sum is a convex polygon whose edge
         normals are the rectangles' axes and whose vertices are sums of their corners,
         so the separation ``max_u <d, u> - h_i(u) - h_j(u)`` is attained at one of the 8
@@ -265,7 +280,9 @@ class RoundedRect(Kind):
             - hxj[:, None] * along(ej)
             - hyj[:, None] * along(fj)
         )
-        return f.max(axis=1) - rci - rcj
+        k = np.argmax(f, axis=1)
+        at = np.arange(len(d))
+        return f[at, k] - rci - rcj, u[at, k]
 
     def contains(self, p, size, angle) -> np.ndarray:
         x, y = _rotate(p, angle)
@@ -369,14 +386,16 @@ GAP_NEWTON = 8
 GAP_BLOCK = 1 << 14
 
 
-def _support_gap(d: np.ndarray, support, samples: int) -> np.ndarray:
-    """``[m]`` ``max_θ d·u(θ) - H(θ)`` for smooth pair supports ``H = support(θ, order)``
-    (``order`` 0: ``H`` of ``[m, k]`` angles; 2: ``(H, H', H'')`` of ``[m]`` angles)."""
+def _support_gap(d: np.ndarray, support, samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """``([m], [m, 2])``: ``max_θ d·u(θ) - H(θ)`` and its ``u``, for smooth pair supports
+    ``H = support(θ, order)`` (``order`` 0: ``H`` of ``[m, k]`` angles; 2: ``(H, H',
+    H'')`` of ``[m]`` angles)."""
     m = len(d)
     theta = 2.0 * np.pi * np.arange(samples) / samples
     t = np.broadcast_to(theta, (m, samples))
     f = d[:, :1] * np.cos(t) + d[:, 1:] * np.sin(t) - support(t, 0) if m else np.zeros((0, 1))
     best_t = theta[np.argmax(f, axis=1)] if m else np.zeros(0)
+    arg = best_t.copy()
     best = f.max(axis=1) if m else np.zeros(0)
     step = 2.0 * np.pi / samples
     t = best_t
@@ -388,8 +407,10 @@ def _support_gap(d: np.ndarray, support, samples: int) -> np.ndarray:
         dt = np.where(g2 < 0, -g1 / np.where(g2 < 0, g2, -1.0), np.sign(g1) * step)
         t = t + np.clip(dt, -step, step)
         val = d[:, 0] * np.cos(t) + d[:, 1] * np.sin(t) - support(t, 0)
-        best = np.maximum(best, val)
-    return best
+        better = val > best
+        arg = np.where(better, t, arg)
+        best = np.where(better, val, best)
+    return best, np.stack([np.cos(arg), np.sin(arg)], axis=1)
 
 
 @dataclass(frozen=True)
@@ -448,6 +469,13 @@ class DotShape:
     def extent(self) -> float:
         """The radius of its bounding disc, mm."""
         return float(self.kind.extent(np.array([self.size]))[0])
+
+    @property
+    def inner_radius(self) -> float:
+        """The radius of the largest disc about its centre inside it (half the width),
+        mm: two footprints whose centres are nearer than twice it (plus the gap) are
+        too close at any angles."""
+        return 0.5 * float(self.size[1])
 
     @property
     def equivalent_diameter(self) -> float:
@@ -510,6 +538,7 @@ class Footprints:
     def concat(cls, parts: list[Footprints], kind: Kind = CIRCLE) -> Footprints:
         """The footprints of ``parts`` one after the other (all of one kind; ``kind``
         when there are none)."""
+        parts = [p for p in parts if p.n]  # an empty part may be of any kind
         if not parts:
             return cls(kind, np.zeros((0, len(kind.params))))
         angle = None
@@ -542,14 +571,20 @@ class Footprints:
     def gap(self, xy: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
         """``[m]`` edge-to-edge distances of the pairs ``(i[m], j[m])`` of dots centred at
         ``xy`` (``[n, 2]`` mm), mm; negative where they overlap."""
+        return self.separation(xy, i, j)[0]
+
+    def separation(
+        self, xy: np.ndarray, i: np.ndarray, j: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``(gap [m] mm, u [m, 2])``: :meth:`gap` of the pairs and the unit direction
+        (from i toward j) moving them apart widens it fastest (:meth:`Kind.separation`)."""
         a = self.angles
-        out = np.empty(len(i))
+        gap, u = np.empty(len(i)), np.empty((len(i), 2))
         for s in range(0, len(i), GAP_BLOCK):  # bounded memory for the search
             ii, jj = i[s : s + GAP_BLOCK], j[s : s + GAP_BLOCK]
-            out[s : s + len(ii)] = self.kind.gap(
-                xy[jj] - xy[ii], self.size[ii], a[ii], self.size[jj], a[jj]
-            )
-        return out
+            got = self.kind.separation(xy[jj] - xy[ii], self.size[ii], a[ii], self.size[jj], a[jj])
+            gap[s : s + len(ii)], u[s : s + len(ii)] = got
+        return gap, u
 
     def contains(self, points: np.ndarray, k: np.ndarray, xy: np.ndarray) -> np.ndarray:
         """``[m]`` whether ``points`` (``[m, 2]`` mm) lie on the dots ``k`` (``[m]``)

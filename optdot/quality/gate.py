@@ -19,6 +19,7 @@ from typing import Any
 from ..config.job import QAParams
 from ..geometry.density import DensityMap
 from ..geometry.domain import Domain
+from ..geometry.orientation import Orientation
 from ..pattern import DotSource
 from .measure import measure
 from .source import Source, source_of
@@ -93,6 +94,10 @@ class QAResult:
         }
 
 
+#: Largest angle a shaped dot may be off its orientation field, degrees.
+MAX_FIELD_ERROR_DEG = 0.5
+
+
 def run_qa(
     dots: DotSource,
     density: DensityMap | None,
@@ -102,6 +107,7 @@ def run_qa(
     box=None,
     outline: Domain | None | bool = True,
     area: tuple[float, float, float, float] | None = None,
+    orientation: Orientation | None = None,
 ) -> QAResult:
     """Measure ``dots`` (a pattern in memory, or a dataset tile by tile in bounded
     memory, its checksums verified first) and apply the gate.
@@ -115,9 +121,11 @@ def run_qa(
         box, outline: the panel (default: the dots' own; True keeps their outline).
         area: ``(x0, y0, x1, y1)`` mm, the part of the panel a viewer sees (the job's
             ``viewing_area``): visibility is judged there; None: the whole panel.
+        orientation: the field shaped dots should follow (the job's), or None.
     """
     dots.verify()
-    return judge(source_of(dots, box, outline), density, params, collision, collision_gap, area)
+    src = source_of(dots, box, outline)
+    return judge(src, density, params, collision, collision_gap, area, orientation)
 
 
 def judge(
@@ -127,6 +135,7 @@ def judge(
     collision: float,
     collision_gap: float = 0.0,
     area: tuple[float, float, float, float] | None = None,
+    orientation: Orientation | None = None,
 ) -> QAResult:
     """Measure ``src`` (:func:`optdot.quality.measure.measure`) and make the gate lines.
 
@@ -142,7 +151,9 @@ def judge(
     gaps = None
     if u is None:
         gaps = (params.effective_close_gap, collision_gap)
-    got = measure(src, density, params.smoothing, close, collision, gaps, params.viewing, area)
+    got = measure(
+        src, density, params.smoothing, close, collision, gaps, params.viewing, area, orientation
+    )
     m, w = got.metrics, got.where
     if gaps is None:
         collide_text = f"pairs closer than {collision * 1e3:.1f} µm (collisions)"
@@ -180,6 +191,27 @@ def judge(
             m["psi6_coherence_2mm"] <= params.max_psi6_coherence,
         ),
     ]
+    shape = m.get("shape")
+    if shape:
+        checks.append(
+            Check(
+                f"near pairs where shapely's distance disagrees with the exact gap "
+                f"(of {shape['shapely_checked_pairs']} checked)",
+                shape["shapely_disagreements"],
+                0,
+                shape["shapely_disagreements"] == 0,
+            )
+        )
+    turned = m.get("orientation") or {}
+    if "field_error_max_deg" in turned:
+        checks.append(
+            Check(
+                "largest angle of a dot off the orientation field where it stands, degrees",
+                turned["field_error_max_deg"],
+                MAX_FIELD_ERROR_DEG,
+                turned["field_error_max_deg"] <= MAX_FIELD_ERROR_DEG,
+            )
+        )
     if density is not None:
         checks.append(
             Check(

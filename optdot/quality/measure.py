@@ -44,6 +44,8 @@ from ..config.viewing import Viewing
 from ..errors import ResourceError
 from ..geometry.density import DensityMap
 from ..geometry.domain import box_protruding
+from ..geometry.orientation import Orientation, axis
+from ..geometry.shapes import CIRCLE, Footprints
 from ..pattern import coverage_pixels
 from ..runtime.memory import available_bytes
 from ..spatial.window import in_rect
@@ -90,6 +92,7 @@ def measure(
     gaps: tuple[float, float] | None = None,
     view: Viewing | None = None,
     area: tuple[float, float, float, float] | None = None,
+    field: Orientation | None = None,
 ) -> Measured:
     """Measure every QA number of ``src``.
 
@@ -105,14 +108,16 @@ def measure(
             (:mod:`optdot.quality.visibility`; needs ``density``); None skips it.
         area: ``(x0, y0, x1, y1)`` mm, where the visibility is judged (the part of the
             panel a viewer sees); None: the whole panel.
+        field: the orientation field shaped dots should follow (the job's); their
+            angles' largest and mean difference from it are measured.
     """
     if src.uniform_diameter is None and src.n and gaps is None:
         raise ValueError("dots of varying size are judged by edge gaps: pass gaps")
     if src.uniform_diameter is not None:
         gaps = None
-    first = _first_pass(src, density, view)
+    first = _first_pass(src, density, view, field)
     second = _second_pass(src, density, first, close, collision, gaps)
-    got = summarize(src, density, smoothing, close, collision, first, second, gaps)
+    got = summarize(src, density, smoothing, close, collision, first, second, gaps, field)
     if first.luminance is not None and view is not None and density is not None:
         vis, arrays = visibility(first.luminance, density, src.outline, view, area)
         got.metrics["visibility"] = vis
@@ -121,7 +126,12 @@ def measure(
     return got
 
 
-def _first_pass(src: Source, density: DensityMap | None, view: Viewing | None = None) -> FirstSums:
+def _first_pass(
+    src: Source,
+    density: DensityMap | None,
+    view: Viewing | None = None,
+    field: Orientation | None = None,
+) -> FirstSums:
     x0, y0, x1, y1 = src.box
     onx, ony = coverage_pixels(src.box, src.nominal_diameter, OVERVIEW_PX)
     uniform = src.uniform_diameter
@@ -148,6 +158,8 @@ def _first_pass(src: Source, density: DensityMap | None, view: Viewing | None = 
             continue
         d = dots.diameter
         f.boxes[k] = (*xy.min(axis=0), *xy.max(axis=0))
+        if dots.angle is not None:
+            _add_angles(f, xy, dots.angle, field)
         if uniform is None:
             f.diameters.append(d)
         area = None if uniform is not None else dots.area()
@@ -168,10 +180,12 @@ def _first_pass(src: Source, density: DensityMap | None, view: Viewing | None = 
         keep(f.defects, xy[out], MAX_MARKS)
         if f.luminance is not None:
             f.luminance.add(xy, disc_area(uniform) if area is None else area)
+        # coverage counts each dot's area: a shaped dot as the disc of its area
+        dc = d if dots.kind is CIRCLE else 2.0 * np.sqrt(area / np.pi)
         if f.walls is not None:
-            f.walls.add(xy, d)
+            f.walls.add(xy, dc)
         if density is not None:
-            f.cells += cell_area_sums(xy, d, uniform is not None, density)
+            f.cells += cell_area_sums(xy, dc, uniform is not None, density)
             empty = density.empty_mask(xy)
             f.empty += int(empty.sum())
             keep(f.where_empty, xy[empty], 20)
@@ -184,6 +198,17 @@ def _first_pass(src: Source, density: DensityMap | None, view: Viewing | None = 
         f.overview *= np.pi * (0.5 * uniform) ** 2
     f.overview /= cell
     return f
+
+
+def _add_angles(f: FirstSums, xy: np.ndarray, angle: np.ndarray, field: Orientation | None):
+    """Shaped dots' axes per 5° (-90..90°) and, with the field, their difference from it."""
+    deg = np.degrees(axis(angle))
+    h, _ = np.histogram(deg, bins=36, range=(-90.0, 90.0))
+    f.angle_hist = h if f.angle_hist is None else f.angle_hist + h
+    if field is not None:
+        err = np.abs(np.degrees(axis(angle - field.at(xy))))
+        f.field_error_max = max(f.field_error_max, float(err.max()))
+        f.field_error_sum += float(err.sum())
 
 
 def grain_window(densest, box) -> tuple[float, float, float, float]:
@@ -241,7 +266,12 @@ def _second_pass(
         if len(pr):
             dist = np.hypot(*(pts[pr[:, 0]] - pts[pr[:, 1]]).T)
             close_at, collision_at = close, collision
-            if gaps is not None:  # edge gaps: each pair's own centre distances
+            if gaps is not None and dots.kind is not CIRCLE:  # the exact edge gaps
+                both = Footprints.concat([dots, halo_dots], dots.kind)
+                dist = both.gap(pts, pr[:, 0], pr[:, 1])
+                close_at, collision_at = gaps
+                _cross_check(s, pts, both, pr[dist < gaps[0]], dist[dist < gaps[0]])
+            elif gaps is not None:  # edge gaps: each pair's own centre distances
                 dd = np.concatenate([d, hd])
                 mean = 0.5 * (dd[pr[:, 0]] + dd[pr[:, 1]])
                 close_at, collision_at = mean + gaps[0], mean + gaps[1]
@@ -296,6 +326,36 @@ def _second_pass(
         s.zoom_d.append(d[inz])
     s.patches = (patches, p_cnt, p_re, p_im)
     return s
+
+
+#: Most near pairs of shaped dots QA checks again with shapely (the first ones met).
+MAX_SHAPELY_PAIRS = 20_000
+#: How close to the true footprints the polygons of that check are, mm.
+SHAPELY_TOLERANCE = 5e-5 * 1e-3
+
+
+def _cross_check(s: SecondSums, pts, dots: Footprints, pairs: np.ndarray, gap: np.ndarray):
+    """Check the exact edge gaps of near pairs (``[m, 2]`` indices into ``pts`` and
+    ``dots``, their gaps ``[m]`` mm) against shapely's distance between polygons inscribed
+    within :data:`SHAPELY_TOLERANCE` of the footprints: a polygon pair is never nearer
+    than the footprints, nor farther by more than two tolerances, and meets exactly
+    when they overlap by more than that. Counts the pairs checked and those that
+    disagree, up to :data:`MAX_SHAPELY_PAIRS` pairs per pattern."""
+    import shapely
+
+    room = MAX_SHAPELY_PAIRS - s.shapely_pairs
+    if room <= 0 or not len(pairs):
+        return
+    pairs, gap = pairs[:room], gap[:room]
+    ends = np.unique(pairs)
+    polys = {int(k): dots.outline(int(k), SHAPELY_TOLERANCE) + pts[k] for k in ends}
+    a = shapely.polygons([polys[int(k)] for k in pairs[:, 0]])
+    b = shapely.polygons([polys[int(k)] for k in pairs[:, 1]])
+    dist = shapely.distance(a, b)
+    slack = 2.0 * SHAPELY_TOLERANCE + 1e-9
+    bad = (dist < gap - 1e-9) | (dist > np.maximum(gap, 0.0) + slack)
+    s.shapely_pairs += len(pairs)
+    s.shapely_disagree += int(bad.sum())
 
 
 def _nearest(

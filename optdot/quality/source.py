@@ -12,7 +12,7 @@ import numpy as np
 
 from ..geometry.domain import Domain
 from ..geometry.limits import validate_dots
-from ..geometry.shapes import Footprints
+from ..geometry.shapes import CIRCLE, Footprints, Kind
 from ..pattern import DotSource
 from ..spatial.window import grown, in_rect
 
@@ -31,6 +31,7 @@ class Source:
         tiling: ``(xs, ys)`` tile edges of a tiled pattern (seam metrics), or None.
         label: the file, for messages.
         cache_parts: parts kept in memory while their neighbours are measured.
+        kind: the footprint kind of every dot.
     """
 
     box: tuple[float, float, float, float]
@@ -42,6 +43,7 @@ class Source:
     tiling: tuple[np.ndarray, np.ndarray] | None = None
     label: str = ""
     cache_parts: int = 8
+    kind: Kind = CIRCLE
     _cache: OrderedDict = field(default_factory=OrderedDict, repr=False)
 
     @property
@@ -88,6 +90,7 @@ def source_of(dots: DotSource, box=None, outline: Domain | None | bool = True) -
         tiling=tiling,
         label=label,
         cache_parts=3 * nx + 3,
+        kind=dots.kind,
     )
 
 

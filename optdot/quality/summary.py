@@ -10,6 +10,8 @@ from typing import Any
 import numpy as np
 
 from ..geometry.density import DensityMap
+from ..geometry.orientation import Orientation
+from ..geometry.shapes import CIRCLE
 from .metrics import coverage, disc_area, radial_spectrum
 from .seams import seam_finish
 from .source import Source
@@ -46,6 +48,7 @@ def summarize(
     f: FirstSums,
     s: SecondSums,
     gaps: tuple[float, float] | None = None,
+    field: Orientation | None = None,
 ) -> Measured:
     n = src.n
     u = src.uniform_diameter
@@ -67,6 +70,18 @@ def summarize(
     else:
         m["collision_gap_mm"] = gaps[1]
         m["close_gap_mm"] = gaps[0]
+    if src.kind is not CIRCLE:
+        m["shape"] = {
+            "kind": src.kind.name,
+            "gaps": "exact edge-to-edge distances of the footprints",
+            "shapely_checked_pairs": s.shapely_pairs,
+            "shapely_disagreements": s.shapely_disagree,
+        }
+    if f.angle_hist is not None:
+        m["orientation"] = {"histogram_5deg_from_-90": f.angle_hist.tolist()}
+        if field is not None:
+            m["orientation"]["field_error_max_deg"] = f.field_error_max
+            m["orientation"]["field_error_mean_deg"] = f.field_error_sum / max(n, 1)
     m["pairs_below_collision"] = s.pairs_collision
     m["pairs_below_close"] = s.pairs_close
     m["dots_in_close_pairs_fraction"] = float(s.close_dots / max(n, 1))

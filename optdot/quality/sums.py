@@ -33,6 +33,9 @@ class FirstSums:
     diameters: list[np.ndarray] = field(default_factory=list)
     luminance: LuminanceGrid | None = None
     walls: WallProfiler | None = None
+    angle_hist: np.ndarray | None = None  # [36] shaped dots per 5° of their axis
+    field_error_max: float = 0.0  # largest |angle - field| of shaped dots, degrees
+    field_error_sum: float = 0.0
 
 
 @dataclass
@@ -55,6 +58,8 @@ class SecondSums:
     zoom_d: list[np.ndarray] = field(default_factory=list)
     segments: list[np.ndarray] = field(default_factory=list)
     requeried: int = 0
+    shapely_pairs: int = 0  # near pairs of shaped dots checked again with shapely
+    shapely_disagree: int = 0  # of them, where shapely and the exact gap disagree
 
 
 def add_nested(a: dict, b: dict) -> dict:

@@ -32,6 +32,8 @@ class Problem:
         close_target: the centre distance the hard core aims to clear, mm (the job's
             ``optimize.close_target``, by default its ``qa.close_distance``).
         seed: seed of any random choice (polydispersity).
+        reach: how far a shaped dot reaches from its centre (its bounding radius), mm:
+            the hard panel term keeps it inside; None: ``dot_radius`` (discs).
     """
 
     domain: Domain
@@ -40,6 +42,7 @@ class Problem:
     min_distance: float
     close_target: float = 0.060
     seed: int = 1
+    reach: float | None = None
 
 
 @dataclass(frozen=True)
@@ -192,7 +195,8 @@ class Formulation:
         dom = problem.domain
         edges = None
         if not dom.rectangle:
-            reach = max(float(panel_r.max(initial=0.0)), r0) + dom.edge_margin
+            reach = max(float(panel_r.max(initial=0.0)), r0, problem.reach or 0.0)
+            reach += dom.edge_margin
             if phantom is not None:
                 reach = max(reach, 2.0 * float(r.max(initial=0.0)) + dom.edge_margin)
             edges = EdgeIndex.build(dom, reach)
@@ -203,7 +207,7 @@ class Formulation:
             half_side=container_half_sides(r, self.container_factor),
             box=dom.box,
             dmin=problem.min_distance,
-            dot_radius=r0,
+            dot_radius=r0 if problem.reach is None else problem.reach,
             w_hard=self.w_hard,
             empty=np.zeros((1, 1), np.uint8) if empty is None else empty,
             grid_box=(density.x0, density.y0, *density.cell_size),

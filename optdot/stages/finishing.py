@@ -8,10 +8,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config.job import Job
-from ..geometry.orientation import degrees
 from ..geometry.shapes import Footprints
 from ..relax.legalize import LegalizeResult, make_legal
 from ..relax.resize import fit_sizes
+from ..relax.shaped import make_legal_shapes
 from ..sampling.initial import Rect
 from .settings import rule_diameters, stage_settings
 
@@ -77,11 +77,13 @@ def finish(
             fit = None if frozen is None else ~frozen
             d = fit_sizes(xy, d, job.sizes, job.density, job.domain, s.fit_sigma, fit, window)
         radius, dmin = 0.5 * d, d + job.optimize.gap
-    leg = make_legal(xy, job.density, home, job.domain, radius, dmin, where, frozen)
     diameter = job.diameter if d is None else d[:n]
-    xy = np.ascontiguousarray(leg.xy[:n])
-    dots = None
-    if job.shape is not None:
-        dots = job.footprints(xy, diameter)
-        dots = Footprints(dots.kind, dots.size, np.radians(degrees(dots.angles)))
-    return Finished(xy, diameter, leg, dots)
+    if job.shape is None:
+        leg = make_legal(xy, job.density, home, job.domain, radius, dmin, where, frozen)
+        return Finished(np.ascontiguousarray(leg.xy[:n]), diameter, leg)
+    thrown = xy0 if held is None or not len(held[0]) else np.concatenate([xy0, held[0]])
+    leg, dots = make_legal_shapes(
+        xy, thrown, job.density, home, job.domain, job.shape, job.orientation,
+        job.optimize.gap, where, frozen,
+    )  # fmt: skip
+    return Finished(np.ascontiguousarray(leg.xy[:n]), diameter, leg, dots.take(slice(0, n)))

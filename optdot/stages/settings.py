@@ -25,10 +25,11 @@ def problem_of(job: Job) -> Problem:
     return Problem(
         domain=job.domain,
         density=job.density,
-        dot_radius=job.dot_radius,
+        dot_radius=0.5 * job.diameter,
         min_distance=job.min_distance,
         close_target=job.close_target,
         seed=job.optimize.seed,
+        reach=None if job.shape is None else job.dot_radius,
     )
 
 

@@ -1,0 +1,117 @@
+"""The guarantee pass for shaped dots: exact edge gaps between oriented footprints.
+
+Discs are legal when their centres keep one diameter + gap apart; shaped dots when their
+footprints do, whatever their angles. The pass alternates two projections until neither
+moves a dot:
+
+1. the disc pass of :mod:`optdot.relax.legalize` with the footprint's bounding disc
+   against the panel and zero cells (a footprint inside its bounding disc cannot
+   protrude), and its inscribed disc + gap between centres (a necessary condition: two
+   footprints nearer than that overlap at any angles);
+2. every pair whose exact edge gap (:meth:`~optdot.geometry.shapes.Footprints.separation`)
+   is under the gap is pushed apart along the direction that widens it fastest, each
+   dot by half of the deficit plus a few nm (a dot held still leaves it to its partner),
+   the angles taken again from the orientation field where the dots now stand.
+
+Then the positions are rounded to 1 nm, the angles computed where they ended (and
+rounded as files store them), and every pair checked again exactly.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import GuaranteeError
+from ..geometry.density import DensityMap
+from ..geometry.domain import Domain
+from ..geometry.orientation import Orientation, degrees
+from ..geometry.shapes import DotShape, Footprints
+from ..spatial.cellgrid import pairs_within
+from .legalize import MARGIN, RESOLUTION, LegalizeResult, check_guarantee, legalize
+
+#: Most alternations of the two projections.
+MAX_ROUNDS = 200
+
+
+def turned(shape: DotShape, field: Orientation, xy: np.ndarray, thrown: np.ndarray) -> Footprints:
+    """The footprints of dots at ``xy`` (``[n, 2]`` mm) thrown at ``thrown``, turned by
+    ``field``, their angles rounded to 1e-6° (what every file holds)."""
+    return shape.footprints(np.radians(degrees(field.at(xy, thrown))))
+
+
+def shape_conflicts(
+    xy: np.ndarray, dots: Footprints, gap: float, frozen: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pairs whose exact edge gap is under ``gap`` (mm): ``(pairs [m, 2], gap [m], u [m,
+    2])``, pairs of two frozen dots left out."""
+    reach = 2.0 * float(dots.extent().max(initial=0.0)) + gap
+    pr = pairs_within(xy, reach)
+    if frozen is not None and len(pr):
+        pr = pr[~(frozen[pr[:, 0]] & frozen[pr[:, 1]])]
+    if not len(pr):
+        return pr, np.zeros(0), np.zeros((0, 2))
+    g, u = dots.separation(xy, pr[:, 0], pr[:, 1])
+    bad = g < gap
+    return pr[bad], g[bad], u[bad]
+
+
+def make_legal_shapes(
+    xy: np.ndarray,
+    thrown: np.ndarray,
+    density: DensityMap,
+    home_cell: np.ndarray,
+    domain: Domain,
+    shape: DotShape,
+    field: Orientation,
+    gap: float,
+    where: str,
+    frozen: np.ndarray | None = None,
+) -> tuple[LegalizeResult, Footprints]:
+    """Legal positions for shaped dots and their footprints where they end.
+
+    Args:
+        xy: ``[n, 2]`` relaxed positions, mm. thrown: ``[n, 2]`` where they were thrown.
+        home_cell: ``[n]`` the map cell each returns to if it drifts into a zero cell.
+        shape, field: the job's dot and orientation field. gap: smallest edge gap, mm.
+        frozen: ``[n]`` bool, dots held still (a tile's halo).
+
+    Raises:
+        GuaranteeError: a violation is left after :data:`MAX_ROUNDS` rounds.
+    """
+    extent, core = shape.extent, 2.0 * shape.inner_radius + gap
+    still = np.zeros(len(xy), bool) if frozen is None else frozen
+    sweeps = pair_fixes = dot_fixes = 0
+    for _ in range(MAX_ROUNDS):
+        leg = legalize(xy, density, home_cell, domain, extent, core, frozen=frozen)
+        sweeps, pair_fixes, dot_fixes = (
+            sweeps + leg.sweeps,
+            pair_fixes + leg.pair_fixes,
+            dot_fixes + leg.dot_fixes,
+        )
+        xy = leg.xy
+        dots = turned(shape, field, xy, thrown)
+        pr, g, u = shape_conflicts(xy, dots, gap + MARGIN, frozen)
+        if not len(pr):
+            break
+        pair_fixes += len(pr)
+        share = 0.5 * (gap + 2.0 * MARGIN - g)
+        i, j = pr[:, 0], pr[:, 1]
+        wi = np.where(still[i], 0.0, np.where(still[j], 2.0, 1.0)) * share
+        wj = np.where(still[j], 0.0, np.where(still[i], 2.0, 1.0)) * share
+        step = np.zeros_like(xy)
+        np.add.at(step, i, -wi[:, None] * u)
+        np.add.at(step, j, wj[:, None] * u)
+        xy = np.round((xy + step) / RESOLUTION) * RESOLUTION
+    else:
+        raise GuaranteeError(
+            f"{where}: could not meet the guarantee for {shape.kind.name} dots after "
+            f"{MAX_ROUNDS} rounds: {len(pr)} pairs closer than {gap * 1e3:g} µm edge to edge"
+        )
+    viol = check_guarantee(xy, density, domain, extent, core, frozen)
+    left, _, _ = shape_conflicts(xy, dots, gap, frozen)
+    if not viol.ok or len(left):
+        raise GuaranteeError(
+            f"{where}: could not meet the guarantee for {shape.kind.name} dots: "
+            + (viol.text(core) if not viol.ok else f"{len(left)} pairs under the gap")
+        )
+    return LegalizeResult(xy, sweeps, pair_fixes, dot_fixes), dots
