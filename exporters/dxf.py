@@ -1,5 +1,10 @@
 """DXF for CAD/CAM: native CIRCLE entities on layer ``DOTS``, the outline on ``OUTLINE``.
 
+Shaped dots are blocks, one per size (``DOT_<length>x<width>[x<corner radius>]`` in nm):
+an ELLIPSE, or a closed LWPOLYLINE whose corners are exact arcs (bulges) for a rounded
+rectangle (R12, which has neither, gets the outline as a polygon within the tolerance),
+each dot an INSERT on layer ``DOTS`` rotated by its angle in degrees.
+
 ezdxf's document model takes ~50 s for 10⁶ circles, so the file is streamed: ezdxf writes
 a complete document (header with ``$INSUNITS`` = mm, tables, layers, blocks, objects)
 holding the outline and one template circle; the template's entity text is then repeated
@@ -10,11 +15,15 @@ is an ordinary DXF that ezdxf's audit accepts (tests/test_exporters.py).
 from __future__ import annotations
 
 import io
+import math
 import re
 from pathlib import Path
 
 import ezdxf
+import numpy as np
 
+from optdot.geometry.orientation import degrees
+from optdot.geometry.shapes import CIRCLE, Kind
 from optdot.io.atomic import atomic_path, expect_tail
 from optdot.pattern import DotSource, Pattern
 
@@ -33,17 +42,55 @@ _FIXED = {
 _STAMP = re.compile(r"^(\S+) @ \d{4}-\d\d-\d\dT[0-9:.]+[+-]\d\d:\d\d$")
 _MARK_X, _MARK_Y = 123456.654321, 654321.123456  # template circle, found by its coordinates
 _MARK_R = 0.123456  # its radius when the sizes vary (replaced per dot)
+_MARK_A = 12.345678  # a template INSERT's rotation (replaced per dot)
+
+
+def _block_name(key: tuple[int, ...]) -> str:
+    """The block of a shaped dot of size ``key`` (nm per parameter)."""
+    return "DOT_" + "x".join(str(v) for v in key)
+
+
+def _add_block(doc, kind: Kind, size: np.ndarray, version: str, tolerance: float) -> None:
+    """A block of one footprint (``size`` mm) at angle 0 about the origin, on layer 0
+    (it takes the layer of the INSERT placing it)."""
+    key = tuple(int(v) for v in np.round(size * 1e6))
+    blk = doc.blocks.new(_block_name(key))
+    if version == "R12":
+        ring = kind.outline(size, 0.0, tolerance)
+        blk.add_polyline2d([tuple(map(float, p)) for p in ring], close=True)
+    elif kind.name == "ellipse":
+        a, b = 0.5 * float(size[0]), 0.5 * float(size[1])
+        blk.add_ellipse((0.0, 0.0), major_axis=(a, 0.0), ratio=b / a)
+    else:
+        hx, hy, rc = 0.5 * float(size[0]) - size[2], 0.5 * float(size[1]) - size[2], size[2]
+        bulge = math.tan(math.pi / 8) if rc > 0 else 0.0  # a quarter circle
+        pts = []
+        for cx, cy, t in ((hx, hy, 0), (-hx, hy, 1), (-hx, -hy, 2), (hx, -hy, 3)):
+            c0, s0 = math.cos(t * math.pi / 2), math.sin(t * math.pi / 2)
+            c1, s1 = math.cos((t + 1) * math.pi / 2), math.sin((t + 1) * math.pi / 2)
+            pts.append((cx + rc * c0, cy + rc * s0, 0.0, 0.0, bulge))
+            if rc > 0:
+                pts.append((cx + rc * c1, cy + rc * s1, 0.0, 0.0, 0.0))
+        blk.add_lwpolyline([tuple(float(v) for v in p) for p in pts], format="xyseb", close=True)
 
 
 def _template(
-    pattern: Pattern, version: str, provenance: tuple[str, ...] = ()
+    pattern: Pattern,
+    version: str,
+    provenance: tuple[str, ...] = (),
+    sizes: list[np.ndarray] = (),
+    tolerance: float = 1e-4,
 ) -> tuple[str, str, str, int]:
-    """(head, circle format, tail, first free handle) of a document for ``pattern``.
+    """(head, dot format, tail, first free handle) of a document for ``pattern``.
 
     The circle format takes ``(handle, x, y)`` (R12: ``(x, y)``), plus the radius last
-    when the dots' sizes vary; with one size the radius is part of the template."""
+    when the dots' sizes vary; with one size the radius is part of the template.
+    Shaped dots: an INSERT of the block of each of ``sizes`` (``[k]`` mm each), its
+    format ``(handle, [block name,] x, y, rotation in degrees)`` (the name when there
+    are several blocks; ``tolerance``, mm, draws R12's polygons)."""
     uniform = pattern.uniform_diameter
     radius = _MARK_R if uniform is None else 0.5 * uniform
+    shaped = pattern.kind is not CIRCLE
     doc = ezdxf.new(version, setup=False)
     if version != "R12":  # R12 has no $INSUNITS: drawing units are mm by convention
         doc.header["$INSUNITS"] = 4  # millimetres
@@ -60,14 +107,23 @@ def _template(
             msp.add_polyline2d(pts, close=True, dxfattribs={"layer": "OUTLINE"})
         else:
             msp.add_lwpolyline(pts, close=True, dxfattribs={"layer": "OUTLINE"})
-    msp.add_circle((_MARK_X, _MARK_Y), radius, dxfattribs={"layer": "DOTS"})
+    names = []
+    if shaped:
+        for size in sizes:
+            _add_block(doc, pattern.kind, size, version, tolerance)
+            names.append(_block_name(tuple(int(v) for v in np.round(size * 1e6))))
+        msp.add_blockref(
+            names[0], (_MARK_X, _MARK_Y), dxfattribs={"layer": "DOTS", "rotation": _MARK_A}
+        )
+    else:
+        msp.add_circle((_MARK_X, _MARK_Y), radius, dxfattribs={"layer": "DOTS"})
     buf = io.StringIO()
     doc.write(buf)
     text = buf.getvalue()
     lines = _sorted_classes(text.split("\n"))
     ix = lines.index(f"{_MARK_X}") if f"{_MARK_X}" in lines else _find_float(lines, _MARK_X)
     start = ix
-    while lines[start] != "CIRCLE":
+    while lines[start] != ("INSERT" if shaped else "CIRCLE"):
         start -= 1
     start -= 1  # the "  0" group code before CIRCLE
     end = ix
@@ -84,8 +140,12 @@ def _template(
             value = "%.6f"
         elif c == "20":
             value = "%.6f"
-        elif c == "40" and uniform is None:
+        elif c == "40" and uniform is None and not shaped:
             value = "%.6f"
+        elif c == "50" and shaped:
+            value = "%.6f"
+        elif c == "2" and shaped and len(names) > 1:
+            value = "%s"
         else:
             value = value.replace("%", "%%")
         fmt += [code, value]
@@ -133,9 +193,19 @@ def _find_float(lines: list[str], value: float) -> int:
 def write_dxf(pattern: DotSource, path: str | Path, opts: ExportOptions) -> None:
     """Write the DXF atomically (R2010 by default, ``opts.dxf_version`` otherwise); a
     dataset is streamed part by part (memory: one part)."""
-    head, fmt, tail, seed = _template(pattern, opts.dxf_version, opts.provenance)
+    shaped = pattern.kind is not CIRCLE
+    sizes, names = [], {}
+    if shaped:  # every size the dots have: a block each
+        keys = set()
+        for _, _, part in pattern.chunks():
+            keys.update(key for key, _ in part.groups(1e6))
+        sizes = [np.array(k) * 1e-6 for k in sorted(keys)]
+        names = {k: _block_name(k) for k in sorted(keys)}
+    tol = opts.tolerance_um * 1e-3
+    head, fmt, tail, seed = _template(pattern, opts.dxf_version, opts.provenance, sizes, tol)
     has_handle = "%X" in fmt
-    varying = pattern.uniform_diameter is None
+    varying = pattern.uniform_diameter is None and not shaped
+    named = shaped and len(names) > 1
     n = pattern.n
     head = head.replace("{SEED}", f"{seed + n:X}")
     verify = expect_tail(tail[-8:].encode("ascii"), str(path))  # "  0\nEOF\n"
@@ -150,8 +220,13 @@ def write_dxf(pattern: DotSource, path: str | Path, opts: ExportOptions) -> None
                 cols = [xy[:, 0].tolist(), xy[:, 1].tolist()]
                 if has_handle:
                     cols.insert(0, list(range(seed + done, seed + done + len(xy))))
+                if named:
+                    keys = np.round(footprints.size[a : a + chunk] * 1e6).astype(np.int64)
+                    cols.insert(len(cols) - 2, [names[tuple(k)] for k in keys.tolist()])
                 if varying:
                     cols.append((0.5 * part_d[a : a + chunk]).tolist())
+                if shaped:
+                    cols.append(degrees(footprints.angles[a : a + chunk]).tolist())
                 rows = zip(*cols, strict=True)
                 fh.write("".join(fmt % row for row in rows))
                 done += len(xy)

@@ -4,6 +4,9 @@ Units: user unit 1 µm, database unit 1 nm. A dot is a cell (a circle polygon wh
 vertex count follows the tolerance; one cell per diameter, ``DOT`` when all dots have the
 same size, ``DOT_<diameter in nm>`` otherwise) placed by one reference per dot, so 10⁶ dots stay
 ~26 MB in GDSII; OASIS stores the same references as one explicit repetition (~8 MB).
+A shaped dot's cell holds its footprint at angle 0 (``DOT_<length>x<width>[x<corner
+radius>]`` in nm), each dot a reference rotated by its own angle (one repeated
+reference when every dot has the same angle).
 ``flatten`` writes plain polygons instead. The panel (outline minus holes and keep-outs)
 goes on its own layer as filled polygons, holes cut open by zero-width keyholes.
 """
@@ -172,7 +175,19 @@ class _Cells:
         returns the number of elements a GDSII file holds for them."""
         for key, index in dots.groups(1e6):  # sizes in nm
             sel = xy[index] * 1e3
-            cell.add(_placed(self.dot(key), sel[spatial_order(sel)]))
+            order = spatial_order(sel)
+            if dots.angle is None:
+                cell.add(_placed(self.dot(key), sel[order]))
+                continue
+            turn = dots.angle[index][order]
+            if np.all(turn == turn[0]):  # one angle: one rotated reference, repeated
+                ref = _placed(self.dot(key), sel[order])
+                ref.rotation = float(turn[0])
+                cell.add(ref)
+                continue
+            dot = self.dot(key)  # a reference per dot, each with its exact rotation
+            for (x, y), t in zip(sel[order].tolist(), turn.tolist(), strict=True):
+                cell.add(gdstk.Reference(dot, origin=(x, y), rotation=t))
         if self.opts.flatten:
             cell.flatten()
         return len(xy)

@@ -10,6 +10,7 @@ qa's distances would be wrong for it. The panel box is the outline's bounding bo
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +19,8 @@ from optdot.errors import GeometryError, PatternFileError, ResourceError, one_li
 from optdot.files import input_problem
 from optdot.geometry.domain import domain_from_rings
 from optdot.geometry.limits import validate_dots
-from optdot.geometry.shapes import CIRCLE
+from optdot.geometry.orientation import degrees
+from optdot.geometry.shapes import CIRCLE, KINDS, Fit, Footprints, Kind
 from optdot.io.patterns import load_pattern
 from optdot.pattern import Pattern
 from optdot.runtime.isolate import ChildCrashed, in_child
@@ -71,7 +73,7 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
         raise PatternFileError(f"{path}: expected one top cell, found {len(tops)}")
     top = tops[0]
     centres: list[np.ndarray] = []
-    diameters: list[np.ndarray] = []
+    diameters: list[Drawn] = []
     budget = [max_dots_read()]
     gds = path.suffix.lower() != ".oas"
     _collect(path, top, _IDENTITY, opts, to_mm, centres, diameters, 0, budget, gds)
@@ -84,7 +86,20 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
     ]
     rings = [p.points * to_mm for p in outline]
     xy = np.round(np.concatenate(centres), 6)
-    return _pattern(path, xy, np.concatenate(diameters), rings, filled=True)
+    kinds = {d.kind for d in diameters}
+    if kinds == {CIRCLE}:
+        return _pattern(path, xy, np.concatenate([d.size[:, 0] for d in diameters]), rings, True)
+    if len(kinds) > 1:
+        raise PatternFileError(
+            f"{path}: the dot layer holds {' and '.join(sorted(k.name for k in kinds))} dots; "
+            "qa measures dots of one kind"
+        )
+    dots = Footprints(
+        diameters[0].kind,
+        np.round(np.concatenate([d.size for d in diameters]), 6),
+        np.radians(degrees(np.concatenate([d.angle for d in diameters]))),
+    )
+    return _pattern(path, xy, dots.diameter, rings, True, dots)
 
 
 #: Deepest hierarchy read: top -> tile cells -> dot cells is 2.
@@ -146,10 +161,10 @@ def _collect(path, cell, place, opts, to_mm, centres, diameters, depth, budget, 
         for poly in cell.polygons:
             if (poly.layer, poly.datatype) != on_layer:
                 continue
-            c, radius = _circle(path, poly.points, "a polygon", to_mm)
-            at = _origins(path, poly.repetition, c, budget, gds)
+            fit = _footprint(path, poly.points, "a polygon", to_mm)
+            at = _origins(path, poly.repetition, fit[1].centre, budget, gds)
             centres.append((at @ a.T + b) * to_mm)
-            diameters.append(np.full(len(at), round(2 * radius * scale, 6)))
+            diameters.append(Drawn.of(fit, a, len(at), scale * to_mm))
     for ref in cell.references:
         sub = ref.cell
         if isinstance(sub, str):
@@ -187,31 +202,58 @@ def _collect(path, cell, place, opts, to_mm, centres, diameters, depth, budget, 
                 f"{path}: cell {sub.name} holds {len(pts)} shapes on layer "
                 f"{opts.layer}/{opts.datatype}; a dot cell holds one circle"
             )
-        centre, radius = _circle(path, pts[0].points, f"cell {sub.name}", to_mm)
-        if np.hypot(*centre) * to_mm > 1e-6:
+        fit = _footprint(path, pts[0].points, f"cell {sub.name}", to_mm)
+        if np.hypot(*fit[1].centre) * to_mm > 1e-6:
             raise PatternFileError(
-                f"{path}: the circle of cell {sub.name} is not centred on the cell origin"
+                f"{path}: the dot of cell {sub.name} is not centred on the cell origin"
             )
-        # vertices sit on the circle, snapped to the database grid: their mean radius
-        # recovers the diameter to well under 1 nm
-        diameter = round(2 * radius * math.sqrt(abs(np.linalg.det(inner))), 6)
+        # vertices sit on the outline, snapped to the database grid: the fit recovers
+        # the size to well under 1 nm
         centres.append((origins @ a.T + b) * to_mm)
-        diameters.append(np.full(len(origins), diameter))
+        scale = math.sqrt(abs(np.linalg.det(inner)))
+        diameters.append(Drawn.of(fit, inner, len(origins), scale * to_mm))
 
 
-def _circle(path: Path, pts: np.ndarray, what: str, to_mm: float) -> tuple[np.ndarray, float]:
-    """``(centre [2] in the file's units, radius mm)`` of a dot polygon, or refuse it as
-    not a circle (:meth:`optdot.geometry.shapes.Circle.fit`: vertex radii within 2 nm
-    plus :data:`RADIUS_SPREAD` of the radius)."""
-    fit = CIRCLE.fit(pts, 2e-6 / to_mm, RADIUS_SPREAD)
-    if not fit.ok:
-        at = fit.centre * to_mm
-        lo, hi = (v * to_mm * 1e3 for v in fit.radii)
-        raise PatternFileError(
-            f"{path}: {what} at ({at[0]:.6g}, {at[1]:.6g}) mm on the dot layer is not a circle "
-            f"({len(pts)} vertices, radii {lo:.4g}..{hi:.4g} µm); qa checks round dots only"
-        )
-    return fit.centre, 0.5 * float(fit.size[0]) * to_mm
+@dataclass(frozen=True)
+class Drawn:
+    """Dots read from one placement: their ``kind``, ``size [k, p]`` (mm) and ``angle
+    [k]`` (rad)."""
+
+    kind: Kind
+    size: np.ndarray
+    angle: np.ndarray
+
+    @classmethod
+    def of(cls, fit: tuple[Kind, Fit], place: np.ndarray, k: int, to_mm: float) -> Drawn:
+        """``k`` dots of the footprint ``fit`` (file units) placed by the linear map
+        ``place`` (``[2, 2]``; its scale already in ``to_mm``, mm per file unit)."""
+        kind, f = fit
+        size = np.round(f.size * to_mm, 6)
+        turn = math.atan2(place[1, 0], place[0, 0]) + f.angle
+        return cls(kind, np.tile(size, (k, 1)), np.full(k, turn))
+
+
+def _footprint(path: Path, pts: np.ndarray, what: str, to_mm: float):
+    """``(kind, fit)`` of a dot polygon (its centre, size and angle in the file's units):
+    a circle (:meth:`optdot.geometry.shapes.Circle.fit`: vertex radii within 2 nm plus
+    :data:`RADIUS_SPREAD` of the radius), else an ellipse or a rounded rectangle to the
+    same tolerance, or refuse it."""
+    slack = 2e-6 / to_mm
+    fit = CIRCLE.fit(pts, slack, RADIUS_SPREAD)
+    if fit.ok:
+        return CIRCLE, fit
+    for kind in KINDS.values():
+        if kind is not CIRCLE:
+            other = kind.fit(pts, slack, RADIUS_SPREAD)
+            if other.ok:
+                return kind, other
+    at = fit.centre * to_mm
+    lo, hi = (v * to_mm * 1e3 for v in fit.radii)
+    raise PatternFileError(
+        f"{path}: {what} at ({at[0]:.6g}, {at[1]:.6g}) mm on the dot layer is not a circle, "
+        f"an ellipse or a rounded rectangle ({len(pts)} vertices, radii {lo:.4g}..{hi:.4g} "
+        "µm); qa checks those dots only"
+    )
 
 
 def _read_dxf(path: Path) -> Pattern:
@@ -228,10 +270,12 @@ def _read_dxf(path: Path) -> Pattern:
     doc = ezdxf.readfile(str(path))
     try:
         scale = mm_per_unit(doc, path)
-        xy_l, r_l, rings = [], [], []
+        xy_l, r_l, rings, shaped = [], [], [], []
         for e in drawn_entities(doc.modelspace(), path):
             layer, kind = e.dxf.get("layer", "0"), e.dxftype()
-            if layer == "DOTS":
+            if layer == "DOTS" and kind != "CIRCLE":
+                shaped.append(_dxf_shape(path, e, kind, scale))
+            elif layer == "DOTS":
                 xy_l.append(_dxf_dot(path, e, kind))
                 r_l.append(float(e.dxf.radius))
             elif layer == "OUTLINE" and kind in ("LWPOLYLINE", "POLYLINE"):
@@ -247,6 +291,21 @@ def _read_dxf(path: Path) -> Pattern:
                 rings.append(np.array(pts, dtype=np.float64) * scale)
     except GeometryError as err:
         raise PatternFileError(str(err)) from None
+    if shaped:
+        kinds = {k for k, _ in shaped}
+        if xy_l or len(kinds) > 1:
+            what = sorted({k.name for k in kinds} | ({"circle"} if xy_l else set()))
+            raise PatternFileError(
+                f"{path}: layer DOTS holds {' and '.join(what)} dots; qa measures one kind"
+            )
+        fits = [f for _, f in shaped]
+        dots = Footprints(
+            shaped[0][0],
+            np.round(np.array([f.size for f in fits]), 6),
+            np.radians(degrees(np.array([f.angle for f in fits]))),
+        )
+        xy = np.round(np.array([f.centre for f in fits]), 6)
+        return _pattern(path, xy, dots.diameter, rings, False, dots)
     if not xy_l:
         raise PatternFileError(f"{path}: no CIRCLE entities on layer DOTS")
     xy = np.array(xy_l, dtype=np.float64) * scale
@@ -259,6 +318,45 @@ def _read_dxf(path: Path) -> Pattern:
             "dots need a radius > 0"
         )
     return _pattern(path, np.round(xy, 6), 2 * radii, rings)
+
+
+#: How finely a DXF dot's arcs are flattened before its footprint is fitted, mm.
+DXF_FLATTEN_MM = 1e-5
+
+
+def _dxf_shape(path: Path, e, kind: str, scale: float) -> tuple[Kind, Fit]:
+    """``(kind, fit)`` (mm) of a shaped dot drawn in world coordinates: an ELLIPSE read
+    from its axes, a closed polyline fitted (:func:`_footprint`) from its outline
+    flattened to :data:`DXF_FLATTEN_MM`; anything else on ``DOTS`` is refused."""
+    where = f"{kind} {e.dxf.handle or '(in a block)'}"
+    ext = e.dxf.get("extrusion", (0.0, 0.0, 1.0))
+    if abs(float(ext[0])) > 1e-9 or abs(float(ext[1])) > 1e-9:
+        raise PatternFileError(f"{path}: {where} on layer DOTS is tilted (extrusion {tuple(ext)})")
+    if kind == "ELLIPSE":
+        full = abs(float(e.dxf.end_param) - float(e.dxf.start_param) - 2 * math.pi) < 1e-9
+        major, ratio = e.dxf.major_axis, float(e.dxf.ratio)
+        if not full or not (0 < ratio <= 1):
+            raise PatternFileError(f"{path}: {where} on layer DOTS is not a whole ellipse")
+        a = math.hypot(float(major[0]), float(major[1])) * scale
+        c = e.dxf.center
+        turn = math.atan2(float(major[1]), float(major[0]))
+        if float(ext[2]) < 0:  # seen from below: mirrored in x
+            c, turn = e.ocs().to_wcs(c), math.pi - turn
+        centre = np.array([float(c[0]), float(c[1])]) * scale
+        return KINDS["ellipse"], Fit(True, centre, np.array([2 * a, 2 * a * ratio]), turn, (a, a))
+    if kind in ("LWPOLYLINE", "POLYLINE") and e.is_closed:
+        from ezdxf import path as dxf_path
+
+        pts = np.array([(v.x, v.y) for v in dxf_path.make_path(e).flattening(1e-5 / scale)])
+        if len(pts) > 1 and np.allclose(pts[0], pts[-1]):
+            pts = pts[:-1]
+        kind_, fit = _footprint(path, pts * scale, where, 1.0)
+        if kind_ is not CIRCLE:
+            return kind_, fit
+    raise PatternFileError(
+        f"{path}: {where} on layer DOTS is not a CIRCLE, an ELLIPSE or a closed outline of "
+        "a rounded rectangle; qa checks those dots only"
+    )
 
 
 def _dxf_dot(path: Path, e, kind: str) -> tuple[float, float]:
@@ -281,7 +379,12 @@ def _dxf_dot(path: Path, e, kind: str) -> tuple[float, float]:
 
 
 def _pattern(
-    path: Path, xy: np.ndarray, diameter: np.ndarray, rings: list[np.ndarray], filled: bool = False
+    path: Path,
+    xy: np.ndarray,
+    diameter: np.ndarray,
+    rings: list[np.ndarray],
+    filled: bool = False,
+    dots: Footprints | None = None,
 ) -> Pattern:
     """A pattern whose panel is the outline read back, else the dots' extent.
 
@@ -306,4 +409,5 @@ def _pattern(
         box=box,
         meta={"source": str(path)},
         outline=outline,
+        dots=dots,
     )

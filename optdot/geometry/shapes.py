@@ -310,7 +310,8 @@ class RoundedRect(Kind):
 
     def fit(self, points: np.ndarray, slack: float, share: float = 0.0) -> Fit:
         """Angle: the longest edge's; sides: the vertices' extent along and across it;
-        corner radius: how far the corners reach along their diagonals; a fit when every
+        corner radius: the median over the corners' vertices of the arc through each (a
+        polygon inscribed in the footprint recovers it to its grid); a fit when every
         vertex lies within ``slack + share L`` of that footprint."""
         q = points - 0.5 * (points.max(axis=0) + points.min(axis=0))
         e = np.roll(points, -1, axis=0) - points
@@ -325,9 +326,14 @@ class RoundedRect(Kind):
         centre = 0.5 * (points.max(axis=0) + points.min(axis=0)) + np.array(
             [c * mid[0] - s * mid[1], s * mid[0] + c * mid[1]]
         )
-        # the corner's point at 45° reaches |x| + |y| = L/2 + W/2 - (2 - √2) rc
-        reach = float((np.abs(x - mid[0]) + np.abs(y - mid[1])).max())
-        rc = (0.5 * (length + width) - reach) / (2.0 - math.sqrt(2.0))
+        # a first radius from the corners' reach along their diagonals (the point at 45°
+        # reaches |x| + |y| = L/2 + W/2 - (2 - √2) rc), then each corner vertex's own:
+        # at (u, w) in from the sides, a vertex on the arc has rc = u + w + sqrt(2 u w)
+        u = 0.5 * length - np.abs(x - mid[0])
+        w = 0.5 * width - np.abs(y - mid[1])
+        rc0 = float((u + w).min()) / (2.0 - math.sqrt(2.0))
+        arc = (u <= 1.01 * rc0) & (w <= 1.01 * rc0) & (u > 0) & (w > 0)
+        rc = float(np.median((u + w + np.sqrt(2.0 * u * w))[arc])) if arc.any() else rc0
         size = np.array([length, width, min(max(rc, 0.0), 0.5 * width)])
         rel = points - centre
         x, y = _rotate(rel, np.full(len(rel), ang))
