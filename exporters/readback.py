@@ -351,12 +351,31 @@ def _dxf_shape(path: Path, e, kind: str, scale: float) -> tuple[Kind, Fit]:
         if len(pts) > 1 and np.allclose(pts[0], pts[-1]):
             pts = pts[:-1]
         kind_, fit = _footprint(path, pts * scale, where, 1.0)
+        if kind_.name == "rounded_rectangle" and kind == "LWPOLYLINE":
+            fit = _bulge_radius(e, fit, scale)
         if kind_ is not CIRCLE:
             return kind_, fit
     raise PatternFileError(
         f"{path}: {where} on layer DOTS is not a CIRCLE, an ELLIPSE or a closed outline of "
         "a rounded rectangle; qa checks those dots only"
     )
+
+
+def _bulge_radius(e, fit: Fit, scale: float) -> Fit:
+    """``fit`` with the corner radius its LWPOLYLINE's arcs hold exactly (a bulge ``b``
+    over a chord ``c`` is an arc of radius ``c (1 + b²) / (4 |b|)``), when they agree."""
+    pts = np.array(e.get_points("xyb"), dtype=np.float64)
+    nxt = np.roll(pts[:, :2], -1, axis=0)
+    b = pts[:, 2]
+    arc = np.abs(b) > 1e-12
+    if not arc.any():
+        return fit
+    chord = np.hypot(*(nxt - pts[:, :2])[arc].T)
+    r = chord * (1 + b[arc] ** 2) / (4 * np.abs(b[arc])) * scale
+    if float(np.ptp(r)) > 1e-9 or r[0] > 0.5 * fit.size[1] + 1e-9:
+        return fit
+    size = np.array([fit.size[0], fit.size[1], float(r.mean())])
+    return Fit(fit.ok, fit.centre, size, fit.angle, fit.radii)
 
 
 def _dxf_dot(path: Path, e, kind: str) -> tuple[float, float]:

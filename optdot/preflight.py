@@ -13,7 +13,7 @@ import numpy as np
 
 from .config.job import Job
 from .errors import JobError, ResourceError
-from .geometry.limits import MAX_RANDOM_FILL
+from .geometry.limits import MAX_RANDOM_FILL, MAX_SHAPED_FILL
 from .runtime.cluster import embedded_workers
 from .runtime.cost import Cost, estimate_cost
 from .runtime.memory import BASE_BYTES, available_bytes, check_memory, estimate_bytes
@@ -26,6 +26,9 @@ def _check_fill(job: Job, where: str) -> None:
     grid = job.density.grid
     k = int(np.argmax(grid))
     iy, ix = divmod(k, grid.shape[1])
+    if job.shape is not None:
+        _check_shaped_fill(job, float(grid[iy, ix]), iy, ix, where)
+        return
     spread = (job.min_distance / job.diameter) ** 2
     eff = float(grid[iy, ix]) * spread
     if eff >= MAX_RANDOM_FILL:
@@ -35,6 +38,25 @@ def _check_fill(job: Job, where: str) -> None:
             f"is an effective fill of {eff:.4g}; a random non-overlapping pattern reaches "
             f"at most {MAX_RANDOM_FILL:g} (the fill can be at most "
             f"{MAX_RANDOM_FILL / spread:.4g} here)"
+        )
+
+
+def _check_shaped_fill(job: Job, fill: float, iy: int, ix: int, where: str) -> None:
+    """:func:`_check_fill` for shaped dots: their footprints grown by half the gap may
+    cover at most :data:`MAX_SHAPED_FILL` of the densest cell."""
+    import shapely
+
+    shape = job.shape
+    ring = shape.kind.outline(np.asarray(shape.size), 0.0, 1e-4 * shape.extent)
+    grown = shapely.Polygon(ring).buffer(0.5 * job.optimize.gap, quad_segs=32).area
+    spread = grown / shape.area
+    if fill * spread >= MAX_SHAPED_FILL:
+        sizes = " × ".join(f"{v * 1e3:.4g}" for v in shape.size[:2])
+        raise JobError(
+            f"{where}: fill {fill:.4g} at row {iy}, column {ix} of {sizes} µm "
+            f"{shape.kind.name} dots {job.optimize.gap * 1e3:.4g} µm apart is an effective "
+            f"fill of {fill * spread:.4g}; shaped dots reach at most {MAX_SHAPED_FILL:g} "
+            f"without collisions (the fill can be at most {MAX_SHAPED_FILL / spread:.4g} here)"
         )
 
 

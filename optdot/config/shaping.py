@@ -159,7 +159,7 @@ def orientation(
         return Orientation("leds", math.radians(angle) + turn, leds=led_centres(guide, box))
     if "map" in sec:
         path = base / sec["map"]
-        grid = load_grid(path, "orientation map")
+        grid = load_grid(path, "orientation.map")
         bad = ~np.isfinite(grid)
         if bad.any():
             iy, ix = np.argwhere(bad)[0]

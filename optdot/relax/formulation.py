@@ -16,6 +16,8 @@ import numpy as np
 from ..geometry.density import DensityMap
 from ..geometry.domain import Domain
 from ..geometry.edges import EdgeIndex
+from ..geometry.orientation import Orientation
+from ..geometry.shapes import DotShape
 from .circles import circle_radius, container_half_sides, hex_radius
 from .penalty import PenaltyTerms
 
@@ -34,6 +36,8 @@ class Problem:
         seed: seed of any random choice (polydispersity).
         reach: how far a shaped dot reaches from its centre (its bounding radius), mm:
             the hard panel term keeps it inside; None: ``dot_radius`` (discs).
+        shaped: ``(shape, orientation field, gap mm)`` of shaped dots, whose footprints
+            feel the multi-sphere penalty (:mod:`optdot.relax.multisphere`); None: discs.
     """
 
     domain: Domain
@@ -43,6 +47,7 @@ class Problem:
     close_target: float = 0.060
     seed: int = 1
     reach: float | None = None
+    shaped: tuple[DotShape, Orientation, float] | None = None
 
 
 @dataclass(frozen=True)

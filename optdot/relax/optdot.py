@@ -11,6 +11,7 @@ import numpy as np
 from ..spatial.verlet import VerletList
 from .formulation import Formulation, Problem
 from .lbfgs import HALTED, minimize_lbfgs
+from .multisphere import MultiSphereTerm
 from .penalty import PenaltyTerms, penalty_fast
 from .result import RelaxResult
 
@@ -69,6 +70,26 @@ class FrozenPenalty(VerletPenalty):
         return f
 
 
+class _Added:
+    """A penalty plus an extra term (frozen dots' gradient kept zero)."""
+
+    def __init__(self, fun, extra, frozen: np.ndarray | None) -> None:
+        self.fun, self.extra = fun, extra
+        self.frozen = None if frozen is None else np.flatnonzero(frozen)
+
+    @property
+    def rebuilds(self) -> int:
+        return self.fun.rebuilds
+
+    def __call__(self, x: np.ndarray, grad: np.ndarray) -> float:
+        f = self.fun(x, grad)
+        g = grad.reshape(-1, 2)
+        f += self.extra(x.reshape(-1, 2), g)
+        if self.frozen is not None:
+            g[self.frozen] = 0.0
+        return f
+
+
 def relax(
     xy0: np.ndarray,
     terms: PenaltyTerms,
@@ -79,10 +100,14 @@ def relax(
     callback: Progress | None = None,
     gtol: float = 0.0,
     frozen: np.ndarray | None = None,
+    extra: Callable[[np.ndarray, np.ndarray], float] | None = None,
 ) -> RelaxResult:
     """Minimize the penalty from ``xy0`` (``[n, 2]`` mm) by L-BFGS with memory ``memory``;
-    dots marked in ``frozen`` (``[n]`` bool) stay where they are."""
+    dots marked in ``frozen`` (``[n]`` bool) stay where they are; ``extra(xy [n, 2],
+    grad [n, 2]) -> value`` adds a term (the multi-sphere penalty of shaped dots)."""
     fun = VerletPenalty(terms, skin) if frozen is None else FrozenPenalty(terms, skin, frozen)
+    if extra is not None:
+        fun = _Added(fun, extra, frozen)
     res = minimize_lbfgs(
         fun,
         xy0.ravel(),
@@ -145,6 +170,14 @@ def relax_staged(
         status and message of the last stage run).
     """
     xy = xy0 if start is None else start
+    extra = None
+    if problem.shaped is not None:
+        shape, field, gap = problem.shaped
+        active = np.ones(len(xy0), bool) if phantom is None else ~phantom
+        extra = MultiSphereTerm(
+            shape, field.at(xy0, xy0), active, gap, max(form.w_hard, 1.0),
+            settings.skin * shape.extent,
+        )  # fmt: skip
     total = RelaxResult(xy, 0.0, 0, 0, 0, "no stage ran", [])
     done = 0
     for k, (share, multiplier) in enumerate(form.stages):
@@ -160,6 +193,7 @@ def relax_staged(
             callback=None if progress is None else (lambda i, f, o=done: progress(o + i, f)),
             gtol=settings.gtol,
             frozen=frozen,
+            extra=extra,
         )
         done += iters
         xy = res.xy

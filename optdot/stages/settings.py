@@ -30,6 +30,7 @@ def problem_of(job: Job) -> Problem:
         close_target=job.close_target,
         seed=job.optimize.seed,
         reach=None if job.shape is None else job.dot_radius,
+        shaped=None if job.shape is None else (job.shape, job.orientation, job.optimize.gap),
     )
 
 
