@@ -1,7 +1,8 @@
 """Previews for people: an SVG and a PNG of the pattern.
 
 PNG: left, the whole panel as a coverage map (share of area covered by dots, binned to at
-most ~400 px a side); right, a true-scale zoom tile (1 mm², dots drawn as circles).
+most ~400 px a side); right, a true-scale zoom tile (1 mm², dots drawn as circles,
+shaped dots as their outlines).
 SVG: every dot as a circle when there are at most 200k dots, else the zoom tile only
 (a browser cannot draw millions of SVG circles), always with the panel outline.
 """
@@ -50,12 +51,17 @@ def write_png(pattern: Pattern, path: str | Path, dpi: int = 110) -> None:
     tx0, ty0, tx1, ty1 = zoom_tile(pattern)
     a.add_patch(plt.Rectangle((tx0, ty0), tx1 - tx0, ty1 - ty0, fill=False, ec="red"))
     sel = _in_window(pattern, (tx0, ty0, tx1, ty1))
-    d = pattern.uniform_diameter or pattern.diameter[sel]
-    b.add_collection(
-        EllipseCollection(
-            d, d, 0, units="xy", offsets=pattern.xy[sel], offset_transform=b.transData, fc="k"
+    if pattern.dots is None:
+        d = pattern.uniform_diameter or pattern.diameter[sel]
+        b.add_collection(
+            EllipseCollection(
+                d, d, 0, units="xy", offsets=pattern.xy[sel], offset_transform=b.transData, fc="k"
+            )
         )
-    )
+    else:
+        from matplotlib.collections import PolyCollection
+
+        b.add_collection(PolyCollection(_outlines(pattern, sel), fc="k", lw=0))
     b.set_xlim(tx0, tx1)
     b.set_ylim(ty0, ty1)
     b.set_aspect("equal")
@@ -92,7 +98,11 @@ def write_svg(pattern: Pattern, path: str | Path) -> tuple[int, tuple[float, ...
         d = " ".join(f"{x:.6f},{-y:.6f}" for x, y in ring.tolist())
         out.append(f'<polygon points="{d}" fill="none" stroke="red" stroke-width="0.01"/>\n')
     out.append('<g fill="black">\n')
-    if u is not None:
+    if pattern.dots is not None:
+        for ring in _outlines(pattern, sel):
+            d = " ".join(f"{x:.6f},{-y:.6f}" for x, y in ring.tolist())
+            out.append(f'<polygon points="{d}"/>\n')
+    elif u is not None:
         r = 0.5 * u
         out += [
             f'<circle cx="{x:.6f}" cy="{-y:.6f}" r="{r:.6f}"/>\n'
@@ -109,11 +119,24 @@ def write_svg(pattern: Pattern, path: str | Path) -> tuple[int, tuple[float, ...
     return int(sel.sum()), tuple(float(v) for v in window)
 
 
+#: How close a preview's polygon of a shaped dot stays to its footprint, mm.
+PREVIEW_TOLERANCE = 2e-4
+
+
+def _outlines(pattern: Pattern, sel: np.ndarray) -> list[np.ndarray]:
+    """``[v, 2]`` polygons (mm, placed) of the shaped dots ``sel`` (a boolean mask)."""
+    dots = pattern.dots
+    return [dots.outline(int(k), PREVIEW_TOLERANCE) + pattern.xy[k] for k in np.flatnonzero(sel)]
+
+
 def _shown(k: int, n: int) -> str:
     return f"{n} dots" if k == n else f"{k} of {n} dots (a window)"
 
 
 def _diameter(pattern: Pattern) -> str:
+    if pattern.dots is not None:
+        size = " x ".join(f"{v:g}" for v in pattern.dots.size[0])
+        return f"{pattern.kind.name} {size}"
     u = pattern.uniform_diameter
     if u is not None:
         return f"{u}"

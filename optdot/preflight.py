@@ -89,12 +89,18 @@ TILE_BREAK_EVEN = 2_000_000
 
 def use_tiles(job: Job, mode: str = "auto") -> bool:
     """Whether ``job`` runs tiled: ``on``, ``off``, or ``auto`` (when one process would
-    not fit, or from :data:`TILE_BREAK_EVEN` dots; the MD baseline never tiles)."""
+    not fit, or from :data:`TILE_BREAK_EVEN` dots; the MD baseline and shaped dots never
+    tile)."""
     if mode == "on":
         if job.optimize.method != "optdot":
             raise JobError(f"{job.name}: tiles need optimize.method = 'optdot' (MD is a baseline)")
+        if job.shape is not None:
+            raise JobError(
+                f"{job.name}: tiles place round dots so far; {job.shape.kind.name} dots run in "
+                "one process (--tiles off)"
+            )
         return True
-    if mode == "off" or job.optimize.method != "optdot":
+    if mode == "off" or job.optimize.method != "optdot" or job.shape is not None:
         return False
     n = job.n_dots
     return n >= TILE_BREAK_EVEN or estimate_bytes(n, job.optimize.lbfgs_memory) > 0.9 * (

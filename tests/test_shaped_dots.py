@@ -248,3 +248,24 @@ def test_an_angle_map_with_nan_and_a_fill_the_shape_cannot_reach(tmp_path):
     path = _job(tmp_path, ELLIPSE, grid=np.full((4, 4), 0.6))  # effective 0.72
     line = one_error(("generate", path, "-o", tmp_path / "p.csv"), 2, "fill")
     assert "at most" in line and "ellipse" in line
+
+
+@pytest.mark.parametrize("dots", [ELLIPSE, PRISM], ids=["ellipse", "rounded_rectangle"])
+def test_the_tracer_meets_the_true_oriented_footprints(tmp_path, dots):
+    """The tracer's test of a point on the bottom face (its dot grid and footprints, as
+    ``simulate`` builds them) against shapely's polygons of the pattern."""
+    from optdot.optics.simulate import _dot_grid
+    from optdot.optics.trace import _on_dot
+
+    job = load_job(_job(tmp_path, dots, {"random": "true"}))
+    p = generate(job)
+    start, x, y, foot, cg = _dot_grid(p, p.box)
+    polys = shapely.MultiPolygon(_polygons(p, 1e-6))
+    rng = np.random.default_rng(2)
+    pts = rng.uniform([0, 0], [2.0, 1.5], (4000, 2))
+    phi, g = np.zeros((1, 1)), np.ones(4)
+    got = np.array([_on_dot(a, b, True, phi, g, start, x, y, foot, cg, 0.0) for a, b in pts])
+    want = shapely.covers(polys, shapely.points(pts))
+    near = shapely.distance(polys.boundary, shapely.points(pts)) < 2e-6  # polygon error
+    assert (got != want)[~near].sum() == 0
+    assert got.mean() == pytest.approx(p.dots.area().sum() / 3.0, abs=0.02)

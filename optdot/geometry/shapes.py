@@ -26,6 +26,7 @@ import math
 from collections.abc import Iterator
 from dataclasses import dataclass
 
+import numba as nb
 import numpy as np
 
 
@@ -39,6 +40,12 @@ class Kind:
     params: tuple[str, ...] = ()
     #: Whether the footprint is the same at every angle (then ``angle`` is ignored).
     round: bool = False
+    #: The kind's number in a packed footprint (:func:`packed`, the compiled kernels).
+    code: int = -1
+
+    def shape_params(self, size: np.ndarray) -> np.ndarray:
+        """``[n, 3]`` the numbers :func:`on_packed` tests a point against, mm (or mm²)."""
+        raise NotImplementedError
 
     def area(self, size: np.ndarray) -> np.ndarray:
         """``[n]`` areas, mm²."""
@@ -96,6 +103,11 @@ class Circle(Kind):
     name = "circle"
     params = ("diameter",)
     round = True
+    code = 0
+
+    def shape_params(self, size: np.ndarray) -> np.ndarray:
+        r = 0.5 * size[:, 0]
+        return np.column_stack([r * r, np.zeros((len(r), 2))])
 
     def area(self, size: np.ndarray) -> np.ndarray:
         return np.pi * 0.25 * size[:, 0] ** 2
@@ -143,6 +155,10 @@ class Ellipse(Kind):
 
     name = "ellipse"
     params = ("length", "width")
+    code = 1
+
+    def shape_params(self, size: np.ndarray) -> np.ndarray:
+        return np.column_stack([0.5 * size[:, 0], 0.5 * size[:, 1], np.zeros(len(size))])
 
     def area(self, size: np.ndarray) -> np.ndarray:
         return np.pi * 0.25 * size[:, 0] * size[:, 1]
@@ -188,8 +204,7 @@ class Ellipse(Kind):
         return _support_gap(d, pair, gap_samples(aspect))
 
     def contains(self, p, size, angle) -> np.ndarray:
-        x, y = _rotate(p, angle)
-        return (x / (0.5 * size[:, 0])) ** 2 + (y / (0.5 * size[:, 1])) ** 2 <= 1.0
+        return _contains(packed(self, size, angle), p)
 
     def outline(self, size, angle, tolerance) -> np.ndarray:
         """Vertices evenly spaced in the ellipse's parameter, as many as a circle of the
@@ -228,6 +243,10 @@ class RoundedRect(Kind):
 
     name = "rounded_rectangle"
     params = ("length", "width", "corner_radius")
+    code = 2
+
+    def shape_params(self, size: np.ndarray) -> np.ndarray:
+        return np.column_stack(self._core(size))
 
     @staticmethod
     def _core(size: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -285,11 +304,7 @@ class RoundedRect(Kind):
         return f[at, k] - rci - rcj, u[at, k]
 
     def contains(self, p, size, angle) -> np.ndarray:
-        x, y = _rotate(p, angle)
-        hx, hy, rc = self._core(size)
-        qx, qy = np.abs(x) - hx, np.abs(y) - hy
-        out = np.hypot(np.maximum(qx, 0.0), np.maximum(qy, 0.0))
-        return out + np.minimum(np.maximum(qx, qy), 0.0) <= rc
+        return _contains(packed(self, size, angle), p)
 
     def outline(self, size, angle, tolerance) -> np.ndarray:
         """The four sides and, at each corner, a quarter of the polygon a circle of the
@@ -347,6 +362,43 @@ class RoundedRect(Kind):
         )
         rad = np.hypot(*rel.T)
         return Fit(ok, centre, size, ang, (float(rad.min()), float(rad.max())))
+
+
+def packed(kind: Kind, size: np.ndarray, angle: np.ndarray | None) -> np.ndarray:
+    """``[n, 6]`` footprints as the compiled kernels take them: kind code, the kind's
+    three :meth:`Kind.shape_params`, and the cosine and sine of the angle."""
+    n = len(size)
+    a = np.zeros(n) if angle is None else np.broadcast_to(angle, (n,))
+    out = np.empty((n, 6))
+    out[:, 0] = kind.code
+    out[:, 1:4] = kind.shape_params(size)
+    out[:, 4], out[:, 5] = np.cos(a), np.sin(a)
+    return out
+
+
+@nb.njit(cache=True, inline="always")
+def on_packed(f, k, dx, dy):  # pragma: no cover - compiled
+    """Whether the point ``(dx, dy)`` (mm, from the centre) lies on packed footprint
+    ``f[k]`` (:func:`packed`; closed: the edge counts)."""
+    code = f[k, 0]
+    if code == 0.0:
+        return dx * dx + dy * dy <= f[k, 1]
+    x = f[k, 4] * dx + f[k, 5] * dy
+    y = -f[k, 5] * dx + f[k, 4] * dy
+    if code == 1.0:
+        u, v = x / f[k, 1], y / f[k, 2]
+        return u * u + v * v <= 1.0
+    qx, qy = abs(x) - f[k, 1], abs(y) - f[k, 2]
+    ox, oy = max(qx, 0.0), max(qy, 0.0)
+    return math.sqrt(ox * ox + oy * oy) + min(max(qx, qy), 0.0) <= f[k, 3]
+
+
+@nb.njit(cache=True)
+def _contains(f, p):  # pragma: no cover - compiled
+    out = np.empty(p.shape[0], np.bool_)
+    for k in range(p.shape[0]):
+        out[k] = on_packed(f, k, p[k, 0], p[k, 1])
+    return out
 
 
 def _corner(hx, hy, angle, sx: int, sy: int) -> np.ndarray:
@@ -613,5 +665,7 @@ __all__ = [
     "Footprints",
     "Kind",
     "RoundedRect",
+    "on_packed",
+    "packed",
     "polygon_vertices",
 ]

@@ -34,6 +34,7 @@ import numpy as np
 from ..config.job import Job
 from ..config.light_guide import EDGE_FINISH, LightGuide
 from ..errors import JobError
+from ..geometry.shapes import packed
 from ..pattern import DotSource
 from ..runtime.stop import check_interrupt
 from .trace import FATES, MAX_EVENTS, UNCOUPLED, UNFINISHED, trace
@@ -240,7 +241,7 @@ def simulate(
         cov = coverage or coverage_of(job)
         phi = np.ascontiguousarray(cov.grid, dtype=np.float64)
         g = np.array([cov.x0, cov.y0, cov.dx, cov.dy])
-        grid = (np.zeros(2, np.int64), np.zeros(1), np.zeros(1), np.zeros(1), np.ones(7))
+        grid = (np.zeros(2, np.int64), np.zeros(1), np.zeros(1), np.zeros((1, 6)), np.ones(7))
         explicit = False
     else:
         phi, g = np.zeros((1, 1)), np.ones(4)
@@ -461,16 +462,19 @@ def _walls(job: Job) -> tuple[np.ndarray, np.ndarray]:
 
 def _dot_grid(dots: DotSource, box) -> tuple:
     """The dots sorted into square cells at least one footprint wide (a point on a dot
-    lies within the largest extent of the dot's cell): ``(start, x, y, r2, grid)``, r2
-    the squared extents (the discs' radii)."""
-    xs, ys, es = [], [], []
+    lies within the largest extent of the dot's cell): ``(start, x, y, foot, grid)``,
+    foot ``[n, 6]`` the footprints as the tracer tests them (kind, size, angle:
+    :func:`optdot.geometry.shapes.packed`)."""
+    xs, ys, es, fs = [], [], [], []
     for _, xy, footprints in dots.chunks():
         xs.append(np.asarray(xy[:, 0], np.float64))
         ys.append(np.asarray(xy[:, 1], np.float64))
         es.append(footprints.extent())
+        fs.append(packed(footprints.kind, footprints.size, footprints.angle))
     x = np.concatenate(xs) if xs else np.zeros(0)
     y = np.concatenate(ys) if ys else np.zeros(0)
     e = np.concatenate(es) if es else np.zeros(0)
+    foot = np.concatenate(fs) if fs else np.zeros((0, 6))
     x0, y0, x1, y1 = box
     area = (x1 - x0) * (y1 - y0)
     rmax = float(e.max()) if len(e) else 0.0
@@ -483,6 +487,5 @@ def _dot_grid(dots: DotSource, box) -> tuple:
     order = np.argsort(key, kind="stable")
     start = np.zeros(nx * ny + 1, np.int64)
     np.cumsum(np.bincount(key, minlength=nx * ny), out=start[1:])
-    r2 = e[order] ** 2
     grid = np.array([x0, y0, cell, cell, nx, ny, rmax], np.float64)
-    return start, x[order], y[order], r2, grid
+    return start, x[order], y[order], np.ascontiguousarray(foot[order]), grid

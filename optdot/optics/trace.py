@@ -33,6 +33,8 @@ import math
 import numba as nb
 import numpy as np
 
+from ..geometry.shapes import on_packed
+
 #: Fates of a ray (``trace`` output).
 EXTRACTED, BULK, DOT, EDGE, BOTTOM, UNCOUPLED, UNFINISHED = range(7)
 FATES = (
@@ -133,7 +135,7 @@ def _wall_distance(x, y, ux, uy, walls):
 
 
 @nb.njit(cache=True, inline="always")
-def _on_dot(x, y, explicit, phi, g, start, dx_, dy_, r2, cg, u):
+def _on_dot(x, y, explicit, phi, g, start, dx_, dy_, foot, cg, u):
     """Does the point (x, y) on the bottom face lie on a dot? ``u``: a uniform draw."""
     if not explicit:
         ix = int(math.floor((x - g[0]) / g[2]))
@@ -153,7 +155,7 @@ def _on_dot(x, y, explicit, phi, g, start, dx_, dy_, r2, cg, u):
             for k in range(start[c], start[c + 1]):
                 ddx = x - dx_[k]
                 ddy = y - dy_[k]
-                if ddx * ddx + ddy * ddy <= r2[k]:
+                if on_packed(foot, k, ddx, ddy):
                     return True
     return False
 
@@ -177,7 +179,7 @@ def trace(
     start,
     dx_,
     dy_,
-    r2,
+    foot,
     cg,
 ):  # pragma: no cover - compiled
     """Trace rays ``first .. first + count - 1``.
@@ -195,9 +197,10 @@ def trace(
             2 absorbing), events after which a ray is given up (``unfinished``).
         explicit: trace real dots (True) or the coverage map ``phi``.
         phi: ``[ny, nx]`` coverage; g: ``[4]`` its x0, y0, dx, dy, mm.
-        start: ``[cells + 1]`` CSR of dots by cell; dx_, dy_: ``[n]`` centres; r2: ``[n]``
-            squared radii; cg: ``[7]`` cell grid x0, y0, dx, dy, nx, ny and the largest
-            dot radius (cells at least that wide).
+        start: ``[cells + 1]`` CSR of dots by cell; dx_, dy_: ``[n]`` centres; foot:
+            ``[n, 6]`` their footprints (:func:`optdot.geometry.shapes.packed`); cg:
+            ``[7]`` cell grid x0, y0, dx, dy, nx, ny and the largest dot extent (cells
+            at least that wide).
 
     Returns:
         ``(fate [count] int8, x [count] float32, y [count] float32)``: how and where each
@@ -338,7 +341,7 @@ def trace(
                 continue
             z = 0.0  # bottom face
             state, u = _uniform(state)
-            if _on_dot(x, y, explicit, phi, g, start, dx_, dy_, r2, cg, u):
+            if _on_dot(x, y, explicit, phi, g, start, dx_, dy_, foot, cg, u):
                 state, u = _uniform(state)
                 if u >= albedo:
                     end = DOT
