@@ -119,10 +119,61 @@ def outline_sample(folder: Path) -> None:
     )
 
 
+def edge_lit(width: float, height: float, leds: list[float], lo: float, hi: float):
+    """Edge-lit from the bottom edge: fill rising from ``lo`` at the LEDs to ``hi`` at the
+    far edge, a little lower in front of each LED (0.5 mm cells)."""
+    X, Y = _centers(width, height, 0.5)
+    light = sum(np.exp(-((X - x) ** 2 + (Y + 0.2) ** 2) / (2 * 1.2**2)) for x in leds)
+    g = lo + (hi - lo) * (1 - np.exp(-Y / (0.45 * height)))
+    return np.clip(g - 0.3 * lo * light, 0.5 * lo, hi)
+
+
+#: The shaped-dot samples: ``name -> (what, dots and orientation TOML, panel, LEDs, fill)``.
+SHAPED = {
+    "ellipses": (
+        "Elongated dots (80 x 40 µm ellipses) on a guide lit from its bottom edge by four "
+        "LEDs, each dot's long axis across the light from its nearest LED (22,800 dots)",
+        'shape = "ellipse"\nlength = 0.080   # mm, the long axis\nwidth = 0.040\n\n'
+        '[orientation]\ntoward = "leds"          # the nearest LED of [light_guide]\n'
+        'relative = "perpendicular"  # long axis across the direction from it\n',
+        (24.0, 12.0),
+        [3.0, 9.0, 15.0, 21.0],
+        (0.05, 0.30),
+    ),
+    "prisms": (
+        "Micro-prism footprints (120 x 30 µm rectangles, 5 µm corners) turned toward "
+        "eight LEDs on the bottom edge (15,900 dots)",
+        'shape = "rounded_rectangle"\nlength = 0.120   # mm\nwidth = 0.030\n'
+        "corner_radius = 0.005   # mm; width / 2 makes a capsule, 0 a sharp rectangle\n\n"
+        '[orientation]\ntoward = "leds"\nrelative = "perpendicular"\n',
+        (24.0, 12.0),
+        [1.5, 4.5, 7.5, 10.5, 13.5, 16.5, 19.5, 22.5],
+        (0.05, 0.30),
+    ),
+}
+
+
+def shaped_sample(name: str) -> None:
+    """Write ``samples/<name>`` of :data:`SHAPED`: its map and a job with its guide."""
+    what, dots, (w, h), leds, (lo, hi) = SHAPED[name]
+    d = HERE / name
+    d.mkdir(exist_ok=True)
+    np.savetxt(d / "density.csv", edge_lit(w, h, leds, lo, hi), fmt="%.4f", delimiter=",")
+    (d / "job.toml").write_text(
+        f'# {what}\nname = "{name}"\n\n[domain]\nwidth = {w}\nheight = {h}\n\n'
+        f'[density]\ngrid = "density.csv"\n\n[dots]\n{dots}\n'
+        "[optimize]\nseed = 1\ngap = 0.005   # mm, edge to edge\n\n"
+        "[light_guide]\nthickness = 0.4\n\n[[light_guide.leds]]\n"
+        f'edge = "bottom"\npositions = {leds}\nwidth = 1.0\n'
+    )
+
+
 def main() -> None:
     d = HERE / "outline"
     d.mkdir(exist_ok=True)
     outline_sample(d)
+    for name in SHAPED:
+        shaped_sample(name)
     for name, (fn, w, h, what) in SAMPLES.items():
         d = HERE / name
         d.mkdir(exist_ok=True)

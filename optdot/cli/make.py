@@ -82,6 +82,9 @@ for _param in check.params:  # the shared --quiet speaks of a progress bar check
 
 
 def _diameter_text(job) -> str:
+    if job.shape is not None:
+        sizes = " × ".join(f"{v * 1e3:.4g}" for v in job.shape.size[:2])
+        return f"{sizes} µm {job.shape.kind.name}s, turned by [orientation] {job.orientation.mode}"
     if job.sizes is None:
         return f"{job.diameter * 1e3:.4g} µm"
     return f"{job.sizes.low * 1e3:.4g}..{job.sizes.high * 1e3:.4g} µm"
