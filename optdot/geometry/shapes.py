@@ -21,7 +21,6 @@ diameter; a new kind is one :class:`Kind` in :data:`KINDS`.
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -190,18 +189,17 @@ class Ellipse(Kind):
         two ellipses' smallest radii of curvature (``b²/a``)."""
         if not len(d):
             return np.zeros(0), np.zeros((0, 2))
-
-        def pair(t, order):
-            si, ai, sj, aj = size_i, angle_i, size_j, angle_j
-            if t.ndim == 2:  # [m, k] directions per pair
-                si, ai, sj, aj = si[:, None], ai[:, None], sj[:, None], aj[:, None]
-            h = self.support(t, si, ai, order), self.support(t, sj, aj, order)
-            return h[0] + h[1] if order == 0 else tuple(x + y for x, y in zip(*h, strict=True))
-
-        aspect = float(
-            np.max(np.concatenate([size_i[:, 0] / size_i[:, 1], size_j[:, 0] / size_j[:, 1]]))
-        )
-        return _support_gap(d, pair, gap_samples(aspect))
+        ratio = np.concatenate([size_i[:, 0] / size_i[:, 1], size_j[:, 0] / size_j[:, 1]])
+        samples = gap_samples(float(ratio.max()))
+        gap, u = np.empty(len(d)), np.empty((len(d), 2))
+        c = np.ascontiguousarray  # one compiled signature, whatever the slices
+        _ellipse_gaps(
+            c(d, dtype=np.float64),
+            c(0.5 * size_i[:, 0]), c(0.5 * size_i[:, 1]), c(angle_i, dtype=np.float64),
+            c(0.5 * size_j[:, 0]), c(0.5 * size_j[:, 1]), c(angle_j, dtype=np.float64),
+            samples, GAP_NEWTON, gap, u,
+        )  # fmt: skip
+        return gap, u
 
     def contains(self, p, size, angle) -> np.ndarray:
         return _contains(packed(self, size, angle), p)
@@ -274,34 +272,14 @@ class RoundedRect(Kind):
         so the separation ``max_u <d, u> - h_i(u) - h_j(u)`` is attained at one of the 8
         axis directions (an edge nearest) or at a direction from one of the 16 corner
         sums to ``d`` (a vertex nearest); the radii add to both."""
-        hxi, hyi, rci = self._core(size_i)
-        hxj, hyj, rcj = self._core(size_j)
-        ei = np.stack([np.cos(angle_i), np.sin(angle_i)], axis=1)  # long axes, [m, 2]
-        ej = np.stack([np.cos(angle_j), np.sin(angle_j)], axis=1)
-        fi, fj = ei[:, ::-1] * [-1.0, 1.0], ej[:, ::-1] * [-1.0, 1.0]  # short axes
-        cand = [ei, fi, ej, fj, -ei, -fi, -ej, -fj]
-        for si, ti, sj, tj in itertools.product((1.0, -1.0), repeat=4):
-            v = (si * hxi)[:, None] * ei + (ti * hyi)[:, None] * fi
-            v += (sj * hxj)[:, None] * ej + (tj * hyj)[:, None] * fj
-            w = d - v
-            n = np.hypot(w[:, 0], w[:, 1])
-            cand.append(w / np.where(n > 0, n, 1.0)[:, None])
-        u = np.stack(cand, axis=1)  # [m, 24, 2]
-
-        def along(e):
-            return np.abs(u[..., 0] * e[:, None, 0] + u[..., 1] * e[:, None, 1])
-
-        f = (
-            u[..., 0] * d[:, None, 0]
-            + u[..., 1] * d[:, None, 1]
-            - hxi[:, None] * along(ei)
-            - hyi[:, None] * along(fi)
-            - hxj[:, None] * along(ej)
-            - hyj[:, None] * along(fj)
-        )
-        k = np.argmax(f, axis=1)
-        at = np.arange(len(d))
-        return f[at, k] - rci - rcj, u[at, k]
+        c = np.ascontiguousarray  # one compiled signature, whatever the slices
+        ci, cj = self._core(size_i), self._core(size_j)
+        gap, u = np.empty(len(d)), np.empty((len(d), 2))
+        _rect_gaps(
+            c(d, dtype=np.float64), *(c(v) for v in ci), c(angle_i, dtype=np.float64),
+            *(c(v) for v in cj), c(angle_j, dtype=np.float64), gap, u,
+        )  # fmt: skip
+        return gap, u
 
     def contains(self, p, size, angle) -> np.ndarray:
         return _contains(packed(self, size, angle), p)
@@ -401,11 +379,47 @@ def _contains(f, p):  # pragma: no cover - compiled
     return out
 
 
-def _corner(hx, hy, angle, sx: int, sy: int) -> np.ndarray:
-    """``[m, 2]`` the corner ``(sx hx, sy hy)`` of rectangles turned by ``angle``."""
-    c, s = np.cos(angle), np.sin(angle)
-    x, y = sx * hx, sy * hy
-    return np.stack([c * x - s * y, s * x + c * y], axis=1)
+@nb.njit(cache=True)
+def _rect_gaps(d, hxi, hyi, rci, pi, hxj, hyj, rcj, pj, gap, u):  # pragma: no cover
+    """Per pair of rounded rectangles (inner half sides, corner radius, angle): the best of
+    the 8 axis directions and the 16 directions from a corner sum to ``d`` (see
+    :meth:`RoundedRect.separation`), into ``gap [m]`` and ``u [m, 2]``."""
+    cand = np.empty((24, 2))
+    for m in range(d.shape[0]):
+        dx, dy = d[m, 0], d[m, 1]
+        e1x, e1y = math.cos(pi[m]), math.sin(pi[m])
+        e2x, e2y = math.cos(pj[m]), math.sin(pj[m])
+        axes = ((e1x, e1y), (-e1y, e1x), (e2x, e2y), (-e2y, e2x))
+        for k in range(4):
+            cand[k, 0], cand[k, 1] = axes[k][0], axes[k][1]
+            cand[k + 4, 0], cand[k + 4, 1] = -axes[k][0], -axes[k][1]
+        k = 8
+        for si in (1.0, -1.0):
+            for ti in (1.0, -1.0):
+                for sj in (1.0, -1.0):
+                    for tj in (1.0, -1.0):
+                        vx = si * hxi[m] * e1x - ti * hyi[m] * e1y
+                        vy = si * hxi[m] * e1y + ti * hyi[m] * e1x
+                        vx += sj * hxj[m] * e2x - tj * hyj[m] * e2y
+                        vy += sj * hxj[m] * e2y + tj * hyj[m] * e2x
+                        wx, wy = dx - vx, dy - vy
+                        n = math.sqrt(wx * wx + wy * wy)
+                        if n == 0.0:
+                            wx, wy, n = 1.0, 0.0, 1.0
+                        cand[k, 0], cand[k, 1] = wx / n, wy / n
+                        k += 1
+        best, bx, by = -1e300, 1.0, 0.0
+        for k in range(24):
+            ux, uy = cand[k, 0], cand[k, 1]
+            f = (
+                dx * ux + dy * uy
+                - hxi[m] * abs(ux * e1x + uy * e1y) - hyi[m] * abs(-ux * e1y + uy * e1x)
+                - hxj[m] * abs(ux * e2x + uy * e2y) - hyj[m] * abs(-ux * e2y + uy * e2x)
+            )  # fmt: skip
+            if f > best:
+                best, bx, by = f, ux, uy
+        gap[m] = best - rci[m] - rcj[m]
+        u[m, 0], u[m, 1] = bx, by
 
 
 def _turned(ring: np.ndarray, angle: float) -> np.ndarray:
@@ -444,31 +458,61 @@ GAP_NEWTON = 8
 GAP_BLOCK = 1 << 14
 
 
-def _support_gap(d: np.ndarray, support, samples: int) -> tuple[np.ndarray, np.ndarray]:
-    """``([m], [m, 2])``: ``max_θ d·u(θ) - H(θ)`` and its ``u``, for smooth pair supports
-    ``H = support(θ, order)`` (``order`` 0: ``H`` of ``[m, k]`` angles; 2: ``(H, H',
-    H'')`` of ``[m]`` angles)."""
-    m = len(d)
-    theta = 2.0 * np.pi * np.arange(samples) / samples
-    t = np.broadcast_to(theta, (m, samples))
-    f = d[:, :1] * np.cos(t) + d[:, 1:] * np.sin(t) - support(t, 0) if m else np.zeros((0, 1))
-    best_t = theta[np.argmax(f, axis=1)] if m else np.zeros(0)
-    arg = best_t.copy()
-    best = f.max(axis=1) if m else np.zeros(0)
-    step = 2.0 * np.pi / samples
-    t = best_t
-    for _ in range(GAP_NEWTON):
-        c, s = np.cos(t), np.sin(t)
-        h, dh, ddh = support(t, 2)
-        g1 = -d[:, 0] * s + d[:, 1] * c - dh
-        g2 = -d[:, 0] * c - d[:, 1] * s - ddh
-        dt = np.where(g2 < 0, -g1 / np.where(g2 < 0, g2, -1.0), np.sign(g1) * step)
-        t = t + np.clip(dt, -step, step)
-        val = d[:, 0] * np.cos(t) + d[:, 1] * np.sin(t) - support(t, 0)
-        better = val > best
-        arg = np.where(better, t, arg)
-        best = np.where(better, val, best)
-    return best, np.stack([np.cos(arg), np.sin(arg)], axis=1)
+@nb.njit(cache=True, inline="always")
+def _ellipse_h(c, s, a1, b1, c1, s1, a2, b2, c2, s2, order):  # pragma: no cover - compiled
+    """``h_i + h_j`` of two ellipses in the direction ``(c, s)`` = (cos θ, sin θ), each
+    given by its half axes and (cos 2φ, sin 2φ) of its angle φ, and for ``order`` 2 the
+    first and second derivatives in θ (``Ellipse.support``'s formulas, summed; the
+    double angles by addition, so no trigonometry per evaluation)."""
+    cc, ss = c * c - s * s, 2.0 * s * c  # cos 2θ, sin 2θ
+    h = dh = ddh = 0.0
+    for a, b, cp, sp in ((a1, b1, c1, s1), (a2, b2, c2, s2)):
+        k = a * a - b * b
+        cos2 = cc * cp + ss * sp  # cos 2(θ - φ)
+        r = math.sqrt(0.5 * (a * a + b * b) + 0.5 * k * cos2)
+        h += r
+        if order == 2:
+            dq = -k * (ss * cp - cc * sp)  # -k sin 2(θ - φ)
+            dh += dq / (2.0 * r)
+            ddh += -k * cos2 / r - dq * dq / (4.0 * r * r * r)
+    return h, dh, ddh
+
+
+@nb.njit(cache=True)
+def _ellipse_gaps(d, ai, bi, pi, aj, bj, pj, samples, newton, gap, u):  # pragma: no cover
+    """Per pair: ``max_θ d·u(θ) - h_i(θ) - h_j(θ)`` by the best of ``samples`` directions
+    then ``newton`` safeguarded Newton steps (a step at most the sampling step, a
+    gradient step where the curvature is not negative), the best value kept; written
+    into ``gap [m]`` and its direction into ``u [m, 2]``."""
+    step = 2.0 * math.pi / samples
+    tc = np.cos(np.arange(samples) * step)
+    ts = np.sin(np.arange(samples) * step)
+    for m in range(d.shape[0]):
+        dx, dy = d[m, 0], d[m, 1]
+        c1, s1 = math.cos(2.0 * pi[m]), math.sin(2.0 * pi[m])
+        c2, s2 = math.cos(2.0 * pj[m]), math.sin(2.0 * pj[m])
+        a1, b1, a2, b2 = ai[m], bi[m], aj[m], bj[m]
+        best, arg = -1e300, 0.0
+        for k in range(samples):
+            h, _, _ = _ellipse_h(tc[k], ts[k], a1, b1, c1, s1, a2, b2, c2, s2, 0)
+            f = dx * tc[k] + dy * ts[k] - h
+            if f > best:
+                best, arg = f, k * step
+        t = arg
+        for it in range(newton + 1):  # the value at each step comes with its derivatives
+            c, s = math.cos(t), math.sin(t)
+            h, dh, ddh = _ellipse_h(c, s, a1, b1, c1, s1, a2, b2, c2, s2, 2)
+            f = dx * c + dy * s - h
+            if f > best:
+                best, arg = f, t
+            g1 = -dx * s + dy * c - dh
+            g2 = -dx * c - dy * s - ddh
+            dt = -g1 / g2 if g2 < 0 else math.copysign(step, g1)
+            if it == newton or abs(dt) < 1e-12:  # converged to machine precision
+                break
+            t += min(max(dt, -step), step)
+        gap[m] = best
+        u[m, 0], u[m, 1] = math.cos(arg), math.sin(arg)
 
 
 @dataclass(frozen=True)

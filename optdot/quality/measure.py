@@ -331,7 +331,7 @@ def _second_pass(
 #: Most near pairs of shaped dots QA checks again with shapely (the first ones met).
 MAX_SHAPELY_PAIRS = 20_000
 #: How close to the true footprints the polygons of that check are, mm.
-SHAPELY_TOLERANCE = 5e-5 * 1e-3
+SHAPELY_TOLERANCE = 1e-5
 
 
 def _cross_check(s: SecondSums, pts, dots: Footprints, pairs: np.ndarray, gap: np.ndarray):

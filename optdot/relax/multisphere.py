@@ -19,12 +19,14 @@ import math
 
 import numba as nb
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..geometry.shapes import DotShape
+from ..spatial.verlet import VerletList
 
 #: Circles per footprint: at most this many along the long axis.
 MAX_SPHERES = 9
+#: Relative skin of the pair list (:class:`~optdot.spatial.verlet.VerletList`).
+SKIN = 0.3
 
 
 def spheres(shape: DotShape) -> tuple[np.ndarray, np.ndarray]:
@@ -46,14 +48,15 @@ def spheres(shape: DotShape) -> tuple[np.ndarray, np.ndarray]:
 
 
 class MultiSphereTerm:
-    """The multi-sphere penalty of shaped dots at fixed angles, over a neighbour list of
-    dot pairs rebuilt when a dot has moved half the skin.
+    """The multi-sphere penalty of shaped dots at fixed angles, over the pair list of
+    :class:`~optdot.spatial.verlet.VerletList` (rebuilt only when many dots have moved
+    far; the few that have are searched afresh at each evaluation).
 
     Args:
         shape: the dots' footprint. angle: ``[n]`` their angles, rad.
         active: ``[n]`` bool, the dots that have a footprint (not phantoms).
         gap: smallest edge gap the circles keep, mm. weight: ``w``.
-        skin: extra reach of the list, mm.
+        skin: relative skin of the list.
     """
 
     def __init__(
@@ -63,57 +66,67 @@ class MultiSphereTerm:
         active: np.ndarray,
         gap: float,
         weight: float,
-        skin: float,
+        skin: float = SKIN,
     ) -> None:
         t, self.radius = spheres(shape)
         c, s = np.cos(angle), np.sin(angle)
         self.offset = np.stack([c[:, None] * t, s[:, None] * t], axis=2)  # [n, k, 2]
-        self.index = np.flatnonzero(active)
-        self.gap, self.weight, self.skin = gap, weight, skin
+        self.active = np.ascontiguousarray(active, dtype=np.bool_)
+        self.gap, self.weight = gap, weight
         self.reach = 2.0 * float(np.abs(t).max() + self.radius.max()) + gap
-        self.pairs = np.zeros((0, 2), np.int64)
-        self.built: np.ndarray | None = None
+        self.verlet = VerletList(np.full(len(angle), 0.5 * self.reach), skin)
 
     def __call__(self, xy: np.ndarray, grad: np.ndarray) -> float:
         """Add the term's gradient into ``grad`` (``[n, 2]``) at ``xy``; its value, mm²."""
-        if len(self.index) < 2:
+        if int(self.active.sum()) < 2:
             return 0.0
-        at = xy[self.index]
-        if self.built is None or np.max(np.abs(at - self.built)) > 0.5 * self.skin:
-            self.pairs = self.index[
-                cKDTree(at).query_pairs(self.reach + self.skin, output_type="ndarray")
-            ].astype(np.int64)
-            self.built = at.copy()
-        return _penalty(
-            xy, self.pairs, self.offset, self.radius, self.gap, self.weight, self.reach, grad
-        )
+        p = self.verlet.update(xy)
+        args = (self.offset, self.radius, self.gap, self.weight, self.reach, self.active, grad)
+        return _penalty(xy, p.ptr, p.nbr, p.skip, p.ei, p.ej, *args)
+
+
+@nb.njit(cache=True, inline="always")
+def _pair(xy, i, j, off, rad, gap, w, reach, active, grad):  # pragma: no cover - compiled
+    if not (active[i] and active[j]):
+        return 0.0
+    ex, ey = xy[i, 0] - xy[j, 0], xy[i, 1] - xy[j, 1]
+    if ex * ex + ey * ey >= reach * reach:
+        return 0.0
+    e = 0.0
+    k = rad.shape[0]
+    for a in range(k):
+        xa, ya = xy[i, 0] + off[i, a, 0], xy[i, 1] + off[i, a, 1]
+        for b in range(k):
+            dx = xa - xy[j, 0] - off[j, b, 0]
+            dy = ya - xy[j, 1] - off[j, b, 1]
+            t = rad[a] + rad[b] + gap
+            d2 = dx * dx + dy * dy
+            if d2 >= t * t:
+                continue
+            d = np.sqrt(d2)
+            pen = t - d
+            e += w * pen * pen
+            if d > 1e-15:
+                g = -2.0 * w * pen / d
+                grad[i, 0] += g * dx
+                grad[i, 1] += g * dy
+                grad[j, 0] -= g * dx
+                grad[j, 1] -= g * dy
+    return e
 
 
 @nb.njit(cache=True)
-def _penalty(xy, pairs, off, rad, gap, w, reach, grad):  # pragma: no cover - compiled
+def _penalty(xy, ptr, nbr, skip, ei, ej, off, rad, gap, w, reach, active, grad):  # pragma: no cover
+    """The term over a :class:`~optdot.spatial.blocks.PairList`: the listed pairs of dots
+    not marked ``skip``, then the extra pairs (those of the skipped dots)."""
     e = 0.0
-    k = rad.shape[0]
-    for p in range(pairs.shape[0]):
-        i, j = pairs[p, 0], pairs[p, 1]
-        ex, ey = xy[i, 0] - xy[j, 0], xy[i, 1] - xy[j, 1]
-        if ex * ex + ey * ey >= reach * reach:
+    for i in range(xy.shape[0]):
+        if skip[i]:
             continue
-        for a in range(k):
-            xa, ya = xy[i, 0] + off[i, a, 0], xy[i, 1] + off[i, a, 1]
-            for b in range(k):
-                dx = xa - xy[j, 0] - off[j, b, 0]
-                dy = ya - xy[j, 1] - off[j, b, 1]
-                t = rad[a] + rad[b] + gap
-                d2 = dx * dx + dy * dy
-                if d2 >= t * t:
-                    continue
-                d = np.sqrt(d2)
-                pen = t - d
-                e += w * pen * pen
-                if d > 1e-15:
-                    g = -2.0 * w * pen / d
-                    grad[i, 0] += g * dx
-                    grad[i, 1] += g * dy
-                    grad[j, 0] -= g * dx
-                    grad[j, 1] -= g * dy
+        for k in range(ptr[i], ptr[i + 1]):
+            j = nbr[k]
+            if not skip[j]:
+                e += _pair(xy, i, j, off, rad, gap, w, reach, active, grad)
+    for p in range(ei.shape[0]):
+        e += _pair(xy, ei[p], ej[p], off, rad, gap, w, reach, active, grad)
     return e

@@ -174,10 +174,7 @@ def relax_staged(
     if problem.shaped is not None:
         shape, field, gap = problem.shaped
         active = np.ones(len(xy0), bool) if phantom is None else ~phantom
-        extra = MultiSphereTerm(
-            shape, field.at(xy0, xy0), active, gap, max(form.w_hard, 1.0),
-            settings.skin * shape.extent,
-        )  # fmt: skip
+        extra = MultiSphereTerm(shape, field.at(xy0, xy0), active, gap, max(form.w_hard, 1.0))
     total = RelaxResult(xy, 0.0, 0, 0, 0, "no stage ran", [])
     done = 0
     for k, (share, multiplier) in enumerate(form.stages):

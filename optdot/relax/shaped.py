@@ -10,8 +10,10 @@ moves a dot:
    footprints nearer than that overlap at any angles);
 2. every pair whose exact edge gap (:meth:`~optdot.geometry.shapes.Footprints.separation`)
    is under the gap is pushed apart along the direction that widens it fastest, each
-   dot by half of the deficit plus a few nm (a dot held still leaves it to its partner),
-   the angles taken again from the orientation field where the dots now stand.
+   dot by :data:`PUSH` of the deficit plus a few nm (a dot held still leaves it to its
+   partner), the angles of the dots that moved taken again from the orientation field
+   where they now stand; only pairs with a dot that moved are measured again, and the
+   pushes repeat until no pair is too close before the disc pass runs again.
 
 Then the positions are rounded to 1 nm, the angles computed where they ended (and
 rounded as files store them), and every pair checked again exactly.
@@ -97,22 +99,31 @@ def make_legal_shapes(
     skin = SKIN * extent
     pr_all, built = None, None
     moved = np.ones(len(xy), bool)
+    angle = np.zeros(len(xy))
+    walls = True  # the disc pass is due: at the start, and once the pairs are clean
     for _ in range(MAX_ROUNDS):
-        leg = legalize(xy, density, home_cell, domain, extent, core, frozen=frozen)
-        sweeps, pair_fixes, dot_fixes = (
-            sweeps + leg.sweeps,
-            pair_fixes + leg.pair_fixes,
-            dot_fixes + leg.dot_fixes,
-        )
-        moved |= np.any(leg.xy != xy, axis=1)
-        xy = leg.xy
+        if walls:
+            leg = legalize(xy, density, home_cell, domain, extent, core, frozen=frozen)
+            sweeps, pair_fixes, dot_fixes = (
+                sweeps + leg.sweeps,
+                pair_fixes + leg.pair_fixes,
+                dot_fixes + leg.dot_fixes,
+            )
+            moved |= np.any(leg.xy != xy, axis=1)
+            xy = leg.xy
         if built is None or np.max(np.abs(xy - built)) > 0.5 * skin:
             pr_all, built = _pairs(xy, shape.footprints(np.zeros(1)), gap, skin, frozen), xy
-        dots = turned(shape, field, xy, thrown)
+        # the field where the dots that moved now stand (the others' angles hold)
+        angle[moved] = np.radians(degrees(field.at(xy[moved], thrown[moved])))
+        dots = shape.footprints(angle)
         near = pr_all[moved[pr_all[:, 0]] | moved[pr_all[:, 1]]]  # only pairs that changed
         pr, g, u = _conflicts(xy, dots, gap + MARGIN, near)
         if not len(pr):
-            break
+            if walls:
+                break  # the disc pass moved nothing into a conflict: done
+            walls, moved = True, np.zeros(len(xy), bool)
+            continue
+        walls = False
         pair_fixes += len(pr)
         share = PUSH * (gap + 2.0 * MARGIN - g)
         i, j = pr[:, 0], pr[:, 1]
@@ -129,6 +140,7 @@ def make_legal_shapes(
             f"{where}: could not meet the guarantee for {shape.kind.name} dots after "
             f"{MAX_ROUNDS} rounds: {len(pr)} pairs closer than {gap * 1e3:g} µm edge to edge"
         )
+    dots = turned(shape, field, xy, thrown)  # every angle afresh for the final check
     viol = check_guarantee(xy, density, domain, extent, core, frozen)
     left, _, _ = shape_conflicts(xy, dots, gap, frozen)
     if not viol.ok or len(left):
