@@ -269,3 +269,52 @@ def test_the_tracer_meets_the_true_oriented_footprints(tmp_path, dots):
     near = shapely.distance(polys.boundary, shapely.points(pts)) < 2e-6  # polygon error
     assert (got != want)[~near].sum() == 0
     assert got.mean() == pytest.approx(p.dots.area().sum() / 3.0, abs=0.02)
+
+
+@pytest.mark.parametrize("dots", [ELLIPSE, PRISM], ids=["ellipse", "rounded_rectangle"])
+def test_multisphere_penalty_gradient_and_pairs(dots):
+    """The multi-sphere term against a brute-force sum over every pair of circles, its
+    gradient against central finite differences, and the circles within the footprint
+    (ellipse: inscribed) or covering it (rounded rectangle)."""
+    from optdot.geometry.shapes import KINDS, DotShape
+    from optdot.relax.multisphere import MultiSphereTerm, spheres
+
+    name = dots["shape"].strip('"')
+    size = tuple(float(dots[k]) for k in KINDS[name].params)
+    shape = DotShape(KINDS[name], size)
+    rng = np.random.default_rng(4)
+    n = 60
+    xy = rng.uniform(0, 0.5, (n, 2))
+    angle = rng.uniform(-np.pi, np.pi, n)
+    active = np.ones(n, bool)
+    active[3] = False  # a phantom: no footprint
+    term = MultiSphereTerm(shape, angle, active, 0.005, 15.0)
+    grad = np.zeros((n, 2))
+    e = term(xy, grad)
+    t, r = spheres(shape)
+    c = np.stack([np.cos(angle)[:, None] * t, np.sin(angle)[:, None] * t], axis=2) + xy[:, None]
+    want = 0.0
+    for i in range(n):
+        for j in range(i + 1, n):
+            if active[i] and active[j]:
+                d = np.hypot(*(c[i][:, None] - c[j][None]).transpose(2, 0, 1))
+                pen = np.maximum(r[:, None] + r[None] + 0.005 - d, 0.0)
+                want += 15.0 * (pen**2).sum()
+    assert e > 0 and e == pytest.approx(want, rel=1e-12)
+    h = 1e-7
+    for k in rng.choice(n, 8, replace=False):
+        for ax in (0, 1):
+            up, dn = xy.copy(), xy.copy()
+            up[k, ax] += h
+            dn[k, ax] -= h
+            g = np.zeros((n, 2))
+            fd = (term(up, g) - term(dn, g)) / (2 * h)
+            assert grad[k, ax] == pytest.approx(fd, rel=1e-4, abs=1e-9)
+    ring = shapely.Polygon(shape.kind.outline(np.array(size), 0.0, 1e-6))
+    circles = shapely.union_all(
+        [shapely.Point(tt, 0).buffer(rr, 256) for tt, rr in zip(t, r, strict=True)]
+    )
+    if name == "ellipse":
+        assert ring.buffer(1e-6).covers(circles)
+    else:
+        assert circles.buffer(1e-6).covers(ring)
