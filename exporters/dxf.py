@@ -15,6 +15,7 @@ is an ordinary DXF that ezdxf's audit accepts (tests/test_exporters.py).
 from __future__ import annotations
 
 import io
+import logging
 import math
 import re
 from pathlib import Path
@@ -43,6 +44,19 @@ _STAMP = re.compile(r"^(\S+) @ \d{4}-\d\d-\d\dT[0-9:.]+[+-]\d\d:\d\d$")
 _MARK_X, _MARK_Y = 123456.654321, 654321.123456  # template circle, found by its coordinates
 _MARK_R = 0.123456  # its radius when the sizes vary (replaced per dot)
 _MARK_A = 12.345678  # a template INSERT's rotation (replaced per dot)
+
+
+def _new_document(version: str):
+    """An empty ezdxf document of ``version``, without ezdxf's warning that R12 has no
+    $INSUNITS (it sets the units of every new document; R12 drawings are in mm by
+    convention, which the module doc states): a command prints its own lines only."""
+    log = logging.getLogger("ezdxf")
+    level = log.level
+    log.setLevel(logging.ERROR)
+    try:
+        return ezdxf.new(version, setup=False)
+    finally:
+        log.setLevel(level)
 
 
 def _block_name(key: tuple[int, ...]) -> str:
@@ -91,7 +105,7 @@ def _template(
     uniform = pattern.uniform_diameter
     radius = _MARK_R if uniform is None else 0.5 * uniform
     shaped = pattern.kind is not CIRCLE
-    doc = ezdxf.new(version, setup=False)
+    doc = _new_document(version)
     if version != "R12":  # R12 has no $INSUNITS: drawing units are mm by convention
         doc.header["$INSUNITS"] = 4  # millimetres
         doc.header["$MEASUREMENT"] = 1  # metric

@@ -282,7 +282,7 @@ def _read_dxf(path: Path) -> Pattern:
                 pts = (
                     [p[:2] for p in e.get_points()]
                     if kind == "LWPOLYLINE"
-                    else [v.dxf.location[:2] for v in e.vertices]
+                    else [tuple(v.dxf.location)[:2] for v in e.vertices]
                 )
                 ocs = e.ocs()
                 if ocs.transform:

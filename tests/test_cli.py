@@ -117,6 +117,13 @@ def test_dxf_r12(tmp_path, exported):
     doc = ezdxf.readfile(tmp_path / "r12.dxf")
     assert doc.dxfversion == "AC1009"
     assert len(doc.modelspace().query("CIRCLE")) == load_pattern(exported["csv"]).n
+    # qa reads it back: R12's outline is a POLYLINE of VERTEX entities
+    from exporters.readback import read_any
+
+    back = read_any(tmp_path / "r12.dxf")
+    want = load_pattern(exported["csv"])
+    assert back.n == want.n
+    np.testing.assert_allclose(back.box, want.box, atol=1e-9)
 
 
 def test_previews(exported):

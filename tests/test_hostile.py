@@ -171,10 +171,21 @@ def _mask_of_squares(path, side_um=46.0, layer=1):
 
 
 @pytest.mark.parametrize("suffix", [".gds", ".oas"])
-def test_qa_refuses_squares_as_dots(tmp_path, suffix):
+def test_qa_reads_squares_as_square_dots(tmp_path, suffix):
+    """A square is a dot shape now (a rounded rectangle of length = width, corner 0): qa
+    measures squares as squares (their exact gaps), not as discs."""
+    from exporters.readback import read_any
+
     path = tmp_path / f"sq{suffix}"
     _mask_of_squares(path)
-    one_error(["qa", path], 2, "not a circle", "4 vertices")
+    p = read_any(path)
+    assert p.kind.name == "rounded_rectangle" and p.n == 400
+    np.testing.assert_allclose(p.dots.size, [[0.046, 0.046, 0.0]] * 400, atol=1e-9)
+    i = np.array([0])
+    j = np.array([int(np.argmin(np.hypot(*(p.xy - p.xy[0] - [0.1, 0.0]).T)))])
+    assert p.dots.gap(p.xy, i, j)[0] == pytest.approx(0.1 - 0.046, abs=1e-9)
+    rc, err, _ = cli("qa", path, "--no-job")
+    assert rc == 0, err
 
 
 def test_qa_refuses_a_dot_cell_that_is_not_round(tmp_path):
