@@ -11,7 +11,7 @@ import numpy as np
 from ..spatial.verlet import VerletList
 from .formulation import Formulation, Problem
 from .lbfgs import HALTED, minimize_lbfgs
-from .multisphere import MultiSphereTerm
+from .multisphere import MULTISPHERE_WEIGHT, MultiSphereTerm
 from .penalty import PenaltyTerms, penalty_fast
 from .result import RelaxResult
 
@@ -174,7 +174,7 @@ def relax_staged(
     if problem.shaped is not None:
         shape, field, gap = problem.shaped
         active = np.ones(len(xy0), bool) if phantom is None else ~phantom
-        extra = MultiSphereTerm(shape, field.at(xy0, xy0), active, gap, max(form.w_hard, 1.0))
+        extra = MultiSphereTerm(shape, field.at(xy0, xy0), active, gap, MULTISPHERE_WEIGHT)
     total = RelaxResult(xy, 0.0, 0, 0, 0, "no stage ran", [])
     done = 0
     for k, (share, multiplier) in enumerate(form.stages):
