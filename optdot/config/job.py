@@ -20,7 +20,7 @@ from ..geometry.density import DensityMap
 from ..geometry.domain import Domain
 from ..geometry.limits import DIAMETER_RANGE_MM, MAX_EXTENT_MM
 from ..geometry.orientation import Orientation
-from ..geometry.shapes import DotShape, Footprints
+from ..geometry.shapes import DotShape
 from ..geometry.sizes import DotSizes, dots_per_cell
 from .grids import validate_grid
 from .light_guide import DesignParams, LightGuide
@@ -308,16 +308,6 @@ class Job:
         """How far a dot reaches from its centre, mm: the radius (the smallest, with
         ``sizes``), or a shaped dot's bounding radius."""
         return 0.5 * self.diameter if self.shape is None else self.shape.extent
-
-    def footprints(
-        self, xy: np.ndarray, diameter: np.ndarray | float, thrown: np.ndarray | None = None
-    ) -> Footprints:
-        """The footprints of dots centred at ``xy`` (``[n, 2]`` mm): discs of
-        ``diameter`` (``[n]`` or one, mm), or the job's shape turned by its orientation
-        field where each dot stands (``random``: drawn from where it was ``thrown``)."""
-        if self.shape is None:
-            return Footprints.circles(diameter, len(xy))
-        return self.shape.footprints(self.orientation.at(xy, thrown))
 
     @cached_property
     def cell_diameters(self) -> np.ndarray | None:
