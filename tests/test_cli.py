@@ -118,7 +118,7 @@ def test_dxf_r12(tmp_path, exported):
     assert doc.dxfversion == "AC1009"
     assert len(doc.modelspace().query("CIRCLE")) == load_pattern(exported["csv"]).n
     # qa reads it back: R12's outline is a POLYLINE of VERTEX entities
-    from exporters.readback import read_any
+    from optdot.exporters.readback import read_any
 
     back = read_any(tmp_path / "r12.dxf")
     want = load_pattern(exported["csv"])

@@ -174,7 +174,7 @@ def _mask_of_squares(path, side_um=46.0, layer=1):
 def test_qa_reads_squares_as_square_dots(tmp_path, suffix):
     """A square is a dot shape now (a rounded rectangle of length = width, corner 0): qa
     measures squares as squares (their exact gaps), not as discs."""
-    from exporters.readback import read_any
+    from optdot.exporters.readback import read_any
 
     path = tmp_path / f"sq{suffix}"
     _mask_of_squares(path)

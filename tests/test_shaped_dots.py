@@ -144,7 +144,7 @@ def test_files_and_masks_read_back_the_same_footprints(tmp_path, dots):
     kdb = pytest.importorskip("klayout.db")
     import ezdxf
 
-    from exporters.readback import read_any
+    from optdot.exporters.readback import read_any
 
     path = _job(tmp_path, dots, {"random": "true"})
     p = generate(load_job(path))
