@@ -72,6 +72,8 @@ def _add_block(doc, kind: Kind, size: np.ndarray, version: str, tolerance: float
     if version == "R12":
         ring = kind.outline(size, 0.0, tolerance)
         blk.add_polyline2d([tuple(map(float, p)) for p in ring], close=True)
+    elif float(size[0]) == float(size[1]) and float(size[-1]) >= 0.5 * float(size[1]):
+        blk.add_circle((0.0, 0.0), 0.5 * float(size[0]))  # a round footprint: a disc
     elif kind.name == "ellipse":
         a, b = 0.5 * float(size[0]), 0.5 * float(size[1])
         blk.add_ellipse((0.0, 0.0), major_axis=(a, 0.0), ratio=b / a)
@@ -85,7 +87,14 @@ def _add_block(doc, kind: Kind, size: np.ndarray, version: str, tolerance: float
             pts.append((cx + rc * c0, cy + rc * s0, 0.0, 0.0, bulge))
             if rc > 0:
                 pts.append((cx + rc * c1, cy + rc * s1, 0.0, 0.0, 0.0))
-        blk.add_lwpolyline([tuple(float(v) for v in p) for p in pts], format="xyseb", close=True)
+        # a side of length 0 (a capsule's ends, a disc): its two ends are one vertex, the
+        # one that starts the next arc
+        keep = [
+            p
+            for p, q in zip(pts, pts[1:] + pts[:1], strict=True)
+            if math.hypot(p[0] - q[0], p[1] - q[1]) > 1e-12 * float(size[0])
+        ]
+        blk.add_lwpolyline([tuple(float(v) for v in p) for p in keep], format="xyseb", close=True)
 
 
 def _template(

@@ -229,7 +229,9 @@ class Drawn:
         ``place`` (``[2, 2]``; its scale already in ``to_mm``, mm per file unit)."""
         kind, f = fit
         size = np.round(f.size * to_mm, 6)
-        turn = math.atan2(place[1, 0], place[0, 0]) + f.angle
+        # the footprint's axis as the placement maps it (a mirror turns it the other way)
+        ax = place @ np.array([math.cos(f.angle), math.sin(f.angle)])
+        turn = math.atan2(ax[1], ax[0])
         return cls(kind, np.tile(size, (k, 1)), np.full(k, turn))
 
 
@@ -291,6 +293,10 @@ def _read_dxf(path: Path) -> Pattern:
                 rings.append(np.array(pts, dtype=np.float64) * scale)
     except GeometryError as err:
         raise PatternFileError(str(err)) from None
+    for _, f in [s for s in shaped if s[0] is CIRCLE]:  # round outlines: discs
+        xy_l.append(tuple(f.centre / scale))  # back to drawing units, as the others
+        r_l.append(0.5 * float(f.size[0]) / scale)
+    shaped = [s for s in shaped if s[0] is not CIRCLE]
     if shaped:
         kinds = {k for k, _ in shaped}
         if xy_l or len(kinds) > 1:
@@ -338,10 +344,8 @@ def _dxf_shape(path: Path, e, kind: str, scale: float) -> tuple[Kind, Fit]:
         if not full or not (0 < ratio <= 1):
             raise PatternFileError(f"{path}: {where} on layer DOTS is not a whole ellipse")
         a = math.hypot(float(major[0]), float(major[1])) * scale
-        c = e.dxf.center
+        c = e.dxf.center  # an ELLIPSE's centre and major axis are in world coordinates
         turn = math.atan2(float(major[1]), float(major[0]))
-        if float(ext[2]) < 0:  # seen from below: mirrored in x
-            c, turn = e.ocs().to_wcs(c), math.pi - turn
         centre = np.array([float(c[0]), float(c[1])]) * scale
         return KINDS["ellipse"], Fit(True, centre, np.array([2 * a, 2 * a * ratio]), turn, (a, a))
     if kind in ("LWPOLYLINE", "POLYLINE") and e.is_closed:
@@ -353,8 +357,7 @@ def _dxf_shape(path: Path, e, kind: str, scale: float) -> tuple[Kind, Fit]:
         kind_, fit = _footprint(path, pts * scale, where, 1.0)
         if kind_.name == "rounded_rectangle" and kind == "LWPOLYLINE":
             fit = _bulge_radius(e, fit, scale)
-        if kind_ is not CIRCLE:
-            return kind_, fit
+        return kind_, fit  # a round outline (a disc-shaped block) is read as a disc
     raise PatternFileError(
         f"{path}: {where} on layer DOTS is not a CIRCLE, an ELLIPSE or a closed outline of "
         "a rounded rectangle; qa checks those dots only"

@@ -13,6 +13,7 @@ import shapely
 
 from optdot.config.schema import load_job
 from optdot.geometry.orientation import Orientation, axis
+from optdot.geometry.shapes import KINDS as KINDS_
 from optdot.io.patterns import load_pattern, save_pattern
 from optdot.pipeline import generate, qa
 
@@ -318,3 +319,71 @@ def test_multisphere_penalty_gradient_and_pairs(dots):
         assert ring.buffer(1e-6).covers(circles)
     else:
         assert circles.buffer(1e-6).covers(ring)
+
+
+def test_hostile_round_on_shaped_dots(tmp_path):
+    """What the hostile tester found, each refused or read right: a dataset of shaped
+    dots, mirrored placements in GDSII and DXF, a trapezoid on the dot layer, a round
+    rounded rectangle through DXF, random = false beside an angle, an angle map of
+    1e300, and 10:1 ellipses at a fill they cannot reach."""
+    import ezdxf
+    import gdstk
+
+    from optdot.errors import PatternFileError
+    from optdot.exporters.readback import read_any
+
+    path = _job(tmp_path, PRISM, {"random": "true"})
+    one_error(("generate", path, "-o", tmp_path / "p.parquet"), 2, "datasets (.parquet)")
+    assert not (tmp_path / "p.parquet").exists()
+    # an ellipse cell drawn at 30°, placed mirrored (and turned by 40°): axes at 150°, 10°
+    kind = KINDS_["ellipse"]
+    lib = gdstk.Library(unit=1e-6, precision=1e-9)
+    dot = lib.new_cell("E")
+    ring = kind.outline(np.array([80.0, 40.0]), math.radians(30), 0.01)
+    dot.add(gdstk.Polygon(ring, layer=1))
+    top = lib.new_cell("TOP")
+    top.add(gdstk.Reference(dot, (0, 0), x_reflection=True))
+    top.add(gdstk.Reference(dot, (500, 0), rotation=math.radians(40), x_reflection=True))
+    lib.write_gds(str(tmp_path / "m.gds"))
+    p = read_any(tmp_path / "m.gds")
+    got = np.degrees(p.dots.angles[np.argsort(p.xy[:, 0])])
+    np.testing.assert_allclose(np.abs(np.degrees(axis(np.radians(got - [150, 10])))), 0, atol=1e-3)
+    doc = ezdxf.new("R2010", units=4)  # mm
+    doc.layers.add("DOTS")
+    blk = doc.blocks.new("E")
+    blk.add_ellipse(
+        (0, 0), major_axis=(0.04 * math.cos(0.5236), 0.04 * math.sin(0.5236)), ratio=0.5
+    )
+    msp = doc.modelspace()
+    msp.add_blockref("E", (0.5, 0.5), dxfattribs={"layer": "DOTS", "xscale": -1})
+    msp.add_blockref("E", (1.5, 0.5), dxfattribs={"layer": "DOTS", "xscale": -1, "rotation": 40})
+    doc.saveas(tmp_path / "m.dxf")
+    p = read_any(tmp_path / "m.dxf")
+    got = np.degrees(p.dots.angles[np.argsort(p.xy[:, 0])])
+    np.testing.assert_allclose(np.abs(np.degrees(axis(np.radians(got - [150, 10])))), 0, atol=1e-3)
+    # a trapezoid's vertices lie on a rectangle, but it is not one
+    lib = gdstk.Library(unit=1e-6, precision=1e-9)
+    lib.new_cell("TOP").add(gdstk.Polygon([(0, 0), (100, 0), (80, 30), (20, 30)], layer=1))
+    lib.write_gds(str(tmp_path / "t.gds"))
+    with pytest.raises(PatternFileError, match="not a circle, an ellipse or a rounded"):
+        read_any(tmp_path / "t.gds")
+    # a rounded rectangle that is a disc survives DXF
+    disc = {**PRISM, "length": 0.05, "width": 0.05, "corner_radius": 0.025}
+    path = _job(tmp_path, disc)
+    rc, err, _ = cli("export", path, "--dxf", tmp_path / "d.dxf", "-q")
+    assert rc == 0, err
+    rc, err, _ = cli("qa", tmp_path / "d.dxf", "--job", path, "-q")
+    assert rc == 0, err
+    # random = false leaves the angle; a map of 1e300 is refused; 10:1 at 0.3 is refused
+    job = load_job(_job(tmp_path, ELLIPSE, {"random": "false", "angle": 20}))
+    assert job.orientation.mode == "constant"
+    path = _job(tmp_path, ELLIPSE, {"map": '"angles.csv"'})
+    (tmp_path / "angles.csv").write_text("0,10\n20,1e300\n")
+    one_error(("check", path), 2, "row 2, column 2", "-360..360")
+    needles = {**ELLIPSE, "length": 0.1, "width": 0.01}
+    path = _job(tmp_path, needles, grid=np.full((4, 4), 0.3))
+    line = one_error(("check", path), 2, "at most")
+    most = float(line.rsplit("at most ", 1)[1].split()[0])
+    path = _job(tmp_path, needles, grid=np.full((4, 4), most))
+    rc, err, _ = cli("check", path, "-q")  # the fill named is one the check lets run
+    assert rc == 0, err

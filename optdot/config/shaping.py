@@ -14,6 +14,8 @@
     relative = "perpendicular"   # ... long axis across ("perpendicular") or along it
     map = "angles.csv"           # degrees per cell over the panel box, row 0 = bottom
     random = true                # uniform, seeded by optimize.seed
+
+With ``toward`` or ``map``, ``angle`` is added to the field (a turn of every dot).
 """
 
 from __future__ import annotations
@@ -47,6 +49,11 @@ ORIENTATION_KEYS: dict[str, tuple[type, ...]] = {
 MAX_ASPECT = 50.0
 
 
+def _a(name: str) -> str:
+    """``name`` with its indefinite article ("an ellipse", "a rounded_rectangle")."""
+    return ("an " if name[0] in "aeiou" else "a ") + name
+
+
 def dot_shape(dots: dict[str, Any], where: str) -> DotShape | None:
     """The ``[dots]`` shape, or None for circles (``shape`` absent or ``"circle"``).
 
@@ -69,7 +76,7 @@ def dot_shape(dots: dict[str, Any], where: str) -> DotShape | None:
     kind = KINDS[name]
     if "diameter" in dots:
         raise JobError(
-            f"{where}: dots.diameter is a circle's; a {name} takes "
+            f"{where}: dots.diameter is a circle's; {_a(name)} takes "
             + ", ".join(f"dots.{p}" for p in kind.params)
         )
     lo, hi = DIAMETER_RANGE_MM
@@ -86,7 +93,7 @@ def dot_shape(dots: dict[str, Any], where: str) -> DotShape | None:
         size.append(v)
     for p in sized:
         if p not in kind.params:
-            raise JobError(f"{where}: dots.{p} does not apply to a {name}")
+            raise JobError(f"{where}: dots.{p} does not apply to {_a(name)}")
     length, width = size[0], size[1]
     if width > length:
         raise JobError(
@@ -129,7 +136,7 @@ def orientation(
             f"{where}: [orientation] turns shaped dots; circles have no long axis "
             '(set dots.shape = "ellipse" or "rounded_rectangle")'
         )
-    ways = [k for k in ("toward", "map", "random") if k in sec]
+    ways = [k for k in ("toward", "map", "random") if k in sec and sec[k] is not False]
     if len(ways) > 1:
         raise JobError(f"{where}: give one of orientation.{', orientation.'.join(ways)}")
     if "relative" in sec and "toward" not in sec:
@@ -137,11 +144,9 @@ def orientation(
     angle = float(sec.get("angle", 0.0))
     if not (math.isfinite(angle) and abs(angle) <= 360.0):
         raise JobError(f"{where}: orientation.angle = {sec['angle']!r} must be degrees, -360..360")
-    if "random" in sec:
+    if sec.get("random"):
         if "angle" in sec:
             raise JobError(f"{where}: orientation.random and orientation.angle exclude each other")
-        if not sec["random"]:
-            return Orientation("constant", 0.0)
         return Orientation("random", seed=seed)
     if "toward" in sec:
         if sec["toward"] != "leds":
@@ -160,12 +165,12 @@ def orientation(
     if "map" in sec:
         path = base / sec["map"]
         grid = load_grid(path, "orientation.map")
-        bad = ~np.isfinite(grid)
+        bad = ~(np.isfinite(grid) & (np.abs(grid) <= 360.0))
         if bad.any():
             iy, ix = np.argwhere(bad)[0]
             raise JobError(
-                f"{path}: orientation.map: row {iy + 1}, column {ix + 1} is not a finite angle "
-                "(degrees)"
+                f"{path}: orientation.map: row {iy + 1}, column {ix + 1} = {grid[iy, ix]!r} is "
+                "not an angle in degrees, -360..360"
             )
         return Orientation("map", math.radians(angle), grid=np.radians(grid), box=box)
     return Orientation("constant", math.radians(angle))

@@ -305,7 +305,8 @@ class RoundedRect(Kind):
         """Angle: the longest edge's; sides: the vertices' extent along and across it;
         corner radius: the median over the corners' vertices of the arc through each (a
         polygon inscribed in the footprint recovers it to its grid); a fit when every
-        vertex lies within ``slack + share L`` of that footprint."""
+        vertex lies within ``t = slack + share L`` of that footprint and the polygon's
+        area is the footprint's within its perimeter times ``t``."""
         q = points - 0.5 * (points.max(axis=0) + points.min(axis=0))
         e = np.roll(points, -1, axis=0) - points
         k = int(np.argmax(np.hypot(*e.T)))
@@ -333,10 +334,18 @@ class RoundedRect(Kind):
         hx, hy, rc = self._core(size)
         qx, qy = np.abs(x) - hx, np.abs(y) - hy
         dist = np.hypot(np.maximum(qx, 0), np.maximum(qy, 0)) + np.minimum(np.maximum(qx, qy), 0)
+        tol = slack + share * length
+        # every vertex on the outline, and the outline covered: a trapezoid's or a
+        # rhombus's vertices also lie on some rectangle, but enclose less of it
+        xs, ys = points[:, 0], points[:, 1]
+        area = 0.5 * abs(float(np.dot(xs, np.roll(ys, -1)) - np.dot(ys, np.roll(xs, -1))))
+        perimeter = 2.0 * (length + width) - (8.0 - 2.0 * math.pi) * float(rc)
+        short = float(self.area(size[None])[0]) - area
         ok = (
             len(points) >= 4
             and width > 0
-            and float(np.abs(dist - rc).max()) <= slack + share * length
+            and float(np.abs(dist - rc).max()) <= tol
+            and abs(short) <= perimeter * tol
         )
         rad = np.hypot(*rel.T)
         return Fit(ok, centre, size, ang, (float(rad.min()), float(rad.max())))

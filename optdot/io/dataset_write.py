@@ -333,6 +333,12 @@ def write_dataset(
 
 
 def save_dataset(pattern, path: str | Path) -> None:
-    """Write an in-memory pattern as a one-part dataset."""
+    """Write an in-memory pattern as a one-part dataset (round dots: a dataset stores a
+    diameter per dot; shaped dots are refused, not written as their bounding discs)."""
+    if getattr(pattern, "dots", None) is not None:
+        raise ExportError(
+            f"{path}: datasets (.parquet) hold round dots so far; write "
+            f"{pattern.kind.name} dots to .npz or .csv"
+        )
     with write_dataset(path, pattern_manifest(pattern)) as w:
         w.write_part(0, (0, 0), pattern.xy, pattern.diameter)

@@ -351,7 +351,7 @@ def _shaped(path: Path, kind: Kind, size: np.ndarray, angle_deg: np.ndarray) -> 
     if bad.any():
         i = int(np.argmax(bad))
         raise PatternFileError(
-            f"{path}: dot {i + 1}: a {kind.name} of {tuple(size[i].tolist())} mm cannot be "
+            f"{path}: dot {i + 1}: {kind.name} of {tuple(size[i].tolist())} mm cannot be "
             "drawn (width > 0, length >= width, corner radius <= width / 2)"
         )
     return Footprints(kind, size, np.radians(angle_deg))
