@@ -34,12 +34,23 @@ def _check_fill(job: Job, where: str) -> None:
     eff = float(grid[iy, ix]) * spread
     if eff >= MAX_RANDOM_FILL:
         raise JobError(
-            f"{where}: fill {float(grid[iy, ix]):.4g} at row {iy}, column {ix} with centres "
+            f"{where}: fill {float(grid[iy, ix]):.4g} {_cell(job, iy, ix)} with centres "
             f"{job.min_distance * 1e3:.4g} µm apart for {job.diameter * 1e3:.4g} µm dots "
             f"is an effective fill of {eff:.4g}; a random non-overlapping pattern reaches "
             f"at most {MAX_RANDOM_FILL:g} (the fill can be at most "
             f"{MAX_RANDOM_FILL / spread:.4g} here)"
         )
+
+
+def _cell(job: Job, iy: int, ix: int) -> str:
+    """Where cell ``(iy, ix)`` of the job's map is, for a message: its row and column in
+    the file, or, for a map read as a smooth field (whose cells are sub-cells of the
+    file's), its centre in mm."""
+    if job.interpolation == "nearest":
+        return f"at row {iy}, column {ix}"
+    d = job.density
+    cw, ch = d.cell_size
+    return f"of the smooth map near ({d.x0 + (ix + 0.5) * cw:.4g}, {d.y0 + (iy + 0.5) * ch:.4g}) mm"
 
 
 def _check_shaped_fill(job: Job, fill: float, iy: int, ix: int, where: str) -> None:
@@ -59,7 +70,7 @@ def _check_shaped_fill(job: Job, fill: float, iy: int, ix: int, where: str) -> N
             3 - math.floor(math.log10(most))
         )  # 4 digits, rounded down: the fill named is one that runs
         raise JobError(
-            f"{where}: fill {fill:.4g} at row {iy}, column {ix} of {sizes} µm "
+            f"{where}: fill {fill:.4g} {_cell(job, iy, ix)} of {sizes} µm "
             f"{shape.kind.name} dots {job.optimize.gap * 1e3:.4g} µm apart is an effective "
             f"fill of {fill * spread:.4g}; dots this long reach at most {limit:.3g} "
             f"without collisions (the fill can be at most {most:.4g} here)"
