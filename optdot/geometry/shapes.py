@@ -46,6 +46,12 @@ class Kind:
         """``[n, 3]`` the numbers :func:`on_packed` tests a point against, mm (or mm²)."""
         raise NotImplementedError
 
+    def support(self, theta: np.ndarray, size: np.ndarray, angle: np.ndarray) -> np.ndarray:
+        """The support function ``h(θ) = max over the footprint of ⟨p, u(θ)⟩`` (mm, about
+        the centre) in the directions ``theta`` (rad): what :meth:`separation` maximises
+        ``⟨d, u⟩ - h_i - h_j`` over."""
+        raise NotImplementedError
+
     def area(self, size: np.ndarray) -> np.ndarray:
         """``[n]`` areas, mm²."""
         raise NotImplementedError
@@ -114,6 +120,11 @@ class Circle(Kind):
     def extent(self, size: np.ndarray) -> np.ndarray:
         return 0.5 * size[:, 0]
 
+    def support(self, theta, size, angle) -> np.ndarray:
+        return np.broadcast_to(
+            0.5 * size[..., 0], np.broadcast_shapes(np.shape(theta), size.shape[:-1])
+        )
+
     def separation(self, d, size_i, angle_i, size_j, angle_j):
         n = np.hypot(d[:, 0], d[:, 1])
         u = np.where(n[:, None] > 0, d / np.where(n > 0, n, 1.0)[:, None], [1.0, 0.0])
@@ -165,19 +176,12 @@ class Ellipse(Kind):
     def extent(self, size: np.ndarray) -> np.ndarray:
         return 0.5 * size[:, 0]
 
-    @staticmethod
-    def support(theta: np.ndarray, size: np.ndarray, angle: np.ndarray, order: int = 0):
-        """The support function ``h`` (mm) of the ellipses in the directions ``theta``
-        (rad) and, for ``order`` 2, its first and second derivatives in ``theta``."""
+    def support(self, theta: np.ndarray, size: np.ndarray, angle: np.ndarray) -> np.ndarray:
+        """The support function (mm) of the ellipses in the directions ``theta`` (rad):
+        ``sqrt(a² cos²(θ - φ) + b² sin²(θ - φ))`` (the compiled search, ``_ellipse_h``,
+        evaluates it and its derivatives by double angles)."""
         a2, b2 = (0.5 * size[..., 0]) ** 2, (0.5 * size[..., 1]) ** 2
-        c2 = np.cos(2.0 * (theta - angle))
-        p = 0.5 * (a2 + b2) + 0.5 * (a2 - b2) * c2
-        h = np.sqrt(p)
-        if order == 0:
-            return h
-        dp = -(a2 - b2) * np.sin(2.0 * (theta - angle))
-        ddp = -2.0 * (a2 - b2) * c2
-        return h, dp / (2.0 * h), ddp / (2.0 * h) - dp * dp / (4.0 * h**3)
+        return np.sqrt(0.5 * (a2 + b2) + 0.5 * (a2 - b2) * np.cos(2.0 * (theta - angle)))
 
     def separation(self, d, size_i, angle_i, size_j, angle_j):
         """The separation ``max_u <d, u> - h_i(u) - h_j(u)`` over unit directions ``u``
@@ -260,10 +264,8 @@ class RoundedRect(Kind):
         hx, hy, rc = self._core(size)
         return np.hypot(hx, hy) + rc
 
-    @classmethod
-    def support(cls, theta, size, angle) -> np.ndarray:
-        """The support function (mm) of the footprints in the directions ``theta``."""
-        hx, hy, rc = cls._core(size)
+    def support(self, theta, size, angle) -> np.ndarray:
+        hx, hy, rc = self._core(size)
         return hx * np.abs(np.cos(theta - angle)) + hy * np.abs(np.sin(theta - angle)) + rc
 
     def separation(self, d, size_i, angle_i, size_j, angle_j):
