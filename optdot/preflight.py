@@ -53,9 +53,16 @@ def _cell(job: Job, iy: int, ix: int) -> str:
     return f"of the smooth map near ({d.x0 + (ix + 0.5) * cw:.4g}, {d.y0 + (iy + 0.5) * ch:.4g}) mm"
 
 
-def _check_shaped_fill(job: Job, fill: float, iy: int, ix: int, where: str) -> None:
+def check_shaped_fill(job: Job, fill: float, where: str) -> None:
+    """Refuse a fill (``design.fill_range``'s top) the job's shaped dots cannot be dealt
+    at, naming the largest (:func:`_check_shaped_fill`)."""
+    _check_shaped_fill(job, fill, None, None, where)
+
+
+def _check_shaped_fill(job: Job, fill: float, iy: int | None, ix: int | None, where: str) -> None:
     """:func:`_check_fill` for shaped dots: their footprints grown by half the gap may
-    cover at most :data:`MAX_SHAPED_FILL` of the densest cell."""
+    cover at most :data:`MAX_SHAPED_FILL` of the densest cell (cell ``(iy, ix)``; None:
+    a fill asked for elsewhere)."""
     import shapely
 
     shape = job.shape
@@ -69,8 +76,9 @@ def _check_shaped_fill(job: Job, fill: float, iy: int, ix: int, where: str) -> N
         most = math.floor(most * 10 ** (3 - math.floor(math.log10(most)))) / 10 ** (
             3 - math.floor(math.log10(most))
         )  # 4 digits, rounded down: the fill named is one that runs
+        at = "" if iy is None else " " + _cell(job, iy, ix)
         raise JobError(
-            f"{where}: fill {fill:.4g} {_cell(job, iy, ix)} of {sizes} µm "
+            f"{where}: fill {fill:.4g}{at} of {sizes} µm "
             f"{shape.kind.name} dots {job.optimize.gap * 1e3:.4g} µm apart is an effective "
             f"fill of {fill * spread:.4g}; dots this long reach at most {limit:.3g} "
             f"without collisions (the fill can be at most {most:.4g} here)"
@@ -173,7 +181,8 @@ def check_job(
     opt = job.optimize
     if not use_tiles(job, tiles):
         check_memory(n, opt.lbfgs_memory, where)
-        cost = estimate_cost(n, opt.max_iter, opt.lbfgs_memory, formats=formats)
+        shaped = job.shape is not None
+        cost = estimate_cost(n, opt.max_iter, opt.lbfgs_memory, formats=formats, shaped=shaped)
         return JobCheck(n, None, 1, cost, available_bytes())
     plan = plan_tiles(job, tile_size)
     k, per_worker = embedded_workers(workers, None)

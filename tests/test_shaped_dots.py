@@ -387,3 +387,20 @@ def test_hostile_round_on_shaped_dots(tmp_path):
     path = _job(tmp_path, needles, grid=np.full((4, 4), most))
     rc, err, _ = cli("check", path, "-q")  # the fill named is one the check lets run
     assert rc == 0, err
+
+
+def test_check_and_design_know_shaped_dots(tmp_path):
+    """``check`` estimates shaped dots at their measured cost (no dataset among the
+    outputs), and ``design`` refuses a fill range the dots cannot be dealt at."""
+    from optdot.runtime.cost import SHAPED_MEMORY, SHAPED_TIME, estimate_cost
+
+    disc, shaped = estimate_cost(10**6, 200, 6), estimate_cost(10**6, 200, 6, shaped=True)
+    assert shaped.peak_bytes == pytest.approx(SHAPED_MEMORY * disc.peak_bytes, rel=1e-6)
+    assert shaped.seconds - 1.0 == pytest.approx(SHAPED_TIME * (disc.seconds - 1.0))
+    assert "parquet" in disc.disk_bytes and "parquet" not in shaped.disk_bytes
+    assert shaped.disk_bytes["gds"] > disc.disk_bytes["gds"]
+    path = _job(tmp_path, PRISM, {"toward": '"leds"'}, leds=True)
+    text = path.read_text().replace('[density]\ngrid = "density.csv"\n', "")
+    path.write_text(text + "\n[design]\nfill_range = [0.0, 0.75]\n")
+    one_error(("design", path, "-o", tmp_path / "m.csv"), 2, "design.fill_range", "at most")
+    assert not (tmp_path / "m.csv").exists()

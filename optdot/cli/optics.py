@@ -173,6 +173,10 @@ def design(job_file, output, png_path, job_out, rays, iterations, seed, quiet):
         from ..errors import JobError
 
         raise JobError(f"{job_file}: no [light_guide] section to design for")
+    if job.shape is not None:  # the map must be one the dots can be dealt at
+        from ..preflight import check_shaped_fill
+
+        check_shaped_fill(job, job.design.fill_range[1], f"{job_file}: design.fill_range")
     nx, ny, dx, dy = design_grid(job)
     p = job.design
     if not quiet:

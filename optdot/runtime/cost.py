@@ -10,7 +10,9 @@ its cores where the work spreads over them:
   on 2 workers), plus ~8 s to start the cluster and compile on it;
 - memory: :func:`optdot.runtime.memory.estimate_bytes` per process (one process), or per
   worker for its largest tile plus ~0.5 GiB for the command, scheduler and results held;
-- disk: bytes per dot of each format (:data:`optdot.formats.FORMATS`).
+- disk: bytes per dot of each format (:data:`optdot.formats.FORMATS`);
+- shaped dots (one process): :data:`SHAPED_TIME` times the time and :data:`SHAPED_MEMORY`
+  times the memory of discs of the same count.
 """
 
 from __future__ import annotations
@@ -28,6 +30,13 @@ TILED_DOTS_PER_S_PER_WORKER = 45_000
 SINGLE_START_S, TILED_START_S = 1.0, 8.0
 #: Memory of the command, scheduler and tiles held while a tiled run writes, bytes.
 TILED_BASE_BYTES = 512 * 2**20
+#: Shaped dots against discs of the same count, one process (BENCHMARKS.md session 21,
+#: 10⁶ dots: ellipses 2.5-3.0x the time and 1.4x the memory, prisms 2.8-3.2x and 1.5x).
+SHAPED_TIME, SHAPED_MEMORY = 3.0, 1.5
+#: Bytes per shaped dot of the formats that store one (a reference rotated by its own
+#: angle, a size and an angle per row), measured on samples/prisms (15,946 dots); a
+#: dataset (.parquet) holds discs only.
+SHAPED_BYTES_PER_DOT = {"gds": 64, "oas": 16, "dxf": 150, "csv": 55, "npz": 20}
 
 
 @dataclass(frozen=True)
@@ -51,20 +60,20 @@ def estimate_cost(
     tile_dots: int | None = None,
     workers: int = 1,
     formats: tuple[str, ...] = ("parquet", "gds", "oas", "dxf"),
+    shaped: bool = False,
 ) -> Cost:
     """Estimate a run of ``n_dots`` at ``iterations`` (time scales with them from the
     measured 200), in one process (``tile_dots`` None) or tiled on ``workers`` workers
-    with tiles of at most ``tile_dots`` dots."""
+    with tiles of at most ``tile_dots`` dots; ``shaped``: of shaped dots (one process)."""
     work = n_dots * max(iterations, 1) / 200.0
     if tile_dots is None:
-        seconds = SINGLE_START_S + work / SINGLE_DOTS_PER_S
-        peak = estimate_bytes(n_dots, lbfgs_memory)
+        seconds = SINGLE_START_S + work / SINGLE_DOTS_PER_S * (SHAPED_TIME if shaped else 1.0)
+        peak = estimate_bytes(n_dots, lbfgs_memory) * (SHAPED_MEMORY if shaped else 1)
     else:
         seconds = TILED_START_S + work / (TILED_DOTS_PER_S_PER_WORKER * max(workers, 1))
         peak = TILED_BASE_BYTES + workers * estimate_bytes(tile_dots, lbfgs_memory)
-    disk = {
-        f: FORMATS[f].bytes_per_dot * n_dots
-        for f in formats
-        if f in FORMATS and FORMATS[f].bytes_per_dot is not None
-    }
+    per_dot = {f: FORMATS[f].bytes_per_dot for f in formats if f in FORMATS}
+    if shaped:
+        per_dot = {f: SHAPED_BYTES_PER_DOT.get(f) for f in per_dot if f != "parquet"}
+    disk = {f: b * n_dots for f, b in per_dot.items() if b is not None}
     return Cost(seconds, int(peak), disk)
