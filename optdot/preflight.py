@@ -5,7 +5,6 @@ and :func:`optdot.tiled.generate_tiled` make before they start, without running 
 
 from __future__ import annotations
 
-import math
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,8 +12,9 @@ from pathlib import Path
 import numpy as np
 
 from .config.job import Job
+from .config.shaping import check_shaped_fill
 from .errors import JobError, ResourceError
-from .geometry.limits import MAX_RANDOM_FILL, MAX_SHAPED_FILL
+from .geometry.limits import MAX_RANDOM_FILL
 from .runtime.cluster import embedded_workers
 from .runtime.cost import Cost, estimate_cost
 from .runtime.memory import BASE_BYTES, available_bytes, check_memory, estimate_bytes
@@ -28,7 +28,7 @@ def _check_fill(job: Job, where: str) -> None:
     k = int(np.argmax(grid))
     iy, ix = divmod(k, grid.shape[1])
     if job.shape is not None:
-        _check_shaped_fill(job, float(grid[iy, ix]), iy, ix, where)
+        check_shaped_fill(job, float(grid[iy, ix]), where, " " + _cell(job, iy, ix))
         return
     spread = (job.min_distance / job.diameter) ** 2
     eff = float(grid[iy, ix]) * spread
@@ -51,48 +51,6 @@ def _cell(job: Job, iy: int, ix: int) -> str:
     d = job.density
     cw, ch = d.cell_size
     return f"of the smooth map near ({d.x0 + (ix + 0.5) * cw:.4g}, {d.y0 + (iy + 0.5) * ch:.4g}) mm"
-
-
-def check_shaped_fill(job: Job, fill: float, where: str) -> None:
-    """Refuse a fill (``design.fill_range``'s top) the job's shaped dots cannot be dealt
-    at, naming the largest (:func:`_check_shaped_fill`)."""
-    _check_shaped_fill(job, fill, None, None, where)
-
-
-def _check_shaped_fill(job: Job, fill: float, iy: int | None, ix: int | None, where: str) -> None:
-    """:func:`_check_fill` for shaped dots: their footprints grown by half the gap may
-    cover at most :data:`MAX_SHAPED_FILL` of the densest cell (cell ``(iy, ix)``; None:
-    a fill asked for elsewhere)."""
-    import shapely
-
-    shape = job.shape
-    ring = shape.kind.outline(np.asarray(shape.size), 0.0, 1e-4 * shape.extent)
-    grown = shapely.Polygon(ring).buffer(0.5 * job.optimize.gap, quad_segs=32).area
-    spread = grown / shape.area
-    limit = shaped_fill_limit(shape.size[0] / shape.size[1])
-    if fill * spread >= limit:
-        sizes = " × ".join(f"{v * 1e3:.4g}" for v in shape.size[:2])
-        most = limit / spread
-        most = math.floor(most * 10 ** (3 - math.floor(math.log10(most)))) / 10 ** (
-            3 - math.floor(math.log10(most))
-        )  # 4 digits, rounded down: the fill named is one that runs
-        at = "" if iy is None else " " + _cell(job, iy, ix)
-        raise JobError(
-            f"{where}: fill {fill:.4g}{at} of {sizes} µm "
-            f"{shape.kind.name} dots {job.optimize.gap * 1e3:.4g} µm apart is an effective "
-            f"fill of {fill * spread:.4g}; dots this long reach at most {limit:.3g} "
-            f"without collisions (the fill can be at most {most:.4g} here)"
-        )
-
-
-def shaped_fill_limit(aspect: float) -> float:
-    """The largest effective fill (footprints grown by half the gap) shaped dots of
-    ``aspect`` (length / width) are dealt at: :data:`MAX_SHAPED_FILL` up to 4:1, then
-    falling as ``(4 / aspect)^0.75``. Measured (uniform maps, 5 µm gap, random angles):
-    2:1 ellipses hold to 0.78, 4:1 prisms to 0.61 and fail at 0.70, 10:1 ellipses fail
-    at 0.52, 50:1 ellipses fail at 0.43 and hold at 0.13; the curve passes below every
-    failure (10:1: 0.33, 50:1: 0.099), so it may refuse some fills that would run."""
-    return MAX_SHAPED_FILL * min(1.0, (4.0 / aspect) ** 0.75)
 
 
 def _check_room(job: Job, n: int, where: str) -> None:

@@ -174,7 +174,7 @@ def design(job_file, output, png_path, job_out, rays, iterations, seed, quiet):
 
         raise JobError(f"{job_file}: no [light_guide] section to design for")
     if job.shape is not None:  # the map must be one the dots can be dealt at
-        from ..preflight import check_shaped_fill
+        from ..config.shaping import check_shaped_fill
 
         check_shaped_fill(job, job.design.fill_range[1], f"{job_file}: design.fill_range")
     nx, ny, dx, dy = design_grid(job)
