@@ -16,7 +16,7 @@ from .config.shaping import check_shaped_fill
 from .errors import JobError, ResourceError
 from .geometry.limits import MAX_RANDOM_FILL
 from .runtime.cluster import embedded_workers
-from .runtime.cost import Cost, estimate_cost
+from .runtime.cost import SHAPED_MEMORY, Cost, estimate_cost
 from .runtime.memory import BASE_BYTES, available_bytes, check_memory, estimate_bytes
 from .tiling.plan import TilePlan, plan_tiles
 
@@ -82,24 +82,22 @@ TILE_BREAK_EVEN = 2_000_000
 
 def use_tiles(job: Job, mode: str = "auto") -> bool:
     """Whether ``job`` runs tiled: ``on``, ``off``, or ``auto`` (when one process would
-    not fit, or from :data:`TILE_BREAK_EVEN` dots; the MD baseline and shaped dots never
-    tile)."""
+    not fit, or from :data:`TILE_BREAK_EVEN` dots; the MD baseline never tiles)."""
     if mode == "on":
         if job.optimize.method != "optdot":
             raise JobError(f"{job.name}: tiles need optimize.method = 'optdot' (MD is a baseline)")
-        if job.shape is not None:
-            where = str(job.source) if job.source else job.name
-            raise JobError(
-                f"{where}: tiles place round dots so far; {job.shape.kind.name} dots run in "
-                "one process (--tiles off)"
-            )
         return True
-    if mode == "off" or job.optimize.method != "optdot" or job.shape is not None:
+    if mode == "off" or job.optimize.method != "optdot":
         return False
     n = job.n_dots
-    return n >= TILE_BREAK_EVEN or estimate_bytes(n, job.optimize.lbfgs_memory) > 0.9 * (
-        available_bytes()
-    )
+    return n >= TILE_BREAK_EVEN or _bytes(job, n) > 0.9 * available_bytes()
+
+
+def _bytes(job: Job, n: int) -> float:
+    """Peak bytes of a process relaxing ``n`` of ``job``'s dots (shaped dots: their
+    measured share more, :data:`~optdot.runtime.cost.SHAPED_MEMORY`)."""
+    scale = 1.0 if job.shape is None else SHAPED_MEMORY
+    return estimate_bytes(n, job.optimize.lbfgs_memory) * scale
 
 
 @dataclass(frozen=True)
@@ -137,9 +135,9 @@ def check_job(
     n = job.n_dots
     _check_room(job, n, where)
     opt = job.optimize
+    shaped = job.shape is not None
     if not use_tiles(job, tiles):
         check_memory(n, opt.lbfgs_memory, where)
-        shaped = job.shape is not None
         cost = estimate_cost(n, opt.max_iter, opt.lbfgs_memory, formats=formats, shaped=shaped)
         return JobCheck(n, None, 1, cost, available_bytes())
     plan = plan_tiles(job, tile_size)
@@ -147,7 +145,7 @@ def check_job(
     k = min(k, plan.count)
     _check_tile_memory(job, plan, per_worker)
     biggest = int(plan.quotas.max())
-    cost = estimate_cost(n, opt.max_iter, opt.lbfgs_memory, biggest, k, formats)
+    cost = estimate_cost(n, opt.max_iter, opt.lbfgs_memory, biggest, k, formats, shaped)
     return JobCheck(n, plan, k, cost, available_bytes())
 
 
@@ -185,7 +183,7 @@ def _check_gathered(job: Job, output: str | Path | None, where: str) -> None:
 def _check_tile_memory(job: Job, plan: TilePlan, per_worker: int) -> None:
     """Refuse tiles that cannot fit a worker's memory limit (0 = no limit)."""
     biggest = int(plan.quotas.max())
-    need = estimate_bytes(biggest, job.optimize.lbfgs_memory)
+    need = _bytes(job, biggest)
     if per_worker and need > 0.8 * per_worker:
         raise ResourceError(
             f"{job.name}: a tile of {biggest:,} dots needs about {need / 2**30:.2f} GiB but "

@@ -16,6 +16,7 @@ import numpy as np
 
 from .config.job import Job
 from .files import sha256_file
+from .geometry.shapes import CIRCLE, Footprints
 from .io.dataset_write import write_dataset
 from .io.manifest import manifest_of
 from .pattern import Pattern
@@ -61,7 +62,11 @@ def resume_key(job: Job, plan: TilePlan) -> str | None:
 
 def _tiled_meta(job: Job, plan: TilePlan) -> dict:
     opt = job.optimize
+    shaped = {}
+    if job.shape is not None:
+        shaped = {"shape": job.shape.kind.name, "orientation": job.orientation.mode}
     return {
+        **shaped,
         "job": job.name,
         "method": opt.method,
         "formulation": opt.formulation,
@@ -154,18 +159,20 @@ def _run_tiled(job, plan, executor_cm, output, progress, announce=None) -> Patte
     and the result is the bytes of an uninterrupted run."""
     meta = _tiled_meta(job, plan)
     outline = None if job.domain.rectangle else job.domain
-    one = job.diameter if job.sizes is None else None  # sizes: known once written
+    # sizes (and shaped dots' bounding discs) are known once written
+    one = job.diameter if job.sizes is None and job.shape is None else None
+    kind = CIRCLE if job.shape is None else job.shape.kind
     if output is not None:
         manifest = manifest_of(
-            job.name, job.optimize.seed, one, one, job.box, meta, outline, plan.to_json()
+            job.name, job.optimize.seed, one, one, job.box, meta, outline, plan.to_json(), kind
         )
         with write_dataset(output, manifest, resume_key(job, plan)) as w:
 
-            def to_part(tile, xy, diameter):
-                w.write_part(plan.index(*tile), tile, xy, diameter)
+            def to_part(tile, xy, dots):
+                w.write_part(plan.index(*tile), tile, xy, dots)
 
             def loader(k: int):
-                return lambda: FinalDots(*w.read_resumed(k))
+                return lambda: FinalDots.read(*w.read_resumed(k, kind))
 
             finished = {tuple(e["tile"]): loader(k) for k, e in w.resumed.items()}
             if finished and announce is not None:
@@ -180,6 +187,10 @@ def _run_tiled(job, plan, executor_cm, output, progress, announce=None) -> Patte
     with executor_cm as executor:
         run = run_tiles(job, plan, executor, lambda t, xy, d: got.__setitem__(t, (xy, d)), progress)
     xy = np.concatenate([got[t][0] for t in plan.tiles()])
-    d = np.concatenate([np.broadcast_to(got[t][1], (len(got[t][0]),)) for t in plan.tiles()])
+    dots = Footprints.concat([got[t][1] for t in plan.tiles()], kind)
     stats = {"total_s": run.seconds, "history": []}
-    return Pattern(xy=xy, diameter=d, box=job.box, meta=meta, stats=stats, outline=outline)
+    shaped = None if kind is CIRCLE else dots
+    return Pattern(
+        xy=xy, diameter=dots.diameter, box=job.box, meta=meta, stats=stats, outline=outline,
+        dots=shaped,
+    )  # fmt: skip

@@ -322,8 +322,8 @@ def test_multisphere_penalty_gradient_and_pairs(dots):
 
 
 def test_hostile_round_on_shaped_dots(tmp_path):
-    """What the hostile tester found, each refused or read right: a dataset of shaped
-    dots, mirrored placements in GDSII and DXF, a trapezoid on the dot layer, a round
+    """What the hostile tester found, each refused or read right: mirrored placements
+    in GDSII and DXF, a trapezoid on the dot layer, a round
     rounded rectangle through DXF, random = false beside an angle, an angle map of
     1e300, and 10:1 ellipses at a fill they cannot reach."""
     import ezdxf
@@ -333,8 +333,6 @@ def test_hostile_round_on_shaped_dots(tmp_path):
     from optdot.exporters.readback import read_any
 
     path = _job(tmp_path, PRISM, {"random": "true"})
-    one_error(("generate", path, "-o", tmp_path / "p.parquet"), 2, "datasets (.parquet)")
-    assert not (tmp_path / "p.parquet").exists()
     # an ellipse cell drawn at 30°, placed mirrored (and turned by 40°): axes at 150°, 10°
     kind = KINDS_["ellipse"]
     lib = gdstk.Library(unit=1e-6, precision=1e-9)
@@ -390,15 +388,18 @@ def test_hostile_round_on_shaped_dots(tmp_path):
 
 
 def test_check_and_design_know_shaped_dots(tmp_path):
-    """``check`` estimates shaped dots at their measured cost (no dataset among the
-    outputs), and ``design`` refuses a fill range the dots cannot be dealt at."""
+    """``check`` estimates shaped dots at their measured cost (one process and tiled),
+    and ``design`` refuses a fill range the dots cannot be dealt at."""
     from optdot.runtime.cost import SHAPED_MEMORY, SHAPED_TIME, estimate_cost
 
     disc, shaped = estimate_cost(10**6, 200, 6), estimate_cost(10**6, 200, 6, shaped=True)
     assert shaped.peak_bytes == pytest.approx(SHAPED_MEMORY * disc.peak_bytes, rel=1e-6)
     assert shaped.seconds - 1.0 == pytest.approx(SHAPED_TIME * (disc.seconds - 1.0))
-    assert "parquet" in disc.disk_bytes and "parquet" not in shaped.disk_bytes
+    assert shaped.disk_bytes["parquet"] > disc.disk_bytes["parquet"]
     assert shaped.disk_bytes["gds"] > disc.disk_bytes["gds"]
+    disc, shaped = (estimate_cost(10**7, 200, 6, 150_000, 2, shaped=s) for s in (False, True))
+    assert shaped.seconds - 8.0 == pytest.approx(SHAPED_TIME * (disc.seconds - 8.0))
+    assert shaped.peak_bytes > 1.4 * disc.peak_bytes - 0.5 * 2**30
     path = _job(tmp_path, PRISM, {"toward": '"leds"'}, leds=True)
     text = path.read_text().replace('[density]\ngrid = "density.csv"\n', "")
     path.write_text(text + "\n[design]\nfill_range = [0.0, 0.75]\n")

@@ -27,7 +27,7 @@ from ..files import sha256_file
 from ..geometry.limits import validate_dots
 from ..geometry.shapes import CIRCLE, Footprints, Kind
 from ..pattern import Chunk, Pattern
-from .manifest import COLUMNS, MANIFEST, read_manifest
+from .manifest import MANIFEST, columns, manifest_kind, read_manifest
 
 __all__ = ["MANIFEST", "Dataset", "is_dataset", "load_dataset", "open_dataset", "read_part_file"]
 
@@ -37,18 +37,31 @@ def is_dataset(path: str | Path) -> bool:
     return Path(path).suffix.lower() == ".parquet"
 
 
-def read_part_file(path: Path, count: int) -> tuple[np.ndarray, np.ndarray]:
-    """A part file's dots, ``(xy [n, 2], diameter [n])`` mm, holding ``count`` rows."""
+def read_part_file(path: Path, count: int, kind: Kind = CIRCLE) -> tuple[np.ndarray, Footprints]:
+    """A part file's dots of ``kind``, ``(xy [n, 2] mm, footprints)``, holding ``count``
+    rows (the columns of :func:`~optdot.io.manifest.columns`).
+
+    Raises:
+        PatternFileError: unreadable, another row count, a column missing, or a shaped
+            dot's size or angle not finite.
+    """
     import pyarrow.parquet as pq
 
+    names = columns(kind)
     try:
-        table = pq.read_table(path, columns=list(COLUMNS))
-    except (OSError, ValueError) as e:
+        table = pq.read_table(path, columns=list(names))
+    except (OSError, ValueError, KeyError) as e:
         raise PatternFileError(f"{path}: not a readable Parquet part ({one_line(e)})") from None
     if table.num_rows != count:
         raise PatternFileError(f"{path}: holds {table.num_rows} dots, the manifest says {count}")
-    cols = [table.column(c).to_numpy().astype(np.float64, copy=False) for c in COLUMNS]
-    return np.column_stack(cols[:2]), cols[2]
+    cols = [table.column(c).to_numpy().astype(np.float64, copy=False) for c in names]
+    xy = np.column_stack(cols[:2])
+    if kind is CIRCLE:
+        return xy, Footprints.circles(cols[2])
+    size, angle = np.column_stack(cols[2:-1]), cols[-1]
+    if not (np.all(np.isfinite(size)) and np.all(np.isfinite(angle))):
+        raise PatternFileError(f"{path}: NaN or infinite {kind.name} size or angle_deg")
+    return xy, Footprints(kind, size, np.radians(angle))
 
 
 @dataclass(frozen=True, eq=False)
@@ -118,8 +131,8 @@ class Dataset:
 
     @property
     def kind(self) -> Kind:
-        """The footprint kind of every dot: the circle."""
-        return CIRCLE
+        """The footprint kind of every dot (the manifest's ``shape``, else the circle)."""
+        return manifest_kind(self.manifest)
 
     @property
     def part_counts(self) -> list[int]:
@@ -152,15 +165,16 @@ class Dataset:
         """Part ``k`` (position in :attr:`parts`): ``(xy [n, 2] mm, footprints)``."""
         part = self.parts[k]
         path = self.path / part["file"]
-        xy, d = read_part_file(path, part["count"])
+        xy, dots = read_part_file(path, part["count"], self.kind)
         u = self.uniform_diameter
+        d = dots.diameter
         if u is not None and len(d) and not np.all(np.abs(d - u) <= 1e-9):
             i = int(np.argmax(np.abs(d - u) > 1e-9))
             raise PatternFileError(
                 f"{path}: dot {i} has diameter {float(d[i]):.6g} mm, the manifest says every "
                 f"dot is {u:.6g} mm"
             )
-        return xy, Footprints.circles(d)
+        return xy, dots
 
     def verify(self) -> None:
         """Check every part's checksum against the manifest.
@@ -221,12 +235,13 @@ def load_dataset(path: str | Path, box=None):
     """
     ds = open_dataset(path)
     ds.verify()
-    xys, ds_ = [], []
+    xys, parts = [], []
     for _, xy, dots in ds.chunks():
         xys.append(xy)
-        ds_.append(dots.diameter)
+        parts.append(dots)
     xy = np.concatenate(xys) if xys else np.zeros((0, 2))
-    d = np.concatenate(ds_) if ds_ else np.zeros(0)
+    dots = Footprints.concat(parts, ds.kind)
+    d = dots.diameter
     the_box = box or ds.box
     validate_dots(ds.path, xy, d, the_box)
     m = ds.manifest
@@ -234,4 +249,5 @@ def load_dataset(path: str | Path, box=None):
     meta = dict(m.get("meta", {}))
     if isinstance(m.get("tiles"), dict) and m["tiles"].get("nx", 1) * m["tiles"].get("ny", 1) > 1:
         meta["tiling"] = {"xs": m["tiles"]["xs"], "ys": m["tiles"]["ys"]}
-    return Pattern(xy=xy, diameter=d, box=the_box, meta=meta, outline=outline)
+    shaped = None if ds.kind is CIRCLE else dots
+    return Pattern(xy=xy, diameter=d, box=the_box, meta=meta, outline=outline, dots=shaped)

@@ -29,10 +29,21 @@ import numpy as np
 
 from ..errors import ExportError, PatternFileError, one_line
 from ..files import sha256_file
+from ..geometry.orientation import degrees
+from ..geometry.shapes import CIRCLE, Footprints, Kind
 from ..runtime.stop import check_interrupt
 from .atomic import install_directory, short_name
 from .dataset import open_dataset, read_part_file
-from .manifest import FORMAT, MANIFEST, VERSION, part_name, pattern_manifest, size_fields
+from .manifest import (
+    FORMAT,
+    MANIFEST,
+    VERSION,
+    columns,
+    manifest_kind,
+    part_name,
+    pattern_manifest,
+    size_fields,
+)
 
 #: The record of a resumable run's finished parts, in its staging directory only.
 RESUME = "_resume.json"
@@ -40,14 +51,18 @@ RESUME = "_resume.json"
 EXTRA = "_extra-"
 
 
-def _table(xy: np.ndarray, diameter: np.ndarray):
+def _table(xy: np.ndarray, dots: Footprints):
+    """The part's table: the columns of :func:`~optdot.io.manifest.columns` for the
+    dots' kind (angles in degrees, 1e-6°, as every file holds them)."""
     import pyarrow as pa
 
+    values = [xy[:, 0], xy[:, 1], *(dots.size[:, c] for c in range(dots.size.shape[1]))]
+    if dots.kind is not CIRCLE:
+        values.append(degrees(dots.angles))
     return pa.table(
         {
-            "x_mm": pa.array(np.ascontiguousarray(xy[:, 0]), pa.float64()),
-            "y_mm": pa.array(np.ascontiguousarray(xy[:, 1]), pa.float64()),
-            "diameter_mm": pa.array(np.ascontiguousarray(diameter), pa.float64()),
+            name: pa.array(np.ascontiguousarray(v, dtype=np.float64), pa.float64())
+            for name, v in zip(columns(dots.kind), values, strict=True)
         }
     )
 
@@ -96,9 +111,10 @@ class DatasetWriter:
         with np.load(self.tmp / self.extras[name]["file"], allow_pickle=False) as z:
             return {k: z[k] for k in z.files}
 
-    def read_resumed(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """A resumed part's dots: ``(xy [n, 2], diameter [n])``, mm."""
-        return read_part_file(self.tmp / self.resumed[k]["file"], self.resumed[k]["count"])
+    def read_resumed(self, k: int, kind: Kind = CIRCLE) -> tuple[np.ndarray, Footprints]:
+        """A resumed part's dots of ``kind``: ``(xy [n, 2] mm, footprints)``."""
+        entry = self.resumed[k]
+        return read_part_file(self.tmp / entry["file"], entry["count"], kind)
 
     def _record(self) -> None:
         """Write the resume record (atomically): the key and every part written so far."""
@@ -116,16 +132,18 @@ class DatasetWriter:
             os.fsync(fh.fileno())
         os.replace(tmp, self.tmp / RESUME)
 
-    def write_part(self, k: int, tile: tuple[int, int], xy: np.ndarray, diameter) -> None:
-        """Write tile ``tile`` (part ``k``): ``xy`` ``[n, 2]`` mm, ``diameter`` mm (one or
-        ``[n]``)."""
+    def write_part(self, k: int, tile: tuple[int, int], xy: np.ndarray, dots: Footprints) -> None:
+        """Write tile ``tile`` (part ``k``): ``xy`` ``[n, 2]`` mm and the dots' footprints
+        (discs: :meth:`Footprints.circles`)."""
         import pyarrow.parquet as pq
 
         check_interrupt()
-        d = np.broadcast_to(np.asarray(diameter, np.float64), (len(xy),))
+        if dots.n != len(xy):
+            raise ValueError(f"part {k}: {len(xy)} positions but {dots.n} footprints")
+        d = dots.diameter
         path = self.tmp / part_name(k)
         try:
-            pq.write_table(_table(xy, d), path, compression="zstd", write_statistics=True)
+            pq.write_table(_table(xy, dots), path, compression="zstd", write_statistics=True)
             rows = pq.ParquetFile(path).metadata.num_rows
         except OSError as e:
             raise ExportError(f"{self.target}: cannot write ({one_line(e)})") from None
@@ -291,8 +309,9 @@ def write_dataset(
         writer._record()  # the staging directory is recognisably ours from the start
     except OSError as e:
         raise ExportError(f"{target}: cannot write ({e.strerror})") from None
+    kind = manifest_kind(manifest)
     for k in resumed:
-        writer._tally(writer.read_resumed(k)[1])
+        writer._tally(writer.read_resumed(k, kind)[1].diameter)
     try:
         yield writer
         if resume_key is not None:  # a dataset holds only what it lists
@@ -303,6 +322,8 @@ def write_dataset(
         doc = {"format": FORMAT, "version": VERSION, **manifest, "parts": parts}
         if doc["diameter_mm"] is None:  # sizes known once written: uniform, median
             doc.update(size_fields(writer.sizes))
+            if kind is not CIRCLE:  # bounding discs: a median, never "every dot's size"
+                doc["uniform_diameter_mm"] = None
         doc["n"] = sum(p["count"] for p in parts)
         data = json.dumps(doc, indent=1, sort_keys=True).encode() + b"\n"
         try:
@@ -333,12 +354,7 @@ def write_dataset(
 
 
 def save_dataset(pattern, path: str | Path) -> None:
-    """Write an in-memory pattern as a one-part dataset (round dots: a dataset stores a
-    diameter per dot; shaped dots are refused, not written as their bounding discs)."""
-    if getattr(pattern, "dots", None) is not None:
-        raise ExportError(
-            f"{path}: datasets (.parquet) hold round dots so far; write "
-            f"{pattern.kind.name} dots to .npz or .csv"
-        )
+    """Write an in-memory pattern as a one-part dataset (discs, or shaped dots with their
+    sizes and angles)."""
     with write_dataset(path, pattern_manifest(pattern)) as w:
-        w.write_part(0, (0, 0), pattern.xy, pattern.diameter)
+        w.write_part(0, (0, 0), pattern.xy, pattern.shape)

@@ -10,6 +10,11 @@ A dataset's layout::
         _manifest.json         format, job, seed, dot count, diameter, box, outline (WKB
                                hex), tiling, and per part: file, tile, count, sha256
 
+Shaped dots (:mod:`optdot.geometry.shapes`): the manifest names the kind (``"shape":
+"ellipse"``), the parts hold the columns of the pattern CSV for that kind (:func:`columns`:
+``x_mm, y_mm``, the kind's sizes, ``angle_deg``), and ``diameter_mm`` is the median
+bounding-disc diameter (``uniform_diameter_mm`` null). Without ``shape`` the dots are discs.
+
 Reading is :mod:`optdot.io.dataset`, writing :mod:`optdot.io.dataset_write`; both
 import this module and neither the other's internals, so "is this directory an optdot
 dataset" (the reader's question, and the writer's before it replaces anything) has one
@@ -27,11 +32,27 @@ from typing import Any
 import numpy as np
 
 from ..errors import PatternFileError, one_line
+from ..geometry.shapes import CIRCLE, KINDS, Kind
 
 MANIFEST = "_manifest.json"
 FORMAT = "optdot.dataset"
 VERSION = 1
 COLUMNS = ("x_mm", "y_mm", "diameter_mm")
+
+
+def columns(kind: Kind) -> tuple[str, ...]:
+    """The columns of a part (and of a pattern CSV) holding dots of ``kind``:
+    :data:`COLUMNS` for discs; else ``x_mm, y_mm``, the kind's sizes in mm
+    (``length_mm, width_mm[, corner_radius_mm]``) and ``angle_deg`` (the long axis from
+    +x, counter-clockwise)."""
+    if kind is CIRCLE:
+        return COLUMNS
+    return ("x_mm", "y_mm", *(f"{p}_mm" for p in kind.params), "angle_deg")
+
+
+def manifest_kind(doc: dict[str, Any]) -> Kind:
+    """The footprint kind of a (checked) manifest's dots: its ``shape``, or the circle."""
+    return KINDS[doc.get("shape", CIRCLE.name)]
 
 
 def part_name(k: int) -> str:
@@ -95,6 +116,10 @@ def manifest_problem(doc: dict[str, Any]) -> str | None:
         return "uniform_diameter_mm must be null or a number > 0"
     if not isinstance(doc.get("meta", {}), dict):
         return "meta must be an object"
+    if "shape" in doc and (doc["shape"] not in KINDS or doc["shape"] == CIRCLE.name):
+        return f"shape must be one of {', '.join(k for k in KINDS if k != CIRCLE.name)}"
+    if "shape" in doc and u is not None:
+        return "uniform_diameter_mm must be null for shaped dots"
     if "outline_wkb_hex" in doc and not isinstance(doc["outline_wkb_hex"], str):
         return "outline_wkb_hex must be a string"
     if not _is_num(doc.get("edge_margin_mm", 0.0)):
@@ -166,11 +191,15 @@ def manifest_of(
     meta: dict[str, Any],
     outline=None,
     tiles: dict[str, Any] | None = None,
+    kind: Kind = CIRCLE,
 ) -> dict[str, Any]:
     """The manifest fields of a dataset besides its parts (one tile = the box by default).
     ``diameter`` None: the nominal and uniform diameters are taken from the parts as
-    they are written (:class:`DatasetWriter`)."""
+    they are written (:class:`DatasetWriter`). ``kind``: the dots' footprint kind
+    (named only when not the circle: a disc dataset's manifest is as it always was)."""
+    shaped = {} if kind is CIRCLE else {"shape": kind.name}
     return {
+        **shaped,
         "job": job,
         "seed": seed,
         "diameter_mm": None if diameter is None else float(diameter),
@@ -193,4 +222,5 @@ def pattern_manifest(pattern) -> dict[str, Any]:
         pattern.box,
         m,
         pattern.outline,
+        kind=pattern.kind,
     )

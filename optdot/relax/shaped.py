@@ -81,6 +81,7 @@ def make_legal_shapes(
     gap: float,
     where: str,
     frozen: np.ndarray | None = None,
+    fixed: np.ndarray | None = None,
 ) -> tuple[LegalizeResult, Footprints]:
     """Legal positions for shaped dots and their footprints where they end.
 
@@ -89,6 +90,9 @@ def make_legal_shapes(
         home_cell: ``[n]`` the map cell each returns to if it drifts into a zero cell.
         shape, field: the job's dot and orientation field. gap: smallest edge gap, mm.
         frozen: ``[n]`` bool, dots held still (a tile's halo).
+        fixed: ``[frozen.sum()]`` the held dots' angles, rad, in order (a neighbour's
+            final angles, or its field's where it stands); without, they are taken from
+            ``field`` at their positions and ``thrown``.
 
     Raises:
         GuaranteeError: a violation is left after :data:`MAX_ROUNDS` rounds.
@@ -100,6 +104,10 @@ def make_legal_shapes(
     pr_all, built = None, None
     moved = np.ones(len(xy), bool)
     angle = np.zeros(len(xy))
+    turns = np.ones(len(xy), bool)  # whose angle the field gives
+    if fixed is not None:  # held dots keep theirs (the disc pass may round their
+        angle[still] = fixed  # positions to 1 nm: their pairs are measured again, but
+        turns &= ~still  # they do not turn)
     walls = True  # the disc pass is due: at the start, and once the pairs are clean
     for _ in range(MAX_ROUNDS):
         if walls:
@@ -114,7 +122,8 @@ def make_legal_shapes(
         if built is None or np.max(np.abs(xy - built)) > 0.5 * skin:
             pr_all, built = _pairs(xy, shape.footprints(np.zeros(1)), gap, skin, frozen), xy
         # the field where the dots that moved now stand (the others' angles hold)
-        angle[moved] = np.radians(degrees(field.at(xy[moved], thrown[moved])))
+        turn = moved & turns
+        angle[turn] = np.radians(degrees(field.at(xy[turn], thrown[turn])))
         dots = shape.footprints(angle)
         near = pr_all[moved[pr_all[:, 0]] | moved[pr_all[:, 1]]]  # only pairs that changed
         pr, g, u = _conflicts(xy, dots, gap + MARGIN, near)
@@ -141,6 +150,8 @@ def make_legal_shapes(
             f"{MAX_ROUNDS} rounds: {len(pr)} pairs closer than {gap * 1e3:g} µm edge to edge"
         )
     dots = turned(shape, field, xy, thrown)  # every angle afresh for the final check
+    if fixed is not None:
+        dots.angle[still] = fixed
     viol = check_guarantee(xy, density, domain, extent, core, frozen)
     left, _, _ = shape_conflicts(xy, dots, gap, frozen)
     if not viol.ok or len(left):

@@ -11,8 +11,8 @@ its cores where the work spreads over them:
 - memory: :func:`optdot.runtime.memory.estimate_bytes` per process (one process), or per
   worker for its largest tile plus ~0.5 GiB for the command, scheduler and results held;
 - disk: bytes per dot of each format (:data:`optdot.formats.FORMATS`);
-- shaped dots (one process): :data:`SHAPED_TIME` times the time and :data:`SHAPED_MEMORY`
-  times the memory of discs of the same count.
+- shaped dots: :data:`SHAPED_TIME` times the time and :data:`SHAPED_MEMORY` times the
+  memory of discs of the same count (of a process, or of a tiled worker).
 """
 
 from __future__ import annotations
@@ -34,9 +34,9 @@ TILED_BASE_BYTES = 512 * 2**20
 #: 10⁶ dots: ellipses 2.5-3.0x the time and 1.4x the memory, prisms 2.8-3.2x and 1.5x).
 SHAPED_TIME, SHAPED_MEMORY = 3.0, 1.5
 #: Bytes per shaped dot of the formats that store one (a reference rotated by its own
-#: angle, a size and an angle per row), measured on samples/prisms (15,946 dots); a
-#: dataset (.parquet) holds discs only.
-SHAPED_BYTES_PER_DOT = {"gds": 64, "oas": 16, "dxf": 150, "csv": 55, "npz": 20}
+#: angle, a size and an angle per row), measured on samples/prisms (15,946 dots; a
+#: dataset 28.1 B, samples/ellipses 28.2 B).
+SHAPED_BYTES_PER_DOT = {"gds": 64, "oas": 16, "dxf": 150, "csv": 55, "npz": 20, "parquet": 30}
 
 
 @dataclass(frozen=True)
@@ -64,16 +64,17 @@ def estimate_cost(
 ) -> Cost:
     """Estimate a run of ``n_dots`` at ``iterations`` (time scales with them from the
     measured 200), in one process (``tile_dots`` None) or tiled on ``workers`` workers
-    with tiles of at most ``tile_dots`` dots; ``shaped``: of shaped dots (one process)."""
-    work = n_dots * max(iterations, 1) / 200.0
+    with tiles of at most ``tile_dots`` dots; ``shaped``: of shaped dots."""
+    work = n_dots * max(iterations, 1) / 200.0 * (SHAPED_TIME if shaped else 1.0)
+    grow = SHAPED_MEMORY if shaped else 1.0
     if tile_dots is None:
-        seconds = SINGLE_START_S + work / SINGLE_DOTS_PER_S * (SHAPED_TIME if shaped else 1.0)
-        peak = estimate_bytes(n_dots, lbfgs_memory) * (SHAPED_MEMORY if shaped else 1)
+        seconds = SINGLE_START_S + work / SINGLE_DOTS_PER_S
+        peak = estimate_bytes(n_dots, lbfgs_memory) * grow
     else:
         seconds = TILED_START_S + work / (TILED_DOTS_PER_S_PER_WORKER * max(workers, 1))
-        peak = TILED_BASE_BYTES + workers * estimate_bytes(tile_dots, lbfgs_memory)
+        peak = TILED_BASE_BYTES + workers * estimate_bytes(tile_dots, lbfgs_memory) * grow
     per_dot = {f: FORMATS[f].bytes_per_dot for f in formats if f in FORMATS}
     if shaped:
-        per_dot = {f: SHAPED_BYTES_PER_DOT.get(f) for f in per_dot if f != "parquet"}
+        per_dot = {f: SHAPED_BYTES_PER_DOT.get(f) for f in per_dot}
     disk = {f: b * n_dots for f, b in per_dot.items() if b is not None}
     return Cost(seconds, int(peak), disk)

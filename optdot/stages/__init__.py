@@ -34,6 +34,7 @@ from .correction import (
     wide_solve,
 )
 from .finishing import Finished, finish
+from .held import Held
 from .initial import coarse_part, coarse_shift, coarse_solve, throw
 from .relaxation import relax
 from .settings import (
@@ -55,6 +56,7 @@ __all__ = [
     "FIT_SHARE",
     "TILE_GRID",
     "Finished",
+    "Held",
     "coarse_part",
     "coarse_shift",
     "coarse_solve",

@@ -13,6 +13,7 @@ from ..relax.legalize import LegalizeResult, make_legal
 from ..relax.resize import fit_sizes
 from ..relax.shaped import make_legal_shapes
 from ..sampling.initial import Rect
+from .held import Held
 from .settings import rule_diameters, stage_settings
 
 
@@ -39,7 +40,7 @@ def finish(
     xy: np.ndarray,
     xy0: np.ndarray,
     where: str,
-    held: tuple[np.ndarray, np.ndarray | float] | None = None,
+    held: Held | None = None,
     window: Rect | None = None,
 ) -> Finished:
     """Sizes fitted (when they vary by a rule), then the guarantee pass and its check.
@@ -49,9 +50,9 @@ def finish(
         xy0: ``[n, 2]`` where they were thrown (their start cells: size and the cell a
             dot returns to if it drifted into a zero cell).
         where: the job or tile, for the error message.
-        held: ``(positions [h, 2] mm, diameters [h] or one, mm)`` of dots held still
-            around these (a tile's neighbours within :func:`halo_width`): they count in
-            the coverage and the spacing, and someone else fixes them.
+        held: dots held still around these (a tile's neighbours within
+            :func:`halo_width`): they count in the coverage and the spacing, and someone
+            else fixes them; shaped dots' with their angles.
         window: the part of the panel the size fit covers (a tile grown by the fit's
             reach; None: the panel).
 
@@ -81,9 +82,14 @@ def finish(
     if job.shape is None:
         leg = make_legal(xy, job.density, home, job.domain, radius, dmin, where, frozen)
         return Finished(np.ascontiguousarray(leg.xy[:n]), diameter, leg)
-    thrown = xy0 if held is None or not len(held[0]) else np.concatenate([xy0, held[0]])
+    thrown, fixed = xy0, None
+    if frozen is not None:  # held shaped dots keep their angles
+        thrown = np.concatenate([xy0, held.xy])
+        if held.angle is None:
+            raise ValueError(f"{where}: held shaped dots come without their angles")
+        fixed = held.angle
     leg, dots = make_legal_shapes(
         xy, thrown, job.density, home, job.domain, job.shape, job.orientation,
-        job.optimize.gap, where, frozen,
+        job.optimize.gap, where, frozen, fixed,
     )  # fmt: skip
     return Finished(np.ascontiguousarray(leg.xy[:n]), diameter, leg, dots.take(slice(0, n)))

@@ -32,6 +32,7 @@ import numpy as np
 
 from ..config.job import Job, OptimizeParams
 from ..geometry.density import DensityMap
+from ..geometry.shapes import Footprints
 from ..relax.lowpass import CoarseField
 from ..runtime.cluster import single_threaded
 from ..runtime.stop import check_interrupt
@@ -55,9 +56,9 @@ from .tasks import (
     wide_task,
 )
 
-#: ``sink(tile, xy, diameter)``: a finished tile's final positions ``[n, 2]`` mm and
-#: diameters (one, or ``[n]``), mm.
-Sink = Callable[[tuple[int, int], np.ndarray, Any], None]
+#: ``sink(tile, xy, footprints)``: a finished tile's final positions ``[n, 2]`` mm and
+#: its dots' footprints (:attr:`FinalDots.footprints`).
+Sink = Callable[[tuple[int, int], np.ndarray, Footprints], None]
 #: ``progress(fraction done, line)``.
 TileProgress = Callable[[float, str], None]
 
@@ -446,7 +447,7 @@ def run_tiles(
         if kind == "legal":
             t = tile_of[id(h)]
             fin = executor.result(h)
-            sink(t, fin.xy, fin.diameter)
+            sink(t, fin.xy, fin.footprints)
             counts[t] = len(fin.xy)
             n_done += 1
             del fin

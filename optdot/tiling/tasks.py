@@ -115,6 +115,8 @@ import numpy as np
 from .. import stages
 from ..config.job import Job
 from ..geometry.morton import spatial_order
+from ..geometry.shapes import CIRCLE, Footprints
+from ..relax.shaped import turned
 from ..relax.lowpass import CoarseField, LatticePart
 from ..spatial.window import bounds, grown, in_rect
 from .plan import TilePlan
@@ -141,10 +143,24 @@ class TileDots:
 
 @dataclass
 class FinalDots:
-    """A tile's final dots: ``xy`` ``[n, 2]`` mm (1 nm), ``diameter`` mm (one, or ``[n]``)."""
+    """A tile's final dots: ``xy`` ``[n, 2]`` mm (1 nm), ``diameter`` mm (one, or ``[n]``)
+    and, for shaped dots, ``dots``: their footprints (sizes and angles, as written)."""
 
     xy: np.ndarray
     diameter: float | np.ndarray
+    dots: Footprints | None = None
+
+    @classmethod
+    def read(cls, xy: np.ndarray, dots: Footprints) -> FinalDots:
+        """Final dots as a part file holds them (``xy [n, 2]`` mm and footprints)."""
+        return cls(xy, dots.diameter, None if dots.kind is CIRCLE else dots)
+
+    @property
+    def footprints(self) -> Footprints:
+        """The footprints of the dots (discs of :attr:`diameter` when not shaped)."""
+        if self.dots is not None:
+            return self.dots
+        return Footprints.circles(self.diameter, len(self.xy))
 
 
 def _where(i: int, j: int) -> str:
@@ -347,20 +363,25 @@ def correct_tile(job: Job, plan: TilePlan, dots: TileDots, *around: TileDots) ->
     return TileDots(dots.tile, dots.xy0, np.ascontiguousarray(dots.xy + u))
 
 
-def held_dots(job: Job, dots: TileDots | FinalDots) -> tuple[np.ndarray, np.ndarray | float]:
-    """A neighbour as the guarantee pass holds it: ``(positions [k, 2] mm, diameters)``,
-    final ones when it is final, else its current positions at their rule sizes."""
+def held_dots(job: Job, dots: TileDots | FinalDots) -> stages.Held:
+    """A neighbour as the guarantee pass holds it: final when it is final, else its
+    current positions at their rule sizes (shaped dots: turned by the job's field where
+    they stand, as their final angles will be)."""
     if isinstance(dots, FinalDots):
-        return dots.xy, dots.diameter
+        angle = None if dots.dots is None else dots.dots.angles
+        return stages.Held(dots.xy, dots.diameter, angle)
     d = stages.rule_diameters(job, dots.xy0)
-    return dots.xy, job.diameter if d is None else d
+    angle = None
+    if job.shape is not None:
+        angle = turned(job.shape, job.orientation, dots.xy, dots.xy0).angles
+    return stages.Held(dots.xy, job.diameter if d is None else d, angle)
 
 
 def legalize_tile(
-    job: Job, plan: TilePlan, dots: TileDots, neighbours: list[tuple[np.ndarray, object]]
+    job: Job, plan: TilePlan, dots: TileDots, neighbours: list[stages.Held]
 ) -> FinalDots:
     """:func:`optdot.stages.hard_core` then :func:`optdot.stages.finish` for one tile;
-    ``neighbours``: ``(positions [k, 2], diameters)`` of the surrounding tiles
+    ``neighbours``: the dots of the surrounding tiles
     (:func:`held_dots`; final for earlier colours), held still within
     :func:`optdot.stages.halo_width` of the tile's dots. The hard core runs here, not in
     the correction task, so that every pair across a border is cleared by the later tile
@@ -371,16 +392,11 @@ def legalize_tile(
     """
     n = len(dots.xy)
     if n == 0:
-        return FinalDots(dots.xy, job.diameter if job.sizes is None else np.zeros(0))
+        none = None if job.shape is None else job.shape.footprints(np.zeros(0))
+        return FinalDots(dots.xy, job.diameter if job.sizes is None else np.zeros(0), none)
     width = stages.stage_settings(job).halo
-    box = grown(bounds(dots.xy), width)
-    xs, ds = [], []
-    for xy, d in neighbours:
-        sel = in_rect(xy, box)
-        xs.append(xy[sel])
-        ds.append(np.broadcast_to(d, (len(xy),))[sel])
-    held = (np.concatenate(xs), np.concatenate(ds)) if xs else None
     window = grown(plan.rect(*dots.tile), width)
+    held = stages.Held.near(neighbours, grown(bounds(dots.xy), width))
     xy = stages.hard_core(job, dots.xy0, dots.xy, held)
     done = stages.finish(job, xy, dots.xy0, _where(*dots.tile), held, window)
-    return FinalDots(done.xy, done.diameter)
+    return FinalDots(done.xy, done.diameter, done.dots)
