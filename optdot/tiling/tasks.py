@@ -116,8 +116,8 @@ from .. import stages
 from ..config.job import Job
 from ..geometry.morton import spatial_order
 from ..geometry.shapes import CIRCLE, Footprints
-from ..relax.shaped import turned
 from ..relax.lowpass import CoarseField, LatticePart
+from ..relax.shaped import turned
 from ..spatial.window import bounds, grown, in_rect
 from .plan import TilePlan
 
