@@ -12,6 +12,13 @@ The circle case has the footprint's area-equivalent diameter, so the same count.
 
 ``--grain`` runs a uniform 0.2 map of 2:1 ellipses with random angles and prints QA's
 coverage grain through a 0.5 mm Gaussian and the psi6 coherence.
+
+``--tiled`` runs tiled (``--tiles on``) into a ``.parquet`` dataset on each ``--workers``
+count given (default 2), peak RSS of the command and all its workers, and says whether
+the datasets of different worker counts are byte-identical:
+
+    python benchmarks/shapes.py --dots 1e7 --case ellipse --case circle --tiled
+    python benchmarks/shapes.py --dots 1e6 --case ellipse --tiled --workers 1 --workers 2
 """
 
 from __future__ import annotations
@@ -107,12 +114,17 @@ def main() -> None:
     ap.add_argument("--dots", type=float, default=1e5)
     ap.add_argument("--case", action="append", choices=list(CASES))
     ap.add_argument("--grain", action="store_true")
+    ap.add_argument("--tiled", action="store_true", help="tiles on, into a .parquet dataset")
+    ap.add_argument("--workers", type=int, action="append", help="with --tiled (repeatable)")
     a = ap.parse_args()
     cases = a.case or list(CASES)
     exe = [sys.executable, "-m", "optdot"]
     runs = [("ellipse", "uniform.csv")] if a.grain else [(c, "map.csv") for c in cases]
     for case, grid in runs:
         path = job(case, a.dots, grid)
+        if a.tiled:
+            tiled(exe, case, path, a.workers or [2])
+            continue
         out = path.parent / "pattern.npz"
         secs, mb, _ = run([*exe, "generate", str(path), "-o", str(out), "-q", "--tiles", "off"])
         n = int(np.load(out)["xy"].shape[0])
@@ -137,6 +149,37 @@ def main() -> None:
             win = (0.1 * w, 0.1 * w, 0.9 * w, 0.9 * w)  # texture.py's central 80 %
             rms = blurred_coverage_rms(xy, 2 * math.sqrt(AREA[case] / math.pi), win)
             print(f"         grain through a 0.5 mm Gaussian: {100 * rms:.3f} %")
+
+
+def tiled(exe: list[str], case: str, path: Path, workers: list[int]) -> None:
+    """The case tiled into a dataset on each worker count; QA of the first dataset."""
+    outs = []
+    for k in workers:
+        out = path.parent / f"tiled_{k}.parquet"
+        cmd = [*exe, "generate", str(path), "-o", str(out), "-q", "--tiles", "on"]
+        secs, mb, _ = run([*cmd, "--workers", str(k)])
+        n = json.loads((out / "_manifest.json").read_text())["n"]
+        print(
+            f"{case:8s} {n:>10,} dots {secs:8.1f} s {n / secs:>10,.0f} dots/s {mb:8.0f} MB "
+            f"(tiled, {k} workers, all processes)"
+        )
+        outs.append(out)
+    for other in outs[1:]:
+        names = sorted(p.name for p in outs[0].iterdir())
+        same = names == sorted(p.name for p in other.iterdir()) and all(
+            (outs[0] / f).read_bytes() == (other / f).read_bytes() for f in names
+        )
+        print(f"         {outs[0].name} and {other.name}: {'byte-identical' if same else 'DIFFER'}")
+    qa_json = path.parent / "qa_tiled.json"
+    qsecs, qmb, _ = run([*exe, "qa", str(outs[0]), "--job", str(path), "--json", str(qa_json)])
+    m = json.loads(qa_json.read_text())["metrics"]
+    shape = m.get("shape") or {}
+    print(
+        f"         qa {qsecs:.1f} s {qmb:.0f} MB: collisions {m['pairs_below_collision']}, "
+        f"shapely {shape.get('shapely_checked_pairs', '-')} checked / "
+        f"{shape.get('shapely_disagreements', '-')} disagree, psi6 "
+        f"{m['psi6_coherence_2mm']:.4f}, seams {m.get('seams', {}).get('passed', '-')}"
+    )
 
 
 if __name__ == "__main__":
