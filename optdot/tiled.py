@@ -172,7 +172,7 @@ def _run_tiled(job, plan, executor_cm, output, progress, announce=None) -> Patte
                 w.write_part(plan.index(*tile), tile, xy, dots)
 
             def loader(k: int):
-                return lambda: FinalDots.read(*w.read_resumed(k, kind))
+                return lambda: FinalDots.read(job, *w.read_resumed(k, kind))
 
             finished = {tuple(e["tile"]): loader(k) for k, e in w.resumed.items()}
             if finished and announce is not None:

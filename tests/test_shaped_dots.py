@@ -232,6 +232,13 @@ def test_orientation_fields():
         (ELLIPSE, {"map": '"angles.csv"'}, ["angles.csv", "orientation.map", "not found"]),
         (ELLIPSE, {"angle": "nan"}, ["orientation.angle"]),
         (ELLIPSE, {"map": '"density.csv"', "toward": '"leds"'}, ["give one of"]),
+        ({"diameter": 0.046, "scale": "[1, 2]"}, None, ["dots.scale", "circles vary"]),
+        ({**ELLIPSE, "scale": "[2, 1]"}, None, ["dots.scale", "0 < low < high"]),
+        ({**ELLIPSE, "scale": "[1]"}, None, ["dots.scale", "[low, high]"]),
+        ({**ELLIPSE, "scale": "[0.01, 1]"}, None, ["dots.scale", "sizes must stay within"]),
+        ({**ELLIPSE, "scale": "[1, 2]", "diameter_step": 0.001}, None, ["diameter_step"]),
+        ({**ELLIPSE, "spacing": 0.2}, None, ["dots.spacing needs", "dots.scale"]),
+        ({**ELLIPSE, "scale": "[1, 2]", "spacing": 0.01}, None, ["dots.spacing", "spacing <="]),
     ],
 )
 def test_shapes_that_cannot_be_drawn_get_one_line(tmp_path, dots, orientation, words):
@@ -272,11 +279,13 @@ def test_the_tracer_meets_the_true_oriented_footprints(tmp_path, dots):
     assert got.mean() == pytest.approx(p.dots.area().sum() / 3.0, abs=0.02)
 
 
+@pytest.mark.parametrize("scaled", [False, True], ids=["one-size", "scaled"])
 @pytest.mark.parametrize("dots", [ELLIPSE, PRISM], ids=["ellipse", "rounded_rectangle"])
-def test_multisphere_penalty_gradient_and_pairs(dots):
-    """The multi-sphere term against a brute-force sum over every pair of circles, its
-    gradient against central finite differences, and the circles within the footprint
-    (ellipse: inscribed) or covering it (rounded rectangle)."""
+def test_multisphere_penalty_gradient_and_pairs(dots, scaled):
+    """The multi-sphere term against a brute-force sum over every pair of circles (each
+    dot's circles scaled with its footprint when sizes vary), its gradient against
+    central finite differences, and the circles within the footprint (ellipse:
+    inscribed) or covering it (rounded rectangle)."""
     from optdot.geometry.shapes import KINDS, DotShape
     from optdot.relax.multisphere import MultiSphereTerm, spheres
 
@@ -289,17 +298,19 @@ def test_multisphere_penalty_gradient_and_pairs(dots):
     angle = rng.uniform(-np.pi, np.pi, n)
     active = np.ones(n, bool)
     active[3] = False  # a phantom: no footprint
-    term = MultiSphereTerm(shape, angle, active, 0.005, 15.0)
+    f = rng.uniform(0.7, 1.8, n) if scaled else np.ones(n)
+    term = MultiSphereTerm(shape, angle, active, 0.005, 15.0, scale=f if scaled else None)
     grad = np.zeros((n, 2))
     e = term(xy, grad)
     t, r = spheres(shape)
-    c = np.stack([np.cos(angle)[:, None] * t, np.sin(angle)[:, None] * t], axis=2) + xy[:, None]
+    c = np.stack([np.cos(angle)[:, None] * t, np.sin(angle)[:, None] * t], axis=2)
+    c = c * f[:, None, None] + xy[:, None]
     want = 0.0
     for i in range(n):
         for j in range(i + 1, n):
             if active[i] and active[j]:
                 d = np.hypot(*(c[i][:, None] - c[j][None]).transpose(2, 0, 1))
-                pen = np.maximum(r[:, None] + r[None] + 0.005 - d, 0.0)
+                pen = np.maximum(f[i] * r[:, None] + f[j] * r[None] + 0.005 - d, 0.0)
                 want += 15.0 * (pen**2).sum()
     assert e > 0 and e == pytest.approx(want, rel=1e-12)
     h = 1e-7
@@ -405,3 +416,33 @@ def test_check_and_design_know_shaped_dots(tmp_path):
     path.write_text(text + "\n[design]\nfill_range = [0.0, 0.75]\n")
     one_error(("design", path, "-o", tmp_path / "m.csv"), 2, "design.fill_range", "at most")
     assert not (tmp_path / "m.csv").exists()
+
+
+def test_shaped_dots_scale_with_the_map_as_circles_do(tmp_path):
+    """``dots.scale`` with the pitch rule: every dot is the footprint scaled (its aspect
+    and corner kept, sizes to 1 nm), larger where the fill is higher, within the range;
+    the count follows each cell's size and the coverage the map; the exact gap holds by
+    shapely; QA's cross-check reads dots of many sizes."""
+    dots = {**PRISM, "scale": "[0.8, 1.6]", "spacing": 0.15}
+    path = _job(tmp_path, dots, {"random": "true"}, grid=_ramp(lo=0.1, hi=0.4),
+                domain={"width": 5.0, "height": 3.0})  # fmt: skip
+    job = load_job(path)
+    p = generate(job)
+    scale = p.dots.size[:, 0] / 0.12
+    np.testing.assert_allclose(p.dots.size, np.outer(scale, [0.12, 0.03, 0.005]), atol=1.1e-6)
+    assert len(np.unique(p.dots.size[:, 0])) >= 10
+    assert 0.8 - 1e-9 <= scale.min() and scale.max() <= 1.6 + 1e-9
+    assert np.corrcoef(p.xy[:, 0], scale)[0, 1] > 0.8  # the map rises along x
+    assert p.n == job.n_dots
+    covered = float(p.dots.area().sum()) / (job.width * job.height)
+    assert covered == pytest.approx(float(job.density.grid.mean()), rel=0.02)
+    _check_guarantee_with_shapely(p, job.optimize.gap, job.box)
+    r = qa(p, job)
+    assert r.passed, r.failures()
+    assert r.metrics["shape"]["shapely_checked_pairs"] > 0
+    assert r.metrics["shape"]["shapely_disagreements"] == 0
+    # one footprint size: the claim rule at low fills keeps the smallest, exactly the
+    # footprint asked for (no 1 nm drift from the rule's rounding)
+    path = _job(tmp_path, {**ELLIPSE, "scale": "[1, 2]"}, grid=np.full((2, 2), 0.1))
+    q = generate(load_job(path))
+    np.testing.assert_array_equal(np.unique(q.dots.size, axis=0), [[0.08, 0.04]])

@@ -188,6 +188,31 @@ def test_an_interrupted_shaped_tiled_run_resumes_with_the_bytes_of_an_uninterrup
         assert (full / name).read_bytes() == (out / name).read_bytes(), name
 
 
+def test_scaled_shapes_resume_with_the_bytes_of_an_uninterrupted_run(tmp_path):
+    """Sizes that vary: a kept tile's dots are held at the sizes they were made at (their
+    area-equivalent diameters recovered from the footprints on the rule's steps), so the
+    resumed run is the uninterrupted one byte for byte."""
+    grid = np.tile(np.linspace(0.15, 0.4, 8), (6, 1))
+    dots = {**ELLIPSE, "scale": "[0.8, 1.6]", "spacing": 0.15}
+    path = _job(tmp_path, dots, {"random": "true"}, grid=grid,
+                domain={"width": 7.5, "height": 5.0})  # fmt: skip
+    job = load_job(path)
+    plan = plan_tiles(job, side=SIDE)
+    full = tmp_path / "full.parquet"
+    generate_tiled(job, full, plan=plan, executor=InProcess())
+    p = load_dataset(full)
+    assert len(np.unique(p.dots.size[:, 0])) >= 10
+    _check_guarantee_with_shapely(p, job.optimize.gap, job.box)
+    out = tmp_path / "resumed.parquet"
+    with pytest.raises(KeyboardInterrupt):
+        generate_tiled(job, out, plan=plan, executor=_Counting(stop_after=3))
+    again = _Counting()
+    generate_tiled(job, out, plan=plan, executor=again)
+    assert again.kinds["legal"] == 3
+    for name in sorted(q.name for q in full.iterdir()):
+        assert (full / name).read_bytes() == (out / name).read_bytes(), name
+
+
 def test_a_shaped_dataset_holds_the_patterns_footprints(tmp_path):
     """One process to a dataset: the columns of the CSV, read back exactly as the NPZ;
     a manifest naming an unknown shape, or a part with a NaN angle, is refused in one

@@ -287,9 +287,10 @@ class Job:
                     f"{where}: optimize.method = 'md' places discs (the baseline of Idé et al.); "
                     "shaped dots use 'optdot'"
                 )
-            if 2.0 * self.shape.extent >= min(self.width, self.height):
+            top = 1.0 if self.sizes is None else self.shape_scale(np.array([self.sizes.high]))[0]
+            if 2.0 * self.shape.extent * top >= min(self.width, self.height):
                 raise JobError(
-                    f"{where}: dots.length = {self.shape.size[0]} does not fit the panel"
+                    f"{where}: dots.length = {self.shape.size[0] * top:g} does not fit the panel"
                 )
         validate_grid(self.density.grid, f"{where}: density.grid")
 
@@ -300,14 +301,27 @@ class Job:
         footprints are too close at any angles; the guarantee pass then holds their
         exact edge gaps to ``optimize.gap``)."""
         if self.shape is not None:
-            return 2.0 * self.shape.inner_radius + self.optimize.gap
+            return 2.0 * self.shape.inner_radius * self._low_scale + self.optimize.gap
         return self.diameter + self.optimize.gap
+
+    def shape_scale(self, diameters: np.ndarray) -> np.ndarray:
+        """``[n]`` factors shaped dots of area-equivalent ``diameters`` (``[n]`` mm) are
+        their footprint (``dots.length``, ``width``, ...) scaled by, to 1e-4 (the size
+        rule's diameters are rounded to 1 nm: unrounded, a dot at ``dots.scale``'s low
+        end of 1 would be 80.001 µm long, not the 80 µm asked for; 1e-4 of a scale is
+        nm on a footprint, far under the rule's 0.5 µm steps)."""
+        return np.round(np.asarray(diameters, np.float64) / self.shape.equivalent_diameter, 4)
+
+    @property
+    def _low_scale(self) -> float:
+        """The smallest shaped dot's scale (1 for one size)."""
+        return self.diameter / self.shape.equivalent_diameter
 
     @property
     def dot_radius(self) -> float:
         """How far a dot reaches from its centre, mm: the radius (the smallest, with
-        ``sizes``), or a shaped dot's bounding radius."""
-        return 0.5 * self.diameter if self.shape is None else self.shape.extent
+        ``sizes``), or a shaped dot's bounding radius (the smallest's)."""
+        return 0.5 * self.diameter if self.shape is None else self.shape.extent * self._low_scale
 
     @cached_property
     def cell_diameters(self) -> np.ndarray | None:

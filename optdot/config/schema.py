@@ -30,7 +30,7 @@ from .light_guide import (
     design_from,
     light_guide_from,
 )
-from .shaping import DOT_SHAPE_KEYS, ORIENTATION_KEYS, dot_shape, orientation
+from .shaping import DOT_SHAPE_KEYS, ORIENTATION_KEYS, dot_shape, orientation, shape_sizes
 
 SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
     "": {"name": (str,)},
@@ -219,7 +219,9 @@ def job_from_dict(
             raise JobError(f"{where}: missing required key dots.diameter")
         diameter, sizes, size_file = _dot_sizes(dots, sections.get("qa", {}), qa, base, where)
     else:
-        diameter, sizes, size_file = shape.equivalent_diameter, None, None
+        sizes = shape_sizes(dots, shape, sections.get("qa", {}), qa, where)
+        diameter = shape.equivalent_diameter if sizes is None else sizes.low
+        size_file = None
     turn = orientation(
         sections.get("orientation", {}),
         shape,

@@ -6,6 +6,9 @@
     length = 0.080               # mm, the long axis
     width = 0.040                # mm, across it (<= length)
     corner_radius = 0.005        # mm, rounded_rectangle only (0 .. width/2; width/2: capsule)
+    scale = [1.0, 2.0]           # optional: sizes vary, each dot this footprint scaled by
+                                 # a factor in the range, chosen by the map as a circle's
+                                 # diameter is (dots.spacing for the hybrid pitch rule)
 
 ``[orientation]`` (one of, for shapes with a long axis; default ``angle = 0``)::
 
@@ -37,6 +40,7 @@ DOT_SHAPE_KEYS: dict[str, tuple[type, ...]] = {
     "length": (int, float),
     "width": (int, float),
     "corner_radius": (int, float),
+    "scale": (list,),
 }
 ORIENTATION_KEYS: dict[str, tuple[type, ...]] = {
     "angle": (int, float),
@@ -67,6 +71,11 @@ def dot_shape(dots: dict[str, Any], where: str) -> DotShape | None:
     if name not in KINDS:
         raise JobError(f"{where}: dots.shape = {name!r} must be one of {', '.join(KINDS)}")
     if KINDS[name] is CIRCLE:
+        if "scale" in dots:
+            raise JobError(
+                f"{where}: dots.scale scales a shaped dot; circles vary by dots.diameter = "
+                "[low, high]"
+            )
         if sized:
             raise JobError(
                 f"{where}: dots.{sized[0]} is a shaped dot's size; circles take dots.diameter "
@@ -111,6 +120,60 @@ def dot_shape(dots: dict[str, Any], where: str) -> DotShape | None:
             f"{width:g} mm wide (at most width / 2 = {0.5 * width:g}: a capsule)"
         )
     return DotShape(kind, tuple(size))
+
+
+def shape_sizes(dots: dict[str, Any], shape: DotShape, qa_sec: dict[str, Any], qa, where: str):
+    """The size rule of shaped dots (``dots.scale = [low, high]``), as the rule of discs
+    of the footprint's area-equivalent diameter scaled by the range
+    (:class:`~optdot.geometry.sizes.DotSizes`: the claim rule, or ``dots.spacing``), or
+    None when the dots have one size.
+
+    Raises:
+        JobError: a scale that is not ``[low, high]`` with ``0 < low < high``, a footprint
+            scaled out of the drawable sizes, a circle's size key, a centre distance in
+            ``[qa]`` (dots of varying size are judged by edge gaps).
+    """
+    from ..geometry.sizes import DEFAULT_STEP, DotSizes
+
+    extra = [k for k in ("diameter_grid", "diameter_step") if k in dots]
+    if extra:
+        raise JobError(
+            f"{where}: dots.{extra[0]} is for circles of varying diameter; shaped dots vary by "
+            "dots.scale = [low, high] (with dots.spacing for the pitch rule)"
+        )
+    if "scale" not in dots:
+        if "spacing" in dots:
+            raise JobError(f"{where}: dots.spacing needs a size range, dots.scale = [low, high]")
+        return None
+    value = dots["scale"]
+    ok = len(value) == 2 and all(
+        isinstance(v, int | float) and not isinstance(v, bool) for v in value
+    )
+    low, high = (float(v) for v in value) if ok else (math.nan, math.nan)
+    if not (math.isfinite(low) and math.isfinite(high) and 0 < low < high):
+        raise JobError(f"{where}: dots.scale = {value!r} must be [low, high] with 0 < low < high")
+    lo, hi = DIAMETER_RANGE_MM
+    if low * shape.size[1] < lo or high * shape.size[0] > hi:
+        raise JobError(
+            f"{where}: dots.scale = {value!r} makes dots {low * shape.size[1]:g} to "
+            f"{high * shape.size[0]:g} mm; sizes must stay within {lo:g}..{hi:g} mm"
+        )
+    for key in ("close_distance", "collision_distance"):
+        if key in qa_sec:
+            raise JobError(
+                f"{where}: qa.{key} is a centre distance, which cannot apply to dots of "
+                "varying size; use qa.close_gap (edge gap, mm) and optimize.gap"
+            )
+    d = shape.equivalent_diameter
+    spacing = None
+    if "spacing" in dots:
+        spacing = float(dots["spacing"])
+        if not (math.isfinite(spacing) and low * d < spacing <= 10.0):
+            raise JobError(
+                f"{where}: dots.spacing = {spacing!r} must be in mm, {low * d:.4g} (the smallest "
+                "dot's area-equivalent diameter) < spacing <= 10"
+            )
+    return DotSizes(low * d, high * d, DEFAULT_STEP, spacing, qa.effective_close_gap)
 
 
 def orientation(
@@ -187,6 +250,10 @@ def check_shaped_fill(job, fill: float, where: str, at: str = "") -> None:
     import shapely
 
     shape = job.shape
+    if job.sizes is not None:  # the footprint at the size the rule gives this fill
+        d = float(job.sizes.quantise(job.sizes.raw(np.array([fill])))[0])
+        scale = d / shape.equivalent_diameter
+        shape = DotShape(shape.kind, tuple(round(v * scale, 6) for v in shape.size))
     ring = shape.kind.outline(np.asarray(shape.size), 0.0, 1e-4 * shape.extent)
     grown = shapely.Polygon(ring).buffer(0.5 * job.optimize.gap, quad_segs=32).area
     spread = grown / shape.area

@@ -596,9 +596,13 @@ class DotShape:
         count (one footprint per ``area / fill``)."""
         return 2.0 * math.sqrt(self.area / math.pi)
 
-    def footprints(self, angle: np.ndarray) -> Footprints:
-        """The footprints of ``len(angle)`` dots at ``angle`` (``[n]`` rad)."""
+    def footprints(self, angle: np.ndarray, scale: np.ndarray | None = None) -> Footprints:
+        """The footprints of ``len(angle)`` dots at ``angle`` (``[n]`` rad), each this
+        footprint scaled by ``scale`` (``[n]``; sizes rounded to 1 nm, as files hold
+        them), or all of this size."""
         n = len(angle)
+        if scale is not None:
+            return Footprints(self.kind, np.round(np.outer(scale, self.size), 6), angle)
         return Footprints(self.kind, np.tile(np.asarray(self.size, float), (n, 1)), angle)
 
 

@@ -348,9 +348,12 @@ def _cross_check(s: SecondSums, pts, dots: Footprints, pairs: np.ndarray, gap: n
         return
     pairs, gap = pairs[:room], gap[:room]
     ends = np.unique(pairs)
-    polys = {int(k): dots.outline(int(k), SHAPELY_TOLERANCE) + pts[k] for k in ends}
-    a = shapely.polygons([polys[int(k)] for k in pairs[:, 0]])
-    b = shapely.polygons([polys[int(k)] for k in pairs[:, 1]])
+    # one polygon per dot (dots of different sizes have different vertex counts)
+    polys = {
+        int(k): shapely.Polygon(dots.outline(int(k), SHAPELY_TOLERANCE) + pts[k]) for k in ends
+    }
+    a = np.array([polys[int(k)] for k in pairs[:, 0]], dtype=object)
+    b = np.array([polys[int(k)] for k in pairs[:, 1]], dtype=object)
     dist = shapely.distance(a, b)
     slack = 2.0 * SHAPELY_TOLERANCE + 1e-9
     bad = (dist < gap - 1e-9) | (dist > np.maximum(gap, 0.0) + slack)

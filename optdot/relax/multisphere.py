@@ -72,6 +72,8 @@ class MultiSphereTerm:
         active: ``[n]`` bool, the dots that have a footprint (not phantoms).
         gap: smallest edge gap the circles keep, mm. weight: ``w``.
         skin: relative skin of the list.
+        scale: ``[n]`` each dot's footprint (its circles) scaled by this, or None: all
+            of ``shape``'s size.
     """
 
     def __init__(
@@ -82,13 +84,17 @@ class MultiSphereTerm:
         gap: float,
         weight: float,
         skin: float = SKIN,
+        scale: np.ndarray | None = None,
     ) -> None:
-        t, self.radius = spheres(shape)
-        c, s = np.cos(angle), np.sin(angle)
+        t, radius = spheres(shape)
+        f = np.ones(len(angle)) if scale is None else np.asarray(scale, np.float64)
+        c, s = np.cos(angle) * f, np.sin(angle) * f
         self.offset = np.stack([c[:, None] * t, s[:, None] * t], axis=2)  # [n, k, 2]
+        self.radius = np.ascontiguousarray(f[:, None] * radius)  # [n, k]
         self.active = np.ascontiguousarray(active, dtype=np.bool_)
         self.gap, self.weight = gap, weight
-        self.reach = 2.0 * float(np.abs(t).max() + self.radius.max()) + gap
+        top = float(f.max(initial=1.0))
+        self.reach = 2.0 * float(np.abs(t).max() + radius.max()) * top + gap
         self.verlet = VerletList(np.full(len(angle), 0.5 * self.reach), skin)
 
     def __call__(self, xy: np.ndarray, grad: np.ndarray) -> float:
@@ -108,18 +114,18 @@ def _pair(xy, i, j, off, rad, gap, w, reach, active, grad):  # pragma: no cover 
     if ex * ex + ey * ey >= reach * reach:
         return 0.0
     e = 0.0
-    k = rad.shape[0]
+    k = rad.shape[1]
     far = 0.5 * reach  # the reach of j's circles from its centre, plus half the gap
     for a in range(k):
         xa, ya = xy[i, 0] + off[i, a, 0], xy[i, 1] + off[i, a, 1]
         fx, fy = xa - xy[j, 0], ya - xy[j, 1]
-        lim = rad[a] + far + 0.5 * gap
+        lim = rad[i, a] + far + 0.5 * gap
         if fx * fx + fy * fy >= lim * lim:  # circle a meets none of j's
             continue
         for b in range(k):
             dx = xa - xy[j, 0] - off[j, b, 0]
             dy = ya - xy[j, 1] - off[j, b, 1]
-            t = rad[a] + rad[b] + gap
+            t = rad[i, a] + rad[j, b] + gap
             d2 = dx * dx + dy * dy
             if d2 >= t * t:
                 continue

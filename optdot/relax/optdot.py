@@ -174,7 +174,10 @@ def relax_staged(
     if problem.shaped is not None:
         shape, field, gap = problem.shaped
         active = np.ones(len(xy0), bool) if phantom is None else ~phantom
-        extra = MultiSphereTerm(shape, field.at(xy0, xy0), active, gap, MULTISPHERE_WEIGHT)
+        scale = None if diameters is None else diameters / shape.equivalent_diameter
+        extra = MultiSphereTerm(
+            shape, field.at(xy0, xy0), active, gap, MULTISPHERE_WEIGHT, scale=scale
+        )
     total = RelaxResult(xy, 0.0, 0, 0, 0, "no stage ran", [])
     done = 0
     for k, (share, multiplier) in enumerate(form.stages):

@@ -40,10 +40,17 @@ PUSH = 0.75
 SKIN = 0.25
 
 
-def turned(shape: DotShape, field: Orientation, xy: np.ndarray, thrown: np.ndarray) -> Footprints:
+def turned(
+    shape: DotShape,
+    field: Orientation,
+    xy: np.ndarray,
+    thrown: np.ndarray,
+    scale: np.ndarray | None = None,
+) -> Footprints:
     """The footprints of dots at ``xy`` (``[n, 2]`` mm) thrown at ``thrown``, turned by
-    ``field``, their angles rounded to 1e-6° (what every file holds)."""
-    return shape.footprints(np.radians(degrees(field.at(xy, thrown))))
+    ``field``, their angles rounded to 1e-6° (what every file holds); scaled by
+    ``scale`` (``[n]``) when sizes vary."""
+    return shape.footprints(np.radians(degrees(field.at(xy, thrown))), scale)
 
 
 def shape_conflicts(
@@ -82,6 +89,7 @@ def make_legal_shapes(
     where: str,
     frozen: np.ndarray | None = None,
     fixed: np.ndarray | None = None,
+    scale: np.ndarray | None = None,
 ) -> tuple[LegalizeResult, Footprints]:
     """Legal positions for shaped dots and their footprints where they end.
 
@@ -98,9 +106,12 @@ def make_legal_shapes(
         GuaranteeError: a violation is left after :data:`MAX_ROUNDS` rounds.
     """
     extent, core = shape.extent, 2.0 * shape.inner_radius + gap
+    if scale is not None:  # per dot: the bounding disc and the inscribed disc + gap
+        extent, core = shape.extent * scale, 2.0 * shape.inner_radius * scale + gap
+    sized = shape.footprints(np.zeros(len(xy)), scale)  # the sizes, 1 nm, as written
     still = np.zeros(len(xy), bool) if frozen is None else frozen
     sweeps = pair_fixes = dot_fixes = 0
-    skin = SKIN * extent
+    skin = SKIN * float(np.max(extent, initial=0.0))
     pr_all, built = None, None
     moved = np.ones(len(xy), bool)
     angle = np.zeros(len(xy))
@@ -120,11 +131,11 @@ def make_legal_shapes(
             moved |= np.any(leg.xy != xy, axis=1)
             xy = leg.xy
         if built is None or np.max(np.abs(xy - built)) > 0.5 * skin:
-            pr_all, built = _pairs(xy, shape.footprints(np.zeros(1)), gap, skin, frozen), xy
+            pr_all, built = _pairs(xy, sized, gap, skin, frozen), xy
         # the field where the dots that moved now stand (the others' angles hold)
         turn = moved & turns
         angle[turn] = np.radians(degrees(field.at(xy[turn], thrown[turn])))
-        dots = shape.footprints(angle)
+        dots = Footprints(shape.kind, sized.size, angle)
         near = pr_all[moved[pr_all[:, 0]] | moved[pr_all[:, 1]]]  # only pairs that changed
         pr, g, u = _conflicts(xy, dots, gap + MARGIN, near)
         if not len(pr):
@@ -149,7 +160,7 @@ def make_legal_shapes(
             f"{where}: could not meet the guarantee for {shape.kind.name} dots after "
             f"{MAX_ROUNDS} rounds: {len(pr)} pairs closer than {gap * 1e3:g} µm edge to edge"
         )
-    dots = turned(shape, field, xy, thrown)  # every angle afresh for the final check
+    dots = turned(shape, field, xy, thrown, scale)  # every angle afresh for the final check
     if fixed is not None:
         dots.angle[still] = fixed
     viol = check_guarantee(xy, density, domain, extent, core, frozen)

@@ -88,8 +88,9 @@ def finish(
         if held.angle is None:
             raise ValueError(f"{where}: held shaped dots come without their angles")
         fixed = held.angle
+    scale = None if d is None else job.shape_scale(d)  # footprints scaled by their sizes
     leg, dots = make_legal_shapes(
         xy, thrown, job.density, home, job.domain, job.shape, job.orientation,
-        job.optimize.gap, where, frozen, fixed,
+        job.optimize.gap, where, frozen, fixed, scale,
     )  # fmt: skip
     return Finished(np.ascontiguousarray(leg.xy[:n]), diameter, leg, dots.take(slice(0, n)))

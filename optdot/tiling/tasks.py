@@ -151,9 +151,16 @@ class FinalDots:
     dots: Footprints | None = None
 
     @classmethod
-    def read(cls, xy: np.ndarray, dots: Footprints) -> FinalDots:
-        """Final dots as a part file holds them (``xy [n, 2]`` mm and footprints)."""
-        return cls(xy, dots.diameter, None if dots.kind is CIRCLE else dots)
+    def read(cls, job: Job, xy: np.ndarray, dots: Footprints) -> FinalDots:
+        """Final dots of ``job`` as a part file holds them (``xy [n, 2]`` mm and
+        footprints): discs' diameters; shaped dots' footprints and their area-equivalent
+        diameters (on the size rule's quantisation, the sizes they were made at)."""
+        if dots.kind is CIRCLE:
+            return cls(xy, dots.diameter)
+        if job.sizes is None:
+            return cls(xy, job.diameter, dots)
+        d = job.sizes.quantise(2.0 * np.sqrt(dots.area() / np.pi))
+        return cls(xy, d, dots)
 
     @property
     def footprints(self) -> Footprints:
