@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import click
+import numpy as np
 
 from .app import main, user_errors
 from .options import (
@@ -84,7 +85,12 @@ for _param in check.params:  # the shared --quiet speaks of a progress bar check
 def _diameter_text(job) -> str:
     if job.shape is not None:
         sizes = " × ".join(f"{v * 1e3:.4g}" for v in job.shape.size[:2])
-        return f"{sizes} µm {job.shape.kind.name}s, turned by [orientation] {job.orientation.mode}"
+        scaled = ""
+        if job.sizes is not None:
+            lo, hi = job.shape_scale(np.array([job.sizes.low, job.sizes.high]))
+            scaled = f" scaled {lo:.4g}..{hi:.4g}x by the {job.sizes.rule} rule"
+        turn = job.orientation.mode
+        return f"{sizes} µm {job.shape.kind.name}s{scaled}, turned by [orientation] {turn}"
     if job.sizes is None:
         return f"{job.diameter * 1e3:.4g} µm"
     return f"{job.sizes.low * 1e3:.4g}..{job.sizes.high * 1e3:.4g} µm"
