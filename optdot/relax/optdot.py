@@ -9,11 +9,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..spatial.verlet import VerletList
+from .exactgap import ExactGapTerm
 from .formulation import Formulation, Problem
 from .lbfgs import HALTED, minimize_lbfgs
 from .multisphere import MULTISPHERE_WEIGHT, MultiSphereTerm
 from .penalty import PenaltyTerms, penalty_fast
 from .result import RelaxResult
+
+#: The penalty term each kind of shaped dot relaxes with (``benchmarks/penalty_choice.py``
+#: measured both on both; :mod:`.exactgap`): ellipses by their exact edge gap, rounded
+#: rectangles by the multi-sphere scheme.
+FOOTPRINT_TERMS = {"ellipse": ExactGapTerm, "rounded_rectangle": MultiSphereTerm}
 
 #: ``progress(iteration, value)``; a true return value halts the run.
 Progress = Callable[[int, float], bool | None]
@@ -175,9 +181,8 @@ def relax_staged(
         shape, field, gap = problem.shaped
         active = np.ones(len(xy0), bool) if phantom is None else ~phantom
         scale = None if diameters is None else diameters / shape.equivalent_diameter
-        extra = MultiSphereTerm(
-            shape, field.at(xy0, xy0), active, gap, MULTISPHERE_WEIGHT, scale=scale
-        )
+        term = FOOTPRINT_TERMS[shape.kind.name]
+        extra = term(shape, field.at(xy0, xy0), active, gap, MULTISPHERE_WEIGHT, scale=scale)
     total = RelaxResult(xy, 0.0, 0, 0, 0, "no stage ran", [])
     done = 0
     for k, (share, multiplier) in enumerate(form.stages):
