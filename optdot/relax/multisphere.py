@@ -14,6 +14,10 @@ it leaves too close. A pair of circles
 ``(m, n)`` of dots ``(i, j)`` adds ``w max(r_m + r_n + gap - |c_im - c_jn|, 0)²``; the
 angles are held for the relaxation (the dots move by a fraction of a spacing, and the
 orientation fields change over millimetres).
+
+Rounded rectangles relax with this term; ellipses with their exact edge gap
+(:mod:`.exactgap`, measured against this one on both kinds; the ellipse's circles stay
+for that comparison, ``benchmarks/penalty_choice.py``).
 """
 
 from __future__ import annotations
