@@ -60,7 +60,7 @@ def _check_room(job: Job, n: int, where: str) -> None:
             f"{where}: the map asks for 0 dots (mean fill fraction x panel area is under half "
             f"a dot of {job.diameter:g} mm)"
         )
-    if job.sizes is None:
+    if job.sizes is None or job.shape is not None:  # shaped: at the rule's size there
         _check_fill(job, where)
     if job.domain.rectangle and job.domain.edge_margin == 0:
         return  # fill fractions below the packing limit always fit

@@ -492,3 +492,23 @@ def test_exact_gap_penalty_value_and_gradient(dots, scaled):
             g = np.zeros((n, 2))
             fd = (term(up, g) - term(dn, g)) / (2 * h)
             assert grad[k, ax] == pytest.approx(fd, rel=1e-3, abs=1e-8)
+
+
+def test_scaled_capsules_stay_drawable_and_scaled_fills_are_checked(tmp_path):
+    """A capsule (corner radius = width / 2) scaled by 1.3741 rounds its width to
+    0.041223 mm: its radius is rounded down to 0.020611, not up over half the width, so
+    its CSV reads back; a fill the largest scaled dot cannot reach is refused before any
+    work, as for one size."""
+    from optdot.geometry.shapes import KINDS, DotShape
+
+    capsule = DotShape(KINDS["rounded_rectangle"], (0.12, 0.03, 0.015))
+    feet = capsule.footprints(np.zeros(3), np.array([1.3741, 1.0, 0.6]))
+    np.testing.assert_array_equal(feet.size[0], [0.164892, 0.041223, 0.020611])
+    np.testing.assert_array_equal(feet.size[1], [0.12, 0.03, 0.015])
+    p = type(generate(load_job(_job(tmp_path, PRISM))))(
+        np.array([[0.5, 0.5], [1.0, 0.5], [1.5, 0.5]]), feet.diameter, (0, 0, 2, 1.5), dots=feet
+    )
+    save_pattern(p, tmp_path / "c.csv")
+    np.testing.assert_array_equal(load_pattern(tmp_path / "c.csv").dots.size, feet.size)
+    path = _job(tmp_path, {**ELLIPSE, "scale": "[0.8, 1.6]"}, grid=np.full((4, 4), 0.8))
+    one_error(("check", path), 2, "fill 0.8", "128 × 63.99 µm ellipse", "at most")

@@ -244,3 +244,69 @@ def test_a_shaped_dataset_holds_the_patterns_footprints(tmp_path):
     pq.write_table(table, part)
     with pytest.raises(PatternFileError, match="NaN or infinite rounded_rectangle"):
         open_dataset(tmp_path / "p.parquet").read_part(0)
+
+
+def test_a_dot_wedged_against_a_wall_by_held_dots_is_moved_where_it_fits(tmp_path):
+    """Scaled capsules on an outlined panel with a zero cell, tiled (the hostile tester's
+    job): a dot of the last tile stood between the panel's edge (its bounding disc) and
+    two final dots of a neighbour, and the disc pass and the exact pushes sent it back
+    and forth until the pass gave up; before that, a held dot in the zero cell crashed
+    the hard core (an infinite circle). Now the wedged dot is moved to a place it fits
+    and the run meets the guarantee (shapely) and passes QA."""
+    (tmp_path / "panel.wkt").write_text("POLYGON ((0 0, 8 0, 8 8, 0 8, 0 0))")
+    grid = np.array([[0.1, 0.2, 0.3, 0.4], [0.15, 0.25, 0.35, 0.45],
+                     [0.0, 0.2, 0.3, 0.4], [0.1, 0.2, 0.3, 0.4]])  # fmt: skip
+    dots = {**PRISM, "corner_radius": 0.015, "scale": "[0.6, 1.4]"}
+    path = _job(tmp_path, dots, {"random": "true"}, grid=grid,
+                domain={"width": None, "height": None, "outline": '"panel.wkt"'},
+                optimize={"max_iter": 40, "seed": 1, "gap": 0.005})  # fmt: skip
+    job = load_job(path)
+    p = generate_tiled(job, plan=plan_tiles(job, side=4.0), executor=InProcess())
+    assert p.n == job.n_dots
+    _check_guarantee_with_shapely(p, job.optimize.gap, job.box)
+    assert (p.dots.size[:, 2] <= 0.5 * p.dots.size[:, 1]).all()  # capsules stay drawable
+    r = qa(p, job)
+    assert r.passed, r.failures()
+
+
+def test_a_tampered_shaped_dataset_is_refused_in_one_line(tmp_path):
+    """A part whose columns are not its kind's (a rounded rectangle relabelled an
+    ellipse), a width under zero, an angle of 1e300, angles stored as text: each refused
+    by the dataset reader, naming the part and the problem, as the CSV reader does."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from optdot.files import sha256_file
+
+    p = generate(load_job(_job(tmp_path, PRISM, {"random": "true"})))
+    base = tmp_path / "p.parquet"
+    save_dataset(p, base)
+    doc = json.loads((base / MANIFEST).read_text())
+    part = base / "part-00000.parquet"
+    table = pq.read_table(part)
+
+    def tampered(name, table=table, **manifest):
+        d = tmp_path / f"{name}.parquet"
+        d.mkdir()
+        pq.write_table(table, d / part.name)
+        parts = [{**doc["parts"][0], "sha256": sha256_file(d / part.name)}]
+        (d / MANIFEST).write_text(json.dumps({**doc, **manifest, "parts": parts}))
+        return d
+
+    def refused(d, words):
+        with pytest.raises(PatternFileError, match=words):
+            ds = open_dataset(d)
+            ds.verify()
+            ds.read_part(0)
+
+    refused(tampered("relabelled", shape="ellipse"), "ellipse dots are x_mm, y_mm, length_mm")
+    width = table.column("width_mm").to_numpy().copy()
+    width[4] = -0.04
+    refused(tampered("negative", table.set_column(3, "width_mm", pa.array(width))),
+            "dot 5: rounded_rectangle .* cannot be drawn")  # fmt: skip
+    angle = table.column("angle_deg").to_numpy().copy()
+    angle[2] = 1e300
+    refused(tampered("turned", table.set_column(5, "angle_deg", pa.array(angle))),
+            "dot 3: angle_deg = 1e[+]300 is not an angle")  # fmt: skip
+    text = pa.array([str(v) for v in table.column("angle_deg").to_pylist()])
+    refused(tampered("text", table.set_column(5, "angle_deg", text)), "angle_deg holds string")

@@ -46,6 +46,16 @@ class Kind:
         """``[n, 3]`` the numbers :func:`on_packed` tests a point against, mm (or mm²)."""
         raise NotImplementedError
 
+    def undrawable(self, size: np.ndarray) -> np.ndarray:
+        """``[n]`` bool: sizes (``[n, k]`` mm) no footprint of this kind has (a width
+        not > 0, a length under the width; NaN)."""
+        return ~(size[:, 1] > 0) | ~(size[:, 0] >= size[:, 1])
+
+    def drawable(self, size: np.ndarray) -> np.ndarray:
+        """``size`` (``[n, k]`` mm, rounded to 1 nm) kept drawable after the rounding
+        (a capsule's corner radius not over half its rounded width)."""
+        return size
+
     def support(self, theta: np.ndarray, size: np.ndarray, angle: np.ndarray) -> np.ndarray:
         """The support function ``h(θ) = max over the footprint of ⟨p, u(θ)⟩`` (mm, about
         the centre) in the directions ``theta`` (rad): what :meth:`separation` maximises
@@ -113,6 +123,9 @@ class Circle(Kind):
     def shape_params(self, size: np.ndarray) -> np.ndarray:
         r = 0.5 * size[:, 0]
         return np.column_stack([r * r, np.zeros((len(r), 2))])
+
+    def undrawable(self, size: np.ndarray) -> np.ndarray:
+        return ~(size[:, 0] > 0)
 
     def area(self, size: np.ndarray) -> np.ndarray:
         return np.pi * 0.25 * size[:, 0] ** 2
@@ -249,6 +262,17 @@ class RoundedRect(Kind):
 
     def shape_params(self, size: np.ndarray) -> np.ndarray:
         return np.column_stack(self._core(size))
+
+    def undrawable(self, size: np.ndarray) -> np.ndarray:
+        rc = size[:, 2]
+        return super().undrawable(size) | ~(rc >= 0) | (rc > 0.5 * size[:, 1])
+
+    def drawable(self, size: np.ndarray) -> np.ndarray:
+        # the radius rounded down to 1 nm under half the width: 0.041223 wide, 0.020611
+        half = np.floor(np.round(size[:, 1] * 0.5e6, 3)) / 1e6
+        out = size.copy()
+        out[:, 2] = np.minimum(size[:, 2], half)
+        return out
 
     @staticmethod
     def _core(size: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -602,7 +626,8 @@ class DotShape:
         them), or all of this size."""
         n = len(angle)
         if scale is not None:
-            return Footprints(self.kind, np.round(np.outer(scale, self.size), 6), angle)
+            size = self.kind.drawable(np.round(np.outer(scale, self.size), 6))
+            return Footprints(self.kind, size, angle)
         return Footprints(self.kind, np.tile(np.asarray(self.size, float), (n, 1)), angle)
 
 

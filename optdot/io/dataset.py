@@ -27,6 +27,7 @@ from ..files import sha256_file
 from ..geometry.limits import validate_dots
 from ..geometry.shapes import CIRCLE, Footprints, Kind
 from ..pattern import Chunk, Pattern
+from .footprints import file_footprints
 from .manifest import MANIFEST, columns, manifest_kind, read_manifest
 
 __all__ = ["MANIFEST", "Dataset", "is_dataset", "load_dataset", "open_dataset", "read_part_file"]
@@ -45,23 +46,29 @@ def read_part_file(path: Path, count: int, kind: Kind = CIRCLE) -> tuple[np.ndar
         PatternFileError: unreadable, another row count, a column missing, or a shaped
             dot's size or angle not finite.
     """
+    import pyarrow as pa
     import pyarrow.parquet as pq
 
     names = columns(kind)
     try:
-        table = pq.read_table(path, columns=list(names))
+        table = pq.read_table(path)
     except (OSError, ValueError, KeyError) as e:
         raise PatternFileError(f"{path}: not a readable Parquet part ({one_line(e)})") from None
+    if tuple(table.column_names) != names:
+        raise PatternFileError(
+            f"{path}: columns {', '.join(table.column_names)}; {kind.name} dots are "
+            f"{', '.join(names)}"
+        )
+    for name, field in zip(names, table.schema, strict=True):
+        if not (pa.types.is_floating(field.type) or pa.types.is_integer(field.type)):
+            raise PatternFileError(f"{path}: column {name} holds {field.type}, not numbers")
     if table.num_rows != count:
         raise PatternFileError(f"{path}: holds {table.num_rows} dots, the manifest says {count}")
     cols = [table.column(c).to_numpy().astype(np.float64, copy=False) for c in names]
     xy = np.column_stack(cols[:2])
     if kind is CIRCLE:
         return xy, Footprints.circles(cols[2])
-    size, angle = np.column_stack(cols[2:-1]), cols[-1]
-    if not (np.all(np.isfinite(size)) and np.all(np.isfinite(angle))):
-        raise PatternFileError(f"{path}: NaN or infinite {kind.name} size or angle_deg")
-    return xy, Footprints(kind, size, np.radians(angle))
+    return xy, file_footprints(path, kind, np.column_stack(cols[2:-1]), cols[-1])
 
 
 @dataclass(frozen=True, eq=False)

@@ -34,6 +34,7 @@ from ..pattern import Pattern
 from .atomic import atomic_path, expect_size
 from .dataset import load_dataset
 from .dataset_write import save_dataset
+from .footprints import file_footprints
 
 CSV_HEADER = "x_mm,y_mm,diameter_mm"
 
@@ -239,7 +240,7 @@ def _load_csv(path: Path, box: tuple[float, float, float, float] | None) -> Patt
         )
     if kind is CIRCLE:
         return _validated(path, data[:, :2], data[:, 2], box, {})
-    dots = _shaped(path, kind, data[:, 2:-1], data[:, -1])
+    dots = file_footprints(path, kind, data[:, 2:-1], data[:, -1])
     return _validated(path, data[:, :2], dots.diameter, box, {}, dots)
 
 
@@ -287,7 +288,9 @@ def _load_npz(path: Path, box: tuple[float, float, float, float] | None) -> Patt
                         f"{path}: size must be [{k}] or [{len(xy)}, {k}] and angle_deg "
                         f"[{len(xy)}], got {size.shape} and {angle.shape}"
                     )
-                dots = _shaped(path, KINDS[name], np.broadcast_to(size, (len(xy), k)), angle)
+                dots = file_footprints(
+                    path, KINDS[name], np.broadcast_to(size, (len(xy), k)), angle
+                )
                 diameter = dots.diameter
             else:
                 diameter = _real(path, z, "diameter")
@@ -337,24 +340,6 @@ def _real(path: Path, z, name: str) -> np.ndarray:
     if a.dtype.kind not in "biuf":
         raise PatternFileError(f"{path}: {name} must hold real numbers, got dtype {a.dtype}")
     return a.astype(np.float64)
-
-
-def _shaped(path: Path, kind: Kind, size: np.ndarray, angle_deg: np.ndarray) -> Footprints:
-    """The footprints a file holds, refused in one line when they cannot be drawn: NaN,
-    a length under the width, a corner radius over half the width."""
-    size = np.ascontiguousarray(size, dtype=np.float64)
-    if not (np.all(np.isfinite(size)) and np.all(np.isfinite(angle_deg))):
-        raise PatternFileError(f"{path}: NaN or infinite size or angle_deg")
-    bad = (size[:, 1] <= 0) | (size[:, 0] < size[:, 1])
-    if kind.name == "rounded_rectangle":
-        bad |= (size[:, 2] < 0) | (size[:, 2] > 0.5 * size[:, 1])
-    if bad.any():
-        i = int(np.argmax(bad))
-        raise PatternFileError(
-            f"{path}: dot {i + 1}: {kind.name} of {tuple(size[i].tolist())} mm cannot be "
-            "drawn (width > 0, length >= width, corner radius <= width / 2)"
-        )
-    return Footprints(kind, size, np.radians(angle_deg))
 
 
 def _validated(path, xy, diam, box, meta, dots: Footprints | None = None) -> Pattern:

@@ -38,6 +38,14 @@ MAX_ROUNDS = 3000
 PUSH = 0.75
 #: Extra reach of the pair list, as a share of the footprint's bounding radius.
 SKIN = 0.25
+#: A dot the disc pass sends back this many times (into the panel, or out of a zero
+#: cell, against its pushes away from dots held still: wedged between a wall and held
+#: dots, which alternate projections cannot leave) is moved to a place it fits instead
+#: (:func:`_relocate`).
+STUCK = 20
+#: Where :func:`_relocate` looks: rings every quarter of the bounding radius, out to
+#: this many bounding radii.
+RELOCATE_REACH = 4.0
 
 
 def turned(
@@ -75,6 +83,54 @@ def _conflicts(xy, dots: Footprints, gap: float, pr: np.ndarray):
     g, u = dots.separation(xy, pr[:, 0], pr[:, 1])
     bad = g < gap
     return pr[bad], g[bad], u[bad]
+
+
+def _relocate(
+    k: int,
+    xy: np.ndarray,
+    thrown: np.ndarray,
+    sized: Footprints,
+    angle: np.ndarray,
+    still: np.ndarray,
+    field: Orientation,
+    gap: float,
+    density: DensityMap,
+    domain: Domain,
+    extent: float,
+) -> np.ndarray | None:
+    """A place for dot ``k`` out of a wedge: among points on rings every quarter of its
+    bounding radius ``extent`` (out to :data:`RELOCATE_REACH` of them), those in a lit
+    cell with the bounding disc inside the panel and the footprint (turned by ``field``
+    there) the gap and rounding margin clear of every dot held still, the one farthest
+    by the exact gap from the dots that may move (the pushes then settle those; nearest
+    first among equals). ``[2]`` mm (1 nm), or None when no point qualifies."""
+    step = 0.25 * extent
+    cand = [xy[k][None]]
+    for m in range(1, int(RELOCATE_REACH / 0.25) + 1):
+        t = np.linspace(0.0, 2.0 * np.pi, 8 * m, endpoint=False)
+        cand.append(xy[k] + m * step * np.column_stack([np.cos(t), np.sin(t)]))
+    cand = np.round(np.concatenate(cand) / RESOLUTION) * RESOLUTION
+    cand = cand[(density.at(cand) > 0) & ~domain.protruding(cand, extent)]
+    if not len(cand):
+        return None
+    reach = (RELOCATE_REACH + 1.0) * extent + 2.0 * float(sized.extent().max()) + gap
+    others = np.flatnonzero(np.hypot(*(xy - xy[k]).T) < reach)
+    others = others[others != k]
+    if not len(others):
+        return cand[0]
+    turn = np.radians(degrees(field.at(cand, np.broadcast_to(thrown, cand.shape))))
+    c, o = np.repeat(np.arange(len(cand)), len(others)), np.tile(others, len(cand))
+    g, _ = sized.kind.separation(
+        xy[o] - cand[c], sized.size[np.full(len(c), k)], turn[c], sized.size[o], angle[o]
+    )
+    g = g.reshape(len(cand), len(others))
+    held = still[others]
+    clear = np.all(g[:, held] >= gap + 2.0 * MARGIN, axis=1)
+    if not clear.any():
+        return None
+    room = np.min(np.where(held[None], np.inf, g), axis=1, initial=np.inf)
+    room[~clear] = -np.inf
+    return cand[int(np.argmax(room))]
 
 
 def make_legal_shapes(
@@ -120,6 +176,7 @@ def make_legal_shapes(
         angle[still] = fixed  # positions to 1 nm: their pairs are measured again, but
         turns &= ~still  # they do not turn)
     walls = True  # the disc pass is due: at the start, and once the pairs are clean
+    sent_back = np.zeros(len(xy), np.int64)
     for _ in range(MAX_ROUNDS):
         if walls:
             leg = legalize(xy, density, home_cell, domain, extent, core, frozen=frozen)
@@ -129,7 +186,18 @@ def make_legal_shapes(
                 dot_fixes + leg.dot_fixes,
             )
             moved |= np.any(leg.xy != xy, axis=1)
+            sent_back += np.abs(leg.xy - xy).max(axis=1) > 2.0 * RESOLUTION
             xy = leg.xy
+            for k in np.flatnonzero((sent_back >= STUCK) & ~still):
+                ext = float(np.broadcast_to(extent, (len(xy),))[k])
+                at = _relocate(
+                    k, xy, thrown[k], sized, angle, still, field, gap, density, domain, ext
+                )
+                sent_back[k] = 0
+                if at is not None:
+                    xy = xy.copy()
+                    xy[k], moved[k] = at, True
+                    dot_fixes += 1
         if built is None or np.max(np.abs(xy - built)) > 0.5 * skin:
             pr_all, built = _pairs(xy, sized, gap, skin, frozen), xy
         # the field where the dots that moved now stand (the others' angles hold)

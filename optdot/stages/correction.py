@@ -197,6 +197,12 @@ def hard_core(
         if diameters is not None:
             diameters = np.concatenate([diameters, np.broadcast_to(held[1], (len(hxy),))])
     rho = job.density.at(xy0)
+    if frozen is not None:
+        # a held dot of a later tile, not yet made legal, may stand in a zero cell: it has
+        # no fill of its own there (its circle would be infinite); the map's largest
+        # gives it the smallest circle, the least push on the dots around it, and the
+        # guarantee pass settles the pair by the true sizes
+        rho = np.where(frozen & (rho <= 0), float(job.density.grid.max()), rho)
     phantom = None
     if form.phantoms:
         xy0, rho, start, frozen, diameters, phantom = with_phantoms(
