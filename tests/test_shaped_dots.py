@@ -49,6 +49,19 @@ def _job(tmp_path, dots, orientation=None, leds=False, grid=None, **more):
     return path
 
 
+def _check_gradient(term, xy, grad, dots, rel, atol, h=1e-7):
+    """``grad`` (``[n, 2]``, the term's at ``xy``) against central finite differences of
+    ``term`` at the ``dots`` given, both axes."""
+    for k in dots:
+        for ax in (0, 1):
+            up, dn = xy.copy(), xy.copy()
+            up[k, ax] += h
+            dn[k, ax] -= h
+            g = np.zeros_like(xy)
+            fd = (term(up, g) - term(dn, g)) / (2 * h)
+            assert grad[k, ax] == pytest.approx(fd, rel=rel, abs=atol)
+
+
 def _polygons(p, tol=2e-5):
     return [shapely.Polygon(p.dots.outline(k, tol) + p.xy[k]) for k in range(p.n)]
 
@@ -313,15 +326,7 @@ def test_multisphere_penalty_gradient_and_pairs(dots, scaled):
                 pen = np.maximum(f[i] * r[:, None] + f[j] * r[None] + 0.005 - d, 0.0)
                 want += 15.0 * (pen**2).sum()
     assert e > 0 and e == pytest.approx(want, rel=1e-12)
-    h = 1e-7
-    for k in rng.choice(n, 8, replace=False):
-        for ax in (0, 1):
-            up, dn = xy.copy(), xy.copy()
-            up[k, ax] += h
-            dn[k, ax] -= h
-            g = np.zeros((n, 2))
-            fd = (term(up, g) - term(dn, g)) / (2 * h)
-            assert grad[k, ax] == pytest.approx(fd, rel=1e-4, abs=1e-9)
+    _check_gradient(term, xy, grad, rng.choice(n, 8, replace=False), 1e-4, 1e-9)
     ring = shapely.Polygon(shape.kind.outline(np.array(size), 0.0, 1e-6))
     circles = shapely.union_all(
         [shapely.Point(tt, 0).buffer(rr, 256) for tt, rr in zip(t, r, strict=True)]
@@ -483,15 +488,8 @@ def test_exact_gap_penalty_value_and_gradient(dots, scaled):
     for a, b, gg in zip(i[live][apart], j[live][apart], g[apart], strict=True):
         pa, pb = (shapely.Polygon(feet.outline(k, 1e-7) + xy[k]) for k in (a, b))
         assert pa.distance(pb) == pytest.approx(gg, abs=3e-7)
-    h = 1e-7
-    for k in rng.choice(np.flatnonzero(np.abs(grad).sum(axis=1) > 0), 8, replace=False):
-        for ax in (0, 1):
-            up, dn = xy.copy(), xy.copy()
-            up[k, ax] += h
-            dn[k, ax] -= h
-            g = np.zeros((n, 2))
-            fd = (term(up, g) - term(dn, g)) / (2 * h)
-            assert grad[k, ax] == pytest.approx(fd, rel=1e-3, abs=1e-8)
+    pushed = np.flatnonzero(np.abs(grad).sum(axis=1) > 0)
+    _check_gradient(term, xy, grad, rng.choice(pushed, 8, replace=False), 1e-3, 1e-8)
 
 
 def test_scaled_capsules_stay_drawable_and_scaled_fills_are_checked(tmp_path):

@@ -42,6 +42,24 @@ def _tiled_job(tmp_path, dots=ELLIPSE, orientation=None, leds=False):
     return path
 
 
+def _resumed(job, tmp_path, stop_after: int) -> int:
+    """Run ``job`` in tiles of :data:`SIDE` uninterrupted (``full.parquet``), then again
+    stopped after ``stop_after`` finished tiles and resumed (``resumed.parquet``): the
+    two must hold the same bytes. Returns the guarantee passes the resumed run made."""
+    plan = plan_tiles(job, side=SIDE)
+    full, out = tmp_path / "full.parquet", tmp_path / "resumed.parquet"
+    generate_tiled(job, full, plan=plan, executor=InProcess())
+    with pytest.raises(KeyboardInterrupt):
+        generate_tiled(job, out, plan=plan, executor=_Counting(stop_after=stop_after))
+    again = _Counting()
+    generate_tiled(job, out, plan=plan, executor=again)
+    names = sorted(p.name for p in full.iterdir())
+    assert names == sorted(p.name for p in out.iterdir())
+    for name in names:
+        assert (full / name).read_bytes() == (out / name).read_bytes(), name
+    return again.kinds["legal"]
+
+
 def _field_error(p, job) -> float:
     """Largest angle of a dot off the job's field where it stands, degrees (fields that
     follow the position only)."""
@@ -173,19 +191,7 @@ def test_an_interrupted_shaped_tiled_run_resumes_with_the_bytes_of_an_uninterrup
     passes, holding the kept tiles' footprints as written, and writes the bytes of a run
     that was never interrupted."""
     job = load_job(_tiled_job(tmp_path, PRISM, {"random": "true"}))
-    plan = plan_tiles(job, side=SIDE)
-    full = tmp_path / "full.parquet"
-    generate_tiled(job, full, plan=plan, executor=InProcess())
-    out = tmp_path / "resumed.parquet"
-    with pytest.raises(KeyboardInterrupt):
-        generate_tiled(job, out, plan=plan, executor=_Counting(stop_after=2))
-    again = _Counting()
-    generate_tiled(job, out, plan=plan, executor=again)
-    assert again.kinds["legal"] == 4
-    names = sorted(p.name for p in full.iterdir())
-    assert names == sorted(p.name for p in out.iterdir())
-    for name in names:
-        assert (full / name).read_bytes() == (out / name).read_bytes(), name
+    assert _resumed(job, tmp_path, stop_after=2) == 4
 
 
 def test_scaled_shapes_resume_with_the_bytes_of_an_uninterrupted_run(tmp_path):
@@ -197,20 +203,10 @@ def test_scaled_shapes_resume_with_the_bytes_of_an_uninterrupted_run(tmp_path):
     path = _job(tmp_path, dots, {"random": "true"}, grid=grid,
                 domain={"width": 7.5, "height": 5.0})  # fmt: skip
     job = load_job(path)
-    plan = plan_tiles(job, side=SIDE)
-    full = tmp_path / "full.parquet"
-    generate_tiled(job, full, plan=plan, executor=InProcess())
-    p = load_dataset(full)
+    assert _resumed(job, tmp_path, stop_after=3) == 3
+    p = load_dataset(tmp_path / "full.parquet")
     assert len(np.unique(p.dots.size[:, 0])) >= 10
     _check_guarantee_with_shapely(p, job.optimize.gap, job.box)
-    out = tmp_path / "resumed.parquet"
-    with pytest.raises(KeyboardInterrupt):
-        generate_tiled(job, out, plan=plan, executor=_Counting(stop_after=3))
-    again = _Counting()
-    generate_tiled(job, out, plan=plan, executor=again)
-    assert again.kinds["legal"] == 3
-    for name in sorted(q.name for q in full.iterdir()):
-        assert (full / name).read_bytes() == (out / name).read_bytes(), name
 
 
 def test_a_shaped_dataset_holds_the_patterns_footprints(tmp_path):

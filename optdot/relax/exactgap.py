@@ -24,42 +24,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry.shapes import DotShape
-from ..spatial.verlet import VerletList
-
-#: Relative skin of the pair list.
-SKIN = 0.3
+from .footprint_term import FootprintTerm, factors
 
 
-class ExactGapTerm:
+class ExactGapTerm(FootprintTerm):
     """The exact-gap penalty of shaped dots at fixed angles over the pair list of
-    :class:`~optdot.spatial.verlet.VerletList`.
+    :class:`~optdot.spatial.verlet.VerletList` (arguments:
+    :class:`~.footprint_term.FootprintTerm`)."""
 
-    Args:
-        shape: the dots' footprint. angle: ``[n]`` their angles, rad.
-        active: ``[n]`` bool, the dots that have a footprint (not phantoms).
-        gap: smallest edge gap, mm. weight: ``w``. skin: relative skin of the list.
-        scale: ``[n]`` each dot's footprint scaled by this, or None (all of ``shape``).
-    """
-
-    def __init__(
-        self,
-        shape: DotShape,
-        angle: np.ndarray,
-        active: np.ndarray,
-        gap: float,
-        weight: float,
-        skin: float = SKIN,
-        scale: np.ndarray | None = None,
-    ) -> None:
-        f = np.ones(len(angle)) if scale is None else np.asarray(scale, np.float64)
-        self.dots = shape.footprints(
-            np.asarray(angle, np.float64), f if scale is not None else None
-        )
-        self.active = np.asarray(active, bool)
-        self.gap, self.weight = gap, weight
-        self.reach = 2.0 * shape.extent * float(f.max(initial=1.0)) + gap
-        self.verlet = VerletList(np.full(len(angle), 0.5 * self.reach), skin)
+    def setup(self, shape, angle, scale, gap) -> float:
+        self.dots = shape.footprints(angle, scale)
+        return 2.0 * shape.extent * float(factors(len(angle), scale).max(initial=1.0)) + gap
 
     def __call__(self, xy: np.ndarray, grad: np.ndarray) -> float:
         """Add the term's gradient into ``grad`` (``[n, 2]``) at ``xy``; its value, mm²."""

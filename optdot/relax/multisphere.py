@@ -28,7 +28,7 @@ import numba as nb
 import numpy as np
 
 from ..geometry.shapes import DotShape
-from ..spatial.verlet import VerletList
+from .footprint_term import FootprintTerm, factors
 
 #: Circles per footprint: at most this many along the long axis.
 MAX_SPHERES = 9
@@ -38,8 +38,6 @@ MAX_SPHERES = 9
 #: prisms 427 pairs for the guarantee pass (5: 57) and 0.33 of them in close pairs (5:
 #: 0.31, 15: 0.28). Uniform fills of 0.5 (prisms) and 0.54 (ellipses) hold at each.
 MULTISPHERE_WEIGHT = 5.0
-#: Relative skin of the pair list (:class:`~optdot.spatial.verlet.VerletList`).
-SKIN = 0.3
 
 
 def spheres(shape: DotShape) -> tuple[np.ndarray, np.ndarray]:
@@ -66,40 +64,20 @@ def spheres(shape: DotShape) -> tuple[np.ndarray, np.ndarray]:
     return t, np.full(len(t), cover)
 
 
-class MultiSphereTerm:
+class MultiSphereTerm(FootprintTerm):
     """The multi-sphere penalty of shaped dots at fixed angles, over the pair list of
     :class:`~optdot.spatial.verlet.VerletList` (rebuilt only when many dots have moved
-    far; the few that have are searched afresh at each evaluation).
+    far; the few that have are searched afresh at each evaluation); arguments:
+    :class:`~.footprint_term.FootprintTerm`, each dot's circles scaled with it."""
 
-    Args:
-        shape: the dots' footprint. angle: ``[n]`` their angles, rad.
-        active: ``[n]`` bool, the dots that have a footprint (not phantoms).
-        gap: smallest edge gap the circles keep, mm. weight: ``w``.
-        skin: relative skin of the list.
-        scale: ``[n]`` each dot's footprint (its circles) scaled by this, or None: all
-            of ``shape``'s size.
-    """
-
-    def __init__(
-        self,
-        shape: DotShape,
-        angle: np.ndarray,
-        active: np.ndarray,
-        gap: float,
-        weight: float,
-        skin: float = SKIN,
-        scale: np.ndarray | None = None,
-    ) -> None:
+    def setup(self, shape, angle, scale, gap) -> float:
         t, radius = spheres(shape)
-        f = np.ones(len(angle)) if scale is None else np.asarray(scale, np.float64)
+        f = factors(len(angle), scale)
         c, s = np.cos(angle) * f, np.sin(angle) * f
         self.offset = np.stack([c[:, None] * t, s[:, None] * t], axis=2)  # [n, k, 2]
         self.radius = np.ascontiguousarray(f[:, None] * radius)  # [n, k]
-        self.active = np.ascontiguousarray(active, dtype=np.bool_)
-        self.gap, self.weight = gap, weight
         top = float(f.max(initial=1.0))
-        self.reach = 2.0 * float(np.abs(t).max() + radius.max()) * top + gap
-        self.verlet = VerletList(np.full(len(angle), 0.5 * self.reach), skin)
+        return 2.0 * float(np.abs(t).max() + radius.max()) * top + gap
 
     def __call__(self, xy: np.ndarray, grad: np.ndarray) -> float:
         """Add the term's gradient into ``grad`` (``[n, 2]``) at ``xy``; its value, mm²."""
