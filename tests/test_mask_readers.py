@@ -216,7 +216,7 @@ def test_a_top_cell_named_like_a_tile_or_dot_cell_is_refused(tmp_path, tiny_patt
     half = tiny_pattern.xy[:, 0] < np.median(tiny_pattern.xy[:, 0])
     with write_dataset(tmp_path / "d.parquet", pattern_manifest(tiny_pattern)) as w:
         for k, sel in enumerate((half, ~half)):  # two tiles: one cell each
-            w.write_part(k, (k, 0), tiny_pattern.xy[sel], tiny_pattern.diameter[sel])
+            w.write_part(k, (k, 0), tiny_pattern.xy[sel], tiny_pattern.shape.take(sel))
     ds = open_dataset(tmp_path / "d.parquet")
     with pytest.raises(ExportError, match="'T0_0' is used by the top cell and tile"):
         write_gds(ds, tmp_path / "m.gds", ExportOptions(top_cell="T0_0"))
