@@ -22,6 +22,7 @@ angles are held during the relaxation, as there.
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 
 from .footprint_term import FootprintTerm, factors
@@ -34,19 +35,17 @@ class ExactGapTerm(FootprintTerm):
 
     def setup(self, shape, angle, scale, gap) -> float:
         self.dots = shape.footprints(angle, scale)
+        self.half = np.ascontiguousarray(0.5 * self.dots.size[:, :2])  # [n, 2] mm
+        self.code = 1 if shape.kind.name == "ellipse" else 2
         return 2.0 * shape.extent * float(factors(len(angle), scale).max(initial=1.0)) + gap
 
     def __call__(self, xy: np.ndarray, grad: np.ndarray) -> float:
         """Add the term's gradient into ``grad`` (``[n, 2]``) at ``xy``; its value, mm²."""
         p = self.verlet.update(xy)
-        rows = np.repeat(np.arange(len(p.ptr) - 1, dtype=np.int64), np.diff(p.ptr))
-        listed = ~(p.skip[rows] | p.skip[p.nbr])
-        i = np.concatenate([rows[listed], p.ei.astype(np.int64)])
-        j = np.concatenate([p.nbr[listed].astype(np.int64), p.ej.astype(np.int64)])
-        keep = self.active[i] & self.active[j]
-        d = xy[j[keep]] - xy[i[keep]]
-        near = np.einsum("ij,ij->i", d, d) < self.reach * self.reach
-        i, j = i[keep][near], j[keep][near]
+        i, j = _candidates(
+            xy, p.ptr, p.nbr, p.skip, p.ei, p.ej, self.active, self.reach, self.gap,
+            self.half[:, 0], self.half[:, 1], self.dots.angles, self.code,
+        )  # fmt: skip
         if not len(i):
             return 0.0
         g, u = self.dots.separation(xy, i, j)
@@ -57,3 +56,65 @@ class ExactGapTerm(FootprintTerm):
         np.add.at(grad, i, push)
         np.add.at(grad, j, -push)
         return float(self.weight * np.dot(pen, pen))
+
+
+@nb.njit(cache=True, inline="always")
+def _h(c, s, a, b, phi, code):  # pragma: no cover - compiled
+    """Support of an ellipse (``code`` 1: half axes a, b), exact, or of a rounded
+    rectangle's box (2: half sides a, b; at least the rounded one's, so the separation
+    it gives still bounds the gap from below) turned by ``phi``, in the direction
+    ``(c, s)``."""
+    cp, sp = np.cos(phi), np.sin(phi)
+    u, v = c * cp + s * sp, -c * sp + s * cp
+    if code == 1:
+        return np.sqrt(a * a * u * u + b * b * v * v)
+    return a * abs(u) + b * abs(v)
+
+
+@nb.njit(cache=True)
+def _candidates(
+    xy, ptr, nbr, skip, ei, ej, active, reach, gap, a, b, phi, code
+):  # pragma: no cover
+    """``(i [m], j [m])``: the pairs of the list (its rows, then its extra pairs) of two
+    active dots within ``reach`` whose separation along their centres' direction, a lower
+    bound of the gap, is under ``gap``: the only ones the exact search must measure."""
+    n = xy.shape[0]
+    cap = 1024
+    oi = np.empty(cap, np.int64)
+    oj = np.empty(cap, np.int64)
+    m = 0
+    for r in range(n + ei.shape[0]):  # the rows, then each extra pair as a row of one
+        if r < n:
+            lo, hi = ptr[r], ptr[r + 1]
+        else:
+            lo, hi = 0, 1
+        for q in range(lo, hi):
+            if r < n:
+                i, j = r, nbr[q]
+                if skip[i] or skip[j]:
+                    continue
+            else:
+                i, j = ei[r - n], ej[r - n]
+            if not (active[i] and active[j]):
+                continue
+            dx, dy = xy[j, 0] - xy[i, 0], xy[j, 1] - xy[i, 1]
+            dist = np.sqrt(dx * dx + dy * dy)
+            if dist >= reach:
+                continue
+            if dist > 0.0:
+                c, s = dx / dist, dy / dist
+                hi_, hj_ = _h(c, s, a[i], b[i], phi[i], code), _h(c, s, a[j], b[j], phi[j], code)
+                lower = dist - hi_ - hj_
+                if lower >= gap:
+                    continue
+            if m == cap:
+                cap *= 2
+                ni = np.empty(cap, np.int64)
+                nj = np.empty(cap, np.int64)
+                ni[:m] = oi[:m]
+                nj[:m] = oj[:m]
+                oi, oj = ni, nj
+            oi[m] = i
+            oj[m] = j
+            m += 1
+    return oi[:m], oj[:m]
