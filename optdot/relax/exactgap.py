@@ -25,6 +25,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from ..spatial.verlet import append_pair
 from .footprint_term import FootprintTerm, factors
 
 
@@ -79,9 +80,8 @@ def _candidates(
     active dots within ``reach`` whose separation along their centres' direction, a lower
     bound of the gap, is under ``gap``: the only ones the exact search must measure."""
     n = xy.shape[0]
-    cap = 1024
-    oi = np.empty(cap, np.int64)
-    oj = np.empty(cap, np.int64)
+    oi = np.empty(1024, np.int64)
+    oj = np.empty(1024, np.int64)
     m = 0
     for r in range(n + ei.shape[0]):  # the rows, then each extra pair as a row of one
         if r < n:
@@ -107,14 +107,6 @@ def _candidates(
                 lower = dist - hi_ - hj_
                 if lower >= gap:
                     continue
-            if m == cap:
-                cap *= 2
-                ni = np.empty(cap, np.int64)
-                nj = np.empty(cap, np.int64)
-                ni[:m] = oi[:m]
-                nj[:m] = oj[:m]
-                oi, oj = ni, nj
-            oi[m] = i
-            oj[m] = j
+            oi, oj = append_pair(oi, oj, m, i, j)
             m += 1
     return oi[:m], oj[:m]

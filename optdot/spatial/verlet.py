@@ -59,17 +59,24 @@ def _mover_pairs(
                     dx = xi - xy[j, 0]
                     dy = yi - xy[j, 1]
                     if dx * dx + dy * dy < lim * lim:
-                        if m == cap:
-                            cap *= 2
-                            ei2 = np.empty(cap, np.int32)
-                            ej2 = np.empty(cap, np.int32)
-                            ei2[:m] = ei[:m]
-                            ej2[:m] = ej[:m]
-                            ei, ej = ei2, ej2
-                        ei[m] = i
-                        ej[m] = j
+                        ei, ej = append_pair(ei, ej, m, i, j)
                         m += 1
     return ei[:m], ej[:m]
+
+
+@nb.njit(cache=True, inline="always")
+def append_pair(ei, ej, m, i, j):  # pragma: no cover - compiled
+    """``(ei, ej)`` with pair ``(i, j)`` stored at ``m`` (their first ``m`` entries
+    kept), doubled when full: a compiled pair list grown in place."""
+    if m == ei.shape[0]:
+        ei2 = np.empty(2 * m, ei.dtype)
+        ej2 = np.empty(2 * m, ej.dtype)
+        ei2[:m] = ei[:m]
+        ej2[:m] = ej[:m]
+        ei, ej = ei2, ej2
+    ei[m] = i
+    ej[m] = j
+    return ei, ej
 
 
 def mover_pairs(
