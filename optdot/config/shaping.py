@@ -251,9 +251,9 @@ def check_shaped_fill(job, fill: float, where: str, at: str = "") -> None:
 
     shape = job.shape
     if job.sizes is not None:  # the footprint at the size the rule gives this fill
-        d = float(job.sizes.quantise(job.sizes.raw(np.array([fill])))[0])
-        scale = d / shape.equivalent_diameter
-        shape = DotShape(shape.kind, tuple(round(v * scale, 6) for v in shape.size))
+        scale = job.shape_scale(job.sizes.quantise(job.sizes.raw(np.array([fill]))))
+        size = shape.footprints(np.zeros(1), scale).size[0]
+        shape = DotShape(shape.kind, tuple(float(v) for v in size))
     ring = shape.kind.outline(np.asarray(shape.size), 0.0, 1e-4 * shape.extent)
     grown = shapely.Polygon(ring).buffer(0.5 * job.optimize.gap, quad_segs=32).area
     spread = grown / shape.area

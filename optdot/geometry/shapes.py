@@ -676,6 +676,10 @@ class Footprints:
         """``[n]`` bounding radii, mm."""
         return self.kind.extent(self.size)
 
+    def equivalent_diameter(self) -> np.ndarray:
+        """``[n]`` diameters of the discs of the same areas, mm (a disc's own)."""
+        return 2.0 * np.sqrt(self.area() / np.pi)
+
     @classmethod
     def concat(cls, parts: list[Footprints], kind: Kind = CIRCLE) -> Footprints:
         """The footprints of ``parts`` one after the other (all of one kind; ``kind``

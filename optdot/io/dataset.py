@@ -43,8 +43,9 @@ def read_part_file(path: Path, count: int, kind: Kind = CIRCLE) -> tuple[np.ndar
     rows (the columns of :func:`~optdot.io.manifest.columns`).
 
     Raises:
-        PatternFileError: unreadable, another row count, a column missing, or a shaped
-            dot's size or angle not finite.
+        PatternFileError: unreadable, not the kind's columns or not numbers, another
+            row count, or a shaped dot that cannot be drawn
+            (:func:`~optdot.io.footprints.file_footprints`).
     """
     import pyarrow as pa
     import pyarrow.parquet as pq

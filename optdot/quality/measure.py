@@ -181,7 +181,7 @@ def _first_pass(
         if f.luminance is not None:
             f.luminance.add(xy, disc_area(uniform) if area is None else area)
         # coverage counts each dot's area: a shaped dot as the disc of its area
-        dc = d if dots.kind is CIRCLE else 2.0 * np.sqrt(area / np.pi)
+        dc = d if dots.kind is CIRCLE else dots.equivalent_diameter()
         if f.walls is not None:
             f.walls.add(xy, dc)
         if density is not None:

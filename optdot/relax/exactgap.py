@@ -38,6 +38,7 @@ class ExactGapTerm(FootprintTerm):
         self.dots = shape.footprints(angle, scale)
         self.half = np.ascontiguousarray(0.5 * self.dots.size[:, :2])  # [n, 2] mm
         self.code = 1 if shape.kind.name == "ellipse" else 2
+        self.cos, self.sin = np.cos(self.dots.angles), np.sin(self.dots.angles)
         return 2.0 * shape.extent * float(factors(len(angle), scale).max(initial=1.0)) + gap
 
     def __call__(self, xy: np.ndarray, grad: np.ndarray) -> float:
@@ -45,7 +46,7 @@ class ExactGapTerm(FootprintTerm):
         p = self.verlet.update(xy)
         i, j = _candidates(
             xy, p.ptr, p.nbr, p.skip, p.ei, p.ej, self.active, self.reach, self.gap,
-            self.half[:, 0], self.half[:, 1], self.dots.angles, self.code,
+            self.half[:, 0], self.half[:, 1], self.cos, self.sin, self.code,
         )  # fmt: skip
         if not len(i):
             return 0.0
@@ -60,12 +61,11 @@ class ExactGapTerm(FootprintTerm):
 
 
 @nb.njit(cache=True, inline="always")
-def _h(c, s, a, b, phi, code):  # pragma: no cover - compiled
+def _h(c, s, a, b, cp, sp, code):  # pragma: no cover - compiled
     """Support of an ellipse (``code`` 1: half axes a, b), exact, or of a rounded
     rectangle's box (2: half sides a, b; at least the rounded one's, so the separation
-    it gives still bounds the gap from below) turned by ``phi``, in the direction
-    ``(c, s)``."""
-    cp, sp = np.cos(phi), np.sin(phi)
+    it gives still bounds the gap from below) turned by the angle of cosine ``cp`` and
+    sine ``sp``, in the direction ``(c, s)``."""
     u, v = c * cp + s * sp, -c * sp + s * cp
     if code == 1:
         return np.sqrt(a * a * u * u + b * b * v * v)
@@ -74,7 +74,7 @@ def _h(c, s, a, b, phi, code):  # pragma: no cover - compiled
 
 @nb.njit(cache=True)
 def _candidates(
-    xy, ptr, nbr, skip, ei, ej, active, reach, gap, a, b, phi, code
+    xy, ptr, nbr, skip, ei, ej, active, reach, gap, a, b, cp, sp, code
 ):  # pragma: no cover
     """``(i [m], j [m])``: the pairs of the list (its rows, then its extra pairs) of two
     active dots within ``reach`` whose separation along their centres' direction, a lower
@@ -103,7 +103,8 @@ def _candidates(
                 continue
             if dist > 0.0:
                 c, s = dx / dist, dy / dist
-                hi_, hj_ = _h(c, s, a[i], b[i], phi[i], code), _h(c, s, a[j], b[j], phi[j], code)
+                hi_ = _h(c, s, a[i], b[i], cp[i], sp[i], code)
+                hj_ = _h(c, s, a[j], b[j], cp[j], sp[j], code)
                 lower = dist - hi_ - hj_
                 if lower >= gap:
                     continue

@@ -159,7 +159,7 @@ class FinalDots:
             return cls(xy, dots.diameter)
         if job.sizes is None:
             return cls(xy, job.diameter, dots)
-        d = job.sizes.quantise(2.0 * np.sqrt(dots.area() / np.pi))
+        d = job.sizes.quantise(dots.equivalent_diameter())
         return cls(xy, d, dots)
 
     @property
