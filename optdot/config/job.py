@@ -22,6 +22,7 @@ from ..geometry.limits import DIAMETER_RANGE_MM, MAX_EXTENT_MM
 from ..geometry.orientation import Orientation
 from ..geometry.shapes import DotShape
 from ..geometry.sizes import DotSizes, dots_per_cell
+from .backlight import Backlight
 from .grids import validate_grid
 from .light_guide import DesignParams, LightGuide
 from .viewing import DEFAULT_VIEW, Viewing, viewing
@@ -220,6 +221,8 @@ class Job:
         inputs: every file the job reads (job, grid, outline, keep-out files); outputs
             may not overwrite them.
         light_guide: the slab and LEDs ``simulate`` and ``design`` trace, or None.
+        backlight: the stack around the printed face (``[backlight]``: a direct-lit
+            cavity, or a film over the guide), or None for the bare guide.
         design: how ``design`` makes a map (``[design]``).
         viewing_area: ``(x0, y0, x1, y1)`` mm, the part of the panel a viewer sees
             (``[domain] active_area`` or ``bezel``), or None for the whole panel. QA's
@@ -243,6 +246,7 @@ class Job:
     sizes: DotSizes | None = None
     interpolation: str = "nearest"
     light_guide: LightGuide | None = None
+    backlight: Backlight | None = None
     design: DesignParams = field(default_factory=DesignParams)
     viewing_area: tuple[float, float, float, float] | None = None
     shape: DotShape | None = None

@@ -162,7 +162,8 @@ class DesignParams:
     target_file: Path | None = None
 
 
-def _typed(sec: dict[str, Any], keys: dict[str, tuple[type, ...]], label: str, where: str):
+def typed_keys(sec: dict[str, Any], keys: dict[str, tuple[type, ...]], label: str, where: str):
+    """Refuse a key of table ``label`` not in ``keys`` or of a type it does not allow."""
     for key, value in sec.items():
         if key not in keys:
             raise JobError(
@@ -174,7 +175,9 @@ def _typed(sec: dict[str, Any], keys: dict[str, tuple[type, ...]], label: str, w
             raise JobError(f"{where}: {label}.{key} = {value!r} must be {names}")
 
 
-def _number(sec, key, default, lo, hi, where, label, unit="", lo_open=False, hi_open=False):
+def number_in(sec, key, default, lo, hi, where, label, unit="", lo_open=False, hi_open=False):
+    """``sec[key]`` (or ``default``) as a float within ``lo..hi`` (open ends as asked), or
+    a one-line :class:`JobError` naming ``label.key``."""
     v = float(sec.get(key, default))
     ok = math.isfinite(v) and (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
     if not ok:
@@ -192,15 +195,15 @@ def light_guide_from(
         JobError: one line naming the key and the problem.
     """
     lab = "light_guide"
-    _typed(sec, LIGHT_GUIDE_KEYS, lab, where)
+    typed_keys(sec, LIGHT_GUIDE_KEYS, lab, where)
     if "thickness" not in sec:
         raise JobError(f"{where}: missing required key light_guide.thickness (mm)")
-    t = _number(sec, "thickness", 0, 0, 100, where, lab, "in mm, ", lo_open=True)
-    n = _number(sec, "refractive_index", 1.49, 1.0, 4.0, where, lab, "", lo_open=True)
-    a = _number(sec, "absorption", 2e-4, 0, 10, where, lab, "in 1/mm, ")
-    albedo = _number(sec, "dot_albedo", 0.9, 0, 1, where, lab)
-    refl = _number(sec, "reflector", 0.95, 0, 1, where, lab)
-    edge_r = _number(sec, "edge_reflectance", 0.9, 0, 1, where, lab)
+    t = number_in(sec, "thickness", 0, 0, 100, where, lab, "in mm, ", lo_open=True)
+    n = number_in(sec, "refractive_index", 1.49, 1.0, 4.0, where, lab, "", lo_open=True)
+    a = number_in(sec, "absorption", 2e-4, 0, 10, where, lab, "in 1/mm, ")
+    albedo = number_in(sec, "dot_albedo", 0.9, 0, 1, where, lab)
+    refl = number_in(sec, "reflector", 0.95, 0, 1, where, lab)
+    edge_r = number_in(sec, "edge_reflectance", 0.9, 0, 1, where, lab)
     scatter = sec.get("dot_scatter", "lambertian")
     if scatter not in DOT_SCATTER:
         raise JobError(
@@ -253,16 +256,16 @@ def _leds(row: Any, k: int, box, where: str) -> Leds:
     lab = f"light_guide.leds[{k}]"
     if not isinstance(row, dict):
         raise JobError(f"{where}: {lab} must be a table ([[light_guide.leds]])")
-    _typed(row, LED_KEYS, lab, where)
+    typed_keys(row, LED_KEYS, lab, where)
     for key in ("edge", "positions"):
         if key not in row:
             raise JobError(f"{where}: missing required key {lab}.{key}")
     edge = row["edge"]
     if edge not in EDGES:
         raise JobError(f"{where}: {lab}.edge = {edge!r} must be one of {', '.join(EDGES)}")
-    width = _number(row, "width", 3.0, 0, 1000, where, lab, "in mm, ", lo_open=True)
-    power = _number(row, "power", 1.0, 0, 1e9, where, lab, "", lo_open=True)
-    tilt = _number(row, "tilt", 30.0, 0, 90, where, lab, "in degrees, ", hi_open=True)
+    width = number_in(row, "width", 3.0, 0, 1000, where, lab, "in mm, ", lo_open=True)
+    power = number_in(row, "power", 1.0, 0, 1e9, where, lab, "", lo_open=True)
+    tilt = number_in(row, "tilt", 30.0, 0, 90, where, lab, "in degrees, ", hi_open=True)
     pos = row["positions"]
     if not pos or not all(isinstance(p, int | float) and not isinstance(p, bool) for p in pos):
         raise JobError(f"{where}: {lab}.positions = {pos!r} must be a list of numbers (mm)")
@@ -282,7 +285,7 @@ def _leds(row: Any, k: int, box, where: str) -> Leds:
                 "a table [[angle_deg, intensity], ...]"
             )
     else:
-        profile = _profile_table(profile, lab, where)
+        profile = profile_table(profile, lab, where)
     if profile == "collimated" and tilt == 0:
         raise JobError(
             f"{where}: {lab}.tilt = 0 with a collimated profile: the light runs parallel to "
@@ -291,7 +294,9 @@ def _leds(row: Any, k: int, box, where: str) -> Leds:
     return Leds(edge, tuple(float(p) for p in pos), width, power, profile, tilt)
 
 
-def _profile_table(rows: list, lab: str, where: str) -> tuple[tuple[float, float], ...]:
+def profile_table(rows: list, lab: str, where: str) -> tuple[tuple[float, float], ...]:
+    """An LED's angular profile ``[[angle_deg, intensity], ...]`` validated (angles rising
+    within 0..90, intensities >= 0, not all 0)."""
     try:
         table = np.array(rows, dtype=np.float64)
     except (TypeError, ValueError):
@@ -319,8 +324,8 @@ def design_from(sec: dict[str, Any], base: Path, where: str) -> DesignParams:
     """Validate ``[design]`` (see the module doc)."""
     from .grids import load_grid
 
-    _typed(sec, DESIGN_KEYS, "design", where)
-    cell = _number(sec, "cell", 1.0, 0.05, 100, where, "design", "in mm, ")
+    typed_keys(sec, DESIGN_KEYS, "design", where)
+    cell = number_in(sec, "cell", 1.0, 0.05, 100, where, "design", "in mm, ")
     fr = sec.get("fill_range", [0.0, 0.4])
     if not (
         len(fr) == 2
@@ -338,7 +343,7 @@ def design_from(sec: dict[str, Any], base: Path, where: str) -> DesignParams:
     rays = sec.get("rays")
     if rays is not None and not 1000 <= rays <= 10**10:
         raise JobError(f"{where}: design.rays = {rays} must be 1000..1e10")
-    smooth = _number(sec, "smoothing", 1.0, 0, 20, where, "design", "in cells, ")
+    smooth = number_in(sec, "smoothing", 1.0, 0, 20, where, "design", "in cells, ")
     target = None
     if "target" in sec:
         path = base / sec["target"]

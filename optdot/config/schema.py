@@ -20,6 +20,7 @@ from ..geometry.density import INTERPOLATIONS, DensityMap
 from ..geometry.domain import DEFAULT_TOLERANCE, Domain, orient_all
 from ..geometry.outline_io import keep_out_is_wkt, load_outline, parse_keep_out
 from ..geometry.sizes import DEFAULT_STEP, DotSizes
+from .backlight import BACKLIGHT_KEYS, backlight_from, check_leds_inside
 from .grids import load_grid, validate_grid
 from .images import IMAGE_SUFFIXES, check_ranges, load_image
 from .job import Job, OptimizeParams, QAParams
@@ -95,6 +96,7 @@ SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
         "warn_jnd": (int, float),
     },
     "light_guide": LIGHT_GUIDE_KEYS,
+    "backlight": BACKLIGHT_KEYS,
     "design": DESIGN_KEYS,
 }
 _REQUIRED: dict[str, tuple[str, ...]] = {"dots": ()}
@@ -185,13 +187,25 @@ def job_from_dict(
         guide = light_guide_from(sections["light_guide"], (x0, y0, x0 + width, y0 + height), where)
         if domain is not None:
             check_leds_on(guide, domain.slab or domain.geometry, domain.box, where)
+    backlight = None
+    if "backlight" in sections:
+        backlight = backlight_from(
+            sections["backlight"],
+            (x0, y0, x0 + width, y0 + height),
+            guide is not None,
+            base,
+            where,
+        )
+        if domain is not None:
+            check_leds_inside(backlight, domain.slab or domain.geometry, where)
+    optics = "light_guide" in sections or "backlight" in sections
     design = design_from(sections.get("design", {}), base, where)
-    if "density" not in sections and "light_guide" in sections and not need_map:
+    if "density" not in sections and optics and not need_map:
         grid_path, grid = None, np.full((1, 1), 0.5 * sum(design.fill_range))
-    elif "density" not in sections and "light_guide" in sections:
+    elif "density" not in sections and optics:
         raise JobError(
             f"{where}: no [density] map yet; 'optdot design {where} -o map.csv' designs one "
-            "for the light guide and writes a job that uses it"
+            "for the backlight and writes a job that uses it"
         )
     else:
         grid_path, grid = _load_density(sections.get("density", {}), base, where)
@@ -243,12 +257,20 @@ def job_from_dict(
         source=source,
         inputs=tuple(
             p
-            for p in (source, grid_path, size_file, *_outline_files(dom, base), design.target_file)
+            for p in (
+                source,
+                grid_path,
+                size_file,
+                *_outline_files(dom, base),
+                design.target_file,
+                backlight.other_file if backlight is not None else None,
+            )
             if p is not None
         ),
         sizes=sizes,
         interpolation=interpolation,
         light_guide=guide,
+        backlight=backlight,
         design=design,
         viewing_area=area,
         shape=shape,

@@ -46,7 +46,8 @@ from scipy.ndimage import gaussian_filter, zoom
 from ..config.job import Job
 from ..errors import JobError
 from ..geometry.domain import centres_in_box, polygon_cell_fractions
-from .simulate import Coverage, Simulation, simulate
+from .scene import Coverage
+from .simulate import Simulation, simulate
 
 #: Exponent of the multiplicative step.
 GAMMA = 0.8

@@ -32,31 +32,18 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..config.job import Job
-from ..config.light_guide import EDGE_FINISH, LightGuide
 from ..errors import JobError
-from ..geometry.shapes import packed
 from ..pattern import DotSource
 from ..runtime.stop import check_interrupt
-from .trace import FATES, MAX_EVENTS, UNCOUPLED, UNFINISHED, trace
+from .scene import Coverage, coverage_of, has_optics, is_direct, probe, scene_of
+from .trace import FATES, MAX_EVENTS, SHEET_FACE, UNCOUPLED, UNFINISHED, Scene, trace
+
+__all__ = ["Coverage", "Simulation", "coverage_of", "simulate"]
 
 #: Border left out of the figures when the job names no viewing area, mm.
 BORDER_MM = 5.0
 #: Rays per compiled call (outputs 9 bytes per ray).
 BATCH = 1 << 20
-#: Samples of a profile's cumulative distribution over 0..90 degrees.
-PROFILE_SAMPLES = 2049
-
-
-@dataclass(frozen=True)
-class Coverage:
-    """A coverage raster: ``grid [ny, nx]`` (0..1) over cells of ``(dx, dy)`` mm from
-    ``(x0, y0)``."""
-
-    grid: np.ndarray
-    x0: float
-    y0: float
-    dx: float
-    dy: float
 
 
 @dataclass
@@ -173,18 +160,6 @@ class Simulation:
         }
 
 
-def coverage_of(job: Job) -> Coverage:
-    """The job's map as a coverage raster: fill times the share of each cell inside the
-    panel."""
-    d = job.density
-    g = np.array(d.grid, dtype=np.float64)
-    w = job.cell_weights
-    if w is not None:
-        g = g * w
-    dx, dy = d.cell_size
-    return Coverage(np.clip(g, 0, 1), d.x0, d.y0, dx, dy)
-
-
 def simulate(
     job: Job,
     rays: int,
@@ -196,16 +171,17 @@ def simulate(
     border_mm: float | None = None,
     bins: tuple[int, int] | None = None,
     progress: Callable[[int, int], None] | None = None,
+    only_led: int | None = None,
 ) -> Simulation:
-    """Trace ``rays`` rays through the job's light guide.
+    """Trace ``rays`` rays through the job's backlight.
 
     Args:
-        job: a job with a ``[light_guide]``.
+        job: a job with a ``[light_guide]`` or a ``[backlight]``.
         rays: rays to emit (shared among the LEDs by power).
         seed: random seed (>= 0).
         dots: the real pattern to trace (explicit mode); None for the coverage mode.
         coverage: the raster of the coverage mode (default: the job's map).
-        bin_mm: luminance bin size, mm (default: 1/20 of the shorter side, at most 5).
+        bin_mm: luminance bin size, mm (default: :func:`default_bin`).
         spot_mm: 9-point spot diameter, mm (default: 1/6 of the shorter side, at most 10).
         border_mm: excluded from the RMS and min/max, mm inside the measured region's edge
             (the job's viewing area, else the panel's outline; default 0 inside a viewing
@@ -213,10 +189,10 @@ def simulate(
             that leaves no bin is an error.
         bins: ``(nbx, nby)`` luminance bins over the box (instead of ``bin_mm``).
         progress: ``progress(done, total)`` after each batch.
+        only_led: light only this LED of a direct-lit grid (its index), for its halo.
     """
-    guide = job.light_guide
-    if guide is None:
-        raise JobError(f"{job.source or 'job'}: no [light_guide] section to simulate")
+    if not has_optics(job):
+        raise JobError(f"{job.source or 'job'}: no [light_guide] or [backlight] to simulate")
     if not 1 <= rays <= 10**10:
         raise JobError(f"rays = {rays} must be 1..1e10")
     if seed < 0:
@@ -227,26 +203,14 @@ def simulate(
     if border_mm is None:
         border_mm = 0.0 if area is not None else BORDER_MM
     short = min(x1 - x0, y1 - y0)
-    bin_mm = min(5.0, short / 20) if bin_mm is None else float(bin_mm)
+    bin_mm = default_bin(job) if bin_mm is None else float(bin_mm)
     spot_mm = min(10.0, short / 6) if spot_mm is None else float(spot_mm)
     if not 0 < bin_mm <= max(x1 - x0, y1 - y0) or not 0 < spot_mm <= short / 3:
         raise JobError(
             f"bin {bin_mm:g} mm / spot {spot_mm:g} mm: must be > 0 and fit the panel "
             f"({x1 - x0:g} x {y1 - y0:g} mm; spots at most a third of the shorter side)"
         )
-    emit, emit_start, theta, cdf, modes = _emitters(guide, rays, box)
-    walls, normals = _walls(job)
-    phys = _physics(guide)
-    if dots is None:
-        cov = coverage or coverage_of(job)
-        phi = np.ascontiguousarray(cov.grid, dtype=np.float64)
-        g = np.array([cov.x0, cov.y0, cov.dx, cov.dy])
-        grid = (np.zeros(2, np.int64), np.zeros(1), np.zeros(1), np.zeros((1, 6)), np.ones(7))
-        explicit = False
-    else:
-        phi, g = np.zeros((1, 1)), np.ones(4)
-        grid = _dot_grid(dots, box)
-        explicit = True
+    scene = scene_of(job, rays, dots, coverage, only_led)
     if bins is None:
         nbx = max(1, int(round((x1 - x0) / bin_mm)))
         nby = max(1, int(round((y1 - y0) / bin_mm)))
@@ -268,20 +232,17 @@ def simulate(
     spots = _spot_centres(area if area is not None else box)
     spot_counts = np.zeros(9, np.int64)
     r2 = (0.5 * spot_mm) ** 2
-    sources = (emit, emit_start, theta, cdf, modes, walls, normals)
-    dots_seen = (explicit, phi, g, *grid)
-    scene = (*sources, phys, *dots_seen)  # trace()'s arguments after the ray range
-    _check_light_leaves(job, seed, rays, sources, phys, dots_seen)
+    _check_light_leaves(job, seed, rays, scene)
     for first in range(0, rays, BATCH):
         check_interrupt()  # Ctrl-C or SIGTERM: stop at the next batch, nothing written
         count = min(BATCH, rays - first)
-        fate, ex, ey = trace(seed, first, count, *scene)
+        fate, ex, ey = trace(seed, first, count, scene)
         fates += np.bincount(fate, minlength=len(FATES))
         if first == 0 and fates[UNCOUPLED] == count:
             raise JobError(
-                f"{job.source or 'job'}: no light enters the guide: all {count:,} rays of "
-                "the first batch are turned back at the LED edge (a collimated tilt near "
-                "90 degrees meets the edge at grazing incidence)"
+                f"{job.source or 'job'}: no light enters the {_what(job)}: all {count:,} "
+                "rays of the first batch are turned back at the LED edge (a collimated tilt "
+                "near 90 degrees meets the edge at grazing incidence)"
             )
         out = fate == 0
         px, py = ex[out].astype(np.float64), ey[out].astype(np.float64)
@@ -292,7 +253,12 @@ def simulate(
             spot_counts[k] += int(np.count_nonzero((px - sx) ** 2 + (py - sy) ** 2 <= r2))
         if progress is not None:
             progress(first + count, rays)
-    fate_counts = {name: int(v) for name, v in zip(FATES, fates, strict=True)}
+    sheets = bool(np.any(scene.stack.face[:, 0] == SHEET_FACE))
+    fate_counts = {
+        name: int(v)
+        for name, v in zip(FATES, fates, strict=True)
+        if sheets or name != "absorbed_sheets"
+    }
     counts = counts.reshape(nby, nbx)
     return Simulation(
         rays=rays,
@@ -304,7 +270,7 @@ def simulate(
         measured=measured,
         spots=np.column_stack([spots, spot_counts]),
         spot=spot_mm,
-        mode="dots" if explicit else "coverage",
+        mode="dots" if dots is not None else "coverage",
         border=border_mm,
         seed=seed,
         area=area,
@@ -317,9 +283,7 @@ PROBE_RAYS = 1000
 PROBE_EVENTS = 1 << 12
 
 
-def _check_light_leaves(
-    job, seed: int, rays: int, sources: tuple, phys: np.ndarray, dots_seen: tuple
-) -> None:
+def _check_light_leaves(job, seed: int, rays: int, scene: Scene) -> None:
     """Refuse a set-up that keeps its light: a guide with nothing that lets light out
     (no dots, no absorption, mirror edges) traces every ray to :data:`MAX_EVENTS`, days
     for a default run. The first :data:`PROBE_RAYS` rays (the run's own) are traced with
@@ -329,29 +293,38 @@ def _check_light_leaves(
     refused when that is over half (``s`` over 0.958): a guide whose light leaves slowly
     but leaves runs, its few unfinished rays reported.
 
-    Args:
-        sources, phys, dots_seen: :func:`trace`'s arguments before, as and after its
-            physics array (whose last entry, the event limit, the probe lowers).
-
     Raises:
         JobError: light stays in the guide (one line: the share, and what lets it out).
     """
-    probe = np.array(phys, dtype=np.float64)
-    probe[8] = PROBE_EVENTS
     count = min(rays, PROBE_RAYS)
-    fate, _, _ = trace(seed, 0, count, *sources, probe, *dots_seen)
+    fate, _, _ = trace(seed, 0, count, probe(scene, PROBE_EVENTS))
     entered = int(np.count_nonzero(fate != UNCOUPLED))
     inside = int(np.count_nonzero(fate == UNFINISHED))
     share = inside / entered if entered else 0.0
     unfinished = share ** (MAX_EVENTS / PROBE_EVENTS)
     if unfinished > 0.5:
         raise JobError(
-            f"{job.source or 'job'}: light hardly leaves this guide: {inside:,} of the first "
-            f"{entered:,} rays that entered are still inside after {PROBE_EVENTS:,} "
+            f"{job.source or 'job'}: light hardly leaves this {_what(job)}: {inside:,} of the "
+            f"first {entered:,} rays that entered are still inside after {PROBE_EVENTS:,} "
             f"events, so about {unfinished:.0%} of a run's rays would end unfinished at its "
             f"limit of {MAX_EVENTS:,}; give the light a way out (more dots, absorption > 0, "
             "edge_reflectance < 1, a reflector < 1)"
         )
+
+
+def _what(job: Job) -> str:
+    return "backlight" if is_direct(job) else "guide"
+
+
+def default_bin(job: Job) -> float:
+    """The luminance bin, mm: a direct-lit grid's pitch / 10 (its LEDs' pattern resolved),
+    else 1/20 of the panel's shorter side, at most 5 mm."""
+    x0, y0, x1, y1 = job.box
+    short = min(x1 - x0, y1 - y0)
+    pitch = job.backlight.pitch if job.backlight is not None else None
+    if pitch is not None:
+        return min(pitch / 10, short / 20)
+    return min(5.0, short / 20)
 
 
 def _spot_centres(box) -> np.ndarray:
@@ -378,114 +351,3 @@ def _measured(job: Job, nbx: int, nby: int, border: float) -> np.ndarray:
     boxes = shapely.box(gx0.ravel(), gy0.ravel(), gx1.ravel(), gy1.ravel())
     ok = shapely.contains(inner, boxes) if not inner.is_empty else np.zeros(len(boxes), bool)
     return np.asarray(ok).reshape(nby, nbx)
-
-
-def _physics(guide: LightGuide) -> np.ndarray:
-    return np.array(
-        [
-            guide.thickness,
-            guide.refractive_index,
-            guide.absorption,
-            guide.dot_albedo,
-            1.0 if guide.dot_scatter == "extract" else 0.0,
-            guide.reflector,
-            guide.edge_reflectance,
-            float(EDGE_FINISH.index(guide.edge_finish)),
-            float(MAX_EVENTS),
-        ]
-    )
-
-
-def _emitters(guide: LightGuide, rays: int, box):
-    """Emitter table, rays per emitter (largest remainder by power), profile CDFs."""
-    rows, power = [], []
-    theta = np.linspace(0.0, 0.5 * math.pi, PROFILE_SAMPLES)
-    cdfs, modes = [], []
-    for p, leds in enumerate(guide.leds):
-        if leds.profile == "collimated":
-            intensity = np.cos(theta)  # unused: the tilt is the one angle
-            modes.append((1.0, math.radians(leds.tilt)))
-        elif leds.profile == "lambertian":
-            intensity = np.cos(theta)
-            modes.append((0.0, 0.0))
-        else:
-            table = np.array(leds.profile)
-            intensity = np.interp(np.degrees(theta), table[:, 0], table[:, 1], right=0.0)
-            modes.append((0.0, 0.0))
-        pdf = intensity * np.sin(theta)
-        cdf = np.concatenate([[0.0], np.cumsum(0.5 * (pdf[1:] + pdf[:-1]))])
-        cdfs.append(cdf / cdf[-1] if cdf[-1] > 0 else np.linspace(0, 1, len(cdf)))
-        for pos in leds.positions:
-            tx, ty, nx, ny, cx, cy = _edge_frame(leds.edge, pos, box)
-            rows.append((cx, cy, tx, ty, nx, ny, leds.width, p))
-            power.append(leds.power)
-    share = np.array(power) / sum(power) * rays
-    n = np.floor(share).astype(np.int64)
-    rest = rays - int(n.sum())
-    if rest:
-        n[np.argsort(-(share - n), kind="stable")[:rest]] += 1
-    start = np.concatenate([[0], np.cumsum(n)]).astype(np.int64)
-    return np.array(rows, np.float64), start, theta, np.array(cdfs), np.array(modes)
-
-
-def _edge_frame(edge: str, pos: float, box):
-    """Tangent, inward normal and centre of an LED at ``pos`` on ``edge`` of ``box``."""
-    x0, y0, x1, y1 = box
-    if edge == "bottom":
-        return 1.0, 0.0, 0.0, 1.0, pos, y0
-    if edge == "top":
-        return 1.0, 0.0, 0.0, -1.0, pos, y1
-    if edge == "left":
-        return 0.0, 1.0, 1.0, 0.0, x0, pos
-    return 0.0, 1.0, -1.0, 0.0, x1, pos
-
-
-def _walls(job: Job) -> tuple[np.ndarray, np.ndarray]:
-    """The side walls: the panel outline's outer ring as segments, with inward normals.
-    Holes and keep-outs are clear slab without dots (a keep-out touching the edge is no
-    notch in the slab)."""
-    polys = job.domain.slab_polygons()
-    if len(polys) != 1:
-        raise JobError(
-            f"{job.source or 'job'}: the panel is {len(polys)} separate pieces; a light guide "
-            "is one slab"
-        )
-    ring = np.asarray(polys[0].exterior.coords)[:-1]  # counter-clockwise
-    a, b = ring, np.roll(ring, -1, axis=0)
-    e = b - a
-    length = np.hypot(e[:, 0], e[:, 1])
-    keep = length > 0
-    a, b, e, length = a[keep], b[keep], e[keep], length[keep]
-    normals = np.column_stack([-e[:, 1], e[:, 0]]) / length[:, None]  # left = inside
-    return np.column_stack([a, b]), normals
-
-
-def _dot_grid(dots: DotSource, box) -> tuple:
-    """The dots sorted into square cells at least one footprint wide (a point on a dot
-    lies within the largest extent of the dot's cell): ``(start, x, y, foot, grid)``,
-    foot ``[n, 6]`` the footprints as the tracer tests them (kind, size, angle:
-    :func:`optdot.geometry.shapes.packed`)."""
-    xs, ys, es, fs = [], [], [], []
-    for _, xy, footprints in dots.chunks():
-        xs.append(np.asarray(xy[:, 0], np.float64))
-        ys.append(np.asarray(xy[:, 1], np.float64))
-        es.append(footprints.extent())
-        fs.append(packed(footprints.kind, footprints.size, footprints.angle))
-    x = np.concatenate(xs) if xs else np.zeros(0)
-    y = np.concatenate(ys) if ys else np.zeros(0)
-    e = np.concatenate(es) if es else np.zeros(0)
-    foot = np.concatenate(fs) if fs else np.zeros((0, 6))
-    x0, y0, x1, y1 = box
-    area = (x1 - x0) * (y1 - y0)
-    rmax = float(e.max()) if len(e) else 0.0
-    cell = max(2.0 * rmax if len(e) else 1.0, 1.5 * math.sqrt(area / max(len(x), 1)))
-    nx = max(1, int(math.ceil((x1 - x0) / cell)))
-    ny = max(1, int(math.ceil((y1 - y0) / cell)))
-    ix = np.clip(((x - x0) / cell).astype(np.int64), 0, nx - 1)
-    iy = np.clip(((y - y0) / cell).astype(np.int64), 0, ny - 1)
-    key = iy * nx + ix
-    order = np.argsort(key, kind="stable")
-    start = np.zeros(nx * ny + 1, np.int64)
-    np.cumsum(np.bincount(key, minlength=nx * ny), out=start[1:])
-    grid = np.array([x0, y0, cell, cell, nx, ny, rmax], np.float64)
-    return start, x[order], y[order], np.ascontiguousarray(foot[order]), grid

@@ -1,34 +1,59 @@
-"""The Monte Carlo ray tracer of an edge-lit slab (compiled): each ray from an LED to its end.
+"""The Monte Carlo ray tracer of a backlight stack (compiled): each ray from an LED to its end.
 
-A ray is followed event by event through the slab ``0 <= z <= t`` bounded by side walls:
+A backlight is a **scene** (:class:`Scene`): sources, a stack of horizontal layers inside the
+panel's side walls, the faces between them, and the dots printed on one face. The edge-lit
+guide is the scene of one slab whose bottom face carries the dots and has the reflector sheet
+under it; a direct-lit backlight is an air cavity over a reflector carrying LEDs, the printed
+film, and diffuser sheets above (:mod:`optdot.optics.scene` builds both from a job).
 
-- **Birth**: an emitter (one LED) chosen by ray index (rays are shared out in proportion
-  to power before tracing), a point on its face, a direction in air from its profile
-  (inverse-CDF of ``I(theta) sin(theta)``), Fresnel transmission into the edge (rays it
-  reflects are *not coupled* and not counted as injected), Snell refraction inside.
-- **Faces**: between events a ray's horizontal direction is fixed, so the distance to
-  the next wall is found once per leg and the faces are stepped one bounce at a time.
-  Top face: inside the escape cone Fresnel decides (escape = *extracted*, binned at the
-  exit point), outside it total internal reflection. Bottom face: first the dot test (the
-  map's coverage as a probability, or the real dots through a cell grid); a dot reflects
-  with the albedo (Lambertian into the slab, or straight out in ``extract`` mode) or
-  absorbs; between dots the escape cone leads to the reflector sheet, which returns light
-  Lambertian in air, refracted back in (or absorbs it: *lost at the bottom*).
-- **Walls**: total internal reflection outside the escape cone, Fresnel inside it; what
-  leaves the edge meets the cover, which returns ``edge_reflectance`` of it, mirrored
-  (``specular``) or Lambertian refracted back in (``diffuse``); the rest is *lost at the
-  edges*. An ``absorbing`` edge (black paint in optical contact) takes everything.
-- **Bulk absorption**: a free path drawn once per ray from ``exp(-a s)``, spent along the
-  3-D path.
+**Layers** ``0 .. L - 1`` bottom to top, each ``z0 <= z <= z1`` with an index, a bulk
+absorption and what covers its side walls. **Faces** ``0 .. L``: face ``i`` lies under
+layer ``i`` (face ``L`` is the top, where light leaves to the viewer). A ray is followed
+event by event:
+
+- **Birth**: an emitter chosen by ray index (rays are shared out in proportion to power
+  before tracing), a point on its rectangle, a direction in air from its profile
+  (inverse-CDF of ``I(theta) sin(theta)``) about its axis, Fresnel transmission into its
+  layer (rays it reflects are *not coupled* and not counted as injected), Snell
+  refraction. An edge emitter is an LED on a slab's side wall; a face emitter an LED on the
+  reflector, shining up into the cavity.
+- **Layers**: between events a ray's horizontal direction is fixed, so the distance to the
+  next wall is found once per leg and the faces are stepped one at a time.
+- **Faces** (by kind):
+
+  - ``BOTTOM`` (face 0): the reflector sheet under layer 0, in contact (no gap): the dot
+    test if the face is printed, then the layer's escape cone and Fresnel lead to the
+    sheet, which returns ``reflector`` of the light Lambertian in air, refracted back in
+    (or absorbs it: *lost at the bottom*).
+  - ``INTERFACE``: a dielectric face between two layers (Fresnel, total internal
+    reflection, Snell). If printed, the dots sit on the bottom of the layer above it: a dot
+    met from either side reflects ``dot R`` of the light Lambertian back, transmits ``dot
+    T`` Lambertian to the other side, and absorbs the rest (*absorbed in dots*). A hazy
+    face sends what it transmits on in a scattered direction (Lambertian, or tilted by a
+    Gaussian angle).
+  - ``SHEET``: a thin diffuser between two air layers: ``T`` transmitted to the other side
+    (Lambertian or Gaussian spread), ``R`` reflected Lambertian (recycled), the rest
+    *absorbed in sheets*.
+  - the top face (index ``L``, any kind): what crosses it is *extracted*, binned where it
+    leaves.
+- **Walls**: a slab's walls reflect totally outside its escape cone and by Fresnel inside
+  it; what leaves meets the cover, which returns ``edge_reflectance`` of it (``specular``
+  mirrored, ``diffuse`` Lambertian refracted back in) and the rest is *lost at the edges*;
+  an ``absorbing`` edge takes everything. In air the same rule is the frame's.
+- **Bulk absorption**: an optical depth drawn once per ray from ``exp(-tau)``, spent along
+  the 3-D path at each layer's absorption coefficient.
 
 Every ray ends in exactly one fate, so injected = extracted + absorbed + lost holds exactly.
 Each ray draws from its own counter-based generator (SplitMix64 of the seed and the ray's
-index), so the result does not depend on how rays are shared among threads.
+index), so the result does not depend on how rays are shared among threads. The edge-lit
+guide as this scene draws the same numbers in the same order as the single-slab kernel it
+replaced, so it gives the same counts for the same seed.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -36,7 +61,7 @@ import numpy as np
 from ..geometry.shapes import on_packed
 
 #: Fates of a ray (``trace`` output).
-EXTRACTED, BULK, DOT, EDGE, BOTTOM, UNCOUPLED, UNFINISHED = range(7)
+EXTRACTED, BULK, DOT, EDGE, BOTTOM, UNCOUPLED, UNFINISHED, SHEET = range(8)
 FATES = (
     "extracted",
     "absorbed_bulk",
@@ -45,10 +70,100 @@ FATES = (
     "lost_bottom",
     "not_coupled",
     "unfinished",
+    "absorbed_sheets",
 )
 #: Events (reflections, scatterings) after which a ray is given up (``unfinished``;
 #: reported, never silently dropped).
 MAX_EVENTS = 1 << 16
+
+# -- the scene's tables: column indices ------------------------------------------------
+#: Emitter ``[e, 17]``: centre (3), axis (3, unit), tangent (3), second tangent (3), width
+#: along the tangent, span and start along the second tangent (a point is centre +
+#: tangent (u - 1/2) width + second (v span + start)), profile index, layer.
+E_C, E_A, E_T, E_B, E_W, E_SPAN, E_START, E_PROF, E_LAYER = 0, 3, 6, 9, 12, 13, 14, 15, 16
+E_COLS = 17
+#: Layer ``[L, 7]``: z0, z1 (mm), index, absorption (1/mm), wall cover's reflectance, its
+#: finish (0 diffuse, 1 specular, 2 absorbing), the walls' critical cosine (0 when none).
+L_Z0, L_Z1, L_N, L_ABS, L_WALL_R, L_WALL_MODE, L_WALL_COS = range(7)
+L_COLS = 7
+#: Face ``[L + 1, 14]``: kind, printed (0 no, 1 the job's print, 2 the second map), dot
+#: R, dot T, reflector (BOTTOM), dot extract (0/1), haze (0 none, 1 Lambertian, 2
+#: Gaussian), haze sigma (rad), sheet T, sheet R, sheet spread (0 Lambertian, 1 Gaussian),
+#: its sigma (rad), critical cosine going up, going down (0 when there is none).
+(F_KIND, F_PRINT, F_DOT_R, F_DOT_T, F_REFL, F_EXTRACT, F_HAZE, F_HAZE_SIG, F_SHEET_T) = range(9)
+F_SHEET_R, F_SPREAD, F_SPREAD_SIG, F_COS_UP, F_COS_DOWN = range(9, 14)
+F_COLS = 14
+#: Face kinds.
+BOTTOM_FACE, INTERFACE, SHEET_FACE = 0, 1, 2
+
+
+class Sources(NamedTuple):
+    """The emitters and their angular profiles.
+
+    Attributes:
+        emit: ``[e, E_COLS]`` emitters (see ``E_*``), mm.
+        start: ``[e + 1]`` int64 first global ray of each emitter (the last = the total).
+        theta: ``[K]`` angles in air, rad, of the profiles' CDFs.
+        cdf: ``[p, K]`` the CDF of ``I(theta) sin(theta)`` per profile.
+        mode: ``[p, 2]`` (0 table / 1 collimated, the collimated tilt in rad).
+    """
+
+    emit: np.ndarray
+    start: np.ndarray
+    theta: np.ndarray
+    cdf: np.ndarray
+    mode: np.ndarray
+
+
+class Stack(NamedTuple):
+    """Layers, faces and walls (see ``L_*``, ``F_*``).
+
+    Attributes:
+        layer: ``[L, L_COLS]``. face: ``[L + 1, F_COLS]``.
+        walls: ``[m, 4]`` wall segments (ax, ay, bx, by), mm. normals: ``[m, 2]`` inward.
+        max_events: events after which a ray is given up (``unfinished``).
+    """
+
+    layer: np.ndarray
+    face: np.ndarray
+    walls: np.ndarray
+    normals: np.ndarray
+    max_events: int
+
+
+class Print(NamedTuple):
+    """What is printed: on faces marked 1 the job's map (its coverage) or its real dots; on
+    faces marked 2 a second coverage map (the other printed face of a stack).
+
+    Attributes:
+        explicit: trace real dots (True) or the coverage map ``phi``.
+        phi: ``[ny, nx]`` coverage; g: ``[4]`` its x0, y0, dx, dy, mm.
+        start: ``[cells + 1]`` CSR of dots by cell; x, y: ``[n]`` centres, mm; foot:
+            ``[n, 6]`` their footprints (:func:`optdot.geometry.shapes.packed`); cg:
+            ``[7]`` cell grid x0, y0, dx, dy, nx, ny and the largest dot extent (cells
+            at least that wide).
+        phi2, g2: the second coverage map and its grid (as ``phi``, ``g``).
+    """
+
+    explicit: bool
+    phi: np.ndarray
+    g: np.ndarray
+    start: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    foot: np.ndarray
+    cg: np.ndarray
+    phi2: np.ndarray
+    g2: np.ndarray
+
+
+class Scene(NamedTuple):
+    """Everything :func:`trace` reads."""
+
+    sources: Sources
+    stack: Stack
+    print: Print
+
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
@@ -96,6 +211,52 @@ def _lambert_in(state, n):
         return state, False, 0.0, 0.0, 0.0
     sin_g = sin_a / n
     return state, True, math.sqrt(1.0 - sin_g * sin_g), sin_g, 2.0 * math.pi * v
+
+
+@nb.njit(cache=True, inline="always")
+def _lambert(state, up):
+    """A Lambertian unit direction about +z (``up``) or -z: ``(state, dx, dy, dz)``."""
+    state, u = _uniform(state)
+    state, v = _uniform(state)
+    s = math.sqrt(u)
+    dz = math.sqrt(1.0 - u)
+    return (
+        state,
+        s * math.cos(2.0 * math.pi * v),
+        s * math.sin(2.0 * math.pi * v),
+        (dz if up else -dz),
+    )
+
+
+@nb.njit(cache=True)
+def _tilt(state, dx, dy, dz, sigma):
+    """The unit direction turned by a 2-D Gaussian angle of ``sigma`` rad (Rayleigh polar
+    angle, uniform azimuth) and kept on its side of the face: redrawn up to 16 times, else
+    left as it was. ``(state, dx, dy, dz)``."""
+    up = dz > 0
+    # an orthonormal pair perpendicular to d
+    if abs(dz) < 0.9:
+        ax, ay, az = -dy, dx, 0.0
+    else:
+        ax, ay, az = 0.0, -dz, dy
+    a = math.sqrt(ax * ax + ay * ay + az * az)
+    ax, ay, az = ax / a, ay / a, az / a
+    bx, by, bz = dy * az - dz * ay, dz * ax - dx * az, dx * ay - dy * ax
+    for _ in range(16):
+        state, u = _uniform(state)
+        state, v = _uniform(state)
+        alpha = sigma * math.sqrt(-2.0 * math.log(1.0 - u))
+        if alpha >= math.pi:
+            continue
+        beta = 2.0 * math.pi * v
+        ca, sa = math.cos(alpha), math.sin(alpha)
+        cb, sb = math.cos(beta), math.sin(beta)
+        nx = dx * ca + (ax * cb + bx * sb) * sa
+        ny = dy * ca + (ay * cb + by * sb) * sa
+        nz = dz * ca + (az * cb + bz * sb) * sa
+        if (nz > 1e-9) == up and abs(nz) > 1e-9:
+            return state, nx, ny, nz
+    return state, dx, dy, dz
 
 
 @nb.njit(cache=True, inline="always")
@@ -160,72 +321,91 @@ def _on_dot(x, y, explicit, phi, g, start, dx_, dy_, foot, cg, u):
     return False
 
 
+@nb.njit(cache=True, inline="always")
+def _refract(dxn, dyn, dz, n1, n2):
+    """The direction transmitted from index n1 into n2 through a horizontal face (the
+    caller has checked it is not totally reflected): ``(dx, dy, dz)``, dz keeping its
+    sign."""
+    r = n1 / n2
+    dxn *= r
+    dyn *= r
+    c = math.sqrt(max(0.0, 1.0 - dxn * dxn - dyn * dyn))
+    return dxn, dyn, (c if dz > 0 else -c)
+
+
+@nb.njit(cache=True)
+def _scatter_through(state, dxn, dyn, dz, mode, sigma, n_to):
+    """What a hazy face or a sheet does to a direction it transmits (``dz``'s sign: the
+    way it goes): ``mode`` 1 a Lambertian direction in air, refracted into ``n_to``; 2 the
+    direction tilted by a Gaussian angle ``sigma``; 0 unchanged."""
+    if mode == 1:
+        state, a, b, c = _lambert(state, dz > 0)
+        if n_to != 1.0:
+            a /= n_to
+            b /= n_to
+            c = math.copysign(math.sqrt(max(0.0, 1.0 - a * a - b * b)), c)
+        return state, a, b, c
+    if mode == 2:
+        return _tilt(state, dxn, dyn, dz, sigma)
+    return state, dxn, dyn, dz
+
+
 @nb.njit(cache=True, parallel=True)
-def trace(
-    seed,
-    first,
-    count,
-    emit,
-    emit_start,
-    prof_theta,
-    prof_cdf,
-    prof_mode,
-    walls,
-    normals,
-    phys,
-    explicit,
-    phi,
-    g,
-    start,
-    dx_,
-    dy_,
-    foot,
-    cg,
-):  # pragma: no cover - compiled
-    """Trace rays ``first .. first + count - 1``.
+def trace(seed, first, count, scene):  # pragma: no cover - compiled
+    """Trace rays ``first .. first + count - 1`` through ``scene``.
 
     Args:
         seed: run seed (int). first, count: global index of the first ray, number of rays.
-        emit: ``[e, 8]`` emitters: centre x, y; tangent tx, ty; inward normal nx, ny;
-            width, mm; profile index.
-        emit_start: ``[e + 1]`` int64 first global ray of each emitter (the last = total).
-        prof_theta: ``[K]`` angles in air, rad. prof_cdf: ``[p, K]`` their CDFs.
-        prof_mode: ``[p, 2]`` (0 table / 1 collimated, tilt in rad).
-        walls: ``[m, 4]`` segments (ax, ay, bx, by), mm. normals: ``[m, 2]`` inward.
-        phys: ``[9]`` thickness mm, index, absorption 1/mm, dot albedo, extract (0/1),
-            reflector, edge reflectance, edge finish (0 diffuse, 1 specular,
-            2 absorbing), events after which a ray is given up (``unfinished``).
-        explicit: trace real dots (True) or the coverage map ``phi``.
-        phi: ``[ny, nx]`` coverage; g: ``[4]`` its x0, y0, dx, dy, mm.
-        start: ``[cells + 1]`` CSR of dots by cell; dx_, dy_: ``[n]`` centres; foot:
-            ``[n, 6]`` their footprints (:func:`optdot.geometry.shapes.packed`); cg:
-            ``[7]`` cell grid x0, y0, dx, dy, nx, ny and the largest dot extent (cells
-            at least that wide).
+        scene: a :class:`Scene`.
 
     Returns:
         ``(fate [count] int8, x [count] float32, y [count] float32)``: how and where each
         ray ended (where it left the top face, for extracted rays).
     """
+    src, st, pr = scene.sources, scene.stack, scene.print
+    emit, emit_start, prof_theta, prof_cdf, prof_mode = (
+        src.emit,
+        src.start,
+        src.theta,
+        src.cdf,
+        src.mode,
+    )
+    layer, face, walls, normals = st.layer, st.face, st.walls, st.normals
+    # the print's arrays (numba's parallel loop cannot carry a record inside it)
+    explicit, phi, g, phi2, g2 = pr.explicit, pr.phi, pr.g, pr.phi2, pr.g2
+    d_start, d_x, d_y, d_foot, d_cg = pr.start, pr.x, pr.y, pr.foot, pr.cg
+    top = layer.shape[0]  # the top face's index
+    max_events = st.max_events
     fate = np.empty(count, np.int8)
     ex = np.empty(count, np.float32)
     ey = np.empty(count, np.float32)
-    t, n, absorb, albedo = phys[0], phys[1], phys[2], phys[3]
-    extract_mode, refl, edge_r, edge_mode = phys[4] > 0.5, phys[5], phys[6], int(phys[7])
-    max_events = int(phys[8])
-    cos_c = math.sqrt(1.0 - 1.0 / (n * n))  # cosine of the critical angle
     n_emit = emit.shape[0]
     for j in nb.prange(count):
         i = first + j
         state = _mix(np.uint64(seed) * _M1 ^ np.uint64(i) * _M2 + _GOLDEN)
         # -- birth
         k = last_at_most(emit_start, i, n_emit)
+        li = int(emit[k, E_LAYER])
+        z0, z1, n, absorb = layer[li, L_Z0], layer[li, L_Z1], layer[li, L_N], layer[li, L_ABS]
         state, u = _uniform(state)
         state, zz = _uniform(state)
-        off = (u - 0.5) * emit[k, 6]
-        x = emit[k, 0] + emit[k, 2] * off + emit[k, 4] * 1e-9
-        y = emit[k, 1] + emit[k, 3] * off + emit[k, 5] * 1e-9
-        z = t * zz
-        p = int(emit[k, 7])
+        off = (u - 0.5) * emit[k, E_W]
+        off2 = zz * emit[k, E_SPAN] + emit[k, E_START]
+        x = emit[k, E_C] + emit[k, E_T] * off + emit[k, E_B] * off2 + emit[k, E_A] * 1e-9
+        y = (
+            emit[k, E_C + 1]
+            + emit[k, E_T + 1] * off
+            + emit[k, E_B + 1] * off2
+            + emit[k, E_A + 1] * 1e-9
+        )
+        z = (
+            emit[k, E_C + 2]
+            + emit[k, E_T + 2] * off
+            + emit[k, E_B + 2] * off2
+            + emit[k, E_A + 2] * 1e-9
+        )
+        z = min(max(z, z0), z1)
+        p = int(emit[k, E_PROF])
         state, u = _uniform(state)
         state, v = _uniform(state)
         if prof_mode[p, 0] > 0.5:
@@ -247,11 +427,13 @@ def trace(
             continue
         sg = math.sin(theta) / n
         cg_ = math.sqrt(1.0 - sg * sg)
-        dxn = emit[k, 4] * cg_ + emit[k, 2] * sg * math.cos(psi)
-        dyn = emit[k, 5] * cg_ + emit[k, 3] * sg * math.cos(psi)
-        dz = sg * math.sin(psi)
+        cp, sp = math.cos(psi), math.sin(psi)
+        dxn = emit[k, E_A] * cg_ + emit[k, E_T] * sg * cp + emit[k, E_B] * sg * sp
+        dyn = emit[k, E_A + 1] * cg_ + emit[k, E_T + 1] * sg * cp + emit[k, E_B + 1] * sg * sp
+        dz = emit[k, E_A + 2] * cg_ + emit[k, E_T + 2] * sg * cp + emit[k, E_B + 2] * sg * sp
         state, u = _uniform(state)
-        budget = -math.log(1.0 - u) / absorb if absorb > 0 else np.inf
+        tau = -math.log(1.0 - u)  # optical depth the ray will travel
+        budget = tau / absorb if absorb > 0 else np.inf  # in mm, in this layer
         end = UNFINISHED
         new_leg = True
         s_wall = np.inf
@@ -269,9 +451,9 @@ def trace(
                     s_wall, wall = np.inf, -1
                 new_leg = False
             if dz > 0:
-                s_face = (t - z) / dz * h
+                s_face = (z1 - z) / dz * h
             elif dz < 0:
-                s_face = z / (-dz) * h
+                s_face = (z - z0) / (-dz) * h
             else:
                 s_face = np.inf
             at_wall = s_wall <= s_face
@@ -279,7 +461,7 @@ def trace(
             if s == np.inf:
                 end = EDGE  # a ray parallel to the faces that meets no wall: cannot happen
                 break
-            path = s / h if h > 1e-12 else abs((t if dz > 0 else 0.0) - z) / abs(dz)
+            path = s / h if h > 1e-12 else abs((z1 if dz > 0 else z0) - z) / abs(dz)
             if path > budget:
                 f = budget / path
                 x += ux * s * f
@@ -291,16 +473,17 @@ def trace(
             y += uy * s
             s_wall -= s
             if at_wall:
-                z = min(max(z + dz * path, 0.0), t)
+                z = min(max(z + dz * path, z0), z1)
+                edge_mode = int(layer[li, L_WALL_MODE])
                 if edge_mode == 2:  # black, in optical contact: all of it absorbed
                     end = EDGE
                     break
                 nx_, ny_ = normals[wall, 0], normals[wall, 1]
                 c = dxn * nx_ + dyn * ny_  # < 0: towards the wall
                 state, u = _uniform(state)
-                if -c > cos_c and u >= _fresnel(-c, n, 1.0):  # out through the edge
+                if -c > layer[li, L_WALL_COS] and u >= _fresnel(-c, n, 1.0):  # out
                     state, u = _uniform(state)
-                    if u >= edge_r:
+                    if u >= layer[li, L_WALL_R]:
                         end = EDGE
                         break
                     if edge_mode == 0:  # tape in air: back Lambertian, refracted in
@@ -311,7 +494,7 @@ def trace(
                             if ok:
                                 break
                             state, u = _uniform(state)  # back to the tape
-                            if u >= edge_r:
+                            if u >= layer[li, L_WALL_R]:
                                 break
                         if not ok:
                             end = EDGE
@@ -330,54 +513,147 @@ def trace(
                 y += ny_ * 1e-9
                 new_leg = True
                 continue
-            if dz > 0:  # top face
-                z = t
-                if dz > cos_c:
-                    state, u = _uniform(state)
-                    if u >= _fresnel(dz, n, 1.0):
-                        end = EXTRACTED
-                        break
-                dz = -dz
-                continue
-            z = 0.0  # bottom face
-            state, u = _uniform(state)
-            if _on_dot(x, y, explicit, phi, g, start, dx_, dy_, foot, cg, u):
+            # -- a face: fi under the layer (going down) or over it (going up)
+            up = dz > 0
+            fi = li + 1 if up else li
+            z = z1 if up else z0
+            kind = int(face[fi, F_KIND])
+            to = li + 1 if up else li - 1  # the layer on the other side (top: none)
+            n_to = layer[to, L_N] if 0 <= to < top else 1.0
+            cross = False  # the ray goes through to the other side
+            if kind == SHEET_FACE:
                 state, u = _uniform(state)
-                if u >= albedo:
-                    end = DOT
-                    break
-                if extract_mode:
-                    end = EXTRACTED
-                    break
-                state, u = _uniform(state)
-                state, v = _uniform(state)
-                sin_a = math.sqrt(u)
-                dz = math.sqrt(1.0 - u)
-                dxn = sin_a * math.cos(2.0 * math.pi * v)
-                dyn = sin_a * math.sin(2.0 * math.pi * v)
-                new_leg = True
-                continue
-            if -dz > cos_c:
-                state, u = _uniform(state)
-                if u >= _fresnel(-dz, n, 1.0):  # out to the reflector sheet
-                    ok = False
-                    cn = sn = az = 0.0
-                    while True:
-                        state, u = _uniform(state)
-                        if u >= refl:
-                            break
-                        state, ok, cn, sn, az = _lambert_in(state, n)
-                        if ok:
-                            break
-                    if not ok:
-                        end = BOTTOM
-                        break
-                    dz = cn
-                    dxn = sn * math.cos(az)
-                    dyn = sn * math.sin(az)
+                if u < face[fi, F_SHEET_T]:
+                    spread = 1 + int(face[fi, F_SPREAD])
+                    state, dxn, dyn, dz = _scatter_through(
+                        state, dxn, dyn, dz, spread, face[fi, F_SPREAD_SIG], 1.0
+                    )
+                    cross = True
+                elif u < face[fi, F_SHEET_T] + face[fi, F_SHEET_R]:
+                    state, dxn, dyn, dz = _lambert(state, not up)
                     new_leg = True
                     continue
-            dz = -dz
+                else:
+                    end = SHEET
+                    break
+            elif kind == BOTTOM_FACE:  # the reflector sheet under layer 0
+                state, u = _uniform(state)
+                mark = int(face[fi, F_PRINT])
+                if mark > 0 and _on_dot(
+                    x,
+                    y,
+                    explicit and mark == 1,
+                    phi if mark == 1 else phi2,
+                    g if mark == 1 else g2,
+                    d_start,
+                    d_x,
+                    d_y,
+                    d_foot,
+                    d_cg,
+                    u,
+                ):
+                    state, u = _uniform(state)
+                    if u >= face[fi, F_DOT_R]:
+                        end = DOT
+                        break
+                    if face[fi, F_EXTRACT] > 0.5:
+                        end = EXTRACTED
+                        break
+                    state, u = _uniform(state)
+                    state, v = _uniform(state)
+                    sin_a = math.sqrt(u)
+                    dz = math.sqrt(1.0 - u)
+                    dxn = sin_a * math.cos(2.0 * math.pi * v)
+                    dyn = sin_a * math.sin(2.0 * math.pi * v)
+                    new_leg = True
+                    continue
+                if -dz > face[fi, F_COS_DOWN]:
+                    state, u = _uniform(state)
+                    if u >= _fresnel(-dz, n, 1.0):  # out to the reflector sheet
+                        ok = False
+                        cn = sn = az = 0.0
+                        while True:
+                            state, u = _uniform(state)
+                            if u >= face[fi, F_REFL]:
+                                break
+                            state, ok, cn, sn, az = _lambert_in(state, n)
+                            if ok:
+                                break
+                        if not ok:
+                            end = BOTTOM
+                            break
+                        dz = cn
+                        dxn = sn * math.cos(az)
+                        dyn = sn * math.sin(az)
+                        new_leg = True
+                        continue
+                dz = -dz
+                continue
+            else:  # INTERFACE (the top face too)
+                mark = int(face[fi, F_PRINT])
+                if mark > 0:
+                    state, u = _uniform(state)
+                    if _on_dot(
+                        x,
+                        y,
+                        explicit and mark == 1,
+                        phi if mark == 1 else phi2,
+                        g if mark == 1 else g2,
+                        d_start,
+                        d_x,
+                        d_y,
+                        d_foot,
+                        d_cg,
+                        u,
+                    ):
+                        # the dots lie on the bottom of the layer above the face
+                        state, u = _uniform(state)
+                        if u < face[fi, F_DOT_R]:
+                            if face[fi, F_EXTRACT] > 0.5:
+                                end = EXTRACTED
+                                break
+                            state, dxn, dyn, dz = _lambert(state, not up)
+                            new_leg = True
+                            continue
+                        if u >= face[fi, F_DOT_R] + face[fi, F_DOT_T]:
+                            end = DOT
+                            break
+                        state, dxn, dyn, dz = _lambert(state, up)
+                        cross = True
+                if not cross:
+                    cos_c = face[fi, F_COS_UP] if up else face[fi, F_COS_DOWN]
+                    if abs(dz) > cos_c:
+                        state, u = _uniform(state)
+                        if u >= _fresnel(abs(dz), n, n_to):
+                            if fi == top:
+                                end = EXTRACTED
+                                break
+                            dxn, dyn, dz = _refract(dxn, dyn, dz, n, n_to)
+                            if face[fi, F_HAZE] > 0.5:
+                                state, dxn, dyn, dz = _scatter_through(
+                                    state,
+                                    dxn,
+                                    dyn,
+                                    dz,
+                                    int(face[fi, F_HAZE]),
+                                    face[fi, F_HAZE_SIG],
+                                    n_to,
+                                )
+                            cross = True
+                    if not cross:  # total internal or Fresnel reflection
+                        dz = -dz
+                        continue
+            # -- through the face into the layer on the other side
+            if fi == top:
+                end = EXTRACTED
+                break
+            if absorb > 0:
+                tau = budget * absorb
+            li = to
+            z0, z1, n, absorb = layer[li, L_Z0], layer[li, L_Z1], layer[li, L_N], layer[li, L_ABS]
+            budget = tau / absorb if absorb > 0 else np.inf
+            z = z0 if up else z1
+            new_leg = True
         fate[j] = end
         ex[j] = x
         ey[j] = y
