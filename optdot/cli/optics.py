@@ -56,17 +56,28 @@ SEED = click.option(
 @click.option(
     "--png", "png_path", type=click.Path(path_type=Path), help="Luminance map (PNG) to write."
 )
+@click.option(
+    "--halo/--no-halo",
+    default=True,
+    show_default=True,
+    help="Direct-lit: also light the LED nearest the centre alone (a quarter of the rays) "
+    "and measure its halo (widths at 50 % and 10 %, share in its own cell).",
+)
 @click.option("--quiet", "-q", is_flag=True, help="Print the figures only.")
 @user_errors
-def simulate(job_file, pattern, rays, seed, bin_mm, spot_mm, border_mm, json_path, png_path, quiet):
-    """Trace JOB_FILE's light guide and report its luminance: with PATTERN (a pattern
-    file, dataset or mask) through the real dots, without it through the map's coverage.
-    Prints efficiency, where the rest of the light went, 9-point uniformity and the
-    luminance RMS, each with its Monte Carlo noise."""
+def simulate(
+    job_file, pattern, rays, seed, bin_mm, spot_mm, border_mm, json_path, png_path, halo, quiet
+):
+    """Trace JOB_FILE's backlight (its light guide, or the direct-lit stack of
+    [backlight]) and report its luminance: with PATTERN (a pattern file, dataset or mask)
+    through the real dots, without it through the map's coverage. Prints efficiency, where
+    the rest of the light went, 9-point uniformity, the luminance RMS and min/max, each
+    with its Monte Carlo noise, and for a direct-lit stack the halo of one LED."""
     from ..config.schema import load_job
     from ..io.atomic import transaction
     from ..io.outputs import check_outputs
     from ..optics.outputs import luminance_png, simulation_json, write_text
+    from ..optics.scene import is_direct
     from ..optics.simulate import simulate as run
 
     job = load_job(job_file, need_map=pattern is None)  # real dots need no map
@@ -80,6 +91,10 @@ def simulate(job_file, pattern, rays, seed, bin_mm, spot_mm, border_mm, json_pat
         dots = _read_with_job(pattern, job)
     t0 = time.perf_counter()
     sim = run(job, rays, seed, dots=dots, bin_mm=bin_mm, spot_mm=spot_mm, border_mm=border_mm)
+    if halo and is_direct(job):
+        from ..optics.halo import halo as one_led
+
+        sim.extra["halo"] = one_led(job, max(rays // 4, 1000), seed, dots=dots)
     seconds = time.perf_counter() - t0  # printed, not written: same seed, same bytes
     _print_simulation(sim, seconds)
     with transaction():
@@ -96,9 +111,10 @@ def _print_simulation(sim, seconds: float, echo=click.echo) -> None:
         f"traced {s['rays']:,} rays through the {mode} in {seconds:.1f} s "
         f"({s['rays'] / max(seconds, 1e-9):,.0f} rays/s), seed {s['seed']}"
     )
+    into = "the edge" if "halo" not in s else "the stack"
     echo(
         f"efficiency: {s['efficiency']:.2%} ± {s['efficiency_sigma']:.2%} of the injected "
-        f"light leaves the top (coupled into the edge: {s['coupling']:.1%})"
+        f"light leaves the top (coupled into {into}: {s['coupling']:.1%})"
     )
     sh = s["shares"]
     echo(
@@ -123,6 +139,26 @@ def _print_simulation(sim, seconds: float, echo=click.echo) -> None:
             f"outside {region}{less}: brightest bin {s['outside_max']:.3f} of the mean at "
             f"({x:.2f}, {y:.2f}) mm" + (" (hidden by the bezel)" if "viewing_area_mm" in s else "")
         )
+    if "halo" in s:
+        _print_halo(s["halo"], echo)
+
+
+def _print_halo(h: dict, echo) -> None:
+    x, y = h["led_mm"]
+    w50, w10 = (
+        f"{w:.3g} mm" if w is not None else "beyond the panel"
+        for w in (h["width50_mm"], h["width10_mm"])
+    )
+    cells = (
+        f"; {h['share_own_cell']:.1%} of its light in its own pitch cell, "
+        f"{h['share_3x3']:.1%} in the 3 x 3 cells around it"
+        if h["share_own_cell"] is not None
+        else ""
+    )
+    echo(
+        f"halo of the LED at ({x:.2f}, {y:.2f}) mm lit alone: width at 50 % {w50}, "
+        f"at 10 % {w10}{cells}"
+    )
 
 
 @main.command()

@@ -364,11 +364,11 @@ def _walls(job: Job) -> tuple[np.ndarray, np.ndarray]:
 def _print(job: Job, dots: DotSource | None, coverage: Coverage | None) -> Print:
     other = _other_coverage(job)
     phi2 = np.ascontiguousarray(other.grid, dtype=np.float64)
-    g2 = np.array([other.x0, other.y0, other.dx, other.dy])
+    g2 = np.array([other.x0, other.y0, other.dx, other.dy], np.float64)
     if dots is None:
         cov = coverage or coverage_of(job)
         phi = np.ascontiguousarray(cov.grid, dtype=np.float64)
-        g = np.array([cov.x0, cov.y0, cov.dx, cov.dy])
+        g = np.array([cov.x0, cov.y0, cov.dx, cov.dy], np.float64)
         start, x, y = np.zeros(2, np.int64), np.zeros(1), np.zeros(1)
         return Print(False, phi, g, start, x, y, np.zeros((1, 6)), np.ones(7), phi2, g2)
     start, x, y, foot, cg = dot_grid(dots, job.box)

@@ -26,7 +26,7 @@ ray has its own random stream; counts are integers).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -228,37 +228,17 @@ def simulate(
             "or --bin"
         )
     counts = np.zeros(nby * nbx, np.int64)
-    fates = np.zeros(len(FATES), np.int64)
     spots = _spot_centres(area if area is not None else box)
     spot_counts = np.zeros(9, np.int64)
     r2 = (0.5 * spot_mm) ** 2
-    _check_light_leaves(job, seed, rays, scene)
-    for first in range(0, rays, BATCH):
-        check_interrupt()  # Ctrl-C or SIGTERM: stop at the next batch, nothing written
-        count = min(BATCH, rays - first)
-        fate, ex, ey = trace(seed, first, count, scene)
-        fates += np.bincount(fate, minlength=len(FATES))
-        if first == 0 and fates[UNCOUPLED] == count:
-            raise JobError(
-                f"{job.source or 'job'}: no light enters the {_what(job)}: all {count:,} "
-                "rays of the first batch are turned back at the LED edge (a collimated tilt "
-                "near 90 degrees meets the edge at grazing incidence)"
-            )
-        out = fate == 0
-        px, py = ex[out].astype(np.float64), ey[out].astype(np.float64)
+    fates = np.zeros(len(FATES), np.int64)
+    for px, py in traced(job, scene, seed, rays, fates, progress):
         ix = np.clip(((px - x0) / (x1 - x0) * nbx).astype(np.int64), 0, nbx - 1)
         iy = np.clip(((py - y0) / (y1 - y0) * nby).astype(np.int64), 0, nby - 1)
         counts += np.bincount(iy * nbx + ix, minlength=nby * nbx)
         for k, (sx, sy) in enumerate(spots):
             spot_counts[k] += int(np.count_nonzero((px - sx) ** 2 + (py - sy) ** 2 <= r2))
-        if progress is not None:
-            progress(first + count, rays)
-    sheets = bool(np.any(scene.stack.face[:, 0] == SHEET_FACE))
-    fate_counts = {
-        name: int(v)
-        for name, v in zip(FATES, fates, strict=True)
-        if sheets or name != "absorbed_sheets"
-    }
+    fate_counts = fates_of(scene, fates)
     counts = counts.reshape(nby, nbx)
     return Simulation(
         rays=rays,
@@ -275,6 +255,49 @@ def simulate(
         seed=seed,
         area=area,
     )
+
+
+def traced(
+    job: Job,
+    scene: Scene,
+    seed: int,
+    rays: int,
+    fates: np.ndarray,
+    progress: Callable[[int, int], None] | None = None,
+) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """Trace ``rays`` rays of ``scene`` batch by batch (after checking light can leave),
+    adding each batch's fates to ``fates`` (``[len(FATES)]`` int64) and yielding ``(x,
+    y)``: where the batch's extracted rays left the top, mm (float64).
+
+    Raises:
+        JobError: light stays in the stack, or none enters it.
+    """
+    _check_light_leaves(job, seed, rays, scene)
+    for first in range(0, rays, BATCH):
+        check_interrupt()  # Ctrl-C or SIGTERM: stop at the next batch, nothing written
+        count = min(BATCH, rays - first)
+        fate, ex, ey = trace(seed, first, count, scene)
+        fates += np.bincount(fate, minlength=len(FATES))
+        if first == 0 and fates[UNCOUPLED] == count:
+            raise JobError(
+                f"{job.source or 'job'}: no light enters the {_what(job)}: all {count:,} "
+                "rays of the first batch are turned back at the LED edge (a collimated tilt "
+                "near 90 degrees meets the edge at grazing incidence)"
+            )
+        out = fate == 0
+        yield ex[out].astype(np.float64), ey[out].astype(np.float64)
+        if progress is not None:
+            progress(first + count, rays)
+
+
+def fates_of(scene: Scene, fates: np.ndarray) -> dict[str, int]:
+    """Rays per fate by name; ``absorbed_sheets`` only where the stack has sheets."""
+    sheets = bool(np.any(scene.stack.face[:, 0] == SHEET_FACE))
+    return {
+        name: int(v)
+        for name, v in zip(FATES, fates, strict=True)
+        if sheets or name != "absorbed_sheets"
+    }
 
 
 #: Rays of the probe that checks, before the run, that light can leave the guide.

@@ -1,0 +1,345 @@
+"""The tracer's direct-lit stacks (issue 38): a Lambertian point source's irradiance on a
+plane, a partially reflecting film over a diffuse reflector, energy conservation ray by
+ray, real dots against the coverage mode, the halo of one LED, the scattering draws, and
+bad input in one line."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from optdot.config.schema import load_job
+from optdot.optics.halo import halo
+from optdot.optics.scene import Coverage, scene_of
+from optdot.optics.simulate import simulate, traced
+from optdot.optics.trace import FATES, _tilt
+
+from .conftest import cli, one_error
+
+FILM = {"thickness": 0.2, "refractive_index": 1.59}
+#: No dots anywhere.
+BARE = Coverage(np.zeros((1, 1)), 0.0, 0.0, 1e3, 1e3)
+
+
+def _toml(sections: dict) -> str:
+    out = []
+    for name, keys in sections.items():
+        if isinstance(keys, list):
+            for row in keys:
+                out.append(f"[[{name}]]")
+                out += [f"{k} = {_value(v)}" for k, v in row.items()]
+            continue
+        out.append(f"[{name}]")
+        out += [f"{k} = {_value(v)}" for k, v in keys.items()]
+    return "\n".join(out) + "\n"
+
+
+def _value(v) -> str:
+    if isinstance(v, str):
+        return f'"{v}"'
+    return repr(v).replace("(", "[").replace(")", "]")
+
+
+def direct_job(
+    tmp: Path,
+    width: float = 20.0,
+    height: float = 20.0,
+    fill: float | None = 0.3,
+    leds: dict | None = None,
+    cavity: dict | None = None,
+    film: dict | None = None,
+    sheets: list | None = None,
+    top: dict | None = None,
+) -> Path:
+    """A direct-lit job on a ``width x height`` mm panel with a uniform map of ``fill``
+    (None: no map; trace it with a coverage of its own)."""
+    sections: dict = {"domain": {"width": width, "height": height}}
+    if fill is not None:
+        np.savetxt(tmp / "map.csv", np.full((4, 4), fill), delimiter=",")
+        sections["density"] = {"grid": "map.csv"}
+    sections |= {
+        "dots": {"diameter": 0.046},
+        "backlight": {"kind": "direct", **(top or {})},
+        "backlight.leds": leds or {"pitch": [5.0, 5.0], "size": 0.2},
+        "backlight.cavity": cavity or {"gap": 1.5},
+        "backlight.film": film or FILM,
+    }
+    if sheets:
+        sections["backlight.sheets"] = sheets
+    path = tmp / "job.toml"
+    path.write_text(_toml(sections))
+    return path
+
+
+def _point_source(tmp: Path, h: float = 2.0) -> Path:
+    """One 10 µm Lambertian LED at the centre of a 40 mm square, a clear film of index 1
+    (no Fresnel, no refraction) ``h`` above it, nothing sent back: the rays that leave the
+    top are the irradiance of the plane at height ``h``."""
+    return direct_job(
+        tmp,
+        40.0,
+        40.0,
+        None,
+        leds={"positions": [[20.0, 20.0]], "size": 0.01},
+        cavity={"gap": h, "reflector": 0.0},
+        film={"thickness": 1e-6, "refractive_index": 1.0},
+        top={"frame": 0.0},
+    )
+
+
+def test_a_lambertian_point_source_lights_a_plane_as_cos4_over_h2(tmp_path):
+    """E(r) = P cos^4(theta) / (pi h^2): the share of the light landing within r of the
+    foot is sin^2(theta) = r^2 / (r^2 + h^2), ring by ring within 1 % (and 4 sigma)."""
+    h, rays = 2.0, 1_000_000
+    job = load_job(_point_source(tmp_path, h), need_map=False)
+    scene = scene_of(job, rays, coverage=BARE)
+    fates = np.zeros(len(FATES), np.int64)
+    r = np.concatenate([np.hypot(x - 20, y - 20) for x, y in traced(job, scene, 3, rays, fates)])
+    edges = np.array([0.0, 0.5, 1.0, 2.0, 3.0, 5.0, 8.0, 14.0])
+    got = np.histogram(r, edges)[0] / rays
+    cum = edges**2 / (edges**2 + h * h)
+    want = np.diff(cum)
+    sigma = np.sqrt(want * (1 - want) / rays)
+    assert np.all(np.abs(got - want) <= np.maximum(0.01 * want, 4 * sigma)), (got, want)
+    assert fates[FATES.index("unfinished")] == 0
+
+
+def test_the_halo_of_a_bare_lambertian_source_has_the_closed_form_widths(tmp_path):
+    """cos^4 falls to 1/2 at r = h tan(arccos 2^-1/4) and to 1/10 at h tan(arccos
+    10^-1/4): widths 1.287 h and 2.941 h, within 2 %; the profile follows cos^4 within
+    3 % out to where it is 0.2."""
+    h = 2.0
+    job = load_job(_point_source(tmp_path, h), need_map=False)
+    got = halo(job, 1_000_000, seed=1, coverage=BARE)
+    w50 = 2 * h * math.tan(math.acos(0.5**0.25))
+    w10 = 2 * h * math.tan(math.acos(0.1**0.25))
+    assert got["width50_mm"] == pytest.approx(w50, rel=0.02)
+    assert got["width10_mm"] == pytest.approx(w10, rel=0.02)
+    prof = np.array(got["profile"])
+    want = (h * h / (h * h + prof[:, 0] ** 2)) ** 2
+    keep = (want > 0.2) & (prof[:, 0] > 0.3)  # the first rings hold few rays
+    assert np.all(np.abs(prof[keep, 1] - want[keep]) < 0.03), prof[keep][:5]
+    assert got["share_own_cell"] is None  # a list of LEDs has no pitch cell
+
+
+def _fresnel(c: np.ndarray, n1: float, n2: float) -> np.ndarray:
+    """Unpolarised Fresnel reflectance (the average of s and p) at incidence cosine c."""
+    s = n1 / n2 * np.sqrt(1 - c * c)
+    t = np.sqrt(np.maximum(0, 1 - s * s))
+    rs = (n1 * c - n2 * t) / (n1 * c + n2 * t)
+    rp = (n1 * t - n2 * c) / (n1 * t + n2 * c)
+    return np.where(s >= 1, 1.0, 0.5 * (rs * rs + rp * rp))
+
+
+def test_a_clear_film_passes_1_minus_r_over_1_plus_r_of_a_lambertian_source(tmp_path):
+    """A clear slab of index 1.59 over the point source, nothing sent back: a ray at theta
+    in air crosses with (1 - R)^2 (1 + R^2 + R^4 ...) = (1 - R) / (1 + R) (R at the air
+    face; the inside face's R is the same by Snell, and light inside the escape cone
+    never stays trapped), so the share out of the top is that averaged over
+    sin(2 theta) d theta, within 1 % and 4 sigma. Refraction, Fresnel at both faces and
+    multiple reflection in the film are all in it."""
+    path = direct_job(
+        tmp_path,
+        200.0,
+        200.0,
+        None,
+        leds={"positions": [[100.0, 100.0]], "size": 0.01},
+        cavity={"gap": 0.5, "reflector": 0.0},
+        film={"thickness": 0.2, "refractive_index": 1.59},
+        top={"frame": 0.0},
+    )
+    rays = 400_000
+    sim = simulate(load_job(path, need_map=False), rays, seed=8, coverage=BARE)
+    theta = np.linspace(0, math.pi / 2, 200_001)
+    r = _fresnel(np.cos(theta), 1.0, 1.59)
+    f = (1 - r) / (1 + r) * np.sin(2 * theta)
+    want = float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(theta)))
+    got = sim.fates["extracted"] / rays
+    sigma = math.sqrt(want * (1 - want) / rays)
+    assert abs(got - want) <= max(0.01 * want, 4 * sigma), (got, want)
+    assert sim.fates["lost_bottom"] + sim.fates["extracted"] + sim.fates["lost_edges"] == rays
+
+
+def test_a_uniform_film_over_a_diffuse_reflector_transmits_t_over_1_minus_r_rr(tmp_path):
+    """Ink everywhere (fill 1) on a film of index 1, mirror frame: every pass through the
+    ink transmits T, reflects R back to the reflector, which returns Rr; the share out of
+    the top is T / (1 - R Rr), within 1 % and 4 sigma; the rest split as R (1 - Rr) / (1 -
+    R Rr) to the reflector and (1 - R - T) / (1 - R Rr) to the ink."""
+    t, r, rr, rays = 0.3, 0.6, 0.9, 400_000
+    path = direct_job(
+        tmp_path,
+        fill=None,
+        cavity={"gap": 1.0, "reflector": rr},
+        film={
+            "thickness": 0.1,
+            "refractive_index": 1.0,
+            "dot_reflectance": r,
+            "dot_transmittance": t,
+        },
+        top={"frame": 1.0, "frame_finish": "specular"},
+    )
+    job = load_job(path, need_map=False)
+    sim = simulate(job, rays, seed=2, coverage=Coverage(np.ones((1, 1)), 0.0, 0.0, 20.0, 20.0))
+    d = 1 - r * rr
+    for fate, want in (
+        ("extracted", t / d),
+        ("lost_bottom", r * (1 - rr) / d),
+        ("absorbed_dots", (1 - r - t) / d),
+    ):
+        got = sim.fates[fate] / rays
+        sigma = math.sqrt(want * (1 - want) / rays)
+        assert abs(got - want) <= max(0.01 * want, 4 * sigma), (fate, got, want)
+    assert sim.fates["lost_edges"] == 0
+
+
+@pytest.mark.parametrize("haze", ["none", "lambertian", 12.0])
+def test_energy_is_conserved_ray_by_ray_in_a_direct_stack(tmp_path, haze):
+    """Every ray ends in one fate, and every way out of a lossy stack is taken: ink,
+    reflector, a diffuse frame, film absorption and a sheet that absorbs."""
+    path = direct_job(
+        tmp_path,
+        fill=0.4,
+        film={**FILM, "absorption": 0.5, "haze": haze},
+        sheets=[{"transmittance": 0.5, "reflectance": 0.4, "gap": 0.3}],
+        cavity={"gap": 1.5, "reflector": 0.9},
+        top={"frame": 0.8},
+    )
+    sim = simulate(load_job(path), 100_000, seed=4)
+    f = sim.fates
+    assert sum(f.values()) == sim.rays == sim.injected == 100_000
+    assert f["extracted"] == int(sim.counts.sum())
+    assert f["unfinished"] == 0 and f["not_coupled"] == 0
+    for k in (
+        "extracted",
+        "absorbed_bulk",
+        "absorbed_dots",
+        "lost_edges",
+        "lost_bottom",
+        "absorbed_sheets",
+    ):
+        assert f[k] > 0, (k, f)
+    assert abs(sum(sim.summary()["shares"].values()) - 1) < 1e-12
+
+
+def test_a_sheet_that_sends_light_back_lifts_the_recycled_share(tmp_path):
+    """A diffuser that reflects half of what meets it and absorbs nothing: less light
+    leaves, more is lost at the bottom, and what leaves is flatter (the sheet spreads
+    what it sends back across the cavity)."""
+    bare_job = load_job(direct_job(tmp_path, fill=None), need_map=False)
+    bare = simulate(bare_job, 400_000, seed=1, coverage=BARE)
+    (tmp_path / "s").mkdir()
+    sheet = direct_job(tmp_path / "s", fill=None, sheets=[{"transmittance": 0.5}])
+    with_sheet = simulate(load_job(sheet, need_map=False), 400_000, seed=1, coverage=BARE)
+    assert with_sheet.fates["absorbed_sheets"] == 0
+    assert with_sheet.fates["lost_bottom"] > 2 * bare.fates["lost_bottom"]
+    assert with_sheet.efficiency < bare.efficiency
+    assert with_sheet.rms()[0] < 0.8 * bare.rms()[0]
+
+
+def test_real_dots_match_the_coverage_mode_on_a_film(tmp_path):
+    """A 10 x 10 mm film at fill 0.3 over four LEDs: the real pattern's efficiency and
+    shares agree with the coverage mode's within 4 sigma (and 1 % of the light)."""
+    from optdot.pipeline import generate
+
+    path = direct_job(tmp_path, 10.0, 10.0, 0.3, cavity={"gap": 1.0})
+    job = load_job(path)
+    pattern = generate(job)
+    rays = 400_000
+    cov = simulate(job, rays, seed=6)
+    real = simulate(job, rays, seed=6, dots=pattern)
+    assert real.mode == "dots" and cov.mode == "coverage"
+    for k in ("extracted", "absorbed_dots", "lost_bottom", "lost_edges"):
+        a, b = cov.fates[k] / rays, real.fates[k] / rays
+        sigma = math.sqrt(2 * max(a, 1e-6) * (1 - a) / rays)
+        assert abs(a - b) <= max(4 * sigma, 0.01 * a), (k, a, b)
+
+
+def test_the_same_seed_gives_the_same_counts(tmp_path):
+    path = direct_job(tmp_path, sheets=[{"transmittance": 0.6, "spread": 20.0}])
+    job = load_job(path)
+    a = simulate(job, 50_000, seed=9)
+    b = simulate(job, 50_000, seed=9)
+    c = simulate(job, 50_000, seed=10)
+    assert a.fates == b.fates and np.array_equal(a.counts, b.counts)
+    assert not np.array_equal(a.counts, c.counts)
+
+
+def test_a_gaussian_tilt_keeps_its_side_and_spreads_by_sigma():
+    """The haze and sheet draw: a 2-D Gaussian angle of sigma per axis has mean square
+    2 sigma^2 (Rayleigh); it never crosses the face."""
+    sigma = math.radians(5.0)
+    state = np.uint64(12345)
+    ang = []
+    for _ in range(20_000):
+        state, x, y, z = _tilt(np.uint64(state), 0.0, 0.0, 1.0, sigma)
+        assert z > 0
+        assert abs(x * x + y * y + z * z - 1) < 1e-12
+        ang.append(math.acos(min(1.0, z)))
+    ms = float(np.mean(np.square(ang)))
+    assert ms == pytest.approx(2 * sigma * sigma, rel=0.05)
+    state, x, y, z = _tilt(np.uint64(7), 0.6, 0.0, -0.8, math.radians(30.0))
+    assert z < 0
+
+
+@pytest.mark.parametrize(
+    "change, words",
+    [
+        ({"leds": {"positions": [[25.0, 5.0]], "size": 0.2}}, ["backlight.leds", "outside"]),
+        ({"cavity": {"gap": 0.0}}, ["backlight.cavity.gap", "0 < x"]),
+        ({"cavity": {"gap": 1.0, "reflector": 1.2}}, ["backlight.cavity.reflector"]),
+        ({"film": {"thickness": 0.2, "dot_reflectance": -0.1}}, ["dot_reflectance"]),
+        (
+            {"film": {"thickness": 0.2, "dot_reflectance": 0.8, "dot_transmittance": 0.3}},
+            ["dot_transmittance", "<= 1"],
+        ),
+        ({"leds": {"pitch": [0.1, 5.0], "size": 0.2}}, ["pitch", "larger than the LEDs"]),
+        ({"leds": {"positions": [[5.0, 5.0], [5.1, 5.0]], "size": 0.2}}, ["closer than"]),
+        ({"sheets": [{"transmittance": 0.7, "reflectance": 0.5}]}, ["sheets[0]", "<= 1"]),
+        ({"top": {"print": "guide"}}, ["backlight.print"]),
+        ({"film": {"thickness": 0.2, "haze": "fog"}}, ["backlight.film.haze"]),
+    ],
+    ids=[
+        "led-outside",
+        "gap-0",
+        "reflector",
+        "ink-r",
+        "ink-r+t",
+        "pitch",
+        "leds-overlap",
+        "sheet",
+        "print",
+        "haze",
+    ],
+)
+def test_bad_stacks_get_one_line(tmp_path, change, words):
+    kw = dict(change)
+    path = direct_job(tmp_path, **kw)
+    one_error(("simulate", path, "--rays", "1000"), 2, str(path), *words)
+
+
+def test_a_stack_with_nothing_to_print_on_is_refused(tmp_path):
+    path = direct_job(tmp_path)
+    text = path.read_text()
+    start = text.index("[backlight.film]")
+    path.write_text(text[:start])
+    one_error(("simulate", path), 2, "no film to print on")
+    path.write_text(text.replace('kind = "direct"', 'kind = "edge"'))
+    one_error(("simulate", path), 2, "[light_guide]")
+
+
+def test_simulate_prints_the_halo_and_writes_it(tmp_path):
+    path = direct_job(tmp_path, sheets=[{"transmittance": 0.65}])
+    rc, err, out = cli("simulate", path, "--rays", "100000", "--json", tmp_path / "s.json")
+    assert rc == 0, err
+    text = out
+    assert "halo of the LED at" in text and "in its own pitch cell" in text
+    import json
+
+    doc = json.loads((tmp_path / "s.json").read_text())
+    h = doc["halo"]
+    assert 0 < h["width50_mm"] < h["width10_mm"] and 0 < h["share_own_cell"] < h["share_3x3"] <= 1
+    assert doc["bin_mm"] == [0.5, 0.5]  # a tenth of the pitch
+    assert "absorbed_sheets" in doc["counts"]
