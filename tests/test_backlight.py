@@ -343,3 +343,140 @@ def test_simulate_prints_the_halo_and_writes_it(tmp_path):
     assert 0 < h["width50_mm"] < h["width10_mm"] and 0 < h["share_own_cell"] < h["share_3x3"] <= 1
     assert doc["bin_mm"] == [0.5, 0.5]  # a tenth of the pitch
     assert "absorbed_sheets" in doc["counts"]
+
+
+# -- design ----------------------------------------------------------------------------
+
+
+def test_period_classes_group_cells_alike_within_their_pitch_cells_and_towards_the_frame(
+    tmp_path,
+):
+    """On a 4 x 3 grid of 5 mm pitch cells, 1 mm design cells: every cell of an inner pitch
+    cell shares its class with the same cell of every other inner pitch cell, edge pitch
+    cells share along their edge, corners keep their own, and nothing else is merged;
+    :func:`fold` is the weighted mean over a class (brute force)."""
+    from optdot.optics.periodic import fold, period_classes
+
+    job = load_job(direct_job(tmp_path, 20.0, 15.0, leds={"pitch": [5.0, 5.0], "size": 0.2}))
+    c = period_classes(job, 20, 15, 1.0, 1.0)
+    assert c is not None and c.shape == (15, 20)
+    blocks = c.reshape(3, 5, 4, 5).transpose(0, 2, 1, 3)  # [row, col, phase y, phase x]
+    assert np.array_equal(blocks[1, 1], blocks[1, 2])  # inner cells alike (one inner row)
+    assert np.array_equal(blocks[0, 1], blocks[0, 2])  # bottom edge, along it
+    assert not np.array_equal(blocks[0, 0], blocks[0, 1])  # a corner is not an edge
+    assert not np.array_equal(blocks[0, 1], blocks[1, 1])  # an edge is not the inside
+    assert len(np.unique(blocks[1, 1])) == 25  # the phases stay apart
+    assert len(np.unique(c)) == 9 * 25  # 3 x 3 classes of pitch cells, 25 phases each
+    rng = np.random.default_rng(0)
+    v, w = rng.normal(size=(15, 20)), rng.uniform(0.5, 1, size=(15, 20))
+    got = fold(v * w, w, c)
+    for k in np.unique(c)[:40]:
+        m = c == k
+        assert np.allclose(got[m], (v * w)[m].sum() / w[m].sum() * w[m])
+    # a cell that does not divide the pitch: no classes
+    assert period_classes(job, 30, 15, 20 / 30, 1.0) is None
+
+
+def test_designing_a_film_evens_a_direct_lit_backlight_and_puts_ink_over_the_leds(tmp_path):
+    """The film rule on a 20 x 20 mm mini-LED cell array: the designed map's luminance
+    RMS (coverage mode, the panel less 5 mm) is under a quarter of the bare film's, the ink
+    is densest over the LEDs and sparsest between them, its emptiest judged cell is at
+    the range's floor, and the job written with it loads and traces."""
+    from optdot.optics.design import design
+    from optdot.optics.outputs import write_design
+
+    path = direct_job(
+        tmp_path,
+        fill=None,
+        leds={"pitch": [5.0, 5.0], "size": 0.2, "profile": "batwing"},
+        sheets=[{"transmittance": 0.65}],
+    )
+    text = path.read_text() + "[design]\nfill_range = [0.0, 0.7]\nrays = 400000\n"
+    path.write_text(text)
+    job = load_job(path, need_map=False)
+    got = design(job, seed=3, iterations=8)
+    assert got.fill.shape == (40, 40) and got.cell == (0.5, 0.5)
+    # judged in 1 mm bins with 2M rays (noise ~1.5 %, a tenth of the bare film's RMS)
+    bare = simulate(job, 2_000_000, seed=1, coverage=BARE, bins=(20, 20))
+    cov = Coverage(got.fill, 0.0, 0.0, 0.5, 0.5)
+    new = simulate(job, 2_000_000, seed=1, coverage=cov, bins=(20, 20))
+    cells = got.fill.reshape(4, 10, 4, 10).mean(axis=(0, 2))  # by phase in the pitch cell
+    assert cells[4:6, 4:6].min() > 0.4 > 0.1 > cells[0, 0]  # LEDs at the pitch centres
+    assert got.fill[10:30, 10:30].min() < 0.02
+    rms_bare, rms_new = bare.rms()[0], new.rms()[0]
+    assert rms_new < rms_bare / 4, (rms_bare, rms_new)
+    write_design(got, job, tmp_path / "map.csv", None, tmp_path / "map.toml")
+    again = load_job(tmp_path / "map.toml")
+    assert again.backlight == job.backlight
+    assert simulate(again, 20_000, seed=1).fates["extracted"] > 0
+
+
+def test_a_design_that_needs_dense_ink_asks_for_larger_dots(tmp_path):
+    """At a fill the job's 46 µm dots cannot hold with QA's 14 µm gap, the design says
+    which diameters can (the claim (1 + g / D)^2 fill at most 0.70, past that 0.80) and
+    writes them into the job it makes; beyond what 1 mm dots reach it refuses."""
+    from optdot.optics.design import SIZE_CLAIM, sizes_asked
+
+    job = load_job(direct_job(tmp_path))
+    assert sizes_asked(job, 0.2) is None
+    lo, hi = sizes_asked(job, 0.57)
+    assert lo == 0.046 and hi == 0.13  # 14 µm / (sqrt(0.70 / 0.57) - 1) = 129.4 µm, up
+    assert 0.57 * (1 + 0.014 / hi) ** 2 <= SIZE_CLAIM
+    lo, hi = sizes_asked(job, 0.72)  # past 0.70: up to the 0.80 random patterns hold
+    assert hi == 0.259 and 0.72 * (1 + 0.014 / hi) ** 2 <= 0.80
+    with pytest.raises(Exception, match="1 mm reach"):
+        sizes_asked(job, 0.79)
+
+
+def _guide(tmp: Path, film: bool) -> Path:
+    """The lgp sample's guide (30 x 20 mm, three LEDs on its bottom edge, 3 mm under the
+    bezel) printed with ``guide.csv``; with ``film``, a dotted film 50 µm above it and a
+    diffuser, the job printing the film (the guide's map is ``other_map``)."""
+    text = (
+        'name = "g"\n[domain]\nwidth = 30.0\nheight = 20.0\nbezel = 3.0\n'
+        "[dots]\ndiameter = 0.046\n"
+        "[light_guide]\nthickness = 0.4\n[[light_guide.leds]]\n"
+        'edge = "bottom"\npositions = [5.0, 15.0, 25.0]\nwidth = 2.0\n'
+        "[design]\ncell = 1.0\nfill_range = [0.0, 0.4]\nrays = 400000\n"
+    )
+    if film:
+        text += (
+            '[backlight]\nkind = "edge"\nprint = "film"\nother_map = "guide.csv"\n'
+            '[backlight.film]\nthickness = 0.1\ngap = 0.05\nhaze = "lambertian"\n'
+            "[[backlight.sheets]]\ntransmittance = 0.65\n"
+        )
+    else:
+        text += '[density]\ngrid = "guide.csv"\n'
+    (tmp / f"g{int(film)}.toml").write_text(text)
+    return tmp / f"g{int(film)}.toml"
+
+
+def test_a_film_designed_over_a_guide_lifts_its_9_point_uniformity(tmp_path):
+    """The guide's map designed first (six iterations: near its design, as a user's first
+    try), then a film over it, its map designed by the film rule with the guide's dots
+    fixed: the 9-point uniformity rises by more than twice its noise, the luminance's
+    structure (its RMS less the Monte Carlo noise) halves, the LEDs' hot spot under the
+    bezel dims, and the ink goes where the bare guide is brightest. The film's and the
+    guide's dots are both traced."""
+    from optdot.optics.design import design
+
+    np.savetxt(tmp_path / "guide.csv", np.full((2, 2), 0.2), delimiter=",")
+    g = design(load_job(_guide(tmp_path, False)), seed=1, iterations=6)
+    np.savetxt(tmp_path / "guide.csv", g.fill, delimiter=",")
+    guide = simulate(load_job(_guide(tmp_path, False)), 8_000_000, seed=2, bins=(30, 20))
+    job = load_job(_guide(tmp_path, True), need_map=False)
+    got = design(job, seed=5, iterations=8)
+    cov = Coverage(got.fill, 0.0, 0.0, 1.0, 1.0)
+    with_film = simulate(job, 8_000_000, seed=2, coverage=cov, bins=(30, 20))
+    u0, s0 = guide.uniformity9()
+    u1, s1 = with_film.uniformity9()
+    assert u1 > u0 + 2 * math.hypot(s0, s1), (u0, u1, s0, s1)
+
+    def structure(sim):
+        rms, noise, _, _ = sim.rms()
+        return math.sqrt(max(rms * rms - noise * noise, 0.0))
+
+    assert structure(with_film) < 0.5 * structure(guide)
+    assert with_film.hidden_peak()[0] < guide.hidden_peak()[0] - 0.05
+    assert with_film.fates["absorbed_dots"] > guide.fates["absorbed_dots"]  # ink on both
+    assert np.corrcoef(guide.luminance.ravel(), got.fill.ravel())[0, 1] > 0.3

@@ -205,10 +205,10 @@ def design(job_file, output, png_path, job_out, rays, iterations, seed, quiet):
     job_out = job_out or output.with_suffix(".toml")
     job = load_job(job_file, need_map=False)
     check_outputs({"output": output, "png": png_path, "job-out": job_out}, job.inputs)
-    if job.light_guide is None:
+    if job.light_guide is None and job.backlight is None:
         from ..errors import JobError
 
-        raise JobError(f"{job_file}: no [light_guide] section to design for")
+        raise JobError(f"{job_file}: no [light_guide] or [backlight] section to design for")
     if job.shape is not None:  # the map must be one the dots can be dealt at
         from ..config.shaping import check_shaped_fill
 
@@ -237,6 +237,13 @@ def design(job_file, output, png_path, job_out, rays, iterations, seed, quiet):
     with transaction():
         write_design(got, job, output, png_path, job_out)
     last = got.history[-1]
+    if got.sizes is not None:
+        lo_d, hi_d = got.sizes
+        click.echo(
+            f"the map's largest fill {float(got.fill.max()):.3g} needs larger dots than "
+            f"{job.diameter * 1e3:.4g} µm to keep the {job.qa.effective_close_gap * 1e3:.3g} µm "
+            f"close gap: {job_out} sizes them, [dots] diameter = [{lo_d:g}, {hi_d:g}] mm"
+        )
     click.echo(
         f"{output}: designed map, 9-point uniformity {last['uniformity_9point']:.3f}, "
         f"efficiency {last['efficiency']:.1%} (map coverage; check it with "

@@ -40,7 +40,8 @@ dots scatter it. What :mod:`optdot.optics` needs to trace it:
 
 ``[design]`` (``optdot design``)
 
-- ``cell``: size of the designed map's cells, mm (default 1).
+- ``cell``: size of the designed map's cells, mm (default 1; a tenth of the LED pitch
+  for a direct-lit grid).
 - ``fill_range``: ``[min, max]`` fill fraction of the designed map (default
   ``[0, 0.4]``); the map is scaled so its largest fill reaches ``max`` (the most light
   a tool-able pattern extracts). Above ~0.45, 46 µm dots cannot keep 60 µm apart (at
@@ -144,7 +145,8 @@ class DesignParams:
     """``[design]``: see the module doc.
 
     Attributes:
-        cell: designed map cell, mm.
+        cell: designed map cell, mm, or None for the default (a tenth of a direct-lit
+            grid's LED pitch, else 1 mm).
         fill_range: ``(min, max)`` fill fraction.
         target: relative luminance ``[ny, nx]`` (row 0 = bottom) over the panel box, or None.
         iterations: most iterations.
@@ -153,7 +155,7 @@ class DesignParams:
         target_file: the file ``target`` came from.
     """
 
-    cell: float = 1.0
+    cell: float | None = None
     fill_range: tuple[float, float] = (0.0, 0.4)
     target: np.ndarray | None = field(default=None, compare=False)
     iterations: int = 16
@@ -325,7 +327,11 @@ def design_from(sec: dict[str, Any], base: Path, where: str) -> DesignParams:
     from .grids import load_grid
 
     typed_keys(sec, DESIGN_KEYS, "design", where)
-    cell = number_in(sec, "cell", 1.0, 0.05, 100, where, "design", "in mm, ")
+    cell = (
+        number_in(sec, "cell", 1.0, 0.05, 100, where, "design", "in mm, ")
+        if "cell" in sec
+        else None
+    )
     fr = sec.get("fill_range", [0.0, 0.4])
     if not (
         len(fr) == 2

@@ -21,6 +21,7 @@ PATH_KEYS = (
     ("domain", "outline"),
     ("dots", "diameter_grid"),
     ("design", "target"),
+    ("backlight", "other_map"),
 )
 
 
@@ -60,15 +61,20 @@ def job_toml(raw: dict[str, Any]) -> str:
 
 
 def _section(lines: list[str], name: str, sec: dict[str, Any]) -> None:
+    """``[name]`` with its values, then its sub-tables (``[name.k]``) and arrays of tables
+    (``[[name.k]]``)."""
     lines += ["", f"[{name}]"]
-    tables = {}
+    tables: dict[str, list[dict[str, Any]]] = {}
+    subs: dict[str, dict[str, Any]] = {}
     for k, v in sec.items():
         if isinstance(v, list) and v and all(isinstance(t, dict) for t in v):
             tables[k] = v
         elif isinstance(v, dict):
-            tables[k] = [v]
+            subs[k] = v
         else:
             lines.append(f"{_key(k)} = {toml_value(v)}")
+    for k, sub in subs.items():
+        _section(lines, f"{name}.{_key(k)}", sub)
     for k, rows in tables.items():
         for row in rows:
             lines += ["", f"[[{name}.{_key(k)}]]"]

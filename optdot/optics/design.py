@@ -46,7 +46,9 @@ from scipy.ndimage import gaussian_filter, zoom
 from ..config.job import Job
 from ..errors import JobError
 from ..geometry.domain import centres_in_box, polygon_cell_fractions
-from .scene import Coverage
+from ..geometry.limits import MAX_RANDOM_FILL
+from .periodic import fold, period_classes
+from .scene import Coverage, has_optics
 from .simulate import Simulation, simulate
 
 #: Exponent of the multiplicative step.
@@ -59,6 +61,11 @@ LEVEL_START = 1.0 / 8.0
 LEVEL_GROWTH = 1.5
 #: Rays per cell of the last iteration when ``[design] rays`` is not given.
 RAYS_PER_CELL = 400
+#: Highest claim ``fill (1 + gap / D) ** 2`` the sizes a design asks for allow: hard disks
+#: begin to order near 0.70 (Bernard & Krauth 2011); random patterns hold to 0.80.
+SIZE_CLAIM = 0.70
+#: Largest diameter a design asks for, mm.
+MAX_SIZE_ASKED = 1.0
 
 
 @dataclass
@@ -70,18 +77,61 @@ class Designed:
         cell: ``(dx, dy)`` cell size, mm.
         history: one dict per iteration (rays, uniformity, RMS, efficiency).
         last: the last iteration's simulation (of the returned map).
+        sizes: ``(low, high)`` diameters, mm, the map asks for when the job's one dot
+            size cannot keep QA's close gap at its largest fill (:func:`sizes_asked`), or
+            None.
     """
 
     fill: np.ndarray
     cell: tuple[float, float]
     history: list[dict]
     last: Simulation
+    sizes: tuple[float, float] | None = None
+
+
+def sizes_asked(job: Job, fill_max: float) -> tuple[float, float] | None:
+    """The diameter range ``(low, high)`` (mm, high rounded up to 1 µm) whose largest dots
+    keep QA's close gap at ``fill_max``: with a claim ``fill (1 + gap / D) ** 2`` of at
+    most :data:`SIZE_CLAIM` where dots up to :data:`MAX_SIZE_ASKED` reach it, else of at
+    most :data:`~optdot.geometry.limits.MAX_RANDOM_FILL` (random, but nearer order). None
+    when the job's dots already do (or are shaped: their sizes are ``[dots] scale``).
+
+    Raises:
+        JobError: no dot size up to :data:`MAX_SIZE_ASKED` reaches ``fill_max``.
+    """
+    if job.shape is not None:
+        return None
+    gap = job.qa.effective_close_gap
+    top = job.sizes.high if job.sizes is not None else job.diameter
+    if fill_max * (1 + gap / top) ** 2 <= SIZE_CLAIM:
+        return None
+    low = job.sizes.low if job.sizes is not None else job.diameter
+    for claim in (SIZE_CLAIM, MAX_RANDOM_FILL):
+        if fill_max < claim:
+            high = gap / (math.sqrt(claim / fill_max) - 1)
+            if high <= MAX_SIZE_ASKED:
+                return low, max(low, math.ceil(round(high * 1e3, 6)) / 1e3)
+    raise JobError(
+        f"{job.source or 'job'}: the designed map's largest fill {fill_max:.3g} is more than "
+        f"dots up to {MAX_SIZE_ASKED:g} mm reach with a {gap * 1e3:.3g} µm gap; lower "
+        "design.fill_range's top"
+    )
+
+
+def prints_on_film(job: Job) -> bool:
+    """The job's dots are printed on a film (direct-lit, or over the guide): more ink
+    means less light through (the film rule), not more out of the guide."""
+    return job.backlight is not None and job.backlight.print == "film"
 
 
 def design_grid(job: Job) -> tuple[int, int, float, float]:
-    """``(nx, ny, dx, dy)`` of the design grid over the panel box."""
+    """``(nx, ny, dx, dy)`` of the design grid over the panel box: cells of ``[design]
+    cell`` mm, by default a tenth of a direct-lit grid's LED pitch (else 1 mm)."""
     x0, y0, x1, y1 = job.box
     c = job.design.cell
+    if c is None:
+        pitch = job.backlight.pitch if job.backlight is not None else None
+        c = pitch / 10 if pitch is not None else 1.0
     nx = max(1, int(round((x1 - x0) / c)))
     ny = max(1, int(round((y1 - y0) / c)))
     return nx, ny, (x1 - x0) / nx, (y1 - y0) / ny
@@ -105,8 +155,8 @@ def design(
         report: called with each iteration's figures.
         start: ``[ny, nx]`` starting map (default uniform at the middle of the range).
     """
-    if job.light_guide is None:
-        raise JobError(f"{job.source or 'job'}: no [light_guide] section to design for")
+    if not has_optics(job):
+        raise JobError(f"{job.source or 'job'}: no [light_guide] or [backlight] to design for")
     p = job.design
     nx, ny, dx, dy = design_grid(job)
     x0, y0 = job.box[:2]
@@ -117,14 +167,19 @@ def design(
     target = _target(p.target, ny, nx)
     total = rays or p.rays or RAYS_PER_CELL * nx * ny
     n_iter = iterations or p.iterations
-    # the level starts at LEVEL_START of the top (never under the floor) and reaches the
-    # top by the last update however few the iterations: fill_range is honoured
-    level = max(hi * LEVEL_START, lo) if start is None else hi
-    growth = max(LEVEL_GROWTH, (hi / level) ** (1.0 / max(1, n_iter - 2)))
-    phi = np.full((ny, nx), level) if start is None else np.array(start, np.float64)
     live = inside > 0.5
-    phi[~live] = 0.0
     seen = live & _in_area(job, nx, ny, dx, dy)
+    if prints_on_film(job):
+        phi = np.full((ny, nx), lo) if start is None else np.array(start, np.float64)
+        step = _film_step(job, nx, ny, dx, dy, inside, live, target, seen)
+    else:
+        # the level starts at LEVEL_START of the top (never under the floor) and reaches
+        # the top by the last update however few the iterations: fill_range is honoured
+        level = max(hi * LEVEL_START, lo) if start is None else hi
+        growth = max(LEVEL_GROWTH, (hi / level) ** (1.0 / max(1, n_iter - 2)))
+        phi = np.full((ny, nx), level) if start is None else np.array(start, np.float64)
+        step = _guide_step(inside, live, target, p.smoothing, lo, hi, level, growth, seen)
+    phi[~live] = 0.0
     history: list[dict] = []
     sim = None
     for it in range(n_iter):
@@ -138,10 +193,10 @@ def design(
             report(figures)
         if last:
             break
-        level = min(hi, level * growth)
-        phi = _step(phi, sim.counts, inside, live, target, p.smoothing, lo, level, seen)
+        phi = step(phi, sim)
     assert sim is not None
-    return Designed(phi, (dx, dy), history, sim)
+    sizes = sizes_asked(job, float(phi.max())) if prints_on_film(job) else None
+    return Designed(phi, (dx, dy), history, sim, sizes)
 
 
 def _figures(it: int, sim: Simulation) -> dict:
@@ -184,10 +239,79 @@ def _in_area(job: Job, nx: int, ny: int, dx: float, dy: float) -> np.ndarray:
     return seen if seen.any() else np.ones((ny, nx), bool)
 
 
-def _step(phi, counts, inside, live, target, smoothing, lo, level, seen) -> np.ndarray:
-    """One damped multiplicative update of the map, scaled so its largest fill is
-    ``level``; the luminance's level ``s`` is taken over the ``seen`` cells (the viewing
-    area's; see the module doc)."""
+def _guide_step(inside, live, target, smoothing, lo, hi, level, growth, seen):
+    """The guide rule's update ``step(phi, sim) -> phi``: one damped multiplicative
+    step of the map, scaled so its largest fill is the level, which grows by ``growth``
+    per step up to ``hi``; the luminance's level ``s`` is taken over the ``seen`` cells
+    (the viewing area's; see the module doc)."""
+    state = {"level": level}
+
+    def step(phi: np.ndarray, sim: Simulation) -> np.ndarray:
+        state["level"] = level_now = min(hi, state["level"] * growth)
+        logq, w = _log_ratio(sim.counts, inside, live, target, seen)
+        logq = _smoothed(logq, w, smoothing)
+        new = phi * np.exp(GAMMA * logq)
+        new = np.where(live, new, 0.0)
+        peak = float(new[live].max()) if live.any() else 0.0
+        if peak > 0:
+            new *= level_now / peak
+        return np.where(live, np.clip(new, lo, level_now), 0.0)
+
+    return step
+
+
+def film_clear_transmittance(n: float) -> float:
+    """Share of Lambertian light a clear face of index ``n`` lets through from air
+    (1 - the hemispherical mean of the unpolarised Fresnel reflectance)."""
+    theta = np.linspace(0.0, 0.5 * math.pi, 2001)[:-1]
+    c = np.cos(theta)
+    s = np.sin(theta) / n
+    t = np.sqrt(1 - s * s)
+    rs = (c - n * t) / (c + n * t)
+    rp = (t - n * c) / (t + n * c)
+    r = 0.5 * (rs * rs + rp * rp)
+    w = np.sin(2 * theta)
+    return float(1.0 - np.sum(r * w) / np.sum(w))
+
+
+def _film_step(job, nx, ny, dx, dy, inside, live, target, seen):
+    """The film rule's update ``step(phi, sim) -> phi`` (see the module doc): the map's
+    clear share carries light through, so the multiplicative step acts on each cell's
+    relative transmission ``v = 1 - k phi`` (``k = 1 - T_ink / T_clear``), and the map is
+    shifted so its emptiest cell where the luminance is judged (where ``simulate`` judges
+    it: the viewing area, else the panel less its border) holds ``fill_range[0]``: the
+    least ink that makes the luminance follow the target there. Outside, cells that would
+    need less ink than that stay at it: a rim the frame dims cannot be lifted by a film,
+    only matched by darkening all the rest, so the level is set where the viewer looks.
+    Over a direct-lit LED grid each cell's update is averaged over the cells that lie
+    alike within their LEDs' pitch cells
+    (:func:`optdot.optics.periodic.period_classes`)."""
+    bl = job.backlight
+    lo, hi = job.design.fill_range
+    t_clear = film_clear_transmittance(bl.film.refractive_index)
+    k = max(0.05, 1.0 - bl.film.dot_transmittance / t_clear)
+    classes = period_classes(job, nx, ny, dx, dy)
+
+    def step(phi: np.ndarray, sim: Simulation) -> np.ndarray:
+        judged = live & sim.measured  # the viewing area, else the panel less the border
+        judged = judged if judged.any() else seen
+        logq, w = _log_ratio(sim.counts, inside, live, target, judged)
+        if classes is not None:
+            logq = fold(logq, w, classes)
+        logq = _smoothed(logq, w, job.design.smoothing)
+        v = (1.0 - k * phi) * np.exp(GAMMA * logq)
+        top = float(v[judged].max())
+        if top > 0:
+            v *= (1.0 - k * lo) / top
+        return np.where(live, np.clip((1.0 - v) / k, lo, hi), 0.0)
+
+    return step
+
+
+def _log_ratio(counts, inside, live, target, seen) -> tuple[np.ndarray, np.ndarray]:
+    """``(log q, w)``: each cell's log of the target over its luminance (the level the
+    mean over the ``seen`` cells), clipped to ``[1 / MAX_STEP, MAX_STEP]``, and its
+    weight (share inside the panel; 0 for dead cells)."""
     w = np.where(live, inside, 0.0)
     lum = counts / np.maximum(inside, 1e-9)
     ws = np.where(seen, w, 0.0)
@@ -195,14 +319,13 @@ def _step(phi, counts, inside, live, target, smoothing, lo, level, seen) -> np.n
     want = scale * target
     q = np.where(live & (counts > 0), want / np.maximum(lum, 1e-300), MAX_STEP)
     q = np.clip(q, 1.0 / MAX_STEP, MAX_STEP)
-    logq = np.log(q) * w
-    if smoothing > 0:
-        num = gaussian_filter(logq, smoothing, mode="nearest")
-        den = gaussian_filter(w, smoothing, mode="nearest")
-        logq = np.where(den > 1e-9, num / np.maximum(den, 1e-9), 0.0)
-    new = phi * np.exp(GAMMA * logq)
-    new = np.where(live, new, 0.0)
-    peak = float(new[live].max()) if live.any() else 0.0
-    if peak > 0:
-        new *= level / peak
-    return np.where(live, np.clip(new, lo, level), 0.0)
+    return np.log(q) * w, w
+
+
+def _smoothed(logq: np.ndarray, w: np.ndarray, smoothing: float) -> np.ndarray:
+    """``logq`` (weighted by ``w``) through a Gaussian of ``smoothing`` cells."""
+    if smoothing <= 0:
+        return logq
+    num = gaussian_filter(logq, smoothing, mode="nearest")
+    den = gaussian_filter(w, smoothing, mode="nearest")
+    return np.where(den > 1e-9, num / np.maximum(den, 1e-9), 0.0)

@@ -154,8 +154,11 @@ def map_png(path: Path, fill: np.ndarray) -> None:
         img.save(tmp, format="PNG")
 
 
-def designed_job(job: Job, map_path: Path, job_path: Path) -> str:
-    """TOML of ``job`` reading its map from ``map_path``, to be written at ``job_path``."""
+def designed_job(
+    job: Job, map_path: Path, job_path: Path, sizes: tuple[float, float] | None = None
+) -> str:
+    """TOML of ``job`` reading its map from ``map_path``, to be written at ``job_path``;
+    with ``sizes``, its dots' diameters ``[low, high]`` mm (the claim rule sizes them)."""
     if job.source is None:
         raise JobError("the designed job needs the job file it comes from")
     raw = tomllib.loads(Path(job.source).read_text(encoding="utf-8-sig"))
@@ -164,12 +167,14 @@ def designed_job(job: Job, map_path: Path, job_path: Path) -> str:
 
     rel = os.path.relpath(os.path.abspath(map_path), os.path.abspath(job_path.parent))
     raw["density"] = {"grid": rel, "interpolation": "linear"}
+    if sizes is not None:
+        raw["dots"] = {**raw.get("dots", {}), "diameter": [sizes[0], sizes[1]]}
     return job_toml(_ordered(raw))
 
 
 def _ordered(raw: dict) -> dict:
     """Top-level keys first, then the sections in the README's order."""
-    order = ["domain", "density", "dots", "optimize", "qa", "light_guide", "design"]
+    order = ["domain", "density", "dots", "optimize", "qa", "light_guide", "backlight", "design"]
     top = {k: v for k, v in raw.items() if not isinstance(v, dict)}
     secs = {k: raw[k] for k in order if k in raw}
     secs.update({k: v for k, v in raw.items() if isinstance(v, dict) and k not in secs})
@@ -181,7 +186,7 @@ def write_design(
 ) -> None:
     """Write the designed map (CSV, optional PNG) and the job that uses it."""
     text = map_csv(designed.fill)
-    job_text = designed_job(job, out_csv, out_job) if out_job is not None else None
+    job_text = designed_job(job, out_csv, out_job, designed.sizes) if out_job is not None else None
     write_text(out_csv, text)
     if out_png is not None:
         map_png(out_png, designed.fill)
