@@ -293,7 +293,16 @@ def qa(
         gap = job.optimize.gap  # dots of varying size collide below it
         field = job.orientation if job.shape and job.orientation.follows_position else None
         result = run_qa(
-            dots, job.density, params, collision, gap, job.box, outline, job.viewing_area, field
+            dots,
+            job.density,
+            params,
+            collision,
+            gap,
+            job.box,
+            outline,
+            job.viewing_area,
+            field,
+            job.ink,
         )
     source = dots.label or None
     seed = dots.meta.get("seed")

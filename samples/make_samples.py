@@ -168,7 +168,19 @@ def shaped_sample(name: str) -> None:
     )
 
 
+def lgp_film_guide_map() -> None:
+    """The lgp sample's designed map, the guide under the lgp_film sample's film (what
+    ``optdot design samples/lgp/job.toml -o map.csv`` writes, seed 0)."""
+    from optdot.config.schema import load_job
+    from optdot.optics.design import design
+    from optdot.optics.outputs import map_csv
+
+    got = design(load_job(HERE / "lgp" / "job.toml", need_map=False))
+    (HERE / "lgp_film" / "guide_map.csv").write_text(map_csv(got.fill))
+
+
 def main() -> None:
+    lgp_film_guide_map()
     d = HERE / "outline"
     d.mkdir(exist_ok=True)
     outline_sample(d)

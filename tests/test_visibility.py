@@ -104,6 +104,39 @@ def test_a_grating_of_modulation_m_reads_m_times_s(period_mm):
     assert metrics["max_jnd"] == pytest.approx(expected, rel=0.15)
 
 
+@pytest.mark.parametrize("fill", [0.1, 0.6])
+def test_ink_on_a_film_reads_a_coverage_grating_through_its_transmission(fill):
+    """On a printed film the luminance goes as 1 - k phi: a coverage grating phi (1 + m
+    sin) reads as a luminance grating of -m k phi / (1 - k phi), darker where the ink is
+    denser, and a zero-fill region is clear film, not dark. At fill 0.1 that is a tenth
+    of what a guide's dots read (a relative coverage error); at 0.6 more than it."""
+    m, k, p = 0.004, 0.89, 5.0
+    view = viewing("notebook", psf=0.3)
+    density = DensityMap(np.full((10, 30), fill), 60.0, 20.0)
+    g = LuminanceGrid.over(density, view)
+    x = g.x0 + (np.arange(g.nx) + 0.5) * g.cw
+    g.sums[:] = fill * (1 + m * np.sin(2 * np.pi * x / p))[None, :] * g.cw * g.ch
+    guide, guide_img = visibility(g, density, None, view)
+    film, film_img = visibility(g, density, None, view, ink=k)
+    ratio = k * fill / (1 - k * fill)
+    mid = slice(g.nx // 3, 2 * g.nx // 3)
+    a = guide_img["jnd"][0][guide_img["jnd"][0].shape[0] // 2, mid]
+    b = film_img["jnd"][0][film_img["jnd"][0].shape[0] // 2, mid]
+    assert np.abs(b).max() == pytest.approx(ratio * np.abs(a).max(), rel=0.03)
+    assert np.corrcoef(a, b)[0, 1] < -0.99  # more ink, less light
+    assert film["relative_luminance_rms"] == pytest.approx(
+        ratio * guide["relative_luminance_rms"], rel=0.03
+    )
+    # a bare strip of film (fill 0) is lit: no contrast at its border
+    grid = np.full((10, 30), fill)
+    grid[:, 12:18] = 0.0
+    strip = DensityMap(grid, 60.0, 20.0)
+    g2 = LuminanceGrid.over(strip, view)
+    g2.sums[:] = strip.deposited(g2.x0, g2.y0, g2.cw, g2.ch, g2.nx, g2.ny) * g2.cw * g2.ch
+    got, _ = visibility(g2, strip, None, view, ink=k)
+    assert got["max_jnd"] < 0.05
+
+
 def test_deposit_keeps_every_dots_area():
     view = viewing("notebook")
     density = DensityMap(np.full((3, 4), 0.2), 4.0, 3.0)

@@ -189,11 +189,34 @@ class Backlight:
     other_file: Path | None = None
 
     @property
+    def ink_contrast(self) -> float:
+        """``k`` of the film's relative transmission ``1 - k phi`` at fill ``phi``: ``1 -
+        T_ink / T_clear`` (the ink's diffuse transmittance over the clear face's share of
+        Lambertian light), at least 0.05. The film rule of ``design`` steps on it, and QA
+        reads a coverage error through it."""
+        t_clear = clear_transmittance(self.film.refractive_index)
+        return max(0.05, 1.0 - self.film.dot_transmittance / t_clear)
+
+    @property
     def pitch(self) -> float | None:
         """The smaller LED pitch of a direct-lit grid, mm (None for a list or edge-lit)."""
         if self.leds is None or self.leds.pitch is None:
             return None
         return min(self.leds.pitch)
+
+
+def clear_transmittance(n: float) -> float:
+    """Share of Lambertian light a clear face of index ``n`` lets through from air (1 -
+    the hemispherical mean of the unpolarised Fresnel reflectance)."""
+    theta = np.linspace(0.0, 0.5 * math.pi, 2001)[:-1]
+    c = np.cos(theta)
+    s = np.sin(theta) / n
+    t = np.sqrt(1 - s * s)
+    rs = (c - n * t) / (c + n * t)
+    rp = (t - n * c) / (t + n * c)
+    r = 0.5 * (rs * rs + rp * rp)
+    w = np.sin(2 * theta)
+    return float(1.0 - np.sum(r * w) / np.sum(w))
 
 
 def backlight_from(

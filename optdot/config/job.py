@@ -252,6 +252,14 @@ class Job:
     shape: DotShape | None = None
     orientation: Orientation = field(default_factory=Orientation)
 
+    @property
+    def ink(self) -> float | None:
+        """The printed film's ink contrast ``k`` (its luminance goes as ``1 - k phi``:
+        more ink, less light), or None when the dots extract light from a guide (luminance
+        as the fill)."""
+        bl = self.backlight
+        return bl.ink_contrast if bl is not None and bl.print == "film" else None
+
     def __post_init__(self) -> None:
         where = str(self.source) if self.source else "job"
         if self.domain is None:

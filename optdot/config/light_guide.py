@@ -43,9 +43,11 @@ dots scatter it. What :mod:`optdot.optics` needs to trace it:
 - ``cell``: size of the designed map's cells, mm (default 1; a tenth of the LED pitch
   for a direct-lit grid).
 - ``fill_range``: ``[min, max]`` fill fraction of the designed map (default
-  ``[0, 0.4]``); the map is scaled so its largest fill reaches ``max`` (the most light
-  a tool-able pattern extracts). Above ~0.45, 46 µm dots cannot keep 60 µm apart (at
-  0.45 2 % of the dots are in closer pairs, at 0.5 nearly all).
+  ``[0, 0.4]``; ``[0, 0.7]`` on a film, see :mod:`optdot.config.backlight`); a guide's
+  map is scaled so its largest fill reaches ``max`` (the most light a tool-able pattern
+  extracts), a film's so its emptiest judged cell holds ``min``. Above ~0.45, 46 µm dots
+  cannot keep 60 µm apart (at 0.45 2 % of the dots are in closer pairs, at 0.5 nearly
+  all): a film's design then asks for larger dots.
 - ``target``: optional CSV grid of relative luminance to follow (row 0 = bottom), any
   resolution over the panel box; default uniform.
 - ``iterations``: most iterations (default 16).
@@ -322,8 +324,15 @@ def profile_table(rows: list, lab: str, where: str) -> tuple[tuple[float, float]
     return tuple((float(a), float(i)) for a, i in table)
 
 
-def design_from(sec: dict[str, Any], base: Path, where: str) -> DesignParams:
-    """Validate ``[design]`` (see the module doc)."""
+#: The default ``[design] fill_range`` of a map printed on a film: ink over the LEDs of a
+#: direct-lit backlight blocks most of their light (dots of the sizes a design asks for
+#: keep QA's gap to a fill of 0.70).
+FILM_FILL_RANGE = (0.0, 0.7)
+
+
+def design_from(sec: dict[str, Any], base: Path, where: str, film: bool = False) -> DesignParams:
+    """Validate ``[design]`` (see the module doc); ``film``: the map is printed on a film
+    (its default fill range is :data:`FILM_FILL_RANGE`)."""
     from .grids import load_grid
 
     typed_keys(sec, DESIGN_KEYS, "design", where)
@@ -332,7 +341,7 @@ def design_from(sec: dict[str, Any], base: Path, where: str) -> DesignParams:
         if "cell" in sec
         else None
     )
-    fr = sec.get("fill_range", [0.0, 0.4])
+    fr = sec.get("fill_range", list(FILM_FILL_RANGE) if film else [0.0, 0.4])
     if not (
         len(fr) == 2
         and all(isinstance(v, int | float) and not isinstance(v, bool) for v in fr)

@@ -199,7 +199,8 @@ def job_from_dict(
         if domain is not None:
             check_leds_inside(backlight, domain.slab or domain.geometry, where)
     optics = "light_guide" in sections or "backlight" in sections
-    design = design_from(sections.get("design", {}), base, where)
+    film = backlight is not None and backlight.print == "film"
+    design = design_from(sections.get("design", {}), base, where, film)
     if "density" not in sections and optics and not need_map:
         grid_path, grid = None, np.full((1, 1), 0.5 * sum(design.fill_range))
     elif "density" not in sections and optics:

@@ -260,20 +260,6 @@ def _guide_step(inside, live, target, smoothing, lo, hi, level, growth, seen):
     return step
 
 
-def film_clear_transmittance(n: float) -> float:
-    """Share of Lambertian light a clear face of index ``n`` lets through from air
-    (1 - the hemispherical mean of the unpolarised Fresnel reflectance)."""
-    theta = np.linspace(0.0, 0.5 * math.pi, 2001)[:-1]
-    c = np.cos(theta)
-    s = np.sin(theta) / n
-    t = np.sqrt(1 - s * s)
-    rs = (c - n * t) / (c + n * t)
-    rp = (t - n * c) / (t + n * c)
-    r = 0.5 * (rs * rs + rp * rp)
-    w = np.sin(2 * theta)
-    return float(1.0 - np.sum(r * w) / np.sum(w))
-
-
 def _film_step(job, nx, ny, dx, dy, inside, live, target, seen):
     """The film rule's update ``step(phi, sim) -> phi`` (see the module doc): the map's
     clear share carries light through, so the multiplicative step acts on each cell's
@@ -286,10 +272,8 @@ def _film_step(job, nx, ny, dx, dy, inside, live, target, seen):
     Over a direct-lit LED grid each cell's update is averaged over the cells that lie
     alike within their LEDs' pitch cells
     (:func:`optdot.optics.periodic.period_classes`)."""
-    bl = job.backlight
     lo, hi = job.design.fill_range
-    t_clear = film_clear_transmittance(bl.film.refractive_index)
-    k = max(0.05, 1.0 - bl.film.dot_transmittance / t_clear)
+    k = job.backlight.ink_contrast
     classes = period_classes(job, nx, ny, dx, dy)
 
     def step(phi: np.ndarray, sim: Simulation) -> np.ndarray:

@@ -108,6 +108,7 @@ def run_qa(
     outline: Domain | None | bool = True,
     area: tuple[float, float, float, float] | None = None,
     orientation: Orientation | None = None,
+    ink: float | None = None,
 ) -> QAResult:
     """Measure ``dots`` (a pattern in memory, or a dataset tile by tile in bounded
     memory, its checksums verified first) and apply the gate.
@@ -122,10 +123,12 @@ def run_qa(
         area: ``(x0, y0, x1, y1)`` mm, the part of the panel a viewer sees (the job's
             ``viewing_area``): visibility is judged there; None: the whole panel.
         orientation: the field shaped dots should follow (the job's), or None.
+        ink: the printed film's ink contrast (the job's :attr:`~optdot.config.job.Job.ink`:
+            its luminance goes as ``1 - ink * coverage``), or None for a guide's dots.
     """
     dots.verify()
     src = source_of(dots, box, outline)
-    return judge(src, density, params, collision, collision_gap, area, orientation)
+    return judge(src, density, params, collision, collision_gap, area, orientation, ink)
 
 
 def judge(
@@ -136,6 +139,7 @@ def judge(
     collision_gap: float = 0.0,
     area: tuple[float, float, float, float] | None = None,
     orientation: Orientation | None = None,
+    ink: float | None = None,
 ) -> QAResult:
     """Measure ``src`` (:func:`optdot.quality.measure.measure`) and make the gate lines.
 
@@ -152,7 +156,16 @@ def judge(
     if u is None:
         gaps = (params.effective_close_gap, collision_gap)
     got = measure(
-        src, density, params.smoothing, close, collision, gaps, params.viewing, area, orientation
+        src,
+        density,
+        params.smoothing,
+        close,
+        collision,
+        gaps,
+        params.viewing,
+        area,
+        orientation,
+        ink,
     )
     m, w = got.metrics, got.where
     if gaps is None:

@@ -93,6 +93,7 @@ def measure(
     view: Viewing | None = None,
     area: tuple[float, float, float, float] | None = None,
     field: Orientation | None = None,
+    ink: float | None = None,
 ) -> Measured:
     """Measure every QA number of ``src``.
 
@@ -110,6 +111,8 @@ def measure(
             panel a viewer sees); None: the whole panel.
         field: the orientation field shaped dots should follow (the job's); their
             angles' largest and mean difference from it are measured.
+        ink: a printed film's ink contrast (luminance ``1 - ink * coverage``), or None
+            (a guide's dots: luminance as the coverage); see the visibility check.
     """
     if src.uniform_diameter is None and src.n and gaps is None:
         raise ValueError("dots of varying size are judged by edge gaps: pass gaps")
@@ -119,7 +122,7 @@ def measure(
     second = _second_pass(src, density, first, close, collision, gaps)
     got = summarize(src, density, smoothing, close, collision, first, second, gaps, field)
     if first.luminance is not None and view is not None and density is not None:
-        vis, arrays = visibility(first.luminance, density, src.outline, view, area)
+        vis, arrays = visibility(first.luminance, density, src.outline, view, area, ink)
         got.metrics["visibility"] = vis
         got.where["visibility"] = [vis["max_jnd_at_mm"]]
         got.arrays["jnd"] = arrays["jnd"]

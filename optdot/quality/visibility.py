@@ -190,6 +190,7 @@ def visibility(
     outline,
     view: Viewing,
     area: tuple[float, float, float, float] | None = None,
+    ink: float | None = None,
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """The JND map of the pattern deposited in ``grid`` against ``density``.
 
@@ -203,6 +204,11 @@ def visibility(
             which errs on the safe side); the largest JND, its percentiles and the blobs
             are judged on the cells whose centres lie in the area, and the whole panel's
             largest is reported beside them (``panel_max_jnd``).
+        ink: the dots are ink on a film that light passes through (a direct-lit
+            diffuser): the luminance goes as ``1 - ink * coverage``, so the relative
+            luminance is ``(1 - ink * blurred coverage) / (1 - ink * blurred map)``, and a
+            zero-fill region is clear film, not dark. None: the dots extract light from
+            a guide (luminance as the coverage, step 2 of the module doc).
 
     Returns:
         ``(metrics, arrays)``: JSON-ready numbers (``max_jnd``, ``max_jnd_at_mm``,
@@ -231,14 +237,21 @@ def visibility(
     # the intended luminance, relative to the lit panel's: the lit (non-zero) share of the
     # panel under the PSF, 1 in the panel, falling to 0 across a zero-fill region's border
     lit_cells = (density.resampled(g.x0, g.y0, g.cw, g.ch, g.nx, g.ny) > 0) * frac
-    dark = bool(((lit_cells == 0) & (frac > 0)).any())  # a zero-fill region in the panel
+    # a zero-fill region in the panel (dark behind a guide; clear film under ink)
+    dark = ink is None and bool(((lit_cells == 0) & (frac > 0)).any())
     if dark:
         lit = sp.back(sp.forward(lit_cells) * psf, got) / np.maximum(share, 1e-12)
     else:
         lit = np.ones_like(got)
     inside = (frac > 0.5) & (share > 0.25)
-    valid = inside & (lit > MIN_LIT) & (want > 1e-12)
-    rel = np.where(valid, lum / np.where(valid, want, 1.0), 1.0)
+    if ink is None:
+        valid = inside & (lit > MIN_LIT) & (want > 1e-12)
+        rel = np.where(valid, lum / np.where(valid, want, 1.0), 1.0)
+    else:  # what the ink lets through, of what the map's ink would
+        clear = 1.0 - ink * want / np.maximum(share, 1e-12)
+        valid = inside & (clear > 1e-9)
+        through = 1.0 - ink * lum / np.maximum(share, 1e-12)
+        rel = np.where(valid, through / np.where(valid, clear, 1.0), 1.0)
     del lum, want, share, target, got, fill, lit_cells
     # luminance seen, relative to the lit panel's: rel where the map is lit, fading with
     # the intended luminance into a zero-fill region's penumbra (cells of no light count
