@@ -435,3 +435,21 @@ def test_design_never_writes_a_job_the_tool_refuses(tmp_path):
         "design.fill_range", "< 0.8", "densest fill",
     )  # fmt: skip
     assert not (tmp_path / "m.csv").exists()
+
+
+def test_the_guide_as_a_scene_gives_the_single_slab_kernels_counts():
+    """The edge-lit guide traced as a one-slab scene of the stack tracer draws the same
+    numbers in the same order as the single-slab kernel it replaced: these fates are what
+    that kernel (optdot 840ef03) gave for this job, rays and seed, ray for ray."""
+    job = load_job(SAMPLES / "lgp" / "job.toml", need_map=False)
+    grid = np.linspace(0.05, 0.35, 40)[:, None] * np.ones((1, 60))
+    sim = simulate(job, 300_000, seed=3, coverage=Coverage(grid, 0.0, 0.0, 0.5, 0.5))
+    assert sim.fates == {
+        "extracted": 201618,
+        "absorbed_bulk": 1602,
+        "absorbed_dots": 51215,
+        "lost_edges": 17721,
+        "lost_bottom": 615,
+        "not_coupled": 27229,
+        "unfinished": 0,
+    }
