@@ -90,3 +90,18 @@ def one_error(args, code: int, *words: str) -> str:
     for w in words:
         assert w in err[0], (w, err[0])
     return err[0]
+
+
+def load_pvtrace():
+    """The pvtrace module (an independent ray tracer the optics tests compare against),
+    with the numpy aliases pvtrace 2.1 still uses (numpy 1.24 removed them) and its
+    logging quiet."""
+    import logging
+
+    for name, typ in (("float", float), ("int", int), ("bool", bool)):
+        if not hasattr(np, name):
+            setattr(np, name, typ)
+    import pvtrace
+
+    logging.getLogger("pvtrace").setLevel(logging.WARNING)
+    return pvtrace

@@ -11,7 +11,6 @@ ink absorbs must agree within the Monte Carlo noise."""
 
 from __future__ import annotations
 
-import logging
 import math
 
 import numpy as np
@@ -20,6 +19,8 @@ import pytest
 from optdot.config.schema import job_from_dict
 from optdot.optics.simulate import simulate
 from optdot.pattern import Pattern
+
+from .conftest import load_pvtrace
 
 W, H, GAP, TF, N, D, FILL = 10.0, 10.0, 1.0, 0.2, 1.5, 0.2, 0.3
 LED, RR, DOT_R, DOT_T = 0.2, 0.9, 0.6, 0.3
@@ -48,29 +49,12 @@ class _InkAbsorbed(Exception):
 
 def _pvtrace(centres: np.ndarray, rays: int) -> dict[str, int]:
     """Rays per fate traced by pvtrace."""
-    for name, typ in (("float", float), ("int", int), ("bool", bool)):
-        if not hasattr(np, name):  # pvtrace 2.1 still uses the aliases numpy 1.24 removed
-            setattr(np, name, typ)
-    import pvtrace
-    from pvtrace import (
-        Absorber,
-        Box,
-        Event,
-        FresnelSurfaceDelegate,
-        Light,
-        Material,
-        Node,
-        Scene,
-        Sphere,
-        Surface,
-        photon_tracer,
-    )
+    pv = load_pvtrace()
     from scipy.spatial import cKDTree
 
-    logging.getLogger("pvtrace").setLevel(logging.WARNING)
     tree = cKDTree(centres)
 
-    class Ink(FresnelSurfaceDelegate):
+    class Ink(pv.FresnelSurfaceDelegate):
         """The film's faces: Fresnel, except on a dot of its bottom face: R back to the
         side the ray came from, T to the other side (Lambertian in the film when going up,
         in air when going down), the rest absorbed."""
@@ -101,7 +85,7 @@ def _pvtrace(centres: np.ndarray, rays: int) -> dict[str, int]:
                 return _lambert(ray.direction[2] > 0)  # on, Lambertian in the new medium
             return super().transmitted_direction(surface, ray, geometry, container, adjacent)
 
-    class Reflector(FresnelSurfaceDelegate):
+    class Reflector(pv.FresnelSurfaceDelegate):
         """The plate's top face returns RR Lambertian; the rest enters the plate (index 1,
         no refraction) and is absorbed in it."""
 
@@ -115,21 +99,21 @@ def _pvtrace(centres: np.ndarray, rays: int) -> dict[str, int]:
                 return _lambert(True)
             return super().reflected_direction(surface, ray, geometry, container, adjacent)
 
-    world = Node(name="world", geometry=Sphere(radius=100.0, material=Material(1.0)))
-    plate = Node(
+    world = pv.Node(name="world", geometry=pv.Sphere(radius=100.0, material=pv.Material(1.0)))
+    plate = pv.Node(
         name="reflector",
-        geometry=Box(
+        geometry=pv.Box(
             (W, H, 1.0),
-            material=Material(
-                1.0, surface=Surface(delegate=Reflector()), components=[Absorber(1e4)]
+            material=pv.Material(
+                1.0, surface=pv.Surface(delegate=Reflector()), components=[pv.Absorber(1e4)]
             ),
         ),
         parent=world,
     )
     plate.location = (W / 2, H / 2, -0.5)
-    film = Node(
+    film = pv.Node(
         name="film",
-        geometry=Box((W, H, TF), material=Material(N, surface=Surface(delegate=Ink()))),
+        geometry=pv.Box((W, H, TF), material=pv.Material(N, surface=pv.Surface(delegate=Ink()))),
         parent=world,
     )
     film.location = (W / 2, H / 2, GAP + TF / 2)
@@ -138,28 +122,32 @@ def _pvtrace(centres: np.ndarray, rays: int) -> dict[str, int]:
         u, v = np.random.uniform(), np.random.uniform()
         return (W / 2 + (u - 0.5) * LED, H / 2 + (v - 0.5) * LED, 1e-4)
 
-    Node(name="led", light=Light(position=position, direction=lambda: _lambert(True)), parent=world)
-    scene = Scene(world)
+    pv.Node(
+        name="led",
+        light=pv.Light(position=position, direction=lambda: _lambert(True)),
+        parent=world,
+    )
+    scene = pv.Scene(world)
     np.random.seed(1)
     fates = dict.fromkeys(FATES, 0)
-    assert pvtrace.__version__
+    assert pv.__version__
     for ray in scene.emit(rays):
         try:
-            history = photon_tracer.follow(scene, ray, maxsteps=20000)
+            history = pv.photon_tracer.follow(scene, ray, maxsteps=20000)
         except _InkAbsorbed:
             fates["absorbed_dots"] += 1
             continue
         events = [e for _, e in history]
-        assert events[-1] in (Event.EXIT, Event.ABSORB), events[-1]
+        assert events[-1] in (pv.Event.EXIT, pv.Event.ABSORB), events[-1]
         last, event = history[-2]
         x, y, z = last.position
-        if events[-1] == Event.ABSORB:
-            assert history[-1][0].position[2] < 0 and event == Event.TRANSMIT
+        if events[-1] == pv.Event.ABSORB:
+            assert history[-1][0].position[2] < 0 and event == pv.Event.TRANSMIT
             fates["lost_bottom"] += 1
-        elif event == Event.TRANSMIT and abs(z - GAP - TF) < 1e-6 and last.direction[2] > 0:
+        elif event == pv.Event.TRANSMIT and abs(z - GAP - TF) < 1e-6 and last.direction[2] > 0:
             fates["extracted"] += 1
         else:  # out of the film's side faces, or out of the cavity's sides in air
-            if not (event == Event.TRANSMIT and min(x, y, W - x, H - y) < 1e-6):
+            if not (event == pv.Event.TRANSMIT and min(x, y, W - x, H - y) < 1e-6):
                 dx, dy, dz = last.direction
                 assert z <= GAP + 1e-6 and dz != 0
                 t = ((GAP if dz > 0 else 0.0) - z) / dz
@@ -206,7 +194,7 @@ def test_pvtrace_agrees_on_a_direct_lit_cell():
         sigma = math.sqrt(max(p * (1 - p), 1e-4) / RAYS)
         assert abs(shares[key] - p) < 3.5 * sigma, (key, shares[key], p, sigma)
 
-    # the comparison can tell. Light recycles so much in this cell that how the ink splits
+    # the comparison can tell. pv.Light recycles so much in this cell that how the ink splits
     # what it does not absorb hardly moves the extraction (opaque ink, R 0.9 and T 0:
     # 0.809 against 0.815): that shows at the reflector, which gets a third more light
     # back; ink that absorbs 0.4 (R 0.6, T 0) takes a tenth off the extraction

@@ -8,7 +8,6 @@ LED edge turns back must agree within the Monte Carlo noise."""
 
 from __future__ import annotations
 
-import logging
 import math
 
 import numpy as np
@@ -17,6 +16,8 @@ import pytest
 from optdot.config.schema import job_from_dict
 from optdot.optics.simulate import simulate
 from optdot.pattern import Pattern
+
+from .conftest import load_pvtrace
 
 W, H, T, N, D, FILL = 10.0, 10.0, 1.0, 1.49, 0.2, 0.3
 RAYS = 4000
@@ -31,28 +32,12 @@ def _dots() -> np.ndarray:
 
 def _pvtrace(centres: np.ndarray, rays: int) -> dict[str, int]:
     """Rays per fate traced by pvtrace."""
-    for name, typ in (("float", float), ("int", int), ("bool", bool)):
-        if not hasattr(np, name):  # pvtrace 2.1 still uses the aliases numpy 1.24 removed
-            setattr(np, name, typ)
-    import pvtrace
-    from pvtrace import (
-        Box,
-        Event,
-        FresnelSurfaceDelegate,
-        Light,
-        Material,
-        Node,
-        Scene,
-        Sphere,
-        Surface,
-        photon_tracer,
-    )
+    pv = load_pvtrace()
     from scipy.spatial import cKDTree
 
-    logging.getLogger("pvtrace").setLevel(logging.WARNING)
     tree = cKDTree(centres)
 
-    class Dots(FresnelSurfaceDelegate):
+    class Dots(pv.FresnelSurfaceDelegate):
         def on_dot(self, ray, container) -> bool:
             x, y, z = ray.position  # the box's frame: centred on the origin
             if container.name != "guide" or abs(z + T / 2) > 1e-6:
@@ -75,10 +60,10 @@ def _pvtrace(centres: np.ndarray, rays: int) -> dict[str, int]:
                 )
             return super().reflected_direction(surface, ray, geometry, container, adjacent)
 
-    world = Node(name="world", geometry=Sphere(radius=100.0, material=Material(1.0)))
-    guide = Node(
+    world = pv.Node(name="world", geometry=pv.Sphere(radius=100.0, material=pv.Material(1.0)))
+    guide = pv.Node(
         name="guide",
-        geometry=Box((W, H, T), material=Material(N, surface=Surface(delegate=Dots()))),
+        geometry=pv.Box((W, H, T), material=pv.Material(N, surface=pv.Surface(delegate=Dots()))),
         parent=world,
     )
     guide.location = (W / 2, H / 2, T / 2)
@@ -91,17 +76,17 @@ def _pvtrace(centres: np.ndarray, rays: int) -> dict[str, int]:
         s = math.sqrt(u)
         return (math.sqrt(1 - u), s * math.cos(2 * math.pi * v), s * math.sin(2 * math.pi * v))
 
-    Node(name="led", light=Light(position=position, direction=direction), parent=world)
-    scene = Scene(world)
+    pv.Node(name="led", light=pv.Light(position=position, direction=direction), parent=world)
+    scene = pv.Scene(world)
     np.random.seed(1)
     fates = {"extracted": 0, "lost_bottom": 0, "lost_edges": 0, "not_coupled": 0, "missed": 0}
-    assert pvtrace.__version__
+    assert pv.__version__
     for ray in scene.emit(rays):
-        history = photon_tracer.follow(scene, ray, maxsteps=20000)
+        history = pv.photon_tracer.follow(scene, ray, maxsteps=20000)
         events = [e for _, e in history]
-        assert events[-1] != Event.KILL
-        crossings = [r for r, e in history if e == Event.TRANSMIT]
-        if events[1] == Event.REFLECT:
+        assert events[-1] != pv.Event.KILL
+        crossings = [r for r, e in history if e == pv.Event.TRANSMIT]
+        if events[1] == pv.Event.REFLECT:
             fates["not_coupled"] += 1
         elif not crossings:  # passed beside the guide (born at its corner)
             fates["missed"] += 1

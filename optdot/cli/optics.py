@@ -3,6 +3,7 @@ makes it uniform (see :mod:`optdot.optics`)."""
 
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 
@@ -111,7 +112,7 @@ def _print_simulation(sim, seconds: float, echo=click.echo) -> None:
         f"traced {s['rays']:,} rays through the {mode} in {seconds:.1f} s "
         f"({s['rays'] / max(seconds, 1e-9):,.0f} rays/s), seed {s['seed']}"
     )
-    into = "the edge" if "halo" not in s else "the stack"
+    into = "the stack" if s["stack"] == "direct" else "the edge"
     echo(
         f"efficiency: {s['efficiency']:.2%} ± {s['efficiency_sigma']:.2%} of the injected "
         f"light leaves the top (coupled into {into}: {s['coupling']:.1%})"
@@ -127,12 +128,15 @@ def _print_simulation(sim, seconds: float, echo=click.echo) -> None:
     )
     region = "the viewing area" if "viewing_area_mm" in s else "the panel"
     less = f" less {s['border_mm']:g} mm" if s["border_mm"] else ""
-    echo(
-        f"luminance over {region}{less}, bins of "
-        f"{s['bin_mm'][0]:.3g} x {s['bin_mm'][1]:.3g} mm: RMS {s['luminance_rms']:.2%} "
-        f"(noise alone {s['luminance_rms_noise']:.2%}), min {s['luminance_min']:.3f}, "
-        f"max {s['luminance_max']:.3f} of the mean"
-    )
+    bins = f"bins of {s['bin_mm'][0]:.3g} x {s['bin_mm'][1]:.3g} mm"
+    if math.isfinite(s["luminance_rms"]):
+        echo(
+            f"luminance over {region}{less}, {bins}: RMS {s['luminance_rms']:.2%} "
+            f"(noise alone {s['luminance_rms_noise']:.2%}), min {s['luminance_min']:.3f}, "
+            f"max {s['luminance_max']:.3f} of the mean"
+        )
+    else:
+        echo(f"luminance over {region}{less}, {bins}: no light reached them")
     if "outside_max" in s:
         x, y = s["outside_max_at_mm"]
         echo(
@@ -145,6 +149,9 @@ def _print_simulation(sim, seconds: float, echo=click.echo) -> None:
 
 def _print_halo(h: dict, echo) -> None:
     x, y = h["led_mm"]
+    if h["extracted"] == 0:
+        echo(f"halo of the LED at ({x:.2f}, {y:.2f}) mm lit alone: no light left the top")
+        return
     w50, w10 = (
         f"{w:.3g} mm" if w is not None else "beyond the panel"
         for w in (h["width50_mm"], h["width10_mm"])
@@ -195,8 +202,8 @@ def design(job_file, output, png_path, job_out, rays, iterations, seed, quiet):
     from ..config.schema import load_job
     from ..io.atomic import transaction
     from ..io.outputs import check_outputs
+    from ..optics.design import check_iterations, design_grid
     from ..optics.design import design as run
-    from ..optics.design import design_grid
     from ..optics.outputs import write_design
 
     if output.suffix.lower() != ".csv":
@@ -213,6 +220,7 @@ def design(job_file, output, png_path, job_out, rays, iterations, seed, quiet):
         from ..config.shaping import check_shaped_fill
 
         check_shaped_fill(job, job.design.fill_range[1], f"{job_file}: design.fill_range")
+    check_iterations(job, iterations or job.design.iterations)
     nx, ny, dx, dy = design_grid(job)
     p = job.design
     if not quiet:

@@ -67,7 +67,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import JobError
-from .light_guide import EDGE_FINISH, number_in, profile_table, typed_keys
+from .light_guide import EDGE_FINISH, led_profile, number_in, typed_keys
 
 KINDS = ("direct", "edge")
 PRINTS = ("film", "guide")
@@ -236,6 +236,8 @@ def backlight_from(
     """
     lab = "backlight"
     typed_keys(sec, BACKLIGHT_KEYS, lab, where)
+    if "kind" not in sec:
+        raise JobError(f"{where}: missing required key backlight.kind ({' or '.join(KINDS)})")
     kind = sec.get("kind")
     if kind not in KINDS:
         raise JobError(f"{where}: backlight.kind = {kind!r} must be one of {', '.join(KINDS)}")
@@ -371,15 +373,7 @@ def _grid_leds(sec: Any, box, where: str) -> GridLeds:
     typed_keys(sec, GRID_LED_KEYS, lab, where)
     size = number_in(sec, "size", 0.2, 0, 100, where, lab, "in mm, ", lo_open=True)
     power = number_in(sec, "power", 1.0, 0, 1e9, where, lab, "", lo_open=True)
-    profile = sec.get("profile", "lambertian")
-    if isinstance(profile, str):
-        if profile not in ("lambertian", "batwing"):
-            raise JobError(
-                f"{where}: {lab}.profile = {profile!r} must be 'lambertian', 'batwing' or a "
-                "table [[angle_deg, intensity], ...]"
-            )
-    else:
-        profile = profile_table(profile, lab, where)
+    profile = led_profile(sec.get("profile", "lambertian"), ("lambertian", "batwing"), lab, where)
     x0, y0, x1, y1 = box
     pitch = None
     if "positions" in sec:
@@ -400,8 +394,14 @@ def _grid_leds(sec: Any, box, where: str) -> GridLeds:
                 f"({size:g} mm)"
             )
         ox, oy = _pair(sec.get("offset", [0.5 * px, 0.5 * py]), f"{lab}.offset", where)
-        nx = int(math.floor((x1 - 0.5 * size - ox) / px + 1e-9)) + 1
-        ny = int(math.floor((y1 - 0.5 * size - oy) / py + 1e-9)) + 1
+        fx = math.floor((x1 - 0.5 * size - ox) / px + 1e-9) + 1.0
+        fy = math.floor((y1 - 0.5 * size - oy) / py + 1e-9) + 1.0
+        if fx >= 1 and fy >= 1 and fx * fy > MAX_LEDS:
+            raise JobError(
+                f"{where}: {lab}.pitch = [{px:g}, {py:g}] mm puts more than {MAX_LEDS:,} LEDs "
+                "on the panel"
+            )
+        nx, ny = int(max(fx, 0)), int(max(fy, 0))
         if nx < 1 or ny < 1:
             raise JobError(
                 f"{where}: {lab}.offset = [{ox:g}, {oy:g}] mm puts no LED on the panel "
@@ -462,7 +462,7 @@ def _other_map(value: Any, base: Path, where: str) -> tuple[float | np.ndarray, 
         from .grids import load_grid
 
         path = base / value
-        grid = load_grid(path)
+        grid = load_grid(path, "backlight.other_map grid")
         if not (np.all(np.isfinite(grid)) and grid.min() >= 0 and grid.max() <= 1):
             raise JobError(f"{path}: backlight.other_map must hold fill fractions 0..1")
         return grid, path

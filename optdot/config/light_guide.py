@@ -182,7 +182,10 @@ def typed_keys(sec: dict[str, Any], keys: dict[str, tuple[type, ...]], label: st
 def number_in(sec, key, default, lo, hi, where, label, unit="", lo_open=False, hi_open=False):
     """``sec[key]`` (or ``default``) as a float within ``lo..hi`` (open ends as asked), or
     a one-line :class:`JobError` naming ``label.key``."""
-    v = float(sec.get(key, default))
+    try:
+        v = float(sec.get(key, default))
+    except OverflowError:  # an integer of hundreds of digits
+        v = math.inf
     ok = math.isfinite(v) and (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
     if not ok:
         a = f"{lo:g} {'<' if lo_open else '<='} x {'<' if hi_open else '<='} {hi:g}"
@@ -281,21 +284,28 @@ def _leds(row: Any, k: int, box, where: str) -> Leds:
                 f"{where}: {lab}.positions: an LED {width:g} mm wide at {p!r} mm is off the "
                 f"{edge} edge, which runs from {lo:g} to {hi:g} mm"
             )
-    profile = row.get("profile", "lambertian")
-    if isinstance(profile, str):
-        if profile not in ("lambertian", "collimated"):
-            raise JobError(
-                f"{where}: {lab}.profile = {profile!r} must be 'lambertian', 'collimated' or "
-                "a table [[angle_deg, intensity], ...]"
-            )
-    else:
-        profile = profile_table(profile, lab, where)
+    profile = led_profile(
+        row.get("profile", "lambertian"), ("lambertian", "collimated"), lab, where
+    )
     if profile == "collimated" and tilt == 0:
         raise JobError(
             f"{where}: {lab}.tilt = 0 with a collimated profile: the light runs parallel to "
             "the guide's faces and never meets a dot (give a tilt > 0 degrees)"
         )
     return Leds(edge, tuple(float(p) for p in pos), width, power, profile, tilt)
+
+
+def led_profile(value: Any, names: tuple[str, ...], lab: str, where: str):
+    """An LED's ``profile``: one of ``names``, or a table (:func:`profile_table`)."""
+    if isinstance(value, str):
+        if value not in names:
+            raise JobError(
+                f"{where}: {lab}.profile = {value!r} must be "
+                + ", ".join(repr(n) for n in names)
+                + " or a table [[angle_deg, intensity], ...]"
+            )
+        return value
+    return profile_table(value, lab, where)
 
 
 def profile_table(rows: list, lab: str, where: str) -> tuple[tuple[float, float], ...]:

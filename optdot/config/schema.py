@@ -132,11 +132,33 @@ def load_job(path: str | Path, need_map: bool = True) -> Job:
     return job_from_dict(raw, base=path.parent, source=path, need_map=need_map)
 
 
+#: TOML integers are 64-bit; a longer one is refused before any number is read from it.
+INT64 = 2**63
+
+
+def _check_integers(value: Any, key: str, where: str) -> None:
+    """Refuse an integer outside 64 bits anywhere in the parsed tree (TOML allows none;
+    Python's reader takes them, and ``float()`` of one overflows)."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _check_integers(v, f"{key}.{k}" if key else str(k), where)
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            _check_integers(v, f"{key}[{i}]", where)
+    elif isinstance(value, int) and not isinstance(value, bool) and not -INT64 <= value < INT64:
+        digits = len(str(abs(value)))
+        raise JobError(
+            f"{where}: {key} is an integer of {digits} digits; TOML integers are 64-bit "
+            "(write a float, e.g. 1e30, if you mean a huge number)"
+        )
+
+
 def job_from_dict(
     raw: dict[str, Any], base: Path = Path("."), source: Path | None = None, need_map: bool = True
 ) -> Job:
     """Build a :class:`Job` from the parsed TOML tree (see :func:`load_job`)."""
     where = str(source) if source else "job"
+    _check_integers(raw, "", where)
     sections: dict[str, dict[str, Any]] = {"": {}}
     for key, value in raw.items():
         if isinstance(value, dict):
@@ -188,6 +210,11 @@ def job_from_dict(
         if domain is not None:
             check_leds_on(guide, domain.slab or domain.geometry, domain.box, where)
     backlight = None
+    if sections.get("backlight", {}).get("kind") == "direct" and guide is not None:
+        raise JobError(
+            f"{where}: a [light_guide] and a direct-lit [backlight] are two different "
+            'backlights; keep one (kind = "edge" puts a film over the guide)'
+        )
     if "backlight" in sections:
         backlight = backlight_from(
             sections["backlight"],

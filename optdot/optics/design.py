@@ -49,7 +49,7 @@ from ..geometry.domain import centres_in_box, polygon_cell_fractions
 from ..geometry.limits import MAX_RANDOM_FILL
 from .periodic import fold, period_classes
 from .scene import Coverage, has_optics
-from .simulate import Simulation, simulate
+from .simulate import DEFAULT_BINS, Simulation, simulate
 
 #: Exponent of the multiplicative step.
 GAMMA = 0.8
@@ -59,11 +59,19 @@ MAX_STEP = 2.0
 #: per iteration (continuation: see the module doc).
 LEVEL_START = 1.0 / 8.0
 LEVEL_GROWTH = 1.5
+#: Smallest default cell, mm (``[design] cell``'s own lower bound).
+MIN_CELL = 0.05
 #: Rays per cell of the last iteration when ``[design] rays`` is not given.
 RAYS_PER_CELL = 400
-#: Highest claim ``fill (1 + gap / D) ** 2`` the sizes a design asks for allow: hard disks
-#: begin to order near 0.70 (Bernard & Krauth 2011); random patterns hold to 0.80.
-SIZE_CLAIM = 0.70
+#: Highest claim ``fill (1 + gap / D) ** 2`` the sizes a design asks for allow: random
+#: patterns hold to 0.80 (and the relaxation's guarantee to 0.78); hard disks begin to
+#: order near 0.70 (Bernard & Krauth 2011), but at 0.75 QA's psi6 stays at 0.02 (the
+#: 60 x 40 mm benchmark film, 100 µm dots) while the dots' grain in 0.5 mm bins falls
+#: from 1.25 % (135 µm, claim 0.70) to 1.05 % (BENCHMARKS.md "Backlights").
+SIZE_CLAIM = 0.75
+#: Above this share of :data:`SIZE_CLAIM` the fill asks for the claim of 0.80 (the sizes
+#: that keep 0.75 grow without bound as the fill nears it).
+SIZE_SWITCH = 0.9
 #: Largest diameter a design asks for, mm.
 MAX_SIZE_ASKED = 1.0
 
@@ -92,9 +100,9 @@ class Designed:
 def sizes_asked(job: Job, fill_max: float) -> tuple[float, float] | None:
     """The diameter range ``(low, high)`` (mm, high rounded up to 1 µm) whose largest dots
     keep QA's close gap at ``fill_max``: with a claim ``fill (1 + gap / D) ** 2`` of at
-    most :data:`SIZE_CLAIM` where dots up to :data:`MAX_SIZE_ASKED` reach it, else of at
-    most :data:`~optdot.geometry.limits.MAX_RANDOM_FILL` (random, but nearer order). None
-    when the job's dots already do (or are shaped: their sizes are ``[dots] scale``).
+    most :data:`SIZE_CLAIM`, or of :data:`~optdot.geometry.limits.MAX_RANDOM_FILL` for a
+    fill over :data:`SIZE_SWITCH` of it. None when the job's dots already do (or are
+    shaped: their sizes are ``[dots] scale``).
 
     Raises:
         JobError: no dot size up to :data:`MAX_SIZE_ASKED` reaches ``fill_max``.
@@ -106,16 +114,25 @@ def sizes_asked(job: Job, fill_max: float) -> tuple[float, float] | None:
     if fill_max * (1 + gap / top) ** 2 <= SIZE_CLAIM:
         return None
     low = job.sizes.low if job.sizes is not None else job.diameter
-    for claim in (SIZE_CLAIM, MAX_RANDOM_FILL):
-        if fill_max < claim:
-            high = gap / (math.sqrt(claim / fill_max) - 1)
-            if high <= MAX_SIZE_ASKED:
-                return low, max(low, math.ceil(round(high * 1e3, 6)) / 1e3)
-    raise JobError(
-        f"{job.source or 'job'}: the designed map's largest fill {fill_max:.3g} is more than "
-        f"dots up to {MAX_SIZE_ASKED:g} mm reach with a {gap * 1e3:.3g} µm gap; lower "
-        "design.fill_range's top"
-    )
+    claim = SIZE_CLAIM if fill_max <= SIZE_SWITCH * SIZE_CLAIM else MAX_RANDOM_FILL
+    high = gap / (math.sqrt(claim / fill_max) - 1) if fill_max < claim else math.inf
+    if high > MAX_SIZE_ASKED:
+        raise JobError(
+            f"{job.source or 'job'}: the designed map's largest fill {fill_max:.3g} is more "
+            f"than dots up to {MAX_SIZE_ASKED:g} mm reach with a {gap * 1e3:.3g} µm gap; "
+            "lower design.fill_range's top"
+        )
+    return low, max(low, math.ceil(round(high * 1e3, 6)) / 1e3)
+
+
+def check_iterations(job: Job, n_iter: int) -> None:
+    """Refuse a film's design of one iteration (it would return the bare film's empty
+    map: the first iteration only traces it)."""
+    if prints_on_film(job) and n_iter < 2:
+        raise JobError(
+            f"{job.source or 'job'}: design.iterations = {n_iter}: a film's map needs at "
+            "least 2 (the first traces the bare film, the next its first map)"
+        )
 
 
 def prints_on_film(job: Job) -> bool:
@@ -126,12 +143,16 @@ def prints_on_film(job: Job) -> bool:
 
 def design_grid(job: Job) -> tuple[int, int, float, float]:
     """``(nx, ny, dx, dy)`` of the design grid over the panel box: cells of ``[design]
-    cell`` mm, by default a tenth of a direct-lit grid's LED pitch (else 1 mm)."""
+    cell`` mm, by default a tenth of a direct-lit grid's LED pitch (at least
+    :data:`MIN_CELL`, and no more cells than ``simulate``'s default bins), else 1 mm."""
     x0, y0, x1, y1 = job.box
     c = job.design.cell
     if c is None:
         pitch = job.backlight.pitch if job.backlight is not None else None
-        c = pitch / 10 if pitch is not None else 1.0
+        c = 1.0
+        if pitch is not None:  # no finer than the bins simulate makes by default
+            floor = math.sqrt((x1 - x0) * (y1 - y0) / DEFAULT_BINS)
+            c = max(pitch / 10, MIN_CELL, floor)
     nx = max(1, int(round((x1 - x0) / c)))
     ny = max(1, int(round((y1 - y0) / c)))
     return nx, ny, (x1 - x0) / nx, (y1 - y0) / ny
@@ -170,6 +191,8 @@ def design(
     live = inside > 0.5
     seen = live & _in_area(job, nx, ny, dx, dy)
     if prints_on_film(job):
+        if start is None:
+            check_iterations(job, n_iter)
         phi = np.full((ny, nx), lo) if start is None else np.array(start, np.float64)
         step = _film_step(job, nx, ny, dx, dy, inside, live, target, seen)
     else:
@@ -195,6 +218,11 @@ def design(
             break
         phi = step(phi, sim)
     assert sim is not None
+    if not phi.max() > 0:
+        raise JobError(
+            f"{job.source or 'job'}: the designed map is empty: the luminance follows the "
+            "target without any ink (nothing to print), or design.fill_range leaves none"
+        )
     sizes = sizes_asked(job, float(phi.max())) if prints_on_film(job) else None
     return Designed(phi, (dx, dy), history, sim, sizes)
 

@@ -57,8 +57,9 @@ def halo(
 
     Returns:
         JSON-ready figures: ``led_mm``, ``rays``, ``extracted``, ``width50_mm``,
-        ``width10_mm``, ``share_own_cell``, ``share_3x3`` (None without a pitch), ``dr_mm``
-        and ``profile`` (``[[r_mm, L / peak], ...]``).
+        ``width10_mm`` (None when no light left the top, or it never fell that low within
+        the panel), ``share_own_cell``, ``share_3x3`` (None without a pitch), ``dr_mm`` and
+        ``profile`` (``[[r_mm, L / peak], ...]``).
 
     Raises:
         JobError: the job is not direct-lit.
@@ -102,8 +103,8 @@ def halo(
         "rays": rays,
         "injected": rays - int(fates[UNCOUPLED]),
         "extracted": extracted,
-        "width50_mm": _width(centres, smooth / peak if peak > 0 else smooth, 0.5),
-        "width10_mm": _width(centres, smooth / peak if peak > 0 else smooth, 0.1),
+        "width50_mm": _width(centres, smooth / peak, 0.5) if peak > 0 else None,
+        "width10_mm": _width(centres, smooth / peak, 0.1) if peak > 0 else None,
         "share_own_cell": own / extracted if pitched else None,
         "share_3x3": near / extracted if pitched else None,
         "dr_mm": dr,

@@ -26,6 +26,7 @@ ray has its own random stream; counts are integers).
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
@@ -42,8 +43,17 @@ __all__ = ["Coverage", "Simulation", "coverage_of", "simulate"]
 
 #: Border left out of the figures when the job names no viewing area, mm.
 BORDER_MM = 5.0
-#: Rays per compiled call (outputs 9 bytes per ray).
+#: Most rays per compiled call (outputs 9 bytes per ray).
 BATCH = 1 << 20
+#: Fewest rays per compiled call.
+MIN_BATCH = 1 << 10
+#: Seconds a batch should take: Ctrl-C and SIGTERM are heard between batches, so a stack
+#: whose rays bounce for long is cut into smaller ones (the counts do not depend on it).
+BATCH_SECONDS = 0.5
+#: Most luminance bins (each a few dozen bytes, and a box in the measured-region test).
+MAX_BINS = 1 << 22
+#: Most bins the default bin size makes.
+DEFAULT_BINS = 1 << 20
 
 
 @dataclass
@@ -61,6 +71,8 @@ class Simulation:
         border: mm left out inside the measured region's edge.
         area: ``(x0, y0, x1, y1)`` mm, the viewing area the figures are judged in, or None
             (the panel).
+        stack: ``"guide"`` (an edge-lit guide), ``"edge"`` (a film over it) or
+            ``"direct"`` (a direct-lit backlight).
     """
 
     rays: int
@@ -77,6 +89,7 @@ class Simulation:
     seed: int
     extra: dict = field(default_factory=dict)
     area: tuple[float, float, float, float] | None = None
+    stack: str = "guide"
 
     @property
     def efficiency(self) -> float:
@@ -136,6 +149,7 @@ class Simulation:
         )
         return {
             "mode": self.mode,
+            "stack": self.stack,
             "rays": self.rays,
             "seed": self.seed,
             "injected": self.injected,
@@ -194,9 +208,9 @@ def simulate(
     if not has_optics(job):
         raise JobError(f"{job.source or 'job'}: no [light_guide] or [backlight] to simulate")
     if not 1 <= rays <= 10**10:
-        raise JobError(f"rays = {rays} must be 1..1e10")
+        raise JobError(f"{job.source or 'job'}: rays = {rays} must be 1..1e10")
     if seed < 0:
-        raise JobError(f"seed = {seed} must be >= 0")
+        raise JobError(f"{job.source or 'job'}: seed = {seed} must be >= 0")
     x0, y0, x1, y1 = box = job.box
     area = job.viewing_area
     given = border_mm is not None
@@ -207,8 +221,9 @@ def simulate(
     spot_mm = min(10.0, short / 6) if spot_mm is None else float(spot_mm)
     if not 0 < bin_mm <= max(x1 - x0, y1 - y0) or not 0 < spot_mm <= short / 3:
         raise JobError(
-            f"bin {bin_mm:g} mm / spot {spot_mm:g} mm: must be > 0 and fit the panel "
-            f"({x1 - x0:g} x {y1 - y0:g} mm; spots at most a third of the shorter side)"
+            f"{job.source or 'job'}: bin {bin_mm:g} mm / spot {spot_mm:g} mm: must be > 0 and "
+            f"fit the panel ({x1 - x0:g} x {y1 - y0:g} mm; bins at most its longer side, "
+            "spots at most a third of the shorter side)"
         )
     scene = scene_of(job, rays, dots, coverage, only_led)
     if bins is None:
@@ -216,6 +231,11 @@ def simulate(
         nby = max(1, int(round((y1 - y0) / bin_mm)))
     else:
         nbx, nby = bins
+    if nbx * nby > MAX_BINS:
+        raise JobError(
+            f"{job.source or 'job'}: bins of {(x1 - x0) / nbx:.3g} x {(y1 - y0) / nby:.3g} mm "
+            f"make {nbx * nby:,} over the panel, more than {MAX_BINS:,}; give a larger --bin"
+        )
     measured = _measured(job, nbx, nby, border_mm)
     if not measured.any() and not given and border_mm > 0:  # a panel narrower than two
         border_mm = 0.0  # default borders: its figures over all of it (``border`` says so)
@@ -223,9 +243,9 @@ def simulate(
     if not measured.any():
         where = "the viewing area" if area is not None else "the panel"
         raise JobError(
-            f"a border of {border_mm:g} mm leaves no {(x1 - x0) / nbx:.3g} x "
-            f"{(y1 - y0) / nby:.3g} mm bin of {where} to measure: give a smaller --border "
-            "or --bin"
+            f"{job.source or 'job'}: a border of {border_mm:g} mm leaves no "
+            f"{(x1 - x0) / nbx:.3g} x {(y1 - y0) / nby:.3g} mm bin of {where} to measure: give "
+            "a smaller --border or --bin"
         )
     counts = np.zeros(nby * nbx, np.int64)
     spots = _spot_centres(area if area is not None else box)
@@ -254,6 +274,7 @@ def simulate(
         border=border_mm,
         seed=seed,
         area=area,
+        stack=job.backlight.kind if job.backlight is not None else "guide",
     )
 
 
@@ -272,11 +293,15 @@ def traced(
     Raises:
         JobError: light stays in the stack, or none enters it.
     """
-    _check_light_leaves(job, seed, rays, scene)
-    for first in range(0, rays, BATCH):
+    per_ray = _check_light_leaves(job, seed, rays, scene)
+    size = _batch(BATCH_SECONDS / max(per_ray, 1e-12))
+    first = 0
+    while first < rays:
         check_interrupt()  # Ctrl-C or SIGTERM: stop at the next batch, nothing written
-        count = min(BATCH, rays - first)
+        count = min(size, rays - first)
+        t0 = time.perf_counter()
         fate, ex, ey = trace(seed, first, count, scene)
+        size = _batch(count * BATCH_SECONDS / max(time.perf_counter() - t0, 1e-9))
         fates += np.bincount(fate, minlength=len(FATES))
         if first == 0 and fates[UNCOUPLED] == count:
             raise JobError(
@@ -286,8 +311,14 @@ def traced(
             )
         out = fate == 0
         yield ex[out].astype(np.float64), ey[out].astype(np.float64)
+        first += count
         if progress is not None:
-            progress(first + count, rays)
+            progress(first, rays)
+
+
+def _batch(rays: float) -> int:
+    """A batch of ``rays`` kept within :data:`MIN_BATCH` .. :data:`BATCH`."""
+    return int(min(max(rays, MIN_BATCH), BATCH))
 
 
 def fates_of(scene: Scene, fates: np.ndarray) -> dict[str, int]:
@@ -306,7 +337,7 @@ PROBE_RAYS = 1000
 PROBE_EVENTS = 1 << 12
 
 
-def _check_light_leaves(job, seed: int, rays: int, scene: Scene) -> None:
+def _check_light_leaves(job, seed: int, rays: int, scene: Scene) -> float:
     """Refuse a set-up that keeps its light: a guide with nothing that lets light out
     (no dots, no absorption, mirror edges) traces every ray to :data:`MAX_EVENTS`, days
     for a default run. The first :data:`PROBE_RAYS` rays (the run's own) are traced with
@@ -316,11 +347,16 @@ def _check_light_leaves(job, seed: int, rays: int, scene: Scene) -> None:
     refused when that is over half (``s`` over 0.958): a guide whose light leaves slowly
     but leaves runs, its few unfinished rays reported.
 
+    Returns:
+        Seconds the probe took per ray (the first batch is sized from it).
+
     Raises:
-        JobError: light stays in the guide (one line: the share, and what lets it out).
+        JobError: light stays in the stack (one line: the share, and what lets it out).
     """
     count = min(rays, PROBE_RAYS)
+    t0 = time.perf_counter()
     fate, _, _ = trace(seed, 0, count, probe(scene, PROBE_EVENTS))
+    per_ray = (time.perf_counter() - t0) / count
     entered = int(np.count_nonzero(fate != UNCOUPLED))
     inside = int(np.count_nonzero(fate == UNFINISHED))
     share = inside / entered if entered else 0.0
@@ -330,9 +366,19 @@ def _check_light_leaves(job, seed: int, rays: int, scene: Scene) -> None:
             f"{job.source or 'job'}: light hardly leaves this {_what(job)}: {inside:,} of the "
             f"first {entered:,} rays that entered are still inside after {PROBE_EVENTS:,} "
             f"events, so about {unfinished:.0%} of a run's rays would end unfinished at its "
-            f"limit of {MAX_EVENTS:,}; give the light a way out (more dots, absorption > 0, "
-            "edge_reflectance < 1, a reflector < 1)"
+            f"limit of {MAX_EVENTS:,}; give the light a way out ({_ways_out(job)})"
         )
+    return per_ray
+
+
+def _ways_out(job: Job) -> str:
+    """What lets light out of the job's stack, for a message."""
+    if job.backlight is None:
+        return "more dots, absorption > 0, edge_reflectance < 1, a reflector < 1"
+    ways = "ink that transmits, a sheet that transmits more, frame < 1, a reflector < 1"
+    if job.backlight.kind == "edge":
+        ways += ", edge_reflectance < 1"
+    return ways
 
 
 def _what(job: Job) -> str:
@@ -340,13 +386,15 @@ def _what(job: Job) -> str:
 
 
 def default_bin(job: Job) -> float:
-    """The luminance bin, mm: a direct-lit grid's pitch / 10 (its LEDs' pattern resolved),
-    else 1/20 of the panel's shorter side, at most 5 mm."""
+    """The luminance bin, mm: a direct-lit grid's pitch / 10 (its LEDs' pattern resolved;
+    no finer than :data:`DEFAULT_BINS` bins over the panel), else 1/20 of the panel's
+    shorter side, at most 5 mm."""
     x0, y0, x1, y1 = job.box
     short = min(x1 - x0, y1 - y0)
     pitch = job.backlight.pitch if job.backlight is not None else None
-    if pitch is not None:
-        return min(pitch / 10, short / 20)
+    if pitch is not None:  # at most DEFAULT_BINS of them
+        floor = math.sqrt((x1 - x0) * (y1 - y0) / DEFAULT_BINS)
+        return max(min(pitch / 10, short / 20), floor)
     return min(5.0, short / 20)
 
 

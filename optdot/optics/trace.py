@@ -322,6 +322,16 @@ def _on_dot(x, y, explicit, phi, g, start, dx_, dy_, foot, cg, u):
 
 
 @nb.njit(cache=True, inline="always")
+def _marked(x, y, mark, pr, u):
+    """Is there a dot of print ``mark`` (1 the job's, 2 the second map) at (x, y)? ``pr``:
+    the :class:`Print`'s fields as a tuple; ``u`` a uniform draw (the coverage test)."""
+    explicit, phi, g, phi2, g2, start, dx_, dy_, foot, cg = pr
+    if mark == 2:
+        return _on_dot(x, y, False, phi2, g2, start, dx_, dy_, foot, cg, u)
+    return _on_dot(x, y, explicit, phi, g, start, dx_, dy_, foot, cg, u)
+
+
+@nb.njit(cache=True, inline="always")
 def _refract(dxn, dyn, dz, n1, n2):
     """The direction transmitted from index n1 into n2 through a horizontal face (the
     caller has checked it is not totally reflected): ``(dx, dy, dz)``, dz keeping its
@@ -371,9 +381,8 @@ def trace(seed, first, count, scene):  # pragma: no cover - compiled
         src.mode,
     )
     layer, face, walls, normals = st.layer, st.face, st.walls, st.normals
-    # the print's arrays (numba's parallel loop cannot carry a record inside it)
-    explicit, phi, g, phi2, g2 = pr.explicit, pr.phi, pr.g, pr.phi2, pr.g2
-    d_start, d_x, d_y, d_foot, d_cg = pr.start, pr.x, pr.y, pr.foot, pr.cg
+    # the print as a plain tuple (numba's parallel loop cannot carry a record inside it)
+    pr_arrays = (pr.explicit, pr.phi, pr.g, pr.phi2, pr.g2, pr.start, pr.x, pr.y, pr.foot, pr.cg)
     top = layer.shape[0]  # the top face's index
     max_events = st.max_events
     fate = np.empty(count, np.int8)
@@ -539,19 +548,7 @@ def trace(seed, first, count, scene):  # pragma: no cover - compiled
             elif kind == BOTTOM_FACE:  # the reflector sheet under layer 0
                 state, u = _uniform(state)
                 mark = int(face[fi, F_PRINT])
-                if mark > 0 and _on_dot(
-                    x,
-                    y,
-                    explicit and mark == 1,
-                    phi if mark == 1 else phi2,
-                    g if mark == 1 else g2,
-                    d_start,
-                    d_x,
-                    d_y,
-                    d_foot,
-                    d_cg,
-                    u,
-                ):
+                if mark > 0 and _marked(x, y, mark, pr_arrays, u):
                     state, u = _uniform(state)
                     if u >= face[fi, F_DOT_R]:
                         end = DOT
@@ -593,19 +590,7 @@ def trace(seed, first, count, scene):  # pragma: no cover - compiled
                 mark = int(face[fi, F_PRINT])
                 if mark > 0:
                     state, u = _uniform(state)
-                    if _on_dot(
-                        x,
-                        y,
-                        explicit and mark == 1,
-                        phi if mark == 1 else phi2,
-                        g if mark == 1 else g2,
-                        d_start,
-                        d_x,
-                        d_y,
-                        d_foot,
-                        d_cg,
-                        u,
-                    ):
+                    if _marked(x, y, mark, pr_arrays, u):
                         # the dots lie on the bottom of the layer above the face
                         state, u = _uniform(state)
                         if u < face[fi, F_DOT_R]:
