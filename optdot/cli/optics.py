@@ -112,7 +112,7 @@ def _print_simulation(sim, seconds: float, echo=click.echo) -> None:
         f"traced {s['rays']:,} rays through the {mode} in {seconds:.1f} s "
         f"({s['rays'] / max(seconds, 1e-9):,.0f} rays/s), seed {s['seed']}"
     )
-    into = "the stack" if s["stack"] == "direct" else "the edge"
+    into = "the stack" if s.get("stack") == "direct" else "the edge"
     echo(
         f"efficiency: {s['efficiency']:.2%} ± {s['efficiency_sigma']:.2%} of the injected "
         f"light leaves the top (coupled into {into}: {s['coupling']:.1%})"

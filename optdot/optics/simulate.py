@@ -149,7 +149,7 @@ class Simulation:
         )
         return {
             "mode": self.mode,
-            "stack": self.stack,
+            **({"stack": self.stack} if self.stack != "guide" else {}),
             "rays": self.rays,
             "seed": self.seed,
             "injected": self.injected,
