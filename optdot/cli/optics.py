@@ -196,9 +196,11 @@ def _print_halo(h: dict, echo) -> None:
 @click.option("--quiet", "-q", is_flag=True, help="No line per iteration.")
 @user_errors
 def design(job_file, output, png_path, job_out, rays, iterations, seed, quiet):
-    """Design the fill map that makes JOB_FILE's light guide uniform (or follow
-    [design] target): iterate ray traces of the map's coverage, print the uniformity of
-    each, and write the map (CSV and 16-bit PNG) and a job ready for 'optdot generate'."""
+    """Design the fill map that makes JOB_FILE's backlight uniform (or follow [design]
+    target): the guide's map, or the film's of a [backlight] (more ink, less light).
+    Iterate ray traces of the map's coverage, print the uniformity of each, and write the
+    map (CSV and 16-bit PNG) and a job ready for 'optdot generate' (with the dot sizes a
+    dense film map needs)."""
     from ..config.schema import load_job
     from ..io.atomic import transaction
     from ..io.outputs import check_outputs
