@@ -46,6 +46,15 @@ from optdot.optics.outputs import write_design  # noqa: E402
 from optdot.optics.scene import Coverage  # noqa: E402
 from optdot.optics.simulate import simulate  # noqa: E402
 
+#: The white ink and the diffuser of both stacks (the end of each job's text).
+INK_AND_DIFFUSER = """dot_reflectance = 0.85
+dot_transmittance = 0.10
+haze = "lambertian"
+[[backlight.sheets]]
+kind = "diffuser"
+transmittance = 0.65
+"""
+
 DIRECT = """name = "minled-{profile}"
 [domain]
 width = {w}
@@ -66,12 +75,6 @@ reflector = 0.95
 [backlight.film]
 thickness = 0.2
 refractive_index = 1.59
-dot_reflectance = 0.85
-dot_transmittance = 0.10
-haze = "lambertian"
-[[backlight.sheets]]
-kind = "diffuser"
-transmittance = 0.65
 """
 
 GUIDE = """name = "lgp-film"
@@ -104,12 +107,6 @@ other_map = "guide_map.csv"
 [backlight.film]
 thickness = 0.1
 gap = 0.05
-dot_reflectance = 0.85
-dot_transmittance = 0.10
-haze = "lambertian"
-[[backlight.sheets]]
-kind = "diffuser"
-transmittance = 0.65
 """
 
 
@@ -147,7 +144,7 @@ def direct(args) -> None:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     job_path = out / "job.toml"
-    job_path.write_text(DIRECT.format(profile=args.profile, w=w, h=h))
+    job_path.write_text(DIRECT.format(profile=args.profile, w=w, h=h) + INK_AND_DIFFUSER)
     job = load_job(job_path, need_map=False)
     rays = int(float(args.rays))
     print(f"machine: {machine()}")
@@ -214,7 +211,7 @@ def guide_film(args) -> None:
     print(f"guide designed in {time.perf_counter() - t0:.1f} s")
     np.savetxt(out / "guide_map.csv", g.fill, delimiter=",", fmt="%.6f")
     guide = load_job(out / "guide.toml")
-    (out / "film.toml").write_text(GUIDE + FILM)
+    (out / "film.toml").write_text(GUIDE + FILM + INK_AND_DIFFUSER)
     film = load_job(out / "film.toml", need_map=False)
     t0 = time.perf_counter()
     f = design(film, seed=2)
