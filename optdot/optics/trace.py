@@ -556,12 +556,7 @@ def trace(seed, first, count, scene):  # pragma: no cover - compiled
                     if face[fi, F_EXTRACT] > 0.5:
                         end = EXTRACTED
                         break
-                    state, u = _uniform(state)
-                    state, v = _uniform(state)
-                    sin_a = math.sqrt(u)
-                    dz = math.sqrt(1.0 - u)
-                    dxn = sin_a * math.cos(2.0 * math.pi * v)
-                    dyn = sin_a * math.sin(2.0 * math.pi * v)
+                    state, dxn, dyn, dz = _lambert(state, True)  # back into the slab
                     new_leg = True
                     continue
                 if -dz > face[fi, F_COS_DOWN]:
