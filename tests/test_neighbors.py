@@ -130,3 +130,29 @@ def test_verlet_update_never_changes_a_list_it_handed_out():
     found |= {tuple(sorted(p)) for p in zip(second.ei.tolist(), second.ej.tolist(), strict=True)}
     want = {tuple(p) for p in pairs_brute_force(moved, reff).tolist()}
     assert want <= found
+
+
+def test_counting_sort_in_parallel_ranges_is_the_stable_sort():
+    """The cell sort split over index ranges gives what one serial stable sort gives:
+    every cell's dots in index order, whatever the number of ranges."""
+    from optdot.spatial.cellgrid import _bin_points
+
+    rng = np.random.default_rng(5)
+    n = 4 * 65536 + 17  # enough dots for four ranges
+    xy = rng.random((n, 2)) * [30.0, 20.0]
+    xy[:100] = xy[100:200]  # shared cells across ranges
+    reff = 0.01 + 0.02 * rng.random(n)
+    nx, ny, cell = 300, 200, 0.1
+    cid = np.minimum((xy[:, 1] / cell).astype(int), ny - 1) * nx + np.minimum(
+        (xy[:, 0] / cell).astype(int), nx - 1
+    )
+    want = np.argsort(cid, kind="stable")
+    for parts in (1, 2, 3, 4):
+        start, order, bx, by, br, cellmax = _bin_points(xy, reff, 0.0, 0.0, cell, nx, ny, parts)
+        np.testing.assert_array_equal(order, want)
+        np.testing.assert_array_equal(start, np.searchsorted(cid[want], np.arange(nx * ny + 1)))
+        np.testing.assert_array_equal(bx, xy[want, 0])
+        np.testing.assert_array_equal(br, reff[want])
+        top = np.zeros(nx * ny)
+        np.maximum.at(top, cid, reff)
+        np.testing.assert_array_equal(cellmax, top)

@@ -294,10 +294,24 @@ def _penalty_kernel(
         i = cross[a]
         if skip[i]:
             continue
+        # the packed rows (one cache line a dot) hold the same values as xy, r and cr
+        # for dots that are not movers; dot i's stay in registers over its partners
+        xi, yi, ri, ci = packed[i, 0], packed[i, 1], packed[i, 2], packed[i, 3]
+        gxi = grad[i, 0]
+        gyi = grad[i, 1]
         for k in range(mid[i], ptr[i + 1]):
             j = nbr[k]
             if not skip[j]:
-                f += _pair_term(xy, r, cr, i, j, w, grad)
+                dx = xi - packed[j, 0]
+                dy = yi - packed[j, 1]
+                fp, gx, gy = pair_grad(dx, dy, ri + packed[j, 2], ci + packed[j, 3], w, i < j)
+                f += fp
+                gxi -= gx
+                gyi -= gy
+                grad[j, 0] += gx
+                grad[j, 1] += gy
+        grad[i, 0] = gxi
+        grad[i, 1] = gyi
     for k in range(ei.shape[0]):
         f += _pair_term(xy, r, cr, ei[k], ej[k], w, grad)
     return f

@@ -18,42 +18,70 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+#: Most index ranges the counting sort splits the dots into (each holds a count per cell;
+#: the sort is stable, so its result is the same for any split).
+_BIN_PARTS = 4
 
-@nb.njit(cache=True)
-def _bin_points(xy, reff, x0, y0, cell, nx, ny):  # pragma: no cover - compiled
+
+def bin_parts() -> int:
+    """Index ranges the counting sort of :func:`_bin_points` runs in parallel: one per
+    thread, at most :data:`_BIN_PARTS` (each holds a count per cell)."""
+    return max(1, min(_BIN_PARTS, nb.get_num_threads()))
+
+
+@nb.njit(parallel=True, cache=True)
+def _bin_points(xy, reff, x0, y0, cell, nx, ny, parts):  # pragma: no cover - compiled
     """Counting sort of the dots into cells; returns cell starts and sorted copies.
 
     The copies (index, x, y, radius in cell order) make every cell scan read contiguous
-    memory, which is what the scan's speed depends on.
+    memory, which is what the scan's speed depends on. The sort is stable (a cell's dots
+    in index order) and runs in parallel over a few index ranges, each placing its dots
+    after those of the ranges before it (``parts`` of them at most, see
+    :func:`bin_parts`): the result is the same for any ``parts``.
     """
     n = xy.shape[0]
+    ncell = nx * ny
     cid = np.empty(n, np.int64)
-    for i in range(n):
+    for i in nb.prange(n):
         ix = int((xy[i, 0] - x0) / cell)
         iy = int((xy[i, 1] - y0) / cell)
         ix = min(max(ix, 0), nx - 1)
         iy = min(max(iy, 0), ny - 1)
         cid[i] = iy * nx + ix
-    start = np.zeros(nx * ny + 1, np.int64)
-    for i in range(n):
-        start[cid[i] + 1] += 1
-    for c in range(nx * ny):
-        start[c + 1] += start[c]
-    fill = start[:-1].copy()
+    parts = max(1, min(parts, n // 65536))
+    step = (n + parts - 1) // parts
+    at = np.zeros((parts, ncell), np.int64)  # counts, then each range's next slot
+    for p in nb.prange(parts):
+        for i in range(p * step, min((p + 1) * step, n)):
+            at[p, cid[i]] += 1
+    start = np.empty(ncell + 1, np.int64)
+    running = 0
+    for c in range(ncell):
+        start[c] = running
+        for p in range(parts):
+            m = at[p, c]
+            at[p, c] = running
+            running += m
+    start[ncell] = running
     order = np.empty(n, np.int32)
-    cellmax = np.zeros(nx * ny)
     bx = np.empty(n)
     by = np.empty(n)
     br = np.empty(n)
-    for i in range(n):
-        c = cid[i]
-        k = fill[c]
-        order[k] = i
-        bx[k] = xy[i, 0]
-        by[k] = xy[i, 1]
-        br[k] = reff[i]
-        cellmax[c] = max(cellmax[c], reff[i])
-        fill[c] += 1
+    for p in nb.prange(parts):
+        for i in range(p * step, min((p + 1) * step, n)):
+            c = cid[i]
+            k = at[p, c]
+            order[k] = i
+            bx[k] = xy[i, 0]
+            by[k] = xy[i, 1]
+            br[k] = reff[i]
+            at[p, c] = k + 1
+    cellmax = np.zeros(ncell)
+    for c in nb.prange(ncell):
+        m = 0.0
+        for k in range(start[c], start[c + 1]):
+            m = max(m, br[k])
+        cellmax[c] = m
     return start, order, bx, by, br, cellmax
 
 
@@ -95,10 +123,10 @@ _CHUNK = 2048
 
 
 @nb.njit(parallel=True, cache=True)
-def _pairs_csr(xy, reff, grow, x0, y0, cell, nx, ny, per_dot):  # pragma: no cover - compiled
+def _pairs_csr(xy, reff, grow, x0, y0, cell, nx, ny, per_dot, parts):  # pragma: no cover - compiled
     """One scan per dot into per-chunk segments of ``per_dot * _CHUNK`` slots, then one
     copy into the CSR arrays; a chunk whose segment overflowed is scanned again."""
-    start, order, bx, by, br, cellmax = _bin_points(xy, reff, x0, y0, cell, nx, ny)
+    start, order, bx, by, br, cellmax = _bin_points(xy, reff, x0, y0, cell, nx, ny, parts)
     n = xy.shape[0]
     nchunk = (n + _CHUNK - 1) // _CHUNK
     cap = per_dot * _CHUNK
@@ -196,7 +224,7 @@ def _search(
     grow = 1.0 + float(skin)
     x0, y0, cell, nx, ny = _grid_shape(xy, cell_side(reff, skin) if cell is None else cell)
     ptr, nbr, start, order, cellmax, over = _pairs_csr(
-        xy, reff, grow, x0, y0, cell, nx, ny, max(int(per_dot), 1)
+        xy, reff, grow, x0, y0, cell, nx, ny, max(int(per_dot), 1), bin_parts()
     )
     return ptr, nbr, CellGrid(x0, y0, cell, nx, ny, start, order, cellmax), bool(over)
 
