@@ -317,16 +317,20 @@ def test_a_frozen_worker_is_dropped_and_its_tiles_retried(tmp_path):
     assert ref.wait(timeout=180) == 0, ref.stderr.read()
     env = {"DASK_DISTRIBUTED__SCHEDULER__WORKER_TTL": "5s"}
     proc = _start_tiled(tmp_path, "d.parquet", env)
-    frozen = _workers_of(proc)[0]  # one that is running a tile
-    os.kill(frozen, signal.SIGSTOP)
     try:
-        out, err = proc.communicate(timeout=150)
-    finally:
+        frozen = _workers_of(proc)[0]  # one that is running a tile
+        os.kill(frozen, signal.SIGSTOP)
         try:
-            os.kill(frozen, signal.SIGCONT)
-            os.kill(frozen, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
+            out, err = proc.communicate(timeout=150)
+        finally:
+            try:
+                os.kill(frozen, signal.SIGCONT)
+                os.kill(frozen, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+    finally:
+        if proc.poll() is None:  # a run that hung is not left running (nor its workers)
+            os.killpg(proc.pid, signal.SIGKILL)
     assert proc.returncode == 0, err
     assert "Traceback" not in err and "Error" not in err, err  # no worker tracebacks
     a = json.loads((tmp_path / "ref.parquet" / "_manifest.json").read_text())

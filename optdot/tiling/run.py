@@ -102,6 +102,11 @@ class FieldStore(Protocol):
         """Keep ``arrays`` under ``name``."""
 
 
+def _value(value: Any) -> Any:
+    """A task that returns what it was given (:meth:`OnDask.share`)."""
+    return value
+
+
 def _run(fn: Callable, *args: Any) -> Any:
     """A task: numba on one thread, then ``fn(*args)``."""
     single_threaded()
@@ -148,9 +153,24 @@ class OnDask:
     retries: int = 2
     run_id: str = field(default_factory=lambda: uuid.uuid4().hex[:8])
     submitted: int = 0
+    shared: int = 0
 
     def share(self, value: Any) -> Any:
-        return self.client.scatter(value, broadcast=True, hash=False)
+        """A handle to ``value`` that every task may take: the result of a task that
+        returns it. Its one copy goes to the scheduler with the task; a worker that needs
+        it fetches it from the worker holding it, and if that worker is lost the
+        scheduler runs the task again elsewhere. Not ``scatter(broadcast=True)``: its
+        replication to every worker at times never finished (a run hung at its first
+        share, every process idle, on a loaded machine; dask/distributed#4907), and a
+        scattered value whose only holder dies cannot be made again."""
+        import dask
+
+        self.shared += 1
+        with dask.config.set({"distributed.admin.large-graph-warning-threshold": "2GiB"}):
+            return self.client.submit(
+                _value, value, key=f"optdot-shared-{self.shared}-{self.run_id}",
+                priority=1, retries=self.retries, pure=False,
+            )  # fmt: skip
 
     def submit(self, kind: str, key: str, fn: Callable, *args: Any) -> Any:
         self.submitted += 1
