@@ -48,7 +48,7 @@ import optdot.relax.lbfgs as lbfgs  # noqa: E402
 import optdot.relax.optdot as relax  # noqa: E402
 from optdot import pipeline  # noqa: E402
 from optdot.config.schema import load_job  # noqa: E402
-from optdot.relax.terms import pair_grad  # noqa: E402
+from optdot.relax.penalty import row_pairs  # noqa: E402
 from optdot.spatial.blocks import BLOCK, PairList  # noqa: E402
 from optdot.spatial.cellgrid import _bin_points, _scan, bin_parts, neighbor_grid  # noqa: E402
 
@@ -98,23 +98,15 @@ def _triad(a, b, c, s):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True)
-def _pairs_hot(xy, r, cr, w, ptr, mid, nbr, hi, reps, grad):  # pragma: no cover - compiled
-    """The penalty's in-block loop over dots ``0..hi`` (in cache), ``reps`` times."""
+def _pairs_hot(packed, w, ptr, mid, nbr, skip, hi, reps, grad):  # pragma: no cover - compiled
+    """The penalty's in-block loop (:func:`optdot.relax.penalty.row_pairs`) over dots
+    ``0..hi`` (in cache), ``reps`` times."""
     f = 0.0
     for _ in range(reps):
         for i in range(hi):
-            gxi = 0.0
-            gyi = 0.0
-            for k in range(ptr[i], mid[i]):
-                j = nbr[k]
-                fp, gx, gy = pair_grad(
-                    xy[i, 0] - xy[j, 0], xy[i, 1] - xy[j, 1], r[i] + r[j], cr[i] + cr[j], w, i < j
-                )
-                f += fp
-                gxi -= gx
-                gyi -= gy
-                grad[j, 0] += gx
-                grad[j, 1] += gy
+            f, gxi, gyi = row_pairs(
+                i, ptr[i], mid[i], packed, nbr, skip, False, w, grad, f, 0.0, 0.0
+            )
             grad[i, 0] += gxi
             grad[i, 1] += gyi
     return f
@@ -163,7 +155,8 @@ def main() -> None:
     hot_pairs = int(pairs.mid[hi - 1] - pairs.ptr[0]) if hi else 0
     grad = np.zeros_like(xy)
     reps = max(1, 2_000_000 // max(hot_pairs, 1))
-    args_p = (xy, r, cr, w, pairs.ptr, pairs.mid, pairs.nbr, hi)
+    packed = np.column_stack([xy, r, cr])
+    args_p = (packed, w, pairs.ptr, pairs.mid, pairs.nbr, pairs.skip, hi)
     t = best(lambda: _pairs_hot(*args_p, reps, grad), 5)
     pair_ns = 1e9 * t / (reps * hot_pairs)
     reff = np.ascontiguousarray(terms.reach)

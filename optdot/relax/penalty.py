@@ -221,6 +221,29 @@ def _phantom_terms(i, xy, r, box, margin, empty, has_empty, gbox, ed):  # pragma
 _GONE = -1e300
 
 
+@nb.njit(cache=True, inline="always")
+def row_pairs(i, lo, hi, packed, nbr, skip, check, w, grad, f, gxi, gyi):  # pragma: no cover
+    """Dot i's pairs with its partners ``nbr[lo:hi]`` read from the ``packed`` rows
+    ``[n, 4]`` (x, y, r, c): each pair's f added to ``f``, its gradient subtracted from
+    ``(gxi, gyi)`` (dot i's, kept in registers over the row) and added to ``grad[j]``;
+    partners that are movers are passed over when ``check`` (a packed mover's radius
+    makes its pairs zero anyway). Returns ``(f, gxi, gyi)``."""
+    xi, yi, ri, ci = packed[i, 0], packed[i, 1], packed[i, 2], packed[i, 3]
+    for k in range(lo, hi):
+        j = nbr[k]
+        if check and skip[j]:
+            continue
+        dx = xi - packed[j, 0]
+        dy = yi - packed[j, 1]
+        fp, gx, gy = pair_grad(dx, dy, ri + packed[j, 2], ci + packed[j, 3], w, i < j)
+        f += fp
+        gxi -= gx
+        gyi -= gy
+        grad[j, 0] += gx
+        grad[j, 1] += gy
+    return f, gxi, gyi
+
+
 @nb.njit(parallel=True, cache=True)
 def _penalty_kernel(
     xy,
@@ -270,20 +293,9 @@ def _penalty_kernel(
         for i in range(lo, hi):
             if skip[i]:
                 continue
-            # dot i's values stay in registers over its partners
-            xi, yi, ri, ci = packed[i, 0], packed[i, 1], packed[i, 2], packed[i, 3]
-            gxi = 0.0
-            gyi = 0.0
-            for k in range(ptr[i], mid[i]):
-                j = nbr[k]
-                dx = xi - packed[j, 0]
-                dy = yi - packed[j, 1]
-                fp, gx, gy = pair_grad(dx, dy, ri + packed[j, 2], ci + packed[j, 3], w, i < j)
-                f += fp
-                gxi -= gx
-                gyi -= gy
-                grad[j, 0] += gx
-                grad[j, 1] += gy
+            f, gxi, gyi = row_pairs(
+                i, ptr[i], mid[i], packed, nbr, skip, False, w, grad, f, 0.0, 0.0
+            )
             grad[i, 0] += gxi
             grad[i, 1] += gyi
         part[b] = f
@@ -295,23 +307,11 @@ def _penalty_kernel(
         if skip[i]:
             continue
         # the packed rows (one cache line a dot) hold the same values as xy, r and cr
-        # for dots that are not movers; dot i's stay in registers over its partners
-        xi, yi, ri, ci = packed[i, 0], packed[i, 1], packed[i, 2], packed[i, 3]
-        gxi = grad[i, 0]
-        gyi = grad[i, 1]
-        for k in range(mid[i], ptr[i + 1]):
-            j = nbr[k]
-            if not skip[j]:
-                dx = xi - packed[j, 0]
-                dy = yi - packed[j, 1]
-                fp, gx, gy = pair_grad(dx, dy, ri + packed[j, 2], ci + packed[j, 3], w, i < j)
-                f += fp
-                gxi -= gx
-                gyi -= gy
-                grad[j, 0] += gx
-                grad[j, 1] += gy
-        grad[i, 0] = gxi
-        grad[i, 1] = gyi
+        # for dots that are not movers
+        g0, g1 = grad[i, 0], grad[i, 1]
+        f, grad[i, 0], grad[i, 1] = row_pairs(
+            i, mid[i], ptr[i + 1], packed, nbr, skip, True, w, grad, f, g0, g1
+        )
     for k in range(ei.shape[0]):
         f += _pair_term(xy, r, cr, ei[k], ej[k], w, grad)
     return f
