@@ -117,10 +117,11 @@ def _scan_hot(xy, reff, grow, start, order, bx, by, br, x0, y0, cell, nx, ny, hi
     """The cell scan of dots ``0..hi`` (their cells in cache), ``reps`` times; returns
     the candidates tested."""  # pragma: no cover - compiled
     row = np.empty(256, np.int32)
+    keys = np.zeros(0, np.int64)  # the dense grid
     cand = 0
     for _ in range(reps):
         for i in range(hi):
-            _scan(i, xy, reff, grow, start, order, bx, by, br, x0, y0, cell, nx, ny, row)
+            _scan(i, xy, reff, grow, start, keys, order, bx, by, br, x0, y0, cell, nx, ny, row)
             ri = reff[i]
             reach = 2.0 * ri * grow
             ix0 = max(int((xy[i, 0] - reach - x0) / cell), 0)

@@ -1,5 +1,5 @@
 import numpy as np
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from optdot.geometry.morton import spatial_order
@@ -156,3 +156,31 @@ def test_counting_sort_in_parallel_ranges_is_the_stable_sort():
         top = np.zeros(nx * ny)
         np.maximum.at(top, cid, reff)
         np.testing.assert_array_equal(cellmax, top)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    n=st.integers(2, 400),
+    seed=st.integers(0, 2**31),
+    spread=st.floats(1.0, 6.0),
+    skin=st.floats(0.0, 0.5),
+    clump=st.booleans(),
+)
+def test_few_dots_far_apart_give_the_dense_grids_pairs_in_its_order(n, seed, spread, skin, clump):
+    """A Verlet list's movers: a few dots over a panel of ~10^6 cells. The bisected
+    search gives the dense grid's CSR list exactly (the same pairs, the same order)."""
+    from optdot.spatial import cellgrid
+
+    rng = np.random.default_rng(seed)
+    xy = rng.random((n, 2)) * [200.0, 120.0]
+    if clump:  # clusters that touch across cell borders, and coincident centres
+        xy[: n // 2] = xy[0] + rng.normal(0.0, 0.05, (n // 2, 2))
+        xy[n // 2 : n // 2 + 3] = xy[0]
+    r = 0.02 * rng.uniform(1.0, spread, n)
+    x0, y0, cell, nx, ny = cellgrid._grid_shape(xy, cellgrid.cell_side(r, skin))
+    assume(nx * ny > cellgrid.SPARSE_CELLS * n)  # the bisected path is the one taken
+    ptr, nbr = neighbor_pairs(xy, r, skin)
+    dense_ptr, dense_nbr, _, _ = cellgrid._search(xy, r, skin, None, 8)
+    np.testing.assert_array_equal(ptr, dense_ptr)
+    np.testing.assert_array_equal(nbr, dense_nbr)
+    np.testing.assert_array_equal(csr_to_pairs(ptr, nbr), pairs_brute_force(xy, r, skin))

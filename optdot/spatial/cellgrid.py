@@ -87,13 +87,16 @@ def _bin_points(xy, reff, x0, y0, cell, nx, ny, parts):  # pragma: no cover - co
 
 @nb.njit(cache=True)
 def _scan(
-    i, xy, reff, grow, start, order, bx, by, br, x0, y0, cell, nx, ny, buf
+    i, xy, reff, grow, start, keys, order, bx, by, br, x0, y0, cell, nx, ny, buf
 ):  # pragma: no cover
     """Partners of dot i: writes them to ``buf`` (as many as fit) and returns how many.
 
     Branch-free inner loop: a candidate is written at the cursor, which then advances by
     the test's 0/1 (clamped to the last slot, so ``buf`` is never overrun); the caller
-    knows ``buf`` held them all when the count is below ``len(buf)``.
+    knows ``buf`` held them all when the count is below ``len(buf)``. A row's cells are
+    ``start[row + ix0]`` to ``start[row + ix1 + 1]`` of the sorted copies (a dense grid),
+    or, when ``keys`` (the sorted copies' cell ids) is given, found in it by bisection (a
+    sparse one): the same candidates in the same order.
     """
     xi = xy[i, 0]
     yi = xy[i, 1]
@@ -105,9 +108,16 @@ def _scan(
     iy1 = min(int((yi + reach - y0) / cell), ny - 1)
     last = buf.shape[0] - 1
     cnt = 0
+    sparse = keys.shape[0] > 0
     for cy in range(iy0, iy1 + 1):
         row = cy * nx
-        for k in range(start[row + ix0], start[row + ix1 + 1]):
+        if sparse:
+            lo = np.searchsorted(keys, row + ix0)
+            hi = np.searchsorted(keys, row + ix1, side="right")
+        else:
+            lo = start[row + ix0]
+            hi = start[row + ix1 + 1]
+        for k in range(lo, hi):
             rj = br[k]
             j = order[k]
             dx = xi - bx[k]
@@ -122,11 +132,54 @@ def _scan(
 _CHUNK = 2048
 
 
+@nb.njit(cache=True)
+def _pairs_sparse(xy, reff, grow, x0, y0, cell, nx, ny):  # pragma: no cover - compiled
+    """:func:`_pairs_csr`'s ``(ptr, nbr)`` for a few dots on a grid of many cells: the
+    dots sorted by cell id (stably, so a cell's dots in index order, as the counting sort
+    leaves them) and each row's cells found by bisection, so nothing is the size of the
+    grid. The same pairs in the same order."""
+    n = xy.shape[0]
+    cid = np.empty(n, np.int64)
+    for i in range(n):
+        ix = min(max(int((xy[i, 0] - x0) / cell), 0), nx - 1)
+        iy = min(max(int((xy[i, 1] - y0) / cell), 0), ny - 1)
+        cid[i] = iy * nx + ix
+    sort = np.argsort(cid, kind="mergesort")
+    keys = cid[sort]
+    order = sort.astype(np.int32)
+    bx = np.empty(n)
+    by = np.empty(n)
+    br = np.empty(n)
+    for k in range(n):
+        bx[k] = xy[sort[k], 0]
+        by[k] = xy[sort[k], 1]
+        br[k] = reff[sort[k]]
+    no_start = np.zeros(0, np.int64)
+    ptr = np.zeros(n + 1, np.int64)
+    nbr = np.empty(max(16, 8 * n), np.int32)
+    row = np.empty(256, np.int32)
+    for i in range(n):
+        m = _scan(i, xy, reff, grow, no_start, keys, order, bx, by, br, x0, y0, cell, nx, ny, row)
+        while m >= row.shape[0]:  # the row buffer was full: again with room for all
+            row = np.empty(2 * m, np.int32)
+            m = _scan(
+                i, xy, reff, grow, no_start, keys, order, bx, by, br, x0, y0, cell, nx, ny, row
+            )
+        if ptr[i] + m > nbr.shape[0]:
+            more = np.empty(2 * (ptr[i] + m), np.int32)
+            more[: ptr[i]] = nbr[: ptr[i]]
+            nbr = more
+        nbr[ptr[i] : ptr[i] + m] = row[:m]
+        ptr[i + 1] = ptr[i] + m
+    return ptr, nbr[: ptr[n]].copy()
+
+
 @nb.njit(parallel=True, cache=True)
 def _pairs_csr(xy, reff, grow, x0, y0, cell, nx, ny, per_dot, parts):  # pragma: no cover - compiled
     """One scan per dot into per-chunk segments of ``per_dot * _CHUNK`` slots, then one
     copy into the CSR arrays; a chunk whose segment overflowed is scanned again."""
     start, order, bx, by, br, cellmax = _bin_points(xy, reff, x0, y0, cell, nx, ny, parts)
+    no_keys = np.zeros(0, np.int64)  # a dense grid: rows from ``start``
     n = xy.shape[0]
     nchunk = (n + _CHUNK - 1) // _CHUNK
     cap = per_dot * _CHUNK
@@ -138,7 +191,9 @@ def _pairs_csr(xy, reff, grow, x0, y0, cell, nx, ny, per_dot, parts):  # pragma:
         pos = c * cap
         end = pos + cap
         for i in range(c * _CHUNK, min((c + 1) * _CHUNK, n)):
-            m = _scan(i, xy, reff, grow, start, order, bx, by, br, x0, y0, cell, nx, ny, row)
+            m = _scan(
+                i, xy, reff, grow, start, no_keys, order, bx, by, br, x0, y0, cell, nx, ny, row
+            )
             counts[i + 1] = m
             if m >= row.shape[0] or pos + m > end:
                 over[c] = True
@@ -155,7 +210,9 @@ def _pairs_csr(xy, reff, grow, x0, y0, cell, nx, ny, per_dot, parts):  # pragma:
             continue
         row = np.empty(counts[a + 1 : b + 1].max() + 1, np.int32)
         for i in range(a, b):
-            m = _scan(i, xy, reff, grow, start, order, bx, by, br, x0, y0, cell, nx, ny, row)
+            m = _scan(
+                i, xy, reff, grow, start, no_keys, order, bx, by, br, x0, y0, cell, nx, ny, row
+            )
             nbr[ptr[i] : ptr[i] + m] = row[:m]
     return ptr, nbr, start, order, cellmax, over.any()
 
@@ -193,6 +250,12 @@ def _bounds(xy):  # pragma: no cover - compiled
         y0 = min(y0, xy[i, 1])
         y1 = max(y1, xy[i, 1])
     return x0, y0, x1, y1
+
+
+#: Cells a dot beyond which :func:`neighbor_pairs` bisects the dots' cell ids instead of
+#: binning them into the whole grid (whose arrays and loops are the size of the grid:
+#: the movers of a large panel's Verlet list spread over ~10^7 cells).
+SPARSE_CELLS = 16
 
 
 def cell_side(reff: np.ndarray, skin: float) -> float:
@@ -351,7 +414,14 @@ def neighbor_pairs(
         ``(ptr, nbr)``: CSR half list, ``ptr`` ``[n + 1]`` int64, ``nbr`` ``[K]`` int32;
         every unordered pair appears once.
     """
-    ptr, nbr, _, _ = _search(xy, radius, skin, None, 8)
+    xy = np.ascontiguousarray(xy, dtype=np.float64).reshape(-1, 2)
+    n = len(xy)
+    reff = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, np.float64), (n,)))
+    if n:
+        x0, y0, cell, nx, ny = _grid_shape(xy, cell_side(reff, skin))
+        if nx * ny > SPARSE_CELLS * n:  # a few dots far apart (a Verlet list's movers)
+            return _pairs_sparse(xy, reff, 1.0 + float(skin), x0, y0, cell, nx, ny)
+    ptr, nbr, _, _ = _search(xy, reff, skin, None, 8)
     return ptr, nbr
 
 
