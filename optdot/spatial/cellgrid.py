@@ -29,6 +29,15 @@ def bin_parts() -> int:
     return max(1, min(_BIN_PARTS, nb.get_num_threads()))
 
 
+@nb.njit(cache=True, inline="always")
+def _cell_id(x, y, x0, y0, cell, nx, ny):  # pragma: no cover - compiled
+    """The row-major id of the cell a point at (x, y) is binned into (clamped to the
+    grid): one rule for the counting sort and the bisected search."""
+    ix = min(max(int((x - x0) / cell), 0), nx - 1)
+    iy = min(max(int((y - y0) / cell), 0), ny - 1)
+    return iy * nx + ix
+
+
 @nb.njit(parallel=True, cache=True)
 def _bin_points(xy, reff, x0, y0, cell, nx, ny, parts):  # pragma: no cover - compiled
     """Counting sort of the dots into cells; returns cell starts and sorted copies.
@@ -43,11 +52,7 @@ def _bin_points(xy, reff, x0, y0, cell, nx, ny, parts):  # pragma: no cover - co
     ncell = nx * ny
     cid = np.empty(n, np.int64)
     for i in nb.prange(n):
-        ix = int((xy[i, 0] - x0) / cell)
-        iy = int((xy[i, 1] - y0) / cell)
-        ix = min(max(ix, 0), nx - 1)
-        iy = min(max(iy, 0), ny - 1)
-        cid[i] = iy * nx + ix
+        cid[i] = _cell_id(xy[i, 0], xy[i, 1], x0, y0, cell, nx, ny)
     parts = max(1, min(parts, n // 65536))
     step = (n + parts - 1) // parts
     at = np.zeros((parts, ncell), np.int64)  # counts, then each range's next slot
@@ -141,9 +146,7 @@ def _pairs_sparse(xy, reff, grow, x0, y0, cell, nx, ny):  # pragma: no cover - c
     n = xy.shape[0]
     cid = np.empty(n, np.int64)
     for i in range(n):
-        ix = min(max(int((xy[i, 0] - x0) / cell), 0), nx - 1)
-        iy = min(max(int((xy[i, 1] - y0) / cell), 0), ny - 1)
-        cid[i] = iy * nx + ix
+        cid[i] = _cell_id(xy[i, 0], xy[i, 1], x0, y0, cell, nx, ny)
     sort = np.argsort(cid, kind="mergesort")
     keys = cid[sort]
     order = sort.astype(np.int32)
@@ -273,9 +276,17 @@ def _grid_shape(xy: np.ndarray, cell: float) -> tuple[float, float, float, int, 
 
 
 def _search(
-    xy: np.ndarray, radius: np.ndarray | float, skin: float, cell: float | None, per_dot: int
-) -> tuple[np.ndarray, np.ndarray, CellGrid, bool]:
-    """(ptr, nbr, grid, overflow) of the cell-grid search (see :func:`neighbor_list`)."""
+    xy: np.ndarray,
+    radius: np.ndarray | float,
+    skin: float,
+    cell: float | None,
+    per_dot: int,
+    sparse: bool = False,
+) -> tuple[np.ndarray, np.ndarray, CellGrid | None, bool]:
+    """(ptr, nbr, grid, overflow) of the cell-grid search (see :func:`neighbor_list`).
+    With ``sparse``, a grid of more than :data:`SPARSE_CELLS` cells a dot is searched by
+    bisection (:func:`_pairs_sparse`, the same pairs in the same order) and no grid is
+    returned."""
     xy = np.ascontiguousarray(xy, dtype=np.float64)
     n = xy.shape[0]
     reff = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, np.float64), (n,)))
@@ -286,6 +297,9 @@ def _search(
         return np.zeros(1, np.int64), np.zeros(0, np.int32), empty, False
     grow = 1.0 + float(skin)
     x0, y0, cell, nx, ny = _grid_shape(xy, cell_side(reff, skin) if cell is None else cell)
+    if sparse and nx * ny > SPARSE_CELLS * n:  # a few dots far apart (a Verlet list's movers)
+        ptr, nbr = _pairs_sparse(xy, reff, grow, x0, y0, cell, nx, ny)
+        return ptr, nbr, None, False
     ptr, nbr, start, order, cellmax, over = _pairs_csr(
         xy, reff, grow, x0, y0, cell, nx, ny, max(int(per_dot), 1), bin_parts()
     )
@@ -414,14 +428,7 @@ def neighbor_pairs(
         ``(ptr, nbr)``: CSR half list, ``ptr`` ``[n + 1]`` int64, ``nbr`` ``[K]`` int32;
         every unordered pair appears once.
     """
-    xy = np.ascontiguousarray(xy, dtype=np.float64).reshape(-1, 2)
-    n = len(xy)
-    reff = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, np.float64), (n,)))
-    if n:
-        x0, y0, cell, nx, ny = _grid_shape(xy, cell_side(reff, skin))
-        if nx * ny > SPARSE_CELLS * n:  # a few dots far apart (a Verlet list's movers)
-            return _pairs_sparse(xy, reff, 1.0 + float(skin), x0, y0, cell, nx, ny)
-    ptr, nbr, _, _ = _search(xy, reff, skin, None, 8)
+    ptr, nbr, _, _ = _search(xy, radius, skin, None, 8, sparse=True)
     return ptr, nbr
 
 
