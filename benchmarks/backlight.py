@@ -1,7 +1,8 @@
 """Direct-lit and film stacks (issue 38): design -> generate -> simulate with the real dots.
 
 Run: python benchmarks/backlight.py direct [--profile lambertian|batwing] [--out DIR]
-         [--rays 4e8] [--halo-rays 4e6] [--size 60x40]
+         [--rays 4e8] [--halo-rays 4e6] [--size 60x40] [--cap 0.8] [--fill-max 0.75]
+         [--smoothing 1]
      python benchmarks/backlight.py guide-film [--out DIR] [--rays 6.4e7]
 
 ``direct``: the issue's stack. A 60 x 40 mm mini-LED backlight: LEDs of 0.2 mm on a 5 mm
@@ -144,11 +145,23 @@ def direct(args) -> None:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     job_path = out / "job.toml"
-    job_path.write_text(DIRECT.format(profile=args.profile, w=w, h=h) + INK_AND_DIFFUSER)
+    text = DIRECT.format(profile=args.profile, w=w, h=h)
+    if args.cap > 0:
+        text = text.replace(
+            f'profile = "{args.profile}"\n', f'profile = "{args.profile}"\ncap = {args.cap}\n'
+        )
+    extra = []
+    if args.fill_max is not None:
+        extra.append(f"fill_range = [0.0, {args.fill_max}]")
+    if args.smoothing is not None:
+        extra.append(f"smoothing = {args.smoothing}")
+    design_sec = "[design]\n" + "\n".join(extra) + "\n" if extra else ""
+    job_path.write_text(text + INK_AND_DIFFUSER + design_sec)
     job = load_job(job_path, need_map=False)
     rays = int(float(args.rays))
     print(f"machine: {machine()}")
-    print(f"stack: {args.profile} LEDs, {len(job.backlight.leds.positions)} on a 5 mm grid")
+    caps = f", caps of {args.cap:g} mm" if args.cap > 0 else ""
+    print(f"stack: {args.profile} LEDs, {len(job.backlight.leds.positions)} on a 5 mm grid{caps}")
 
     t0 = time.perf_counter()
     got = design(job, seed=1)
@@ -234,6 +247,9 @@ def main() -> None:
     ap.add_argument("--rays", default=None)
     ap.add_argument("--halo-rays", default="4e6")
     ap.add_argument("--size", default="60x40")
+    ap.add_argument("--cap", type=float, default=0.0, help="direct: LED cap diameter, mm")
+    ap.add_argument("--fill-max", type=float, help="direct: design.fill_range's top")
+    ap.add_argument("--smoothing", type=float, help="direct: design.smoothing, cells")
     args = ap.parse_args()
     if args.case == "direct":
         args.rays = args.rays or "4e8"

@@ -10,6 +10,9 @@ a complete document (header with ``$INSUNITS`` = mm, tables, layers, blocks, obj
 holding the outline and one template circle; the template's entity text is then repeated
 once per dot with fresh handles, and ``$HANDSEED`` is moved past the last one. The result
 is an ordinary DXF that ezdxf's audit accepts (tests/test_exporters.py).
+
+Caps over LEDs (:mod:`optdot.geometry.caps`) are CIRCLEs on ``DOTS`` too (they are
+printed), each marked by XDATA of the application ``OPTDOT_CAP``.
 """
 
 from __future__ import annotations
@@ -23,10 +26,11 @@ from pathlib import Path
 import ezdxf
 import numpy as np
 
+from optdot.geometry.caps import CAP_APPID
 from optdot.geometry.orientation import degrees
 from optdot.geometry.shapes import CIRCLE, Kind
 from optdot.io.atomic import atomic_path, expect_tail
-from optdot.pattern import DotSource, Pattern
+from optdot.pattern import DotSource, Pattern, caps_of
 
 from .options import ExportOptions
 
@@ -130,6 +134,12 @@ def _template(
             msp.add_polyline2d(pts, close=True, dxfattribs={"layer": "OUTLINE"})
         else:
             msp.add_lwpolyline(pts, close=True, dxfattribs={"layer": "OUTLINE"})
+    caps = caps_of(pattern)
+    if len(caps):
+        doc.appids.add(CAP_APPID)
+    for x, y, d in caps.tolist():  # a cap: a circle on DOTS marked by its XDATA
+        cap = msp.add_circle((x, y), 0.5 * d, dxfattribs={"layer": "DOTS"})
+        cap.set_xdata(CAP_APPID, [(1000, "cap")])
     names = []
     if shaped:
         for size in sizes:

@@ -8,7 +8,9 @@ A shaped dot's cell holds its footprint at angle 0 (``DOT_<length>x<width>[x<cor
 radius>]`` in nm), each dot a reference rotated by its own angle (one repeated
 reference when every dot has the same angle).
 ``flatten`` writes plain polygons instead. The panel (outline minus holes and keep-outs)
-goes on its own layer as filled polygons, holes cut open by zero-width keyholes.
+goes on its own layer as filled polygons, holes cut open by zero-width keyholes. Caps
+over LEDs (:mod:`optdot.geometry.caps`) are circles on the dots' layer in a cell ``CAP``
+(``CAP_<diameter in nm>`` when they differ), one reference a cap, flattened or not.
 """
 
 from __future__ import annotations
@@ -25,10 +27,11 @@ import gdstk
 import numpy as np
 
 from optdot.errors import ExportError
+from optdot.geometry.caps import CAP_CELL
 from optdot.geometry.morton import spatial_order
 from optdot.geometry.shapes import CIRCLE, MIN_VERTICES, Footprints, Kind, polygon_vertices
 from optdot.io.atomic import atomic_path, expect_tail
-from optdot.pattern import DotSource
+from optdot.pattern import DotSource, caps_of
 
 from .options import ExportOptions
 
@@ -225,6 +228,23 @@ def _top(src: DotSource, opts: ExportOptions, oasis: bool) -> gdstk.Cell:
     return top
 
 
+def _cap_cells(caps: np.ndarray, opts: ExportOptions, names: dict[str, str]):
+    """``(cells, refs)``: a cell per cap diameter (:data:`CAP_CELL`, with ``_<nm>`` when
+    there are several), a circle on the dots' layer, and the references placing them
+    (one a cap, in Morton order), to go into the top cell."""
+    cells, refs = [], []
+    sizes = np.unique(np.round(caps[:, 2] * 1e6).astype(np.int64)) if len(caps) else []
+    for nm in sizes:
+        name = CAP_CELL if len(sizes) == 1 else f"{CAP_CELL}_{nm}"
+        name = _unique(name, f"the {nm} nm cap", names)
+        cell = dot_cell(name, CIRCLE, np.array([nm * 1e-3]), opts)
+        at = caps[np.round(caps[:, 2] * 1e6).astype(np.int64) == nm, :2] * 1e3
+        at = at[spatial_order(at)]
+        cells.append(cell)
+        refs.extend(gdstk.Reference(cell, origin=(float(x), float(y))) for x, y in at.tolist())
+    return cells, refs
+
+
 def write_gds(src: DotSource, path: str | Path, opts: ExportOptions) -> None:
     """Stream a dot source (a pattern, a dataset) into a GDSII file with
     ``gdstk.GdsWriter``, one chunk in memory at a time: a pattern's dots go into the top
@@ -233,7 +253,8 @@ def write_gds(src: DotSource, path: str | Path, opts: ExportOptions) -> None:
     anything (ENDLIB, the whole record stream, the reference and polygon counts)."""
     cells = _Cells(src, opts)
     top = _top(src, opts, oasis=False)
-    counts = {"refs": 0, "polys": 0}
+    cap_cells, cap_refs = _cap_cells(caps_of(src), opts, cells.names)
+    counts = {"refs": len(cap_refs), "polys": len(cap_cells)}
 
     def check(tmp: Path) -> None:
         _check_counts(path, tmp, counts["refs"], counts["polys"])
@@ -256,7 +277,8 @@ def write_gds(src: DotSource, path: str | Path, opts: ExportOptions) -> None:
                     top.add(gdstk.Reference(cell))
                     counts["refs"] += 1
             dots = cells.library_cells()
-            writer.write(*dots, top)
+            top.add(*cap_refs)  # after the dots: a flattened top keeps its caps placed
+            writer.write(*dots, *cap_cells, top)
         finally:
             writer.close()
         counts["polys"] += len(dots) + len(_outline_polygons(src.outline_rings(), opts))
@@ -272,6 +294,7 @@ def write_oas(src: DotSource, path: str | Path, opts: ExportOptions) -> None:
     gdstk rounds to the 1 nm grid are each exact (no drift across a tile)."""
     cells = _Cells(src, opts)
     top = _top(src, opts, oasis=True)
+    cap_cells, cap_refs = _cap_cells(caps_of(src), opts, cells.names)
     lib = gdstk.Library("OPTDOT", unit=1e-6, precision=1e-9)
     for label, xy, d, alone in _chunks(src):
         cell = top if alone else cells.tile(label)
@@ -279,7 +302,8 @@ def write_oas(src: DotSource, path: str | Path, opts: ExportOptions) -> None:
         if not alone:
             lib.add(cell)
             top.add(gdstk.Reference(cell))
-    lib.add(*cells.library_cells(), top)
+    top.add(*cap_refs)  # after the dots: a flattened top keeps its caps placed
+    lib.add(*cells.library_cells(), *cap_cells, top)
     _write_oas_lib(lib, path, opts)
 
 

@@ -4,7 +4,8 @@ PNG: left, the whole panel as a coverage map (share of area covered by dots, bin
 most ~400 px a side); right, a true-scale zoom tile (1 mm², dots drawn as circles,
 shaped dots as their outlines).
 SVG: every dot as a circle when there are at most 200k dots, else the zoom tile only
-(a browser cannot draw millions of SVG circles), always with the panel outline.
+(a browser cannot draw millions of SVG circles), always with the panel outline. Caps
+over LEDs (:mod:`optdot.geometry.caps`) are drawn as the solid discs they are.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from optdot.io.atomic import atomic_path, expect_tail
-from optdot.pattern import Pattern, coverage_image
+from optdot.pattern import Pattern, caps_of, coverage_image
 
 SVG_MAX_DOTS = 200_000
 #: A PNG file's last chunk (IEND with its CRC).
@@ -62,6 +63,14 @@ def write_png(pattern: Pattern, path: str | Path, dpi: int = 110) -> None:
         from matplotlib.collections import PolyCollection
 
         b.add_collection(PolyCollection(_outlines(pattern, sel), fc="k", lw=0))
+    caps = _caps_near(pattern, (tx0, ty0, tx1, ty1))
+    if len(caps):
+        d = caps[:, 2]
+        b.add_collection(
+            EllipseCollection(
+                d, d, 0, units="xy", offsets=caps[:, :2], offset_transform=b.transData, fc="k"
+            )
+        )
     b.set_xlim(tx0, tx1)
     b.set_ylim(ty0, ty1)
     b.set_aspect("equal")
@@ -113,10 +122,23 @@ def write_svg(pattern: Pattern, path: str | Path) -> tuple[int, tuple[float, ...
             f'<circle cx="{x:.6f}" cy="{-y:.6f}" r="{r:.6f}"/>\n'
             for (x, y), r in zip(pattern.xy[sel].tolist(), radius.tolist(), strict=True)
         ]
+    out += [
+        f'<circle cx="{x:.6f}" cy="{-y:.6f}" r="{0.5 * d:.6f}" class="cap"/>\n'
+        for x, y, d in _caps_near(pattern, window).tolist()
+    ]
     out.append("</g>\n</svg>\n")
     with atomic_path(path, expect_tail(b"</svg>\n", str(path))) as tmp:
         tmp.write_text("".join(out), encoding="utf-8")
     return int(sel.sum()), tuple(float(v) for v in window)
+
+
+def _caps_near(pattern: Pattern, w: tuple[float, float, float, float]) -> np.ndarray:
+    """The caps (:func:`optdot.pattern.caps_of`) that reach into the window ``w``."""
+    caps = caps_of(pattern)
+    r = 0.5 * caps[:, 2]
+    x, y = caps[:, 0], caps[:, 1]
+    near = (x + r >= w[0]) & (x - r <= w[2]) & (y + r >= w[1]) & (y - r <= w[3])
+    return caps[near]
 
 
 #: How close a preview's polygon of a shaped dot stays to its footprint, mm.

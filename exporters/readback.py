@@ -10,14 +10,16 @@ qa's distances would be wrong for it. The panel box is the outline's bounding bo
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+import re
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from optdot.errors import GeometryError, PatternFileError, ResourceError, one_line
 from optdot.files import input_problem
-from optdot.geometry.domain import domain_from_rings
+from optdot.geometry.caps import CAP_APPID, CAP_CELL
+from optdot.geometry.domain import Domain, domain_from_rings
 from optdot.geometry.limits import validate_dots
 from optdot.geometry.orientation import degrees
 from optdot.geometry.shapes import CIRCLE, KINDS, Fit, Footprints, Kind
@@ -77,6 +79,7 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
     budget = [max_dots_read()]
     gds = path.suffix.lower() != ".oas"
     _collect(path, top, _IDENTITY, opts, to_mm, centres, diameters, 0, budget, gds)
+    caps = _layout_caps(path, top, opts, to_mm)
     if not centres:
         raise PatternFileError(f"{path}: no dots on layer {opts.layer}/{opts.datatype}")
     outline = [
@@ -88,7 +91,8 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
     xy = np.round(np.concatenate(centres), 6)
     kinds = {d.kind for d in diameters}
     if kinds == {CIRCLE}:
-        return _pattern(path, xy, np.concatenate([d.size[:, 0] for d in diameters]), rings, True)
+        d = np.concatenate([d.size[:, 0] for d in diameters])
+        return _pattern(path, xy, d, rings, True, caps=caps)
     if len(kinds) > 1:
         raise PatternFileError(
             f"{path}: the dot layer holds {' and '.join(sorted(k.name for k in kinds))} dots; "
@@ -99,7 +103,33 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
         np.round(np.concatenate([d.size for d in diameters]), 6),
         np.radians(degrees(np.concatenate([d.angle for d in diameters]))),
     )
-    return _pattern(path, xy, dots.diameter, rings, True, dots)
+    return _pattern(path, xy, dots.diameter, rings, True, dots, caps)
+
+
+def _is_cap_cell(name: str) -> bool:
+    """A cell written for caps (:data:`exporters.gds.CAP_CELL`, or ``CAP_<nm>``)."""
+    return name == CAP_CELL or re.fullmatch(f"{CAP_CELL}_[0-9]+", name) is not None
+
+
+def _layout_caps(path: Path, top, opts: ExportOptions, to_mm: float) -> np.ndarray:
+    """``[m, 3]`` caps ``(x, y, diameter)`` mm: the top cell's plain references to cap
+    cells, each a circle on the dots' layer centred on the cell's origin."""
+    rows = []
+    for ref in top.references:
+        sub = ref.cell
+        if isinstance(sub, str) or not _is_cap_cell(sub.name):
+            continue
+        pts = [p for p in sub.polygons if (p.layer, p.datatype) == (opts.layer, opts.datatype)]
+        fit = CIRCLE.fit(pts[0].points, 2e-6 / to_mm, RADIUS_SPREAD) if len(pts) == 1 else None
+        plain = ref.magnification == 1 and ref.repetition.size <= 1 and not ref.x_reflection
+        if fit is None or not fit.ok or not plain or np.hypot(*fit.centre) * to_mm > 1e-6:
+            raise PatternFileError(
+                f"{path}: cap cell {sub.name} must hold one circle on layer "
+                f"{opts.layer}/{opts.datatype}, centred, placed once a reference unscaled"
+            )
+        x, y = (float(v) * to_mm for v in ref.origin)
+        rows.append((round(x, 6), round(y, 6), round(float(fit.size[0]) * to_mm, 6)))
+    return np.array(rows, np.float64).reshape(-1, 3)
 
 
 #: Deepest hierarchy read: top -> tile cells -> dot cells is 2.
@@ -169,6 +199,8 @@ def _collect(path, cell, place, opts, to_mm, centres, diameters, depth, budget, 
         sub = ref.cell
         if isinstance(sub, str):
             raise PatternFileError(f"{path}: reference to a missing cell {sub!r}")
+        if depth == 0 and _is_cap_cell(sub.name):
+            continue  # a cap over an LED (:func:`_layout_caps`), not a dot
         m = float(ref.magnification)
         if not (math.isfinite(m) and m > 0 and math.isfinite(ref.rotation)):
             raise PatternFileError(
@@ -272,10 +304,13 @@ def _read_dxf(path: Path) -> Pattern:
     doc = ezdxf.readfile(str(path))
     try:
         scale = mm_per_unit(doc, path)
-        xy_l, r_l, rings, shaped = [], [], [], []
+        xy_l, r_l, rings, shaped, caps = [], [], [], [], []
         for e in drawn_entities(doc.modelspace(), path):
             layer, kind = e.dxf.get("layer", "0"), e.dxftype()
-            if layer == "DOTS" and kind != "CIRCLE":
+            if layer == "DOTS" and kind == "CIRCLE" and e.has_xdata(CAP_APPID):
+                x, y = (v * scale for v in _dxf_dot(path, e, kind))
+                caps.append((round(x, 6), round(y, 6), round(2 * float(e.dxf.radius) * scale, 6)))
+            elif layer == "DOTS" and kind != "CIRCLE":
                 shaped.append(_dxf_shape(path, e, kind, scale))
             elif layer == "DOTS":
                 xy_l.append(_dxf_dot(path, e, kind))
@@ -311,7 +346,7 @@ def _read_dxf(path: Path) -> Pattern:
             np.radians(degrees(np.array([f.angle for f in fits]))),
         )
         xy = np.round(np.array([f.centre for f in fits]), 6)
-        return _pattern(path, xy, dots.diameter, rings, False, dots)
+        return _pattern(path, xy, dots.diameter, rings, False, dots, _rows(caps))
     if not xy_l:
         raise PatternFileError(f"{path}: no CIRCLE entities on layer DOTS")
     xy = np.array(xy_l, dtype=np.float64) * scale
@@ -323,7 +358,11 @@ def _read_dxf(path: Path) -> Pattern:
             f"{path}: CIRCLE {i + 1} on layer DOTS has radius {float(radii[i])!r}; "
             "dots need a radius > 0"
         )
-    return _pattern(path, np.round(xy, 6), 2 * radii, rings)
+    return _pattern(path, np.round(xy, 6), 2 * radii, rings, caps=_rows(caps))
+
+
+def _rows(caps: list) -> np.ndarray:
+    return np.array(caps, np.float64).reshape(-1, 3)
 
 
 #: How finely a DXF dot's arcs are flattened before its footprint is fitted, mm.
@@ -407,8 +446,10 @@ def _pattern(
     rings: list[np.ndarray],
     filled: bool = False,
     dots: Footprints | None = None,
+    caps: np.ndarray | None = None,
 ) -> Pattern:
-    """A pattern whose panel is the outline read back, else the dots' extent.
+    """A pattern whose panel is the outline read back, else the dots' extent; ``caps``
+    ``[m, 3]`` read back go with the outline (a mask with caps has one).
 
     ``rings`` are DXF loops (exteriors counter-clockwise, holes clockwise) or, with
     ``filled``, GDS/OAS polygons whose holes are keyholes."""
@@ -420,6 +461,11 @@ def _pattern(
             raise PatternFileError(str(e)) from None
         pts = np.concatenate(rings)
         lo, hi = pts.min(axis=0), pts.max(axis=0)
+        if caps is not None and len(caps):
+            panel = outline or Domain.rect(float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+            outline = replace(panel, caps=caps)
+    elif caps is not None and len(caps):
+        raise PatternFileError(f"{path}: caps over LEDs but no panel outline to hold them")
     else:
         lo = (xy - diameter[:, None] / 2).min(axis=0)
         hi = (xy + diameter[:, None] / 2).max(axis=0)

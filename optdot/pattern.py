@@ -12,6 +12,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from .geometry.caps import cap_shares, no_caps
 from .geometry.domain import Domain
 from .geometry.shapes import CIRCLE, Footprints, Kind
 
@@ -211,7 +212,8 @@ def coverage_image(
     """Covered area share per pixel, ``[ny, nx]``, and its extent ``(x0, x1, y0, y1)`` mm.
 
     Pixels are at least 6 nominal dot diameters, so each holds several dots and the map
-    reads as coverage rather than as dot positions; at most ``max_px`` a side.
+    reads as coverage rather than as dot positions; at most ``max_px`` a side. Caps over
+    LEDs (:func:`caps_of`) count with their share of each pixel.
     """
     x0, y0, x1, y1 = pattern.box
     nx, ny = coverage_pixels(pattern.box, pattern.nominal_diameter, max_px)
@@ -220,11 +222,16 @@ def coverage_image(
     u = pattern.uniform_diameter
     if u is not None:
         h, _, _ = np.histogram2d(pattern.xy[:, 1], pattern.xy[:, 0], bins=(ny, nx), range=rng)
-        return h * (np.pi * (0.5 * u) ** 2) / cell, (x0, x1, y0, y1)
-    h, _, _ = np.histogram2d(
-        pattern.xy[:, 1], pattern.xy[:, 0], bins=(ny, nx), range=rng, weights=pattern.areas
-    )
-    return h / cell, (x0, x1, y0, y1)
+        img = h * (np.pi * (0.5 * u) ** 2) / cell
+    else:
+        h, _, _ = np.histogram2d(
+            pattern.xy[:, 1], pattern.xy[:, 0], bins=(ny, nx), range=rng, weights=pattern.areas
+        )
+        img = h / cell
+    caps = caps_of(pattern)
+    if len(caps):  # solid ink: their share of each pixel
+        img = img + cap_shares(caps, x0, y0, (x1 - x0) / nx, (y1 - y0) / ny, nx, ny)
+    return img, (x0, x1, y0, y1)
 
 
 def coverage_pixels(box, nominal: float, max_px: int) -> tuple[int, int]:
@@ -233,3 +240,10 @@ def coverage_pixels(box, nominal: float, max_px: int) -> tuple[int, int]:
     x0, y0, x1, y1 = box
     px = max(max((x1 - x0), (y1 - y0)) / max_px, 6.0 * nominal)
     return max(1, int(round((x1 - x0) / px))), max(1, int(round((y1 - y0) / px)))
+
+
+def caps_of(src: DotSource) -> np.ndarray:
+    """The caps ``[m, 3]`` ``(x, y, diameter)``, mm, printed with ``src``'s dots (its
+    outline's: :mod:`optdot.geometry.caps`), or ``[0, 3]``."""
+    outline = src.outline
+    return no_caps() if outline is None or outline.caps is None else outline.caps

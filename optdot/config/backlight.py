@@ -34,6 +34,10 @@ Keys (every length in mm, panel coordinates; reflectances and transmittances 0..
 - ``profile``: ``"lambertian"`` (default), ``"batwing"`` (``I ∝ cos θ (1 + 3 sin² θ)``,
   peaking at 55°, the side-emitting mini-LED of DBR-capped chips), or a table
   ``[[angle_deg, intensity], ...]`` about the normal.
+- ``cap``: the diameter of a disc of solid ink printed on the film over each LED
+  (default 0: none; :mod:`optdot.geometry.caps`). The dots keep out of each cap and a
+  ring of QA's close gap around it; the cap plus that ring must fit between the LEDs and
+  inside the panel.
 
 ``[backlight.cavity]`` (``"direct"``)
 
@@ -93,6 +97,7 @@ GRID_LED_KEYS: dict[str, tuple[type, ...]] = {
     "size": (int, float),
     "power": (int, float),
     "profile": (str, list),
+    "cap": (int, float),
 }
 CAVITY_KEYS: dict[str, tuple[type, ...]] = {"gap": (int, float), "reflector": (int, float)}
 FILM_KEYS: dict[str, tuple[type, ...]] = {
@@ -124,6 +129,7 @@ class GridLeds:
         profile: ``"lambertian"``, ``"batwing"`` or a table ``((angle_deg, intensity),
             ...)`` about the normal.
         pitch: ``(px, py)`` of the grid, mm, or None for a list.
+        cap: diameter of the solid ink cap printed over each LED, mm (0: none).
     """
 
     positions: np.ndarray = field(compare=False)
@@ -131,6 +137,7 @@ class GridLeds:
     power: float = 1.0
     profile: str | tuple[tuple[float, float], ...] = "lambertian"
     pitch: tuple[float, float] | None = None
+    cap: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -374,6 +381,7 @@ def _grid_leds(sec: Any, box, where: str) -> GridLeds:
     size = number_in(sec, "size", 0.2, 0, 100, where, lab, "in mm, ", lo_open=True)
     power = number_in(sec, "power", 1.0, 0, 1e9, where, lab, "", lo_open=True)
     profile = led_profile(sec.get("profile", "lambertian"), ("lambertian", "batwing"), lab, where)
+    cap = number_in(sec, "cap", 0.0, 0, 100, where, lab, "in mm, ")
     x0, y0, x1, y1 = box
     pitch = None
     if "positions" in sec:
@@ -433,7 +441,50 @@ def _grid_leds(sec: Any, box, where: str) -> GridLeds:
                 f"{where}: {lab}.positions: the LED at ({xy[k, 0]:g}, {xy[k, 1]:g}) mm is "
                 f"{d[k, 1]:.3g} mm from the next, closer than its size ({size:g} mm)"
             )
-    return GridLeds(xy, size, power, profile, pitch)
+    return GridLeds(xy, size, power, profile, pitch, cap)
+
+
+def led_caps(backlight: Backlight | None, domain, gap: float, where: str):
+    """``domain`` (a :class:`~optdot.geometry.domain.Domain`) with the caps of
+    ``backlight.leds.cap`` cut out (:func:`optdot.geometry.caps.with_caps`), or
+    ``domain`` when there are none.
+
+    Raises:
+        JobError: a cap with its ring of QA's close gap ``gap`` (mm) reaches another
+            LED's, or a cap reaches past the panel outline.
+    """
+    if backlight is None or backlight.leds is None or backlight.leds.cap <= 0:
+        return domain
+    import shapely
+
+    from ..geometry.caps import cap_array, with_caps
+
+    leds = backlight.leds
+    xy = leds.positions
+    lab = "backlight.leds.cap"
+    if len(xy) > 1:
+        from scipy.spatial import cKDTree
+
+        d, _ = cKDTree(xy).query(xy, k=2)
+        k = int(np.argmin(d[:, 1]))
+        if leds.cap + gap >= d[k, 1]:
+            raise JobError(
+                f"{where}: {lab} = {leds.cap:g} mm: the cap and QA's close gap "
+                f"({gap * 1e3:.3g} µm) need more than the {d[k, 1]:.3g} mm between the LEDs "
+                f"at ({xy[k, 0]:g}, {xy[k, 1]:g}) mm and the next"
+            )
+    panel = domain.slab if domain.slab is not None else domain.geometry
+    outer = shapely.Polygon(panel.exterior) if hasattr(panel, "exterior") else panel
+    inside = shapely.covers(
+        outer.buffer(1e-9), shapely.buffer(shapely.points(xy), 0.5 * leds.cap, quad_segs=16)
+    )
+    if not inside.all():
+        k = int(np.argmin(inside))
+        raise JobError(
+            f"{where}: {lab} = {leds.cap:g} mm: the cap over the LED at ({xy[k, 0]:g}, "
+            f"{xy[k, 1]:g}) mm reaches past the panel outline"
+        )
+    return with_caps(domain, cap_array(xy, leds.cap), gap)
 
 
 def check_leds_inside(backlight: Backlight, geometry, where: str) -> None:

@@ -20,7 +20,7 @@ from ..geometry.density import INTERPOLATIONS, DensityMap
 from ..geometry.domain import DEFAULT_TOLERANCE, Domain, orient_all
 from ..geometry.outline_io import keep_out_is_wkt, load_outline, parse_keep_out
 from ..geometry.sizes import DEFAULT_STEP, DotSizes
-from .backlight import BACKLIGHT_KEYS, backlight_from, check_leds_inside
+from .backlight import BACKLIGHT_KEYS, backlight_from, check_leds_inside, led_caps
 from .grids import load_grid, validate_grid
 from .images import IMAGE_SUFFIXES, check_ranges, load_image
 from .job import Job, OptimizeParams, QAParams
@@ -244,6 +244,9 @@ def job_from_dict(
         raise JobError(f"{where}: {e}") from None
     if not (math.isfinite(width) and math.isfinite(height) and width > 0 and height > 0):
         raise JobError(f"{where}: domain.width/height = {width}, {height} must be > 0 mm")
+    if backlight is not None and backlight.leds is not None and backlight.leds.cap > 0:
+        panel = domain or Domain.rect(x0, y0, x0 + width, y0 + height)
+        domain = led_caps(backlight, panel, qa.effective_close_gap, where)
     validate_grid(grid, str(grid_path))
     density = DensityMap(grid, width, height, x0, y0)
     interpolation = sections.get("density", {}).get("interpolation", "nearest")

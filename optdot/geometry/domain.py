@@ -33,6 +33,9 @@ class Domain:
         source: where the outline came from (for messages).
         slab: the panel before its keep-outs were cut out (the light guide's slab: a
             keep-out is clear slab without dots), or None when it has none.
+        caps: ``[m, 3]`` discs of solid ink ``(x, y, diameter)``, mm, printed with the
+            dots (over a direct-lit backlight's LEDs: :mod:`optdot.geometry.caps`), cut
+            out of ``geometry`` with a ring of QA's close gap; None when there are none.
     """
 
     geometry: Polygon | MultiPolygon
@@ -40,6 +43,7 @@ class Domain:
     rectangle: bool = False
     source: str = "panel"
     slab: Polygon | MultiPolygon | None = None
+    caps: np.ndarray | None = None
 
     @classmethod
     def rect(cls, x0: float, y0: float, x1: float, y1: float, edge_margin: float = 0.0) -> Domain:
@@ -56,6 +60,12 @@ class Domain:
         """The polygons of the domain (one, unless keep-outs cut it apart)."""
         g = self.geometry
         return list(g.geoms) if isinstance(g, MultiPolygon) else [g]
+
+    @property
+    def lit(self) -> Polygon | MultiPolygon:
+        """Where the light is seen: the geometry with its caps and their rings filled
+        back in (the panel a viewer looks at; dots keep out of caps, light does not)."""
+        return self.geometry if self.caps is None or self.slab is None else self.slab
 
     def slab_polygons(self) -> list[Polygon]:
         """The polygons of the slab: the panel with its holes, keep-outs not cut out."""

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numba as nb
 import numpy as np
+from scipy.ndimage import distance_transform_cdt
 
 from .domain import Domain
 
@@ -26,6 +27,10 @@ class EdgeIndex:
         nx, ny: bucket grid shape.
         start, items: CSR of the segments within ``cell`` of each bucket.
         inside: ``[nx * ny]`` int8, 1 if the bucket's centre is inside.
+        clear: ``[nx * ny]`` int32, how many buckets (chessboard) from the nearest one
+            that lists a segment (0: it lists one): every segment is at least ``clear
+            cell`` from the bucket.
+        reach: distances below it come out exact (by default: :func:`signed_distance`).
     """
 
     seg: np.ndarray
@@ -39,10 +44,18 @@ class EdgeIndex:
     start: np.ndarray
     items: np.ndarray
     inside: np.ndarray
+    clear: np.ndarray
+    reach: float
 
     @classmethod
     def build(cls, domain: Domain, reach: float) -> EdgeIndex:
-        """Index ``domain``'s edges; distances below ``reach`` (mm) come out exact."""
+        """Index ``domain``'s edges; distances below ``reach`` (mm) come out exact.
+
+        Buckets are ``reach`` wide, but no wider than :data:`SEGMENTS_A_CELL` typical
+        segments (and no finer than 1/2048 of the panel): a bucket then lists a few
+        segments even where an outline is finely curved (a cap's keep-out, a flattened
+        arc) and ``reach`` is long (the phantoms' two radii at a sparse fill); a point
+        farther than a bucket from the edges is found by rings of buckets."""
         segs, prev, nxt = [], [], []
         for ring in domain.rings():
             k = len(ring)
@@ -55,7 +68,8 @@ class EdgeIndex:
         seg = np.asarray(segs, dtype=np.float64)
         bx0, by0, bx1, by1 = domain.box
         span = max(bx1 - bx0, by1 - by0)
-        cell = max(reach, span / 2048.0, 1e-9)
+        length = float(np.median(np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])))
+        cell = max(min(reach, SEGMENTS_A_CELL * length), span / 2048.0, 1e-9)
         x0, y0 = bx0 - reach - cell, by0 - reach - cell
         nx = int((bx1 + reach + cell - x0) / cell) + 1
         ny = int((by1 + reach + cell - y0) / cell) + 1
@@ -63,9 +77,30 @@ class EdgeIndex:
         iy, ix = np.divmod(np.arange(nx * ny), nx)
         centres = np.stack([x0 + (ix + 0.5) * cell, y0 + (iy + 0.5) * cell], axis=1)
         inside = domain.contains(centres).astype(np.int8)
+        listed = (np.diff(start) > 0).reshape(ny, nx)
+        if listed.any():
+            clear = distance_transform_cdt(~listed, metric="chessboard").astype(np.int32)
+        else:
+            clear = np.full((ny, nx), max(nx, ny), np.int32)
         return cls(
-            seg, np.asarray(prev), np.asarray(nxt), x0, y0, cell, nx, ny, start, items, inside
+            seg,
+            np.asarray(prev),
+            np.asarray(nxt),
+            x0,
+            y0,
+            cell,
+            nx,
+            ny,
+            start,
+            items,
+            inside,
+            np.ascontiguousarray(clear.ravel()),
+            float(reach),
         )
+
+
+#: A bucket is at most this many typical segment lengths wide (see :meth:`EdgeIndex.build`).
+SEGMENTS_A_CELL = 4.0
 
 
 @nb.njit(cache=True)
@@ -136,15 +171,53 @@ def _nearest(x, y, seg, prev, nxt, cand, lo, hi):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True)
+def _nearest_around(
+    x, y, ix, iy, k0, seg, prev, nxt, nx, ny, cell, start, items, need
+):  # pragma: no cover - compiled
+    """The nearest boundary point from the buckets in square rings around bucket ``(ix,
+    iy)``, from ring ``k0`` out (the rings inside hold no segment): ``(d, px, py,
+    inside)``. A segment at distance ``D`` has its nearest point in a bucket within
+    ``ceil(D / cell)`` rings, and every bucket lists the segments within ``cell`` of it,
+    so rings ``0 .. k - 1`` hold every segment closer than ``k cell``: the search stops
+    before ring ``k`` once it has a candidate that close (exact) or ``k cell`` reaches
+    ``need``, or past the grid; ``d`` = inf when nothing is closer than ``need``."""
+    best, bpx, bpy, bins = np.inf, 0.0, 0.0, False
+    for k in range(k0, max(nx, ny) + 1):
+        if best <= k * cell or k * cell >= need:
+            break
+        for jy in range(max(iy - k, 0), min(iy + k, ny - 1) + 1):
+            step = 1 if (jy == iy - k or jy == iy + k) else 2 * k
+            jx = ix - k
+            while jx <= ix + k:
+                if 0 <= jx < nx:
+                    c = jy * nx + jx
+                    if start[c] < start[c + 1]:
+                        d, px, py, ins = _nearest(
+                            x, y, seg, prev, nxt, items, start[c], start[c + 1]
+                        )
+                        if d < best:
+                            best, bpx, bpy, bins = d, px, py, ins
+                jx += step
+    if best >= need:
+        return np.inf, 0.0, 0.0, False
+    return best, bpx, bpy, bins
+
+
+@nb.njit(cache=True)
 def signed_distance(
-    x, y, seg, prev, nxt, x0, y0, cell, nx, ny, start, items, inside, far
+    x, y, seg, prev, nxt, x0, y0, cell, nx, ny, start, items, inside, clear, far, need_in, need_out
 ):  # pragma: no cover
-    """Signed distance of (x, y) to the boundary (> 0 inside) and its gradient (ux, uy).
+    """Signed distance of (x, y) to the boundary (> 0 inside) and its gradient (ux, uy),
+    exact when it is under ``need_in`` inside or ``need_out`` outside; beyond, inside
+    returns ``far`` and outside ``-far`` (nothing a caller measures there), with a zero
+    gradient.
 
     Each bucket lists every segment within ``cell`` of it, so a nearest listed segment
     closer than ``cell`` is the true nearest. Otherwise the point is at least ``cell``
-    from the boundary, on the same side as its bucket's centre (half a diagonal away):
-    inside returns ``far`` (nothing to penalise); outside is measured on all segments.
+    (and at least ``clear`` buckets) from the boundary, on the same side as its bucket's
+    centre (half a diagonal away), and the buckets in rings around its own are searched
+    (:func:`_nearest_around`) as far as the side's need. A point off the grid is
+    outside: all segments are measured, unless it is farther off than ``need_out``.
     """
     ix = int(np.floor((x - x0) / cell))
     iy = int(np.floor((y - y0) / cell))
@@ -154,9 +227,18 @@ def signed_distance(
         if start[c] < start[c + 1]:
             d, px, py, ins = _nearest(x, y, seg, prev, nxt, items, start[c], start[c + 1])
         if d >= cell:
-            if inside[c]:
-                return far, 0.0, 0.0
-            d = np.inf
+            need = need_in if inside[c] else need_out
+            k0 = max(1, clear[c])
+            d, px, py, ins = _nearest_around(
+                x, y, ix, iy, k0, seg, prev, nxt, nx, ny, cell, start, items, need
+            )
+            if d == np.inf:
+                return (far, 0.0, 0.0) if inside[c] else (-far, 0.0, 0.0)
+    else:  # off the grid: outside the panel, at least this far from the grid's edge
+        gx = max(x0 - x, x - (x0 + nx * cell), 0.0)
+        gy = max(y0 - y, y - (y0 + ny * cell), 0.0)
+        if max(gx, gy) >= need_out:
+            return -far, 0.0, 0.0
     if d == np.inf:
         d, px, py, ins = _nearest(x, y, seg, prev, nxt, np.arange(seg.shape[0]), 0, seg.shape[0])
     if d < 1e-15:
@@ -175,7 +257,8 @@ NO_EDGES = (
     np.zeros(1, np.int64),
     np.zeros(0, np.int64),
     np.zeros(0, np.int8),
-    np.zeros(5),
+    np.zeros(0, np.int32),
+    np.zeros(6),
 )
 
 
@@ -183,14 +266,34 @@ def edge_args(edges: EdgeIndex | None) -> tuple:
     """The edge index as one tuple of arrays for the kernel (empty: rectangle)."""
     if edges is None:
         return NO_EDGES
-    geo = np.array([edges.x0, edges.y0, edges.cell, edges.nx, edges.ny], dtype=np.float64)
-    return (edges.seg, edges.prev, edges.next, edges.start, edges.items, edges.inside, geo)
+    geo = np.array(
+        [edges.x0, edges.y0, edges.cell, edges.nx, edges.ny, edges.reach], dtype=np.float64
+    )
+    return (
+        edges.seg,
+        edges.prev,
+        edges.next,
+        edges.start,
+        edges.items,
+        edges.inside,
+        edges.clear,
+        geo,
+    )
 
 
 @nb.njit(cache=True, inline="always")
 def edge_signed_distance(x, y, ed):  # pragma: no cover - compiled
-    """:func:`signed_distance` with the index packed by :func:`edge_args`."""
-    seg, prev, nxt, start, items, inside, geo = ed
+    """:func:`signed_distance` with the index packed by :func:`edge_args`: exact within
+    the index's reach inside, and everywhere outside."""
+    return edge_signed_distance_within(x, y, ed, ed[7][5], np.inf)
+
+
+@nb.njit(cache=True, inline="always")
+def edge_signed_distance_within(x, y, ed, need_in, need_out):  # pragma: no cover - compiled
+    """:func:`signed_distance` with the index packed by :func:`edge_args`, exact within
+    ``need_in`` inside and ``need_out`` outside (``need_in`` at most the index's
+    reach); beyond, ``inf`` inside and ``-inf`` outside."""
+    seg, prev, nxt, start, items, inside, clear, geo = ed
     return signed_distance(
         x,
         y,
@@ -205,14 +308,18 @@ def edge_signed_distance(x, y, ed):  # pragma: no cover - compiled
         start,
         items,
         inside,
+        clear,
         np.inf,
+        need_in,
+        need_out,
     )
 
 
 def signed_distances(
     index: EdgeIndex, xy: np.ndarray, far: float = math.inf
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Vectorised :func:`signed_distance`: ``[n]`` distances and ``[n, 2]`` gradients."""
+    """Vectorised :func:`signed_distance`: ``[n]`` distances and ``[n, 2]`` gradients,
+    exact within the index's reach inside (``far`` beyond) and everywhere outside."""
     return _signed_many(
         xy,
         index.seg,
@@ -226,19 +333,37 @@ def signed_distances(
         index.start,
         index.items,
         index.inside,
+        index.clear,
         far,
+        index.reach,
     )
 
 
 @nb.njit(cache=True)
 def _signed_many(
-    xy, seg, prev, nxt, x0, y0, cell, nx, ny, start, items, inside, far
+    xy, seg, prev, nxt, x0, y0, cell, nx, ny, start, items, inside, clear, far, reach
 ):  # pragma: no cover
     n = xy.shape[0]
     d = np.empty(n)
     u = np.empty((n, 2))
     for i in range(n):
         d[i], u[i, 0], u[i, 1] = signed_distance(
-            xy[i, 0], xy[i, 1], seg, prev, nxt, x0, y0, cell, nx, ny, start, items, inside, far
+            xy[i, 0],
+            xy[i, 1],
+            seg,
+            prev,
+            nxt,
+            x0,
+            y0,
+            cell,
+            nx,
+            ny,
+            start,
+            items,
+            inside,
+            clear,
+            far,
+            reach,
+            np.inf,
         )
     return d, u

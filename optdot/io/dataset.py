@@ -122,7 +122,8 @@ class Dataset:
             raise PatternFileError(
                 f"{self.path}: bad outline in the manifest ({one_line(e)})"
             ) from None
-        return Domain(geom, float(m.get("edge_margin_mm", 0.0)), False, str(self.path))
+        caps = np.array(m["caps_mm"], np.float64).reshape(-1, 3) if "caps_mm" in m else None
+        return Domain(geom, float(m.get("edge_margin_mm", 0.0)), False, str(self.path), caps=caps)
 
     def outline_rings(self) -> list[np.ndarray]:
         """Boundary loops of the panel (outline and holes, or the box), mm."""

@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import PatternFileError, one_line
+from ..geometry.caps import caps_problem
 from ..geometry.shapes import CIRCLE, KINDS, Kind
 
 MANIFEST = "_manifest.json"
@@ -124,6 +125,14 @@ def manifest_problem(doc: dict[str, Any]) -> str | None:
         return "outline_wkb_hex must be a string"
     if not _is_num(doc.get("edge_margin_mm", 0.0)):
         return "edge_margin_mm must be a number"
+    if "caps_mm" in doc:
+        caps = doc["caps_mm"]
+        rows = isinstance(caps, list) and all(
+            isinstance(r, list) and all(_is_num(v) for v in r) for r in caps
+        )
+        problem = caps_problem(np.array(caps, np.float64)) if rows else "caps_mm must be rows"
+        if problem is not None:
+            return problem.replace("caps", "caps_mm", 1)
     tiles = doc.get("tiles")
     if tiles is not None:
         ok = isinstance(tiles, dict) and all(
@@ -165,7 +174,10 @@ def outline_hex(outline) -> dict[str, Any]:
     import shapely
 
     wkb = shapely.to_wkb(outline.geometry, byte_order=1, hex=True)
-    return {"outline_wkb_hex": wkb, "edge_margin_mm": float(outline.edge_margin)}
+    out = {"outline_wkb_hex": wkb, "edge_margin_mm": float(outline.edge_margin)}
+    if outline.caps is not None:
+        out["caps_mm"] = outline.caps.tolist()
+    return out
 
 
 def size_fields(sizes: dict[float, int]) -> dict[str, Any]:

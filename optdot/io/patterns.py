@@ -6,9 +6,11 @@
   counter-clockwise, 1e-6°); the header names the kind.
 * NPZ: arrays ``xy`` ``[n, 2]`` (mm), ``diameter`` (mm: a 0-d array when every dot has
   the same size, else ``[n]``), ``box`` ``[4]`` (mm) and ``meta`` (JSON text), plus
-  ``outline_wkb``/``edge_margin`` for outlines; shaped dots hold ``shape`` (the kind's
-  name), ``size`` (mm, ``[k]`` or ``[n, k]``) and ``angle_deg`` ``[n]`` instead of
-  ``diameter``. A zip with fixed timestamps so equal patterns give equal bytes.
+  ``outline_wkb``/``edge_margin`` for outlines (and ``caps`` ``[m, 3]``, ``x, y,
+  diameter`` mm, when the outline has caps: :mod:`optdot.geometry.caps`); shaped dots
+  hold ``shape`` (the kind's name), ``size`` (mm, ``[k]`` or ``[n, k]``) and
+  ``angle_deg`` ``[n]`` instead of ``diameter``. A zip with fixed timestamps so equal
+  patterns give equal bytes.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ import shapely
 
 from ..errors import ExportError, PatternFileError, one_line
 from ..files import input_problem
+from ..geometry.caps import caps_problem
 from ..geometry.domain import Domain, orient_all
 from ..geometry.limits import validate_dots
 from ..geometry.orientation import degrees
@@ -174,6 +177,8 @@ def _write_npz(pattern: Pattern, path: Path) -> None:
         wkb = shapely.to_wkb(pattern.outline.geometry, byte_order=1)
         arrays["outline_wkb"] = np.frombuffer(wkb, dtype=np.uint8)
         arrays["edge_margin"] = np.array(pattern.outline.edge_margin)
+        if pattern.outline.caps is not None:
+            arrays["caps"] = pattern.outline.caps
     with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as zf:
         for name, arr in arrays.items():
             buf = io.BytesIO()
@@ -307,7 +312,8 @@ def _load_npz(path: Path, box: tuple[float, float, float, float] | None) -> Patt
                 if wkb.dtype != np.uint8 or wkb.ndim != 1:
                     raise PatternFileError(f"{path}: outline_wkb must be a 1-D uint8 array")
                 geom = orient_all(shapely.from_wkb(wkb.tobytes()))
-                outline = Domain(geom, float(margin), False, str(path))
+                caps = _caps(path, z) if "caps" in z else None
+                outline = Domain(geom, float(margin), False, str(path), caps=caps)
     except KeyError as e:
         raise PatternFileError(f"{path}: missing array {e} in pattern .npz") from None
     except (
@@ -332,6 +338,15 @@ def _load_npz(path: Path, box: tuple[float, float, float, float] | None) -> Patt
     the_box = box or tuple(file_box.tolist())
     p = _validated(path, xy, np.broadcast_to(diameter, (len(xy),)), the_box, meta, dots)
     return p if outline is None else replace(p, outline=outline)
+
+
+def _caps(path: Path, z) -> np.ndarray:
+    """The ``caps`` array of the archive, checked."""
+    caps = np.asarray(z["caps"])
+    problem = caps_problem(caps)
+    if problem is not None:
+        raise PatternFileError(f"{path}: {problem}")
+    return caps.astype(np.float64)
 
 
 def _real(path: Path, z, name: str) -> np.ndarray:

@@ -45,6 +45,7 @@ from scipy.ndimage import gaussian_filter, zoom
 
 from ..config.job import Job
 from ..errors import JobError
+from ..geometry.caps import cap_shares
 from ..geometry.domain import centres_in_box, polygon_cell_fractions
 from ..geometry.limits import MAX_RANDOM_FILL
 from .periodic import fold, period_classes
@@ -181,20 +182,18 @@ def design(
     p = job.design
     nx, ny, dx, dy = design_grid(job)
     x0, y0 = job.box[:2]
-    inside = polygon_cell_fractions(
-        job.domain.geometry, x0, y0, dx, dy, nx, ny, job.domain.rectangle
-    )
+    inside, panel, capped = _shares(job, nx, ny, dx, dy)
     lo, hi = p.fill_range
     target = _target(p.target, ny, nx)
     total = rays or p.rays or RAYS_PER_CELL * nx * ny
     n_iter = iterations or p.iterations
-    live = inside > 0.5
+    live = panel > 0.5
     seen = live & _in_area(job, nx, ny, dx, dy)
     if prints_on_film(job):
         if start is None:
             check_iterations(job, n_iter)
         phi = np.full((ny, nx), lo) if start is None else np.array(start, np.float64)
-        step = _film_step(job, nx, ny, dx, dy, inside, live, target, seen)
+        step = _film_step(job, nx, ny, dx, dy, (inside, panel, capped), live, target, seen)
     else:
         # the level starts at LEVEL_START of the top (never under the floor) and reaches
         # the top by the last update however few the iterations: fill_range is honoured
@@ -257,6 +256,19 @@ def _target(target: np.ndarray | None, ny: int, nx: int) -> np.ndarray:
     return np.maximum(t, 0.0) / max(float(t.mean()), 1e-300)
 
 
+def _shares(job: Job, nx: int, ny: int, dx: float, dy: float):
+    """``(inside, panel, capped)``, each ``[ny, nx]`` over the design grid: the share of
+    each cell where dots may go, where the light is seen (the panel: ``inside`` when the
+    job has no caps) and under a cap (None without caps)."""
+    x0, y0 = job.box[:2]
+    dom = job.domain
+    inside = polygon_cell_fractions(dom.geometry, x0, y0, dx, dy, nx, ny, dom.rectangle)
+    if dom.caps is None:
+        return inside, inside, None
+    panel = polygon_cell_fractions(dom.lit, x0, y0, dx, dy, nx, ny)
+    return inside, panel, cap_shares(dom.caps, x0, y0, dx, dy, nx, ny)
+
+
 def _in_area(job: Job, nx: int, ny: int, dx: float, dy: float) -> np.ndarray:
     """``[ny, nx]`` bool: design cells whose centres lie in the job's viewing area
     (every cell without one)."""
@@ -288,7 +300,7 @@ def _guide_step(inside, live, target, smoothing, lo, hi, level, growth, seen):
     return step
 
 
-def _film_step(job, nx, ny, dx, dy, inside, live, target, seen):
+def _film_step(job, nx, ny, dx, dy, shares, live, target, seen):
     """The film rule's update ``step(phi, sim) -> phi`` (see the module doc): the map's
     clear share carries light through, so the multiplicative step acts on each cell's
     relative transmission ``v = 1 - k phi`` (``k = 1 - T_ink / T_clear``), and the map is
@@ -299,23 +311,36 @@ def _film_step(job, nx, ny, dx, dy, inside, live, target, seen):
     only matched by darkening all the rest, so the level is set where the viewer looks.
     Over a direct-lit LED grid each cell's update is averaged over the cells that lie
     alike within their LEDs' pitch cells
-    (:func:`optdot.optics.periodic.period_classes`)."""
+    (:func:`optdot.optics.periodic.period_classes`).
+
+    With caps (``shares`` = ``(inside, panel, capped)``: :func:`_shares`) a cell's ink is
+    its cap share plus the fill over the share dots may use, ``c = (capped + phi inside)
+    / panel``: the step acts on ``v = 1 - k c`` and the fill is what gives the new ``v``
+    (a cell a cap darkens more than it should keeps the least fill)."""
     lo, hi = job.design.fill_range
     k = job.backlight.ink_contrast
     classes = period_classes(job, nx, ny, dx, dy)
+    inside, panel, capped = shares
 
     def step(phi: np.ndarray, sim: Simulation) -> np.ndarray:
         judged = live & sim.measured  # the viewing area, else the panel less the border
         judged = judged if judged.any() else seen
-        logq, w = _log_ratio(sim.counts, inside, live, target, judged)
+        logq, w = _log_ratio(sim.counts, panel, live, target, judged)
         if classes is not None:
             logq = fold(logq, w, classes)
         logq = _smoothed(logq, w, job.design.smoothing)
-        v = (1.0 - k * phi) * np.exp(GAMMA * logq)
+        if capped is None:
+            ink = phi
+        else:
+            ink = (capped + phi * inside) / np.maximum(panel, 1e-12)
+        v = (1.0 - k * ink) * np.exp(GAMMA * logq)
         top = float(v[judged].max())
         if top > 0:
             v *= (1.0 - k * lo) / top
-        return np.where(live, np.clip((1.0 - v) / k, lo, hi), 0.0)
+        fill = (1.0 - v) / k
+        if capped is not None:
+            fill = (fill * panel - capped) / np.maximum(inside, 1e-12)
+        return np.where(live, np.clip(fill, lo, hi), 0.0)
 
     return step
 

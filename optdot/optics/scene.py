@@ -23,6 +23,7 @@ from ..config.backlight import Backlight
 from ..config.job import Job
 from ..config.light_guide import EDGE_FINISH, LightGuide
 from ..errors import JobError
+from ..geometry.caps import cap_shares, no_caps
 from ..geometry.shapes import packed
 from ..pattern import DotSource
 from .trace import (
@@ -362,17 +363,70 @@ def _walls(job: Job) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _print(job: Job, dots: DotSource | None, coverage: Coverage | None) -> Print:
+    """The printed faces: the job's dots (or the coverage of its map), its caps, and the
+    other face's coverage. A coverage raster holds the dots' share of each cell; with
+    caps it is turned into the share of the cell outside its caps (the tracer tests the
+    caps first)."""
     other = _other_coverage(job)
     phi2 = np.ascontiguousarray(other.grid, dtype=np.float64)
     g2 = np.array([other.x0, other.y0, other.dx, other.dy], np.float64)
+    caps = job.domain.caps if job.domain.caps is not None else no_caps()
+    cap_start, cap, cap_g = cap_grid(caps, job.box)
     if dots is None:
         cov = coverage or coverage_of(job)
         phi = np.ascontiguousarray(cov.grid, dtype=np.float64)
+        if len(caps):
+            ny, nx = phi.shape
+            free = 1.0 - cap_shares(caps, cov.x0, cov.y0, cov.dx, cov.dy, nx, ny)
+            phi = np.where(free > 1e-9, np.minimum(phi / np.maximum(free, 1e-9), 1.0), 0.0)
         g = np.array([cov.x0, cov.y0, cov.dx, cov.dy], np.float64)
         start, x, y = np.zeros(2, np.int64), np.zeros(1), np.zeros(1)
-        return Print(False, phi, g, start, x, y, np.zeros((1, 6)), np.ones(7), phi2, g2)
+        return Print(
+            False,
+            phi,
+            g,
+            start,
+            x,
+            y,
+            np.zeros((1, 6)),
+            np.ones(7),
+            phi2,
+            g2,
+            cap_start,
+            cap,
+            cap_g,
+        )
     start, x, y, foot, cg = dot_grid(dots, job.box)
-    return Print(True, np.zeros((1, 1)), np.ones(4), start, x, y, foot, cg, phi2, g2)
+    return Print(
+        True, np.zeros((1, 1)), np.ones(4), start, x, y, foot, cg, phi2, g2, cap_start, cap, cap_g
+    )
+
+
+def cap_grid(caps: np.ndarray, box) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The caps ``[m, 3]`` ``(x, y, diameter)`` sorted into square cells at least one cap
+    wide: ``(start, rows, grid)``, rows ``[m, 3]`` ``(x, y, r^2)`` (see :class:`Print`)."""
+    r = 0.5 * caps[:, 2]
+    start, order, grid = _cells(caps[:, 0], caps[:, 1], float(r.max()) if len(r) else 0.0, box)
+    rows = np.column_stack([caps[:, 0], caps[:, 1], r * r])[order]
+    return start, np.ascontiguousarray(rows, np.float64), grid
+
+
+def _cells(x: np.ndarray, y: np.ndarray, rmax: float, box) -> tuple:
+    """Points sorted into square cells over ``box``, at least ``2 rmax`` and 1.5 mean
+    spacings wide: ``(start [cells + 1] CSR, order [n], grid [7])``, grid ``x0, y0, dx,
+    dy, nx, ny, rmax``."""
+    x0, y0, x1, y1 = box
+    area = (x1 - x0) * (y1 - y0)
+    cell = max(2.0 * rmax if len(x) else 1.0, 1.5 * math.sqrt(area / max(len(x), 1)))
+    nx = max(1, int(math.ceil((x1 - x0) / cell)))
+    ny = max(1, int(math.ceil((y1 - y0) / cell)))
+    ix = np.clip(((x - x0) / cell).astype(np.int64), 0, nx - 1)
+    iy = np.clip(((y - y0) / cell).astype(np.int64), 0, ny - 1)
+    key = iy * nx + ix
+    order = np.argsort(key, kind="stable")
+    start = np.zeros(nx * ny + 1, np.int64)
+    np.cumsum(np.bincount(key, minlength=nx * ny), out=start[1:])
+    return start, order, np.array([x0, y0, cell, cell, nx, ny, rmax], np.float64)
 
 
 def _other_coverage(job: Job) -> Coverage:
@@ -400,17 +454,5 @@ def dot_grid(dots: DotSource, box) -> tuple:
     y = np.concatenate(ys) if ys else np.zeros(0)
     e = np.concatenate(es) if es else np.zeros(0)
     foot = np.concatenate(fs) if fs else np.zeros((0, 6))
-    x0, y0, x1, y1 = box
-    area = (x1 - x0) * (y1 - y0)
-    rmax = float(e.max()) if len(e) else 0.0
-    cell = max(2.0 * rmax if len(e) else 1.0, 1.5 * math.sqrt(area / max(len(x), 1)))
-    nx = max(1, int(math.ceil((x1 - x0) / cell)))
-    ny = max(1, int(math.ceil((y1 - y0) / cell)))
-    ix = np.clip(((x - x0) / cell).astype(np.int64), 0, nx - 1)
-    iy = np.clip(((y - y0) / cell).astype(np.int64), 0, ny - 1)
-    key = iy * nx + ix
-    order = np.argsort(key, kind="stable")
-    start = np.zeros(nx * ny + 1, np.int64)
-    np.cumsum(np.bincount(key, minlength=nx * ny), out=start[1:])
-    grid = np.array([x0, y0, cell, cell, nx, ny, rmax], np.float64)
+    start, order, grid = _cells(x, y, float(e.max()) if len(e) else 0.0, box)
     return start, x[order], y[order], np.ascontiguousarray(foot[order]), grid

@@ -407,11 +407,11 @@ def _spot_centres(box) -> np.ndarray:
 
 def _measured(job: Job, nbx: int, nby: int, border: float) -> np.ndarray:
     """Bins wholly inside the panel (and the job's viewing area) shrunk by ``border``
-    mm."""
+    mm; caps and their rings are panel (:attr:`~optdot.geometry.domain.Domain.lit`)."""
     import shapely
 
     x0, y0, x1, y1 = job.box
-    region = job.domain.geometry
+    region = job.domain.lit
     if job.viewing_area is not None:
         region = region.intersection(shapely.box(*job.viewing_area))
     inner = region.buffer(-border) if border > 0 else region

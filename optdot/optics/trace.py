@@ -143,6 +143,10 @@ class Print(NamedTuple):
             ``[7]`` cell grid x0, y0, dx, dy, nx, ny and the largest dot extent (cells
             at least that wide).
         phi2, g2: the second coverage map and its grid (as ``phi``, ``g``).
+        cap_start, cap: the caps of print 1 (solid ink discs, tested before the dots or
+            the coverage, so ``phi`` is the coverage where no cap is): ``[cells + 1]``
+            CSR by cell and ``[m, 3]`` rows ``(x, y, r^2)``, mm; cap_g: ``[7]`` their
+            cell grid (as ``cg``).
     """
 
     explicit: bool
@@ -155,6 +159,9 @@ class Print(NamedTuple):
     cg: np.ndarray
     phi2: np.ndarray
     g2: np.ndarray
+    cap_start: np.ndarray
+    cap: np.ndarray
+    cap_g: np.ndarray
 
 
 class Scene(NamedTuple):
@@ -322,12 +329,35 @@ def _on_dot(x, y, explicit, phi, g, start, dx_, dy_, foot, cg, u):
 
 
 @nb.njit(cache=True, inline="always")
+def _on_cap(x, y, cap_start, cap, cap_g):
+    """Does the point (x, y) lie on a cap (``cap`` rows ``(x, y, r^2)``, by cell)?"""
+    nx, ny = int(cap_g[4]), int(cap_g[5])
+    jx = int(math.floor((x - cap_g[0]) / cap_g[2]))
+    jy = int(math.floor((y - cap_g[1]) / cap_g[3]))
+    # cells are at least a cap's diameter wide: the 2 x 2 cells nearest the point
+    ax = jx - 1 if x - cap_g[0] - jx * cap_g[2] < 0.5 * cap_g[2] else jx
+    ay = jy - 1 if y - cap_g[1] - jy * cap_g[3] < 0.5 * cap_g[3] else jy
+    for iy in range(max(ay, 0), min(ay + 2, ny)):
+        for ix in range(max(ax, 0), min(ax + 2, nx)):
+            c = iy * nx + ix
+            for k in range(cap_start[c], cap_start[c + 1]):
+                ddx = x - cap[k, 0]
+                ddy = y - cap[k, 1]
+                if ddx * ddx + ddy * ddy <= cap[k, 2]:
+                    return True
+    return False
+
+
+@nb.njit(cache=True, inline="always")
 def _marked(x, y, mark, pr, u):
     """Is there a dot of print ``mark`` (1 the job's, 2 the second map) at (x, y)? ``pr``:
-    the :class:`Print`'s fields as a tuple; ``u`` a uniform draw (the coverage test)."""
-    explicit, phi, g, phi2, g2, start, dx_, dy_, foot, cg = pr
+    the :class:`Print`'s fields as a tuple; ``u`` a uniform draw (the coverage test). A
+    cap of print 1 is ink whatever ``u``."""
+    explicit, phi, g, phi2, g2, start, dx_, dy_, foot, cg, cap_start, cap, cap_g = pr
     if mark == 2:
         return _on_dot(x, y, False, phi2, g2, start, dx_, dy_, foot, cg, u)
+    if cap.shape[0] > 0 and _on_cap(x, y, cap_start, cap, cap_g):
+        return True
     return _on_dot(x, y, explicit, phi, g, start, dx_, dy_, foot, cg, u)
 
 
@@ -382,7 +412,21 @@ def trace(seed, first, count, scene):  # pragma: no cover - compiled
     )
     layer, face, walls, normals = st.layer, st.face, st.walls, st.normals
     # the print as a plain tuple (numba's parallel loop cannot carry a record inside it)
-    pr_arrays = (pr.explicit, pr.phi, pr.g, pr.phi2, pr.g2, pr.start, pr.x, pr.y, pr.foot, pr.cg)
+    pr_arrays = (
+        pr.explicit,
+        pr.phi,
+        pr.g,
+        pr.phi2,
+        pr.g2,
+        pr.start,
+        pr.x,
+        pr.y,
+        pr.foot,
+        pr.cg,
+        pr.cap_start,
+        pr.cap,
+        pr.cap_g,
+    )
     top = layer.shape[0]  # the top face's index
     max_events = st.max_events
     fate = np.empty(count, np.int8)

@@ -29,7 +29,7 @@ from functools import cached_property
 import numba as nb
 import numpy as np
 
-from ..geometry.edges import EdgeIndex, edge_args, edge_signed_distance
+from ..geometry.edges import EdgeIndex, edge_args, edge_signed_distance_within
 from ..spatial.blocks import BLOCK, PairList
 from .terms import (
     box_axis_term,
@@ -153,7 +153,9 @@ def _single_terms(
         f, g0, g1 = empty_term(xy[i, 0], xy[i, 1], rp[i], empty, gbox, f, g0, g1)
     outline = ed[0].shape[0] > 0
     if outline:
-        sd, ux, uy = edge_signed_distance(xy[i, 0], xy[i, 1], ed)
+        # exact where a term acts (the dot's radius and the hard core's, plus the margin)
+        need = (max(rp[i], r0) if w > 0.0 else rp[i]) + margin
+        sd, ux, uy = edge_signed_distance_within(xy[i, 0], xy[i, 1], ed, need, np.inf)
         f, g0, g1 = edge_term(sd, ux, uy, rp[i], margin, 1.0, f, g0, g1)
         if w > 0.0:
             f, g0, g1 = edge_term(sd, ux, uy, r0, margin, w, f, g0, g1)
@@ -188,9 +190,10 @@ def _phantom_terms(i, xy, r, box, margin, empty, has_empty, gbox, ed):  # pragma
     x = xy[i, 0]
     y = xy[i, 1]
     if ed[0].shape[0] > 0:
-        sd, ux, uy = edge_signed_distance(x, y, ed)
-        # further inside than the index measures (inf): never, a phantom's container
-        # keeps it within 0.75 r of where it was thrown, beyond the wall
+        # outside, only the side matters (no term); inside, exact within the index's
+        # reach, and further inside (inf) never: a phantom's container keeps it within
+        # 0.75 r of where it was thrown, beyond the wall
+        sd, ux, uy = edge_signed_distance_within(x, y, ed, ed[7][5], 0.0)
         depth = sd - margin if sd < np.inf else 0.0
     else:
         depth = x - box[0]
