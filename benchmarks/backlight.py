@@ -189,14 +189,17 @@ def direct(args) -> None:
         flush=True,
     )
     bare = Coverage(np.zeros((1, 1)), 0.0, 0.0, w, h)
+    # the bare stack: the film without dots and without caps
+    (out / "bare.toml").write_text(DIRECT.format(profile=args.profile, w=w, h=h) + INK_AND_DIFFUSER)
+    bare_job = load_job(out / "bare.toml", need_map=False)
     result = {}
-    for label, kw in (
-        ("bare film", {"coverage": bare}),
-        ("designed map, coverage", {}),
-        ("designed map, real dots", {"dots": pattern}),
+    for label, on, kw in (
+        ("bare film", bare_job, {"coverage": bare}),
+        ("designed map, coverage", designed, {}),
+        ("designed map, real dots", designed, {"dots": pattern}),
     ):
         t0 = time.perf_counter()
-        sim = simulate(designed, rays, seed=7, **kw)
+        sim = simulate(on, rays, seed=7, **kw)
         dt = time.perf_counter() - t0
         result[label] = figures(f"{label} ({rays:.2g} rays, {dt:.0f} s)", sim)
     ratio = result["designed map, real dots"]["efficiency"] / result["bare film"]["efficiency"]

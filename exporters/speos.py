@@ -11,8 +11,10 @@ axes), and the scale ``d_i / reference`` on all three axes, ``reference`` being
 the diameter the Speos pattern element was drawn at (default: the pattern's nominal
 diameter, so fixed-size dots all have scale 1). Scaling z too keeps the element's shape
 (a moulded micro-dot's depth follows its diameter); a texture whose depth is fixed edits
-that column. Numbers have 6 decimals (1 nm in position). The file is written part by
-part (a dataset streams tile by tile) and verified by size before it replaces anything.
+that column. Caps over LEDs (:mod:`optdot.geometry.caps`) follow the dots, each a disc
+element scaled to its diameter. Numbers have 6 decimals (1 nm in position). The file is
+written part by part (a dataset streams tile by tile) and verified by size before it
+replaces anything.
 """
 
 from __future__ import annotations
@@ -22,9 +24,10 @@ from pathlib import Path
 import numpy as np
 
 from optdot.errors import ExportError
+from optdot.geometry.shapes import CIRCLE
 from optdot.io.atomic import atomic_path, expect_size
 from optdot.io.patterns import format_fixed6
-from optdot.pattern import DotSource
+from optdot.pattern import DotSource, caps_of
 
 from .options import ExportOptions
 
@@ -41,6 +44,13 @@ def write_speos(pattern: DotSource, path: str | Path, opts: ExportOptions) -> No
     """
     if pattern.n == 0:
         raise ExportError(f"{path}: the pattern has no dots")
+    caps = caps_of(pattern)
+    if len(caps) and pattern.kind is not CIRCLE:
+        raise ExportError(
+            f"{path}: the pattern prints caps over its LEDs, which a mapping of "
+            f"{pattern.kind.name} elements cannot scale into discs; export the caps' "
+            "discs separately (gds, oas, dxf)"
+        )
     ref = opts.speos_reference_mm or pattern.nominal_diameter
     written = 0
 
@@ -54,7 +64,7 @@ def write_speos(pattern: DotSource, path: str | Path, opts: ExportOptions) -> No
         rows[:, 9:] = (d / ref)[:, None]
         return format_fixed6(rows).replace(b",", b" ")
 
-    head = f"{pattern.n}\n".encode("ascii")
+    head = f"{pattern.n + len(caps)}\n".encode("ascii")
     with atomic_path(path, _verify(path, lambda: written)) as tmp, open(tmp, "wb") as fh:
         fh.write(head)
         written += len(head)
@@ -64,6 +74,10 @@ def write_speos(pattern: DotSource, path: str | Path, opts: ExportOptions) -> No
                 data = lines(xy[a : a + BATCH], d[a : a + BATCH], angle[a : a + BATCH])
                 fh.write(data)
                 written += len(data)
+        if len(caps):  # after the dots: a disc element scaled to each cap's diameter
+            data = lines(caps[:, :2], caps[:, 2], np.zeros(len(caps)))
+            fh.write(data)
+            written += len(data)
 
 
 def _verify(path, size):

@@ -26,12 +26,14 @@ from . import stages
 from .config.job import Job, QAParams
 from .errors import ExportError, JobError, QAGateError
 from .formats import FORMATS
+from .geometry.caps import no_caps
+from .geometry.domain import Domain
 from .geometry.morton import spatial_order
 from .io.atomic import transaction
 from .io.dataset import is_dataset
 from .io.outputs import check_outputs
 from .io.patterns import save_pattern
-from .pattern import DotSource, Pattern
+from .pattern import DotSource, Pattern, caps_of
 from .preflight import (
     MAX_RANDOM_FILL,
     TILE_BREAK_EVEN,
@@ -40,7 +42,7 @@ from .preflight import (
     check_job,
     use_tiles,
 )
-from .quality.gate import QAResult, run_qa
+from .quality.gate import QAResult, caps_check, run_qa
 from .quality.provenance import mask_lines, provenance
 from .relax.formulation import Formulation
 from .relax.optdot import Progress
@@ -237,10 +239,18 @@ def generate_to(
 
 
 def with_job_panel(pattern: Pattern, job: Job | None) -> Pattern:
-    """The pattern with the job's panel box and outline (the job is the authority)."""
+    """The pattern with the job's panel box and outline (the job is the authority), and
+    its own caps over LEDs (what the file prints: QA holds them to the job's)."""
     if job is None:
         return pattern
-    return replace(pattern, box=job.box, outline=None if job.domain.rectangle else job.domain)
+    outline = None if job.domain.rectangle else job.domain
+    own = caps_of(pattern)
+    printed = own if len(own) else None
+    if outline is not None:
+        outline = replace(outline, caps=printed)
+    elif printed is not None:
+        outline = replace(Domain.rect(*job.box), caps=printed)
+    return replace(pattern, box=job.box, outline=outline)
 
 
 def qa(
@@ -304,6 +314,9 @@ def qa(
             field,
             job.ink,
         )
+    wanted = job.domain.caps if job is not None else None
+    if job is not None and (wanted is not None or len(caps_of(dots))):
+        result.checks.append(caps_check(caps_of(dots), no_caps() if wanted is None else wanted))
     source = dots.label or None
     seed = dots.meta.get("seed")
     if seed is None and job is not None and source is None:

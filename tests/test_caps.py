@@ -247,3 +247,53 @@ def test_edge_distances_on_a_capped_panel_match_shapely(tmp_path):
         assert np.allclose(np.abs(d[exact]), want[exact], atol=1e-9)
         assert np.array_equal(d[exact] > 0, inside[exact])
         assert np.all(d[~exact] == np.inf)
+
+
+def test_qa_fails_a_pattern_whose_caps_differ_from_the_job_s(tmp_path):
+    """QA with the job: every cap the job asks for is printed, at its place and size; a
+    pattern without them (made for the uncapped job) fails, naming a missing cap."""
+    from optdot.io.patterns import load_pattern, save_pattern
+    from optdot.pipeline import generate
+    from optdot.quality.gate import caps_check
+
+    capped_path = direct_job(tmp_path, 10.0, 10.0, 0.3, leds=CAPPED)
+    job = load_job(capped_path)
+    save_pattern(generate(job), tmp_path / "capped.npz")
+    rc, err, out = cli("qa", tmp_path / "capped.npz", "--job", capped_path)
+    assert rc == 0, err
+    assert any("caps over LEDs" in ln and ln.startswith("PASS") for ln in out.splitlines())
+    other = tmp_path / "plain"
+    other.mkdir()
+    plain = direct_job(other, 10.0, 10.0, 0.3, leds={"pitch": [5.0, 5.0], "size": 0.2})
+    save_pattern(generate(load_job(plain)), tmp_path / "plain.npz")
+    rc, err, out = cli("qa", tmp_path / "plain.npz", "--job", capped_path)
+    assert rc == 1
+    assert any("caps over LEDs" in ln and ln.startswith("FAIL") for ln in out.splitlines())
+    wanted = job.domain.caps
+    moved = wanted.copy()
+    moved[0, 0] += 0.01
+    assert caps_check(wanted, wanted).passed
+    assert caps_check(moved, wanted).value == 2  # one missing, one extra
+    bigger = wanted.copy()
+    bigger[1, 2] += 0.01
+    assert caps_check(bigger, wanted).value == 2
+    assert load_pattern(tmp_path / "capped.npz").outline.caps.shape == (4, 3)
+
+
+def test_a_csv_refuses_caps_and_a_speos_mapping_carries_them(tmp_path):
+    job_path = direct_job(tmp_path, 10.0, 10.0, 0.3, leds=CAPPED)
+    assert cli("generate", job_path, "-o", tmp_path / "p.npz", "-q")[0] == 0
+    one_error(("export", tmp_path / "p.npz", "--csv", tmp_path / "p.csv"), 2, "caps", "CSV")
+    assert not (tmp_path / "p.csv").exists()
+    rc, err, _ = cli("export", tmp_path / "p.npz", "--speos", tmp_path / "p.OPT3DMapping")
+    assert rc == 0, err
+    from optdot.io.patterns import load_pattern
+
+    n = load_pattern(tmp_path / "p.npz").n
+    lines = (tmp_path / "p.OPT3DMapping").read_text().splitlines()
+    assert int(lines[0]) == n + 4 == len(lines) - 1
+    last = np.array([[float(v) for v in row.split()] for row in lines[-4:]])
+    ref = float(lines[1].split()[9]) and None  # first dot's scale (unused)
+    assert ref is None
+    nominal = load_pattern(tmp_path / "p.npz").nominal_diameter
+    assert np.allclose(last[:, 9:], 0.8 / nominal, atol=1e-6)

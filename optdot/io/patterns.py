@@ -76,7 +76,16 @@ def save_pattern(pattern: Pattern, path: str | Path) -> None:
 
 
 def write_csv(pattern: Pattern, path: str | Path) -> None:
-    """Write the pattern's CSV atomically, its size checked before it replaces anything."""
+    """Write the pattern's CSV atomically, its size checked before it replaces anything.
+
+    Raises:
+        ExportError: the pattern prints caps over its LEDs (a CSV holds dots only).
+    """
+    if pattern.outline is not None and pattern.outline.caps is not None:
+        raise ExportError(
+            f"{path}: the pattern prints caps over its LEDs, which a CSV of dots cannot "
+            "hold; write .npz or .parquet, or a mask (gds, oas, dxf)"
+        )
     data = pattern_csv_bytes(pattern)
     with atomic_path(path, expect_size(len(data), str(path))) as tmp:
         tmp.write_bytes(data)

@@ -25,7 +25,7 @@ from ..config.light_guide import EDGE_FINISH, LightGuide
 from ..errors import JobError
 from ..geometry.caps import cap_shares, no_caps
 from ..geometry.shapes import packed
-from ..pattern import DotSource
+from ..pattern import DotSource, caps_of
 from .trace import (
     BOTTOM_FACE,
     E_A,
@@ -363,14 +363,17 @@ def _walls(job: Job) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _print(job: Job, dots: DotSource | None, coverage: Coverage | None) -> Print:
-    """The printed faces: the job's dots (or the coverage of its map), its caps, and the
-    other face's coverage. A coverage raster holds the dots' share of each cell; with
-    caps it is turned into the share of the cell outside its caps (the tracer tests the
-    caps first)."""
+    """The printed faces: the job's dots (or the coverage of its map), the caps (the
+    dots' own, else the job's), and the other face's coverage. A coverage raster holds
+    the dots' share of each cell; with caps it is turned into the share of the cell
+    outside its caps (the tracer tests the caps first)."""
     other = _other_coverage(job)
     phi2 = np.ascontiguousarray(other.grid, dtype=np.float64)
     g2 = np.array([other.x0, other.y0, other.dx, other.dy], np.float64)
-    caps = job.domain.caps if job.domain.caps is not None else no_caps()
+    if dots is not None:  # what the pattern prints
+        caps = caps_of(dots)
+    else:
+        caps = job.domain.caps if job.domain.caps is not None else no_caps()
     cap_start, cap, cap_g = cap_grid(caps, job.box)
     if dots is None:
         cov = coverage or coverage_of(job)

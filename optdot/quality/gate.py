@@ -16,6 +16,8 @@ import numbers
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from ..config.job import QAParams
 from ..geometry.density import DensityMap
 from ..geometry.domain import Domain
@@ -24,7 +26,7 @@ from ..pattern import DotSource
 from .measure import measure
 from .source import Source, source_of
 
-__all__ = ["Check", "QAResult", "judge", "run_qa"]
+__all__ = ["Check", "QAResult", "caps_check", "judge", "run_qa"]
 
 
 @dataclass
@@ -292,6 +294,36 @@ def judge(
             "visibility (no target map: give --job)",
         ]
     return QAResult(metrics=m, checks=checks, arrays=got.arrays, skipped=skipped)
+
+
+#: How far a printed cap may sit from the job's, or differ in diameter, mm (1 µm).
+CAP_TOLERANCE = 1e-3
+
+
+def caps_check(printed: np.ndarray, wanted: np.ndarray) -> Check:
+    """The gate line of caps over LEDs (:mod:`optdot.geometry.caps`): how many of the job's
+    caps ``wanted`` ``[m, 3]`` (x, y, diameter mm) the dots' file does not print as a cap
+    of that diameter within :data:`CAP_TOLERANCE`, plus caps it prints that the job does
+    not ask for. An LED without its cap is a bright spot; one too many a dark one."""
+    from scipy.spatial import cKDTree
+
+    def unmatched(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        if len(b) == 0:
+            return np.ones(len(a), bool)
+        d, k = cKDTree(b[:, :2]).query(a[:, :2])
+        return (d > CAP_TOLERANCE) | (np.abs(a[:, 2] - b[k, 2]) > CAP_TOLERANCE)
+
+    missing = unmatched(wanted, printed)
+    extra = unmatched(printed, wanted)
+    where = [list(map(float, r[:2])) for r in (*wanted[missing], *printed[extra])][:10]
+    bad = int(missing.sum() + extra.sum())
+    return Check(
+        f"caps over LEDs missing, extra or of another size (of {len(wanted)} the job prints)",
+        bad,
+        0,
+        bad == 0,
+        where,
+    )
 
 
 def number_text(v) -> str:
