@@ -297,3 +297,47 @@ def test_a_csv_refuses_caps_and_a_speos_mapping_carries_them(tmp_path):
     assert ref is None
     nominal = load_pattern(tmp_path / "p.npz").nominal_diameter
     assert np.allclose(last[:, 9:], 0.8 / nominal, atol=1e-6)
+
+
+def test_the_film_step_acts_on_each_cell_s_whole_ink_cap_included(tmp_path):
+    """One step of the film rule (no smoothing, no grid symmetry): each cell's whole
+    transmission ``1 - k (capped + fill inside) / panel`` is multiplied by ``q ** 0.8``
+    times one level factor, ``q`` the target over its luminance: so ``(v' / v) lum **
+    0.8`` is one number over the cells the range does not clip, cells under a cap
+    included (a rule that ignored the cap would step their ink wrongly)."""
+    from types import SimpleNamespace
+
+    from optdot.optics.design import GAMMA, _film_step, _shares, design_grid
+
+    leds = {"positions": [[2.5, 2.5], [7.5, 7.5]], "size": 0.2, "cap": 0.8}
+    path = direct_job(tmp_path, 10.0, 10.0, None, leds=leds)
+    path.write_text(path.read_text() + "[design]\nsmoothing = 0\n")
+    job = load_job(path, need_map=False)
+    nx, ny, dx, dy = design_grid(job)
+    inside, panel, capped = _shares(job, nx, ny, dx, dy)
+    live = panel > 0.5
+    step = _film_step(job, nx, ny, dx, dy, (inside, panel, capped), live, np.ones((ny, nx)), live)
+    phi = np.full((ny, nx), 0.3)
+    lum = np.where(capped > 0, 1.3, 1.0) * 100.0  # the capped cells too bright
+    sim = SimpleNamespace(counts=panel * lum, measured=np.ones((ny, nx), bool))
+    new = step(phi, sim)
+    k = job.backlight.ink_contrast
+    lo, hi = job.design.fill_range
+    v = 1 - k * (capped + phi * inside) / panel
+    v2 = 1 - k * (capped + new * inside) / panel
+    free = live & (inside > 0.05) & (new < hi - 1e-9)  # the emptiest sit at lo exactly
+    level = (v2 / v * lum**GAMMA)[free]
+    assert np.allclose(level, level[0], rtol=1e-9)
+    assert (free & (capped > 0.05)).sum() == 2 and (free & (capped == 0)).sum() > 50
+
+
+def test_caps_keep_the_led_grid_s_symmetry_for_the_design(tmp_path):
+    """Caps sit on the LED grid: the design still averages its corrections over the pitch
+    cells (a keep-out elsewhere would break the symmetry and turn it off)."""
+    from optdot.optics.design import design_grid
+    from optdot.optics.periodic import period_classes
+
+    job = _capped(tmp_path, fill=None)
+    assert period_classes(job, *design_grid(job)) is not None
+    other = direct_job(tmp_path, 10.0, 10.0, None, leds={"pitch": [5.0, 5.0], "size": 0.2})
+    assert period_classes(load_job(other, need_map=False), *design_grid(job)) is not None

@@ -30,7 +30,7 @@ def period_classes(job: Job, nx: int, ny: int, dx: float, dy: float) -> np.ndarr
     bl = job.backlight
     if bl is None or bl.leds is None or bl.leds.pitch is None:
         return None
-    if job.design.target is not None or not job.domain.rectangle:
+    if job.design.target is not None or not _rectangle_panel(job):
         return None
     px, py = bl.leds.pitch
     xy = bl.leds.positions
@@ -72,3 +72,15 @@ def fold(logq_w: np.ndarray, w: np.ndarray, classes: np.ndarray) -> np.ndarray:
     weight = np.bincount(c, w.ravel())
     mean = np.where(weight > 0, total / np.maximum(weight, 1e-300), 0.0)
     return mean[classes] * w
+
+
+def _rectangle_panel(job: Job) -> bool:
+    """The panel is its box: the plain rectangle, or one whose only holes are the caps
+    over its LEDs (they sit on the grid, so the symmetry holds)."""
+    dom = job.domain
+    if dom.rectangle:
+        return True
+    x0, y0, x1, y1 = job.box
+    return dom.caps is not None and abs(dom.lit.area - (x1 - x0) * (y1 - y0)) <= 1e-9 * (
+        (x1 - x0) * (y1 - y0)
+    )
