@@ -320,50 +320,16 @@ def signed_distances(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Vectorised :func:`signed_distance`: ``[n]`` distances and ``[n, 2]`` gradients,
     exact within the index's reach inside (``far`` beyond) and everywhere outside."""
-    return _signed_many(
-        xy,
-        index.seg,
-        index.prev,
-        index.next,
-        index.x0,
-        index.y0,
-        index.cell,
-        index.nx,
-        index.ny,
-        index.start,
-        index.items,
-        index.inside,
-        index.clear,
-        far,
-        index.reach,
-    )
+    return _signed_many(np.ascontiguousarray(xy, dtype=np.float64), edge_args(index), far)
 
 
 @nb.njit(cache=True)
-def _signed_many(
-    xy, seg, prev, nxt, x0, y0, cell, nx, ny, start, items, inside, clear, far, reach
-):  # pragma: no cover
+def _signed_many(xy, ed, far):  # pragma: no cover - compiled
     n = xy.shape[0]
     d = np.empty(n)
     u = np.empty((n, 2))
     for i in range(n):
-        d[i], u[i, 0], u[i, 1] = signed_distance(
-            xy[i, 0],
-            xy[i, 1],
-            seg,
-            prev,
-            nxt,
-            x0,
-            y0,
-            cell,
-            nx,
-            ny,
-            start,
-            items,
-            inside,
-            clear,
-            far,
-            reach,
-            np.inf,
-        )
+        d[i], u[i, 0], u[i, 1] = edge_signed_distance(xy[i, 0], xy[i, 1], ed)
+        if d[i] == np.inf:
+            d[i] = far
     return d, u
