@@ -117,6 +117,7 @@ def test_speos_directions_follow_the_footprints_orientation(tmp_path):
     class Turned:  # a dot source whose footprints carry orientations
         n = 3
         nominal_diameter = 0.05
+        outline = None  # the box: no caps
 
         def chunks(self):
             dots = Footprints.circles(np.array([0.05, 0.05, 0.1]))
