@@ -293,8 +293,6 @@ def test_a_csv_refuses_caps_and_a_speos_mapping_carries_them(tmp_path):
     lines = (tmp_path / "p.OPT3DMapping").read_text().splitlines()
     assert int(lines[0]) == n + 4 == len(lines) - 1
     last = np.array([[float(v) for v in row.split()] for row in lines[-4:]])
-    ref = float(lines[1].split()[9]) and None  # first dot's scale (unused)
-    assert ref is None
     nominal = load_pattern(tmp_path / "p.npz").nominal_diameter
     assert np.allclose(last[:, 9:], 0.8 / nominal, atol=1e-6)
 
