@@ -1,7 +1,7 @@
 """Direct-lit and film stacks (issue 38): design -> generate -> simulate with the real dots.
 
 Run: python benchmarks/backlight.py direct [--profile lambertian|batwing] [--out DIR]
-         [--rays 4e8] [--halo-rays 4e6] [--size 60x40] [--cap 0.8] [--fill-max 0.75]
+         [--rays 4e8] [--halo-rays 4e6] [--size 60x40] [--cap 0.8 [--graded]] [--fill-max 0.75]
          [--smoothing 1]
      python benchmarks/backlight.py guide-film [--out DIR] [--rays 6.4e7]
 
@@ -147,8 +147,10 @@ def direct(args) -> None:
     job_path = out / "job.toml"
     text = DIRECT.format(profile=args.profile, w=w, h=h)
     if args.cap > 0:
+        ink = 'cap_ink = "design"\n' if args.graded else ""
         text = text.replace(
-            f'profile = "{args.profile}"\n', f'profile = "{args.profile}"\ncap = {args.cap}\n'
+            f'profile = "{args.profile}"\n',
+            f'profile = "{args.profile}"\ncap = {args.cap}\n{ink}',
         )
     extra = []
     if args.fill_max is not None:
@@ -160,7 +162,7 @@ def direct(args) -> None:
     job = load_job(job_path, need_map=False)
     rays = int(float(args.rays))
     print(f"machine: {machine()}")
-    caps = f", caps of {args.cap:g} mm" if args.cap > 0 else ""
+    caps = f", {'graded' if args.graded else 'solid'} caps of {args.cap:g} mm" if args.cap else ""
     print(f"stack: {args.profile} LEDs, {len(job.backlight.leds.positions)} on a 5 mm grid{caps}")
 
     t0 = time.perf_counter()
@@ -251,6 +253,7 @@ def main() -> None:
     ap.add_argument("--halo-rays", default="4e6")
     ap.add_argument("--size", default="60x40")
     ap.add_argument("--cap", type=float, default=0.0, help="direct: LED cap diameter, mm")
+    ap.add_argument("--graded", action="store_true", help='direct: cap_ink = "design"')
     ap.add_argument("--fill-max", type=float, help="direct: design.fill_range's top")
     ap.add_argument("--smoothing", type=float, help="direct: design.smoothing, cells")
     args = ap.parse_args()

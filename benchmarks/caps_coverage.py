@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +33,7 @@ from _common import machine  # noqa: E402
 from backlight import DIRECT, INK_AND_DIFFUSER, figures  # noqa: E402
 
 from optdot.config.schema import load_job  # noqa: E402
+from optdot.geometry.caps import ring_table  # noqa: E402
 from optdot.optics.design import design  # noqa: E402
 from optdot.optics.scene import Coverage  # noqa: E402
 from optdot.optics.simulate import simulate  # noqa: E402
@@ -46,18 +48,29 @@ def folded(a: np.ndarray, per: int) -> np.ndarray:
 
 
 def run(
-    cap: float, rays: int, out: Path, fill_max: float | None = None, cell: float | None = None
+    cap: float,
+    rays: int,
+    out: Path,
+    fill_max: float | None = None,
+    cell: float | None = None,
+    graded: bool = False,
+    smoothing: float | None = None,
 ) -> None:
     out.mkdir(parents=True, exist_ok=True)
     path = out / "job.toml"
     text = DIRECT.format(profile="lambertian", w=60.0, h=40.0)
     if cap > 0:
-        text = text.replace('profile = "lambertian"\n', f'profile = "lambertian"\ncap = {cap}\n')
+        ink = 'cap_ink = "design"\n' if graded else ""
+        text = text.replace(
+            'profile = "lambertian"\n', f'profile = "lambertian"\ncap = {cap}\n{ink}'
+        )
     design_sec = "[design]\n"
     if fill_max is not None:
         design_sec += f"fill_range = [0.0, {fill_max}]\n"
     if cell is not None:
         design_sec += f"cell = {cell}\n"
+    if smoothing is not None:
+        design_sec += f"smoothing = {smoothing}\n"
     path.write_text(text + INK_AND_DIFFUSER + design_sec)
     job = load_job(path, need_map=False)
     t0 = time.perf_counter()
@@ -65,6 +78,10 @@ def run(
     dt = time.perf_counter() - t0
     dx, dy = got.cell
     print(f"caps {cap:g} mm: design {dt:.1f} s, fill {got.fill.min():.3f}..{got.fill.max():.3f}")
+    if got.cap_ink is not None:
+        print("bands' ink from the centre out:", np.array2string(got.cap_ink, precision=2))
+        rings = ring_table(cap, got.cap_ink)
+        job = replace(job, domain=replace(job.domain, cap_rings=rings))
     inside = job.domain.cell_fractions(0.0, 0.0, dx, dy, *got.fill.shape[::-1])
     sim = simulate(job, rays, seed=7, coverage=Coverage(got.fill * inside, 0.0, 0.0, dx, dy))
     figures(f"caps {cap:g} mm, coverage ({rays:.2g} rays)", sim)
@@ -82,11 +99,23 @@ def main() -> None:
     ap.add_argument("--rays", type=float, default=4e7)
     ap.add_argument("--fill-max", type=float, help="design.fill_range's top (default 0.7)")
     ap.add_argument("--cell", type=float, help="design.cell, mm (default: pitch / 10)")
+    ap.add_argument("--smoothing", type=float, help="design.smoothing, cells (default 1)")
+    ap.add_argument(
+        "--graded", action="store_true", help='graded caps (cap_ink = "design"), not solid'
+    )
     ap.add_argument("--out", type=Path, default=HERE / "out" / "caps_coverage")
     args = ap.parse_args()
     print(f"machine: {machine()}")
     for cap in args.caps:
-        run(cap, int(args.rays), args.out / f"cap{cap:g}", args.fill_max, args.cell)
+        run(
+            cap,
+            int(args.rays),
+            args.out / f"cap{cap:g}",
+            args.fill_max,
+            args.cell,
+            args.graded,
+            args.smoothing,
+        )
 
 
 if __name__ == "__main__":

@@ -12,7 +12,10 @@ once per dot with fresh handles, and ``$HANDSEED`` is moved past the last one. T
 is an ordinary DXF that ezdxf's audit accepts (tests/test_exporters.py).
 
 Caps over LEDs (:mod:`optdot.geometry.caps`) are CIRCLEs on ``DOTS`` too (they are
-printed), each marked by XDATA of the application ``OPTDOT_CAP``.
+printed), each marked by XDATA of the application ``OPTDOT_CAP``. A graded cap is a
+POINT at its centre (XDATA ``cap``, its diameter in mm) and one solid HATCH a ring on
+``DOTS`` (XDATA ``cap ring``): a disc bounded by one circle, an annulus by two; R12,
+which has no HATCH, refuses graded caps.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from pathlib import Path
 import ezdxf
 import numpy as np
 
+from optdot.errors import ExportError
 from optdot.geometry.caps import CAP_APPID
 from optdot.geometry.orientation import degrees
 from optdot.geometry.shapes import CIRCLE, Kind
@@ -66,6 +70,20 @@ def _new_document(version: str):
 def _block_name(key: tuple[int, ...]) -> str:
     """The block of a shaped dot of size ``key`` (nm per parameter)."""
     return "DOT_" + "x".join(str(v) for v in key)
+
+
+def _graded_caps(msp, caps: np.ndarray, rings: np.ndarray) -> None:
+    """Graded caps into ``msp``: a POINT a cap, a solid HATCH a ring (see the module
+    doc)."""
+    for x, y, d in caps.tolist():
+        mark = msp.add_point((x, y), dxfattribs={"layer": "DOTS"})
+        mark.set_xdata(CAP_APPID, [(1000, "cap"), (1040, float(d))])
+        for r_in, r_out in rings.tolist():
+            hatch = msp.add_hatch(dxfattribs={"layer": "DOTS"})
+            hatch.paths.add_edge_path().add_arc((x, y), r_out, 0.0, 360.0)
+            if r_in > 0:
+                hatch.paths.add_edge_path().add_arc((x, y), r_in, 0.0, 360.0)
+            hatch.set_xdata(CAP_APPID, [(1000, "cap ring")])
 
 
 def _add_block(doc, kind: Kind, size: np.ndarray, version: str, tolerance: float) -> None:
@@ -137,7 +155,10 @@ def _template(
     caps = caps_of(pattern)
     if len(caps):
         doc.appids.add(CAP_APPID)
-    for x, y, d in caps.tolist():  # a cap: a circle on DOTS marked by its XDATA
+    graded = pattern.outline is not None and pattern.outline.cap_rings is not None
+    if graded and len(caps):
+        _graded_caps(msp, caps, pattern.outline.cap_rings)
+    for x, y, d in caps.tolist() if not graded else []:  # a circle marked by its XDATA
         cap = msp.add_circle((x, y), 0.5 * d, dxfattribs={"layer": "DOTS"})
         cap.set_xdata(CAP_APPID, [(1000, "cap")])
     names = []
@@ -225,7 +246,16 @@ def _find_float(lines: list[str], value: float) -> int:
 
 def write_dxf(pattern: DotSource, path: str | Path, opts: ExportOptions) -> None:
     """Write the DXF atomically (R2010 by default, ``opts.dxf_version`` otherwise); a
-    dataset is streamed part by part (memory: one part)."""
+    dataset is streamed part by part (memory: one part).
+
+    Raises:
+        ExportError: graded caps in an R12 drawing (it has no HATCH)."""
+    outline = pattern.outline
+    if opts.dxf_version == "R12" and outline is not None and outline.cap_rings is not None:
+        raise ExportError(
+            f"{path}: DXF R12 has no HATCH to fill the rings of graded caps over the LEDs; "
+            "write R2000 or later (--dxf-version)"
+        )
     shaped = pattern.kind is not CIRCLE
     sizes, names = [], {}
     if shaped:  # every size the dots have: a block each

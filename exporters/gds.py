@@ -11,6 +11,9 @@ reference when every dot has the same angle).
 goes on its own layer as filled polygons, holes cut open by zero-width keyholes. Caps
 over LEDs (:mod:`optdot.geometry.caps`) are circles on the dots' layer in a cell ``CAP``
 (``CAP_<diameter in nm>`` when they differ), one reference a cap, flattened or not.
+Graded caps print their rings instead: the cell is always ``CAP_<diameter in nm>`` (the
+cap's diameter is not drawn when its outer bands are empty) and holds one polygon a ring,
+a disc for a ring from the centre, else an annulus cut open by a zero-width keyhole.
 """
 
 from __future__ import annotations
@@ -228,21 +231,51 @@ def _top(src: DotSource, opts: ExportOptions, oasis: bool) -> gdstk.Cell:
     return top
 
 
-def _cap_cells(caps: np.ndarray, opts: ExportOptions, names: dict[str, str]):
-    """``(cells, refs)``: a cell per cap diameter (:data:`CAP_CELL`, with ``_<nm>`` when
-    there are several), a circle on the dots' layer, and the references placing them
-    (one a cap, in Morton order), to go into the top cell."""
+def _cap_cells(src: DotSource, opts: ExportOptions, names: dict[str, str]):
+    """``(cells, refs, polygons)``: a cell per cap diameter (:data:`CAP_CELL`, with
+    ``_<nm>`` when there are several or the caps are graded), a circle on the dots'
+    layer or the graded caps' rings, the references placing them (one a cap, in Morton
+    order), to go into the top cell, and how many polygons the cells hold."""
+    caps = caps_of(src)
+    graded = src.outline is not None and src.outline.cap_rings is not None
     cells, refs = [], []
     sizes = np.unique(np.round(caps[:, 2] * 1e6).astype(np.int64)) if len(caps) else []
     for nm in sizes:
-        name = CAP_CELL if len(sizes) == 1 else f"{CAP_CELL}_{nm}"
+        name = CAP_CELL if len(sizes) == 1 and not graded else f"{CAP_CELL}_{nm}"
         name = _unique(name, f"the {nm} nm cap", names)
-        cell = dot_cell(name, CIRCLE, np.array([nm * 1e-3]), opts)
+        if graded:
+            cell = _ring_cell(name, src.outline.cap_rings * 1e3, opts)
+        else:
+            cell = dot_cell(name, CIRCLE, np.array([nm * 1e-3]), opts)
         at = caps[np.round(caps[:, 2] * 1e6).astype(np.int64) == nm, :2] * 1e3
         at = at[spatial_order(at)]
         cells.append(cell)
         refs.extend(gdstk.Reference(cell, origin=(float(x), float(y))) for x, y in at.tolist())
-    return cells, refs
+    return cells, refs, sum(len(c.polygons) for c in cells)
+
+
+def _ring_cell(name: str, rings_um: np.ndarray, opts: ExportOptions) -> gdstk.Cell:
+    """The cell of a graded cap: one polygon a ring ``(r_in, r_out)`` µm about the
+    origin, within the tolerance."""
+    cell = gdstk.Cell(name)
+    for r_in, r_out in rings_um.tolist():
+        nv = polygon_vertices(r_out, opts.tolerance_um)
+        if 2 * nv + 2 > MAX_POINTS:
+            raise ExportError(
+                f"--tolerance {opts.tolerance_um} µm needs {nv} vertices for a cap's ring of "
+                f"{2 * r_out:.4g} µm (max {MAX_POINTS // 2 - 1})"
+            )
+        cell.add(
+            gdstk.ellipse(
+                (0, 0),
+                r_out,
+                inner_radius=r_in if r_in > 0 else None,
+                tolerance=opts.tolerance_um,
+                layer=opts.layer,
+                datatype=opts.datatype,
+            )
+        )
+    return cell
 
 
 def write_gds(src: DotSource, path: str | Path, opts: ExportOptions) -> None:
@@ -253,8 +286,8 @@ def write_gds(src: DotSource, path: str | Path, opts: ExportOptions) -> None:
     anything (ENDLIB, the whole record stream, the reference and polygon counts)."""
     cells = _Cells(src, opts)
     top = _top(src, opts, oasis=False)
-    cap_cells, cap_refs = _cap_cells(caps_of(src), opts, cells.names)
-    counts = {"refs": len(cap_refs), "polys": len(cap_cells)}
+    cap_cells, cap_refs, cap_polys = _cap_cells(src, opts, cells.names)
+    counts = {"refs": len(cap_refs), "polys": cap_polys}
 
     def check(tmp: Path) -> None:
         _check_counts(path, tmp, counts["refs"], counts["polys"])
@@ -294,7 +327,7 @@ def write_oas(src: DotSource, path: str | Path, opts: ExportOptions) -> None:
     gdstk rounds to the 1 nm grid are each exact (no drift across a tile)."""
     cells = _Cells(src, opts)
     top = _top(src, opts, oasis=True)
-    cap_cells, cap_refs = _cap_cells(caps_of(src), opts, cells.names)
+    cap_cells, cap_refs, _ = _cap_cells(src, opts, cells.names)
     lib = gdstk.Library("OPTDOT", unit=1e-6, precision=1e-9)
     for label, xy, d, alone in _chunks(src):
         cell = top if alone else cells.tile(label)

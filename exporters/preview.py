@@ -5,7 +5,8 @@ most ~400 px a side); right, a true-scale zoom tile (1 mm², dots drawn as circl
 shaped dots as their outlines).
 SVG: every dot as a circle when there are at most 200k dots, else the zoom tile only
 (a browser cannot draw millions of SVG circles), always with the panel outline. Caps
-over LEDs (:mod:`optdot.geometry.caps`) are drawn as the solid discs they are.
+over LEDs (:mod:`optdot.geometry.caps`) are drawn as the solid discs they are, graded
+caps as their rings.
 """
 
 from __future__ import annotations
@@ -64,13 +65,24 @@ def write_png(pattern: Pattern, path: str | Path, dpi: int = 110) -> None:
 
         b.add_collection(PolyCollection(_outlines(pattern, sel), fc="k", lw=0))
     caps = _caps_near(pattern, (tx0, ty0, tx1, ty1))
-    if len(caps):
+    rings = _rings(pattern)
+    if len(caps) and rings is None:
         d = caps[:, 2]
         b.add_collection(
             EllipseCollection(
                 d, d, 0, units="xy", offsets=caps[:, :2], offset_transform=b.transData, fc="k"
             )
         )
+    elif len(caps):  # graded: each ring an annulus (a disc from the centre)
+        from matplotlib.collections import PatchCollection
+        from matplotlib.patches import Wedge
+
+        wedges = [
+            Wedge((x, y), r_out, 0, 360, width=None if r_in == 0 else r_out - r_in)
+            for x, y, _ in caps.tolist()
+            for r_in, r_out in rings.tolist()
+        ]
+        b.add_collection(PatchCollection(wedges, fc="k", lw=0))
     b.set_xlim(tx0, tx1)
     b.set_ylim(ty0, ty1)
     b.set_aspect("equal")
@@ -122,14 +134,29 @@ def write_svg(pattern: Pattern, path: str | Path) -> tuple[int, tuple[float, ...
             f'<circle cx="{x:.6f}" cy="{-y:.6f}" r="{r:.6f}"/>\n'
             for (x, y), r in zip(pattern.xy[sel].tolist(), radius.tolist(), strict=True)
         ]
-    out += [
-        f'<circle cx="{x:.6f}" cy="{-y:.6f}" r="{0.5 * d:.6f}" class="cap"/>\n'
-        for x, y, d in _caps_near(pattern, window).tolist()
-    ]
+    rings = _rings(pattern)
+    for x, y, d in _caps_near(pattern, window).tolist():
+        if rings is None:
+            out.append(f'<circle cx="{x:.6f}" cy="{-y:.6f}" r="{0.5 * d:.6f}" class="cap"/>\n')
+            continue
+        for r_in, r_out in rings.tolist():  # a ring: a circle stroked as wide as the ring
+            if r_in == 0:
+                out.append(f'<circle cx="{x:.6f}" cy="{-y:.6f}" r="{r_out:.6f}" class="cap"/>\n')
+            else:
+                out.append(
+                    f'<circle cx="{x:.6f}" cy="{-y:.6f}" r="{0.5 * (r_in + r_out):.6f}" '
+                    f'fill="none" stroke="black" stroke-width="{r_out - r_in:.6f}" '
+                    'class="cap"/>\n'
+                )
     out.append("</g>\n</svg>\n")
     with atomic_path(path, expect_tail(b"</svg>\n", str(path))) as tmp:
         tmp.write_text("".join(out), encoding="utf-8")
     return int(sel.sum()), tuple(float(v) for v in window)
+
+
+def _rings(pattern: Pattern) -> np.ndarray | None:
+    """The graded caps' rings ``[k, 2]`` mm, or None for solid caps."""
+    return None if pattern.outline is None else pattern.outline.cap_rings
 
 
 def _caps_near(pattern: Pattern, w: tuple[float, float, float, float]) -> np.ndarray:

@@ -18,7 +18,7 @@ import numpy as np
 
 from optdot.errors import GeometryError, PatternFileError, ResourceError, one_line
 from optdot.files import input_problem
-from optdot.geometry.caps import CAP_APPID, CAP_CELL
+from optdot.geometry.caps import CAP_APPID, CAP_CELL, rings_problem
 from optdot.geometry.domain import Domain, domain_from_rings
 from optdot.geometry.limits import validate_dots
 from optdot.geometry.orientation import degrees
@@ -79,7 +79,7 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
     budget = [max_dots_read()]
     gds = path.suffix.lower() != ".oas"
     _collect(path, top, _IDENTITY, opts, to_mm, centres, diameters, 0, budget, gds)
-    caps = _layout_caps(path, top, opts, to_mm)
+    caps, cap_rings = _layout_caps(path, top, opts, to_mm)
     if not centres:
         raise PatternFileError(f"{path}: no dots on layer {opts.layer}/{opts.datatype}")
     outline = [
@@ -92,7 +92,7 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
     kinds = {d.kind for d in diameters}
     if kinds == {CIRCLE}:
         d = np.concatenate([d.size[:, 0] for d in diameters])
-        return _pattern(path, xy, d, rings, True, caps=caps)
+        return _pattern(path, xy, d, rings, True, caps=caps, cap_rings=cap_rings)
     if len(kinds) > 1:
         raise PatternFileError(
             f"{path}: the dot layer holds {' and '.join(sorted(k.name for k in kinds))} dots; "
@@ -103,7 +103,7 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
         np.round(np.concatenate([d.size for d in diameters]), 6),
         np.radians(degrees(np.concatenate([d.angle for d in diameters]))),
     )
-    return _pattern(path, xy, dots.diameter, rings, True, dots, caps)
+    return _pattern(path, xy, dots.diameter, rings, True, dots, caps, cap_rings)
 
 
 def _is_cap_cell(name: str) -> bool:
@@ -111,10 +111,14 @@ def _is_cap_cell(name: str) -> bool:
     return name == CAP_CELL or re.fullmatch(f"{CAP_CELL}_[0-9]+", name) is not None
 
 
-def _layout_caps(path: Path, top, opts: ExportOptions, to_mm: float) -> np.ndarray:
-    """``[m, 3]`` caps ``(x, y, diameter)`` mm: the top cell's plain references to cap
-    cells, each a circle on the dots' layer centred on the cell's origin."""
-    rows = []
+def _layout_caps(
+    path: Path, top, opts: ExportOptions, to_mm: float
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(caps, rings)``: ``[m, 3]`` caps ``(x, y, diameter)`` mm, the top cell's plain
+    references to cap cells, each a circle on the dots' layer centred on the cell's
+    origin; or, graded, a cell ``CAP_<diameter nm>`` of rings about it, whose ``[k, 2]``
+    ``(r_in, r_out)`` mm every cap must share (None for solid caps)."""
+    rows, tables = [], []
     for ref in top.references:
         sub = ref.cell
         if isinstance(sub, str) or not _is_cap_cell(sub.name):
@@ -122,14 +126,49 @@ def _layout_caps(path: Path, top, opts: ExportOptions, to_mm: float) -> np.ndarr
         pts = [p for p in sub.polygons if (p.layer, p.datatype) == (opts.layer, opts.datatype)]
         fit = CIRCLE.fit(pts[0].points, 2e-6 / to_mm, RADIUS_SPREAD) if len(pts) == 1 else None
         plain = ref.magnification == 1 and ref.repetition.size <= 1 and not ref.x_reflection
-        if fit is None or not fit.ok or not plain or np.hypot(*fit.centre) * to_mm > 1e-6:
+        solid = fit is not None and fit.ok and np.hypot(*fit.centre) * to_mm <= 1e-6
+        named = re.fullmatch(f"{CAP_CELL}_([0-9]+)", sub.name)
+        d = None if fit is None else round(float(fit.size[0]) * to_mm, 6)
+        if named and not (solid and abs(d - int(named.group(1)) * 1e-6) <= 1e-6):
+            d = int(named.group(1)) * 1e-6  # graded: the cell's name holds the diameter
+            tables.append(_cell_rings(path, sub.name, pts, to_mm, 0.5 * d))
+        elif not solid:
+            d = None
+        if d is None or not plain:
             raise PatternFileError(
                 f"{path}: cap cell {sub.name} must hold one circle on layer "
-                f"{opts.layer}/{opts.datatype}, centred, placed once a reference unscaled"
+                f"{opts.layer}/{opts.datatype} (or, named CAP_<nm>, rings), centred, placed "
+                "once a reference unscaled"
             )
         x, y = (float(v) * to_mm for v in ref.origin)
-        rows.append((round(x, 6), round(y, 6), round(float(fit.size[0]) * to_mm, 6)))
-    return np.array(rows, np.float64).reshape(-1, 3)
+        rows.append((round(x, 6), round(y, 6), d))
+    caps = np.array(rows, np.float64).reshape(-1, 3)
+    if not tables:
+        return caps, None
+    if len(tables) != len(rows) or any(
+        t.shape != tables[0].shape or not np.allclose(t, tables[0], atol=2e-6) for t in tables
+    ):
+        raise PatternFileError(f"{path}: graded caps must all print the same rings")
+    return caps, tables[0]
+
+
+def _cell_rings(path: Path, name: str, pts: list, to_mm: float, reach: float) -> np.ndarray:
+    """``[k, 2]`` ``(r_in, r_out)`` mm of a graded cap cell's polygons about its origin
+    (a disc when the polygon holds the origin), sorted outward, within ``reach`` mm."""
+    import gdstk
+
+    rows = []
+    for p in pts:
+        r = np.hypot(p.points[:, 0], p.points[:, 1]) * to_mm
+        holds = bool(gdstk.inside([(0.0, 0.0)], p)[0])
+        r_out = float(r.max())
+        r_out = reach if reach < r_out <= reach + 1e-5 else r_out  # vertices on the nm grid
+        rows.append((0.0 if holds else round(float(r.min()), 6), round(r_out, 6)))
+    rings = np.array(sorted(rows), np.float64).reshape(-1, 2)
+    problem = rings_problem(rings, np.array([[0.0, 0.0, 2 * reach]]))
+    if problem is not None:
+        raise PatternFileError(f"{path}: cap cell {name}: {problem}")
+    return rings
 
 
 #: Deepest hierarchy read: top -> tile cells -> dot cells is 2.
@@ -304,10 +343,12 @@ def _read_dxf(path: Path) -> Pattern:
     doc = ezdxf.readfile(str(path))
     try:
         scale = mm_per_unit(doc, path)
-        xy_l, r_l, rings, shaped, caps = [], [], [], [], []
+        xy_l, r_l, rings, shaped, caps, graded = [], [], [], [], [], []
         for e in drawn_entities(doc.modelspace(), path):
             layer, kind = e.dxf.get("layer", "0"), e.dxftype()
-            if layer == "DOTS" and kind == "CIRCLE" and e.has_xdata(CAP_APPID):
+            if layer == "DOTS" and kind in ("POINT", "HATCH") and e.has_xdata(CAP_APPID):
+                _dxf_graded(path, e, kind, scale, caps, graded)
+            elif layer == "DOTS" and kind == "CIRCLE" and e.has_xdata(CAP_APPID):
                 x, y = (v * scale for v in _dxf_dot(path, e, kind))
                 caps.append((round(x, 6), round(y, 6), round(2 * float(e.dxf.radius) * scale, 6)))
             elif layer == "DOTS" and kind != "CIRCLE":
@@ -346,7 +387,8 @@ def _read_dxf(path: Path) -> Pattern:
             np.radians(degrees(np.array([f.angle for f in fits]))),
         )
         xy = np.round(np.array([f.centre for f in fits]), 6)
-        return _pattern(path, xy, dots.diameter, rings, False, dots, _rows(caps))
+        cap_rings = _dxf_rings(path, _rows(caps), graded)
+        return _pattern(path, xy, dots.diameter, rings, False, dots, _rows(caps), cap_rings)
     if not xy_l:
         raise PatternFileError(f"{path}: no CIRCLE entities on layer DOTS")
     xy = np.array(xy_l, dtype=np.float64) * scale
@@ -358,7 +400,66 @@ def _read_dxf(path: Path) -> Pattern:
             f"{path}: CIRCLE {i + 1} on layer DOTS has radius {float(radii[i])!r}; "
             "dots need a radius > 0"
         )
-    return _pattern(path, np.round(xy, 6), 2 * radii, rings, caps=_rows(caps))
+    cap_rings = _dxf_rings(path, _rows(caps), graded)
+    return _pattern(path, np.round(xy, 6), 2 * radii, rings, caps=_rows(caps), cap_rings=cap_rings)
+
+
+def _dxf_graded(path: Path, e, kind: str, scale: float, caps: list, graded: list) -> None:
+    """A graded cap's POINT (into ``caps``: ``(x, y, diameter)`` mm; None into
+    ``graded``) or one of its ring HATCHes (into ``graded``: ``(x, y, r_in, r_out)``
+    mm), from their XDATA."""
+    if kind == "POINT":
+        tags = [v for code, v in e.get_xdata(CAP_APPID) if code == 1040]
+        x, y = (float(v) * scale for v in tuple(e.dxf.location)[:2])
+        if len(tags) != 1:
+            raise PatternFileError(f"{path}: a cap's POINT needs its diameter (XDATA 1040)")
+        caps.append((round(x, 6), round(y, 6), round(float(tags[0]), 6)))
+        graded.append(None)  # a graded cap, whether or not it prints a ring
+        return
+    arcs = []
+    for p in e.paths:
+        edges = getattr(p, "edges", [])
+        if len(edges) != 1 or edges[0].type.name != "ARC":
+            raise PatternFileError(f"{path}: a cap's ring HATCH must be bounded by circles")
+        arcs.append(edges[0])
+    if len(arcs) not in (1, 2):
+        raise PatternFileError(f"{path}: a cap's ring HATCH must have one or two circles")
+    c = np.array([(a.center.x, a.center.y) for a in arcs], np.float64) * scale
+    r = sorted(float(a.radius) * scale for a in arcs)
+    if np.ptp(c, axis=0).max() > 1e-6:
+        raise PatternFileError(f"{path}: a cap's ring HATCH must have concentric circles")
+    r_in = r[0] if len(r) == 2 else 0.0
+    graded.append((float(c[0, 0]), float(c[0, 1]), round(r_in, 6), round(r[-1], 6)))
+
+
+def _dxf_rings(path: Path, caps: np.ndarray, graded: list) -> np.ndarray | None:
+    """The graded caps' one ring table ``[k, 2]`` mm from their HATCHes, each about a
+    cap's centre (None without graded caps)."""
+    if not graded:
+        return None
+    tables: dict[int, list] = {}
+    found = [g for g in graded if g is not None]
+    if not found:
+        return np.zeros((0, 2))
+    for x, y, r_in, r_out in found:
+        d = np.hypot(caps[:, 0] - x, caps[:, 1] - y) if len(caps) else np.array([np.inf])
+        k = int(np.argmin(d))
+        if d[k] > 1e-6:
+            raise PatternFileError(f"{path}: a cap's ring HATCH at ({x:g}, {y:g}) has no cap")
+        tables.setdefault(k, []).append((r_in, r_out))
+    first = np.array(sorted(tables[min(tables)]), np.float64)
+    for rows in tables.values():
+        t = np.array(sorted(rows), np.float64)
+        if (
+            len(tables) != len(caps)
+            or t.shape != first.shape
+            or not np.allclose(t, first, atol=2e-6)
+        ):
+            raise PatternFileError(f"{path}: graded caps must all print the same rings")
+    problem = rings_problem(first, caps)
+    if problem is not None:
+        raise PatternFileError(f"{path}: {problem}")
+    return first
 
 
 def _rows(caps: list) -> np.ndarray:
@@ -447,9 +548,11 @@ def _pattern(
     filled: bool = False,
     dots: Footprints | None = None,
     caps: np.ndarray | None = None,
+    cap_rings: np.ndarray | None = None,
 ) -> Pattern:
     """A pattern whose panel is the outline read back, else the dots' extent; ``caps``
-    ``[m, 3]`` read back go with the outline (a mask with caps has one).
+    ``[m, 3]`` read back go with the outline (a mask with caps has one), with their
+    ``cap_rings`` when graded.
 
     ``rings`` are DXF loops (exteriors counter-clockwise, holes clockwise) or, with
     ``filled``, GDS/OAS polygons whose holes are keyholes."""
@@ -463,7 +566,7 @@ def _pattern(
         lo, hi = pts.min(axis=0), pts.max(axis=0)
         if caps is not None and len(caps):
             panel = outline or Domain.rect(float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
-            outline = replace(panel, caps=caps)
+            outline = replace(panel, caps=caps, cap_rings=cap_rings)
     elif caps is not None and len(caps):
         raise PatternFileError(f"{path}: caps over LEDs but no panel outline to hold them")
     else:

@@ -45,6 +45,11 @@ def write_speos(pattern: DotSource, path: str | Path, opts: ExportOptions) -> No
     if pattern.n == 0:
         raise ExportError(f"{path}: the pattern has no dots")
     caps = caps_of(pattern)
+    if len(caps) and pattern.outline.cap_rings is not None:
+        raise ExportError(
+            f"{path}: the pattern prints graded caps over its LEDs (rings), which a mapping "
+            "of elements cannot hold; export the caps' rings from the GDSII/OASIS or DXF mask"
+        )
     if len(caps) and pattern.kind is not CIRCLE:
         raise ExportError(
             f"{path}: the pattern prints caps over its LEDs, which a mapping of "

@@ -12,7 +12,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from .geometry.caps import cap_shares, no_caps
+from .geometry.caps import cap_shares, no_caps, ring_shares
 from .geometry.domain import Domain
 from .geometry.shapes import CIRCLE, Footprints, Kind
 
@@ -213,7 +213,7 @@ def coverage_image(
 
     Pixels are at least 6 nominal dot diameters, so each holds several dots and the map
     reads as coverage rather than as dot positions; at most ``max_px`` a side. Caps over
-    LEDs (:func:`caps_of`) count with their share of each pixel.
+    LEDs (:func:`caps_of`) count with their share of each pixel (graded caps: their rings').
     """
     x0, y0, x1, y1 = pattern.box
     nx, ny = coverage_pixels(pattern.box, pattern.nominal_diameter, max_px)
@@ -229,8 +229,12 @@ def coverage_image(
         )
         img = h / cell
     caps = caps_of(pattern)
-    if len(caps):  # solid ink: their share of each pixel
-        img = img + cap_shares(caps, x0, y0, (x1 - x0) / nx, (y1 - y0) / ny, nx, ny)
+    rings = pattern.outline.cap_rings if pattern.outline is not None else None
+    cw, ch = (x1 - x0) / nx, (y1 - y0) / ny
+    if len(caps) and rings is None:  # solid ink: their share of each pixel
+        img = img + cap_shares(caps, x0, y0, cw, ch, nx, ny)
+    elif len(caps):  # graded: their rings' share
+        img = img + ring_shares(caps, rings, x0, y0, cw, ch, nx, ny)
     return img, (x0, x1, y0, y1)
 
 

@@ -246,10 +246,11 @@ def with_job_panel(pattern: Pattern, job: Job | None) -> Pattern:
     outline = None if job.domain.rectangle else job.domain
     own = caps_of(pattern)
     printed = own if len(own) else None
+    rings = pattern.outline.cap_rings if printed is not None else None
     if outline is not None:
-        outline = replace(outline, caps=printed)
+        outline = replace(outline, caps=printed, cap_rings=rings)
     elif printed is not None:
-        outline = replace(Domain.rect(*job.box), caps=printed)
+        outline = replace(Domain.rect(*job.box), caps=printed, cap_rings=rings)
     return replace(pattern, box=job.box, outline=outline)
 
 
@@ -316,7 +317,15 @@ def qa(
         )
     wanted = job.domain.caps if job is not None else None
     if job is not None and (wanted is not None or len(caps_of(dots))):
-        result.checks.append(caps_check(caps_of(dots), no_caps() if wanted is None else wanted))
+        own = dots.outline.cap_rings if dots.outline is not None else None
+        result.checks.append(
+            caps_check(
+                caps_of(dots),
+                no_caps() if wanted is None else wanted,
+                own,
+                job.domain.cap_rings,
+            )
+        )
     source = dots.label or None
     seed = dots.meta.get("seed")
     if seed is None and job is not None and source is None:

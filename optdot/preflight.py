@@ -54,7 +54,14 @@ def _cell(job: Job, iy: int, ix: int) -> str:
 
 
 def _check_room(job: Job, n: int, where: str) -> None:
-    """Refuse, before any work, a job whose dots cannot be placed at all."""
+    """Refuse, before any work, a job whose dots cannot be placed at all, or whose
+    graded caps the design has not sized yet (``cap_ink = "design"``)."""
+    leds = job.backlight.leds if job.backlight is not None else None
+    if leds is not None and leds.cap_ink == "design":
+        raise JobError(
+            f'{where}: backlight.leds.cap_ink = "design": the caps\' rings are not sized '
+            "yet; run 'optdot design' and generate the job it writes"
+        )
     if n == 0:
         raise JobError(
             f"{where}: the map asks for 0 dots (mean fill fraction x panel area is under half "

@@ -38,6 +38,12 @@ Keys (every length in mm, panel coordinates; reflectances and transmittances 0..
   (default 0: none; :mod:`optdot.geometry.caps`). The dots keep out of each cap and a
   ring of QA's close gap around it; the cap plus that ring must fit between the LEDs and
   inside the panel.
+- ``cap_ink``: grade the caps (default: solid). A list of ink shares in [0, 1], one for
+  each band of equal width from the cap's centre out, each printed as a ring of that
+  share of the band's area (:func:`optdot.geometry.caps.ring_table`); or ``"design"``:
+  ``optdot design`` sizes them (bands of :data:`~optdot.geometry.caps.RING_PITCH` mm) and
+  writes the list into the job it writes. A job whose caps are still ``"design"`` cannot
+  be generated.
 
 ``[backlight.cavity]`` (``"direct"``)
 
@@ -98,6 +104,7 @@ GRID_LED_KEYS: dict[str, tuple[type, ...]] = {
     "power": (int, float),
     "profile": (str, list),
     "cap": (int, float),
+    "cap_ink": (str, list),
 }
 CAVITY_KEYS: dict[str, tuple[type, ...]] = {"gap": (int, float), "reflector": (int, float)}
 FILM_KEYS: dict[str, tuple[type, ...]] = {
@@ -129,7 +136,9 @@ class GridLeds:
         profile: ``"lambertian"``, ``"batwing"`` or a table ``((angle_deg, intensity),
             ...)`` about the normal.
         pitch: ``(px, py)`` of the grid, mm, or None for a list.
-        cap: diameter of the solid ink cap printed over each LED, mm (0: none).
+        cap: diameter of the ink cap printed over each LED, mm (0: none).
+        cap_ink: ``(share, ...)`` of each band of a graded cap, ``"design"`` (the design
+            sizes them), or None for solid caps.
     """
 
     positions: np.ndarray = field(compare=False)
@@ -138,6 +147,7 @@ class GridLeds:
     profile: str | tuple[tuple[float, float], ...] = "lambertian"
     pitch: tuple[float, float] | None = None
     cap: float = 0.0
+    cap_ink: tuple[float, ...] | str | None = None
 
 
 @dataclass(frozen=True)
@@ -382,6 +392,7 @@ def _grid_leds(sec: Any, box, where: str) -> GridLeds:
     power = number_in(sec, "power", 1.0, 0, 1e9, where, lab, "", lo_open=True)
     profile = led_profile(sec.get("profile", "lambertian"), ("lambertian", "batwing"), lab, where)
     cap = number_in(sec, "cap", 0.0, 0, 100, where, lab, "in mm, ")
+    cap_ink = _cap_ink(sec, cap, where)
     x0, y0, x1, y1 = box
     pitch = None
     if "positions" in sec:
@@ -441,7 +452,34 @@ def _grid_leds(sec: Any, box, where: str) -> GridLeds:
                 f"{where}: {lab}.positions: the LED at ({xy[k, 0]:g}, {xy[k, 1]:g}) mm is "
                 f"{d[k, 1]:.3g} mm from the next, closer than its size ({size:g} mm)"
             )
-    return GridLeds(xy, size, power, profile, pitch, cap)
+    return GridLeds(xy, size, power, profile, pitch, cap, cap_ink)
+
+
+#: Most bands a graded cap may have.
+MAX_CAP_BANDS = 10_000
+
+
+def _cap_ink(sec: dict, cap: float, where: str) -> tuple[float, ...] | str | None:
+    """``backlight.leds.cap_ink`` checked: None, ``"design"`` or the bands' shares."""
+    if "cap_ink" not in sec:
+        return None
+    lab = "backlight.leds.cap_ink"
+    v = sec["cap_ink"]
+    if cap <= 0:
+        raise JobError(f"{where}: {lab} grades caps, but backlight.leds.cap is 0 (no caps)")
+    if isinstance(v, str):
+        if v != "design":
+            raise JobError(f'{where}: {lab} = {v!r} must be "design" or a list of ink shares')
+        return v
+    ok = 0 < len(v) <= MAX_CAP_BANDS and all(
+        isinstance(f, (int, float)) and not isinstance(f, bool) and 0 <= f <= 1 for f in v
+    )
+    if not ok:
+        raise JobError(
+            f"{where}: {lab} must be 1 to {MAX_CAP_BANDS:,} ink shares in [0, 1] (one a band "
+            "from the centre out)"
+        )
+    return tuple(float(f) for f in v)
 
 
 def led_caps(backlight: Backlight | None, domain, gap: float, where: str):
@@ -457,7 +495,7 @@ def led_caps(backlight: Backlight | None, domain, gap: float, where: str):
         return domain
     import shapely
 
-    from ..geometry.caps import cap_array, with_caps
+    from ..geometry.caps import cap_array, design_bands, ring_table, with_caps
 
     leds = backlight.leds
     xy = leds.positions
@@ -484,7 +522,12 @@ def led_caps(backlight: Backlight | None, domain, gap: float, where: str):
             f"{where}: {lab} = {leds.cap:g} mm: the cap over the LED at ({xy[k, 0]:g}, "
             f"{xy[k, 1]:g}) mm reaches past the panel outline"
         )
-    return with_caps(domain, cap_array(xy, leds.cap), gap)
+    rings = None
+    if leds.cap_ink == "design":  # the design's start: bare bands
+        rings = ring_table(leds.cap, np.zeros(design_bands(leds.cap)))
+    elif leds.cap_ink is not None:
+        rings = ring_table(leds.cap, np.array(leds.cap_ink))
+    return with_caps(domain, cap_array(xy, leds.cap), gap, rings)
 
 
 def check_leds_inside(backlight: Backlight, geometry, where: str) -> None:

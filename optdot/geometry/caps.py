@@ -7,6 +7,17 @@ cap and a ring of QA's close gap around it, so the pattern around a cap is held 
 same spacing as between two dots; the caps themselves are exact discs on every mask.
 
 Caps are a ``[m, 3]`` array of ``(x, y, diameter)`` rows, mm, in panel coordinates.
+
+**Graded caps.** A solid cap hides the LED's own peak, but the ring around it still needs
+more ink than dots reach (the Lambertian stack of ``benchmarks/caps_coverage.py``). A graded
+cap prints its disc as concentric rings instead: the disc is cut into bands of equal width
+from the centre, and each band carries a ring whose area is the band's ink share
+(``[backlight.leds] cap_ink``, which ``optdot design`` sizes). Each ring starts at its
+band's inner edge; its width is at least :data:`RING_LINE` and leaves at least that much
+clear before the next band, or the band is empty or full (1-D error diffusion from the
+centre out keeps the running ink). Touching rings merge. The printed rings are one
+``[k, 2]`` table ``(r_in, r_out)``, mm, shared by every cap of the pattern
+(:func:`ring_table`); a solid cap is the table ``[[0, d / 2]]``.
 """
 
 from __future__ import annotations
@@ -28,6 +39,12 @@ KEEP_OUT_TOLERANCE = 1e-4
 CAP_CELL = "CAP"
 #: DXF: the XDATA application that marks a CIRCLE on ``DOTS`` as a cap, not a dot.
 CAP_APPID = "OPTDOT_CAP"
+#: The band width the design grades a cap with, mm.
+RING_PITCH = 0.05
+#: The narrowest printed ring, and the narrowest clear space between two, mm.
+RING_LINE = 0.01
+#: Radii of printed rings are rounded to this, mm (1 nm: the masks' grid).
+RING_GRID = 1e-6
 
 
 def no_caps() -> np.ndarray:
@@ -69,15 +86,28 @@ def cap_shares(
     return polygon_cell_fractions(discs(caps), x0, y0, cw, ch, nx, ny)
 
 
-def with_caps(domain: Domain, caps: np.ndarray, gap: float) -> Domain:
+def with_caps(
+    domain: Domain, caps: np.ndarray, gap: float, rings: np.ndarray | None = None
+) -> Domain:
     """``domain`` with the caps and a ring of
     ``gap`` mm around each cut out of where dots may go; the slab (the panel the light
-    sees) keeps them. ``domain`` itself when there are no caps."""
+    sees) keeps them. ``rings``: the graded caps' printed rings (:func:`ring_table`), or
+    None for solid caps. ``domain`` itself when there are no caps."""
     if len(caps) == 0:
         return domain
     geom = orient_all(domain.geometry.difference(discs(caps, gap)))
     slab = domain.slab if domain.slab is not None else domain.geometry
-    return replace(domain, geometry=geom, rectangle=False, slab=slab, caps=caps)
+    return replace(domain, geometry=geom, rectangle=False, slab=slab, caps=caps, cap_rings=rings)
+
+
+def rings_of(domain: Domain | None) -> np.ndarray:
+    """The rings ``[k, 2]`` (mm) each of ``domain``'s caps prints: its graded rings, else
+    the solid disc of its caps' largest diameter (``[0, 2]`` without caps)."""
+    if domain is None or domain.caps is None or len(domain.caps) == 0:
+        return np.zeros((0, 2))
+    if domain.cap_rings is not None:
+        return domain.cap_rings
+    return ring_table(float(domain.caps[:, 2].max()), None)
 
 
 def caps_problem(caps: np.ndarray) -> str | None:
@@ -88,4 +118,133 @@ def caps_problem(caps: np.ndarray) -> str | None:
         return f"caps must be [m, 3] numbers (x, y, diameter mm), got {a.dtype} {a.shape}"
     if not (np.isfinite(a).all() and (a[:, 2] > 0).all()):
         return "caps must be finite with diameters > 0 mm"
+    return None
+
+
+def ring_table(diameter: float, ink: np.ndarray | None) -> np.ndarray:
+    """The printed rings ``[k, 2]`` ``(r_in, r_out)``, mm, of a cap of ``diameter`` mm
+    graded by ``ink`` ``[n]`` (the ink share of each of ``n`` bands of equal width from
+    the centre; see the module doc), or the solid disc ``[[0, d / 2]]`` when ``ink`` is
+    None. Empty when no band prints."""
+    big_r = 0.5 * float(diameter)
+    if ink is None:
+        return np.array([[0.0, big_r]])
+    f = np.clip(np.asarray(ink, np.float64).ravel(), 0.0, 1.0)
+    n = len(f)
+    p = big_r / n
+    line = min(RING_LINE, 0.5 * p)
+    rows: list[list[float]] = []
+    carry = 0.0  # ink area asked for but not printed yet, mm^2
+    for i in range(n):
+        a = i * p
+        band = math.pi * ((a + p) ** 2 - a * a)
+        want = f[i] * band + carry
+        b = math.sqrt(a * a + max(0.0, min(want, band)) / math.pi)
+        w = b - a
+        if w < 0.5 * line:
+            w = 0.0
+        elif w < line:
+            w = line
+        elif w > p - 0.5 * line:
+            w = p
+        elif w > p - line:
+            w = p - line
+        b = round((a + w) / RING_GRID) * RING_GRID
+        a = round(a / RING_GRID) * RING_GRID
+        carry = want - math.pi * (b * b - a * a) if b > a else want
+        if b <= a:
+            continue
+        if rows and abs(rows[-1][1] - a) < 0.5 * RING_GRID:
+            rows[-1][1] = b  # touching rings merge
+        else:
+            rows.append([a, b])
+    return np.array(rows, np.float64).reshape(-1, 2)
+
+
+def design_bands(diameter: float) -> int:
+    """How many bands the design grades a cap of ``diameter`` mm with (each about
+    :data:`RING_PITCH` wide)."""
+    return max(1, int(round(0.5 * diameter / RING_PITCH)))
+
+
+def _quadrant_area(x: np.ndarray, y: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Area of the disc of radius ``r`` about the origin where ``X <= x`` and ``Y <= y``
+    (elementwise, broadcast)."""
+    r = np.maximum(r, 0.0)
+    rs = np.where(r > 0, r, 1.0)
+
+    def prim(t):  # integral of sqrt(r^2 - X^2) from 0 to t, |t| <= r
+        t = np.clip(t, -r, r)
+        return 0.5 * (t * np.sqrt(np.maximum(r * r - t * t, 0.0)) + r * r * np.arcsin(t / rs))
+
+    xc = np.clip(x, -r, r)
+    yc = np.clip(y, -r, r)
+    c = np.sqrt(np.maximum(r * r - yc * yc, 0.0))  # the chord at Y = y reaches |X| = c
+    u = np.minimum(xc, c)
+    mid = np.where(u > -c, yc * (u + c) + prim(u) + prim(c), 0.0)
+    upper = yc >= 0  # above the chord the disc's own height counts, beyond |X| = c
+    left = np.where(upper, 2 * (prim(np.minimum(xc, -c)) + prim(r)), 0.0)
+    right = np.where(upper & (xc > c), 2 * (prim(xc) - prim(c)), 0.0)
+    return np.where(r > 0, mid + left + right, 0.0)
+
+
+def disc_rect_area(cx, cy, r, x0, y0, x1, y1) -> np.ndarray:
+    """Exact area, mm^2, of the disc of radius ``r`` about ``(cx, cy)`` inside the
+    rectangle ``[x0, x1] x [y0, y1]`` (all mm, elementwise, broadcast)."""
+    a, b, c, d = x0 - cx, y0 - cy, x1 - cx, y1 - cy
+    q = _quadrant_area
+    return q(c, d, r) - q(a, d, r) - q(c, b, r) + q(a, b, r)
+
+
+def ring_shares(
+    caps: np.ndarray,
+    rings: np.ndarray,
+    x0: float,
+    y0: float,
+    cw: float,
+    ch: float,
+    nx: int,
+    ny: int,
+) -> np.ndarray:
+    """``[ny, nx]`` share of each cell of a grid (lower-left ``x0, y0``, cells ``cw x
+    ch`` mm) printed by the caps' rings (``rings`` ``[k, 2]`` ``(r_in, r_out)`` mm about
+    each cap's centre), exactly."""
+    out = np.zeros((ny, nx))
+    if len(caps) == 0 or len(rings) == 0:
+        return out
+    reach = float(rings[:, 1].max())
+    for x, y, _ in caps:
+        i0 = max(0, int(math.floor((x - reach - x0) / cw)))
+        i1 = min(nx, int(math.ceil((x + reach - x0) / cw)))
+        j0 = max(0, int(math.floor((y - reach - y0) / ch)))
+        j1 = min(ny, int(math.ceil((y + reach - y0) / ch)))
+        if i0 >= i1 or j0 >= j1:
+            continue
+        ex = x0 + cw * np.arange(i0, i1 + 1)
+        ey = y0 + ch * np.arange(j0, j1 + 1)
+        gx0, gy0 = np.meshgrid(ex[:-1], ey[:-1])
+        gx1, gy1 = np.meshgrid(ex[1:], ey[1:])
+        area = np.zeros(gx0.shape)
+        for a, b in rings:
+            area += disc_rect_area(x, y, b, gx0, gy0, gx1, gy1)
+            if a > 0:
+                area -= disc_rect_area(x, y, a, gx0, gy0, gx1, gy1)
+        out[j0:j1, i0:i1] += area / (cw * ch)
+    return np.clip(out, 0.0, 1.0)
+
+
+def rings_problem(rings: np.ndarray, caps: np.ndarray) -> str | None:
+    """What is wrong with a ring table read from a file (``[k, 2]`` finite, ``0 <= r_in
+    < r_out``, sorted, apart, within the caps, whose diameters must then be one), or
+    None."""
+    a = np.asarray(rings)
+    if a.dtype.kind not in "iuf" or a.ndim != 2 or a.shape[1] != 2:
+        return f"cap_rings must be [k, 2] numbers (r_in, r_out mm), got {a.dtype} {a.shape}"
+    if not np.isfinite(a).all() or (a[:, 0] < 0).any() or (a[:, 1] <= a[:, 0]).any():
+        return "cap_rings must be finite with 0 <= r_in < r_out"
+    if (a[1:, 0] < a[:-1, 1]).any():
+        return "cap_rings must be sorted outward and must not overlap"
+    d = np.asarray(caps)[:, 2]
+    if len(d) and (np.ptp(d) > 1e-9 or (len(a) and a[-1, 1] > 0.5 * d[0] + 1e-9)):
+        return "cap_rings need caps of one diameter that holds every ring"
     return None

@@ -36,6 +36,8 @@ class Domain:
         caps: ``[m, 3]`` discs of solid ink ``(x, y, diameter)``, mm, printed with the
             dots (over a direct-lit backlight's LEDs: :mod:`optdot.geometry.caps`), cut
             out of ``geometry`` with a ring of QA's close gap; None when there are none.
+        cap_rings: ``[k, 2]`` ``(r_in, r_out)`` mm of the rings every cap prints (graded
+            caps: :func:`optdot.geometry.caps.ring_table`), or None for solid caps.
     """
 
     geometry: Polygon | MultiPolygon
@@ -44,6 +46,7 @@ class Domain:
     source: str = "panel"
     slab: Polygon | MultiPolygon | None = None
     caps: np.ndarray | None = None
+    cap_rings: np.ndarray | None = None
 
     @classmethod
     def rect(cls, x0: float, y0: float, x1: float, y1: float, edge_margin: float = 0.0) -> Domain:

@@ -123,7 +123,10 @@ class Dataset:
                 f"{self.path}: bad outline in the manifest ({one_line(e)})"
             ) from None
         caps = np.array(m["caps_mm"], np.float64).reshape(-1, 3) if "caps_mm" in m else None
-        return Domain(geom, float(m.get("edge_margin_mm", 0.0)), False, str(self.path), caps=caps)
+        rings = m.get("cap_rings_mm")
+        rings = None if rings is None else np.array(rings, np.float64).reshape(-1, 2)
+        margin = float(m.get("edge_margin_mm", 0.0))
+        return Domain(geom, margin, False, str(self.path), caps=caps, cap_rings=rings)
 
     def outline_rings(self) -> list[np.ndarray]:
         """Boundary loops of the panel (outline and holes, or the box), mm."""

@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import PatternFileError, one_line
-from ..geometry.caps import caps_problem
+from ..geometry.caps import caps_problem, rings_problem
 from ..geometry.shapes import CIRCLE, KINDS, Kind
 
 MANIFEST = "_manifest.json"
@@ -133,6 +133,17 @@ def manifest_problem(doc: dict[str, Any]) -> str | None:
         problem = caps_problem(np.array(caps, np.float64)) if rows else "caps_mm must be rows"
         if problem is not None:
             return problem.replace("caps", "caps_mm", 1)
+        if "cap_rings_mm" in doc:
+            rings = doc["cap_rings_mm"]
+            ok = isinstance(rings, list) and all(
+                isinstance(r, list) and all(_is_num(v) for v in r) for r in rings
+            )
+            table = np.array(rings, np.float64).reshape(-1, 2) if ok else None
+            problem = rings_problem(table, np.array(caps)) if ok else "must be rows"
+            if problem is not None:
+                return f"cap_rings_mm: {problem}"
+    elif "cap_rings_mm" in doc:
+        return "cap_rings_mm without caps_mm"
     tiles = doc.get("tiles")
     if tiles is not None:
         ok = isinstance(tiles, dict) and all(
@@ -177,6 +188,8 @@ def outline_hex(outline) -> dict[str, Any]:
     out = {"outline_wkb_hex": wkb, "edge_margin_mm": float(outline.edge_margin)}
     if outline.caps is not None:
         out["caps_mm"] = outline.caps.tolist()
+        if outline.cap_rings is not None:
+            out["cap_rings_mm"] = outline.cap_rings.tolist()
     return out
 
 

@@ -7,7 +7,8 @@
 * NPZ: arrays ``xy`` ``[n, 2]`` (mm), ``diameter`` (mm: a 0-d array when every dot has
   the same size, else ``[n]``), ``box`` ``[4]`` (mm) and ``meta`` (JSON text), plus
   ``outline_wkb``/``edge_margin`` for outlines (and ``caps`` ``[m, 3]``, ``x, y,
-  diameter`` mm, when the outline has caps: :mod:`optdot.geometry.caps`); shaped dots
+  diameter`` mm, when the outline has caps: :mod:`optdot.geometry.caps`, with
+  ``cap_rings`` ``[k, 2]`` ``r_in, r_out`` mm when they are graded); shaped dots
   hold ``shape`` (the kind's name), ``size`` (mm, ``[k]`` or ``[n, k]``) and
   ``angle_deg`` ``[n]`` instead of ``diameter``. A zip with fixed timestamps so equal
   patterns give equal bytes.
@@ -28,7 +29,7 @@ import shapely
 
 from ..errors import ExportError, PatternFileError, one_line
 from ..files import input_problem
-from ..geometry.caps import caps_problem
+from ..geometry.caps import caps_problem, rings_problem
 from ..geometry.domain import Domain, orient_all
 from ..geometry.limits import validate_dots
 from ..geometry.orientation import degrees
@@ -188,6 +189,8 @@ def _write_npz(pattern: Pattern, path: Path) -> None:
         arrays["edge_margin"] = np.array(pattern.outline.edge_margin)
         if pattern.outline.caps is not None:
             arrays["caps"] = pattern.outline.caps
+            if pattern.outline.cap_rings is not None:
+                arrays["cap_rings"] = pattern.outline.cap_rings
     with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as zf:
         for name, arr in arrays.items():
             buf = io.BytesIO()
@@ -322,7 +325,8 @@ def _load_npz(path: Path, box: tuple[float, float, float, float] | None) -> Patt
                     raise PatternFileError(f"{path}: outline_wkb must be a 1-D uint8 array")
                 geom = orient_all(shapely.from_wkb(wkb.tobytes()))
                 caps = _caps(path, z) if "caps" in z else None
-                outline = Domain(geom, float(margin), False, str(path), caps=caps)
+                rings = _rings(path, z, caps) if "cap_rings" in z else None
+                outline = Domain(geom, float(margin), False, str(path), caps=caps, cap_rings=rings)
     except KeyError as e:
         raise PatternFileError(f"{path}: missing array {e} in pattern .npz") from None
     except (
@@ -347,6 +351,17 @@ def _load_npz(path: Path, box: tuple[float, float, float, float] | None) -> Patt
     the_box = box or tuple(file_box.tolist())
     p = _validated(path, xy, np.broadcast_to(diameter, (len(xy),)), the_box, meta, dots)
     return p if outline is None else replace(p, outline=outline)
+
+
+def _rings(path: Path, z, caps: np.ndarray | None) -> np.ndarray:
+    """The ``cap_rings`` array of the archive, checked against its caps."""
+    rings = np.asarray(z["cap_rings"])
+    if caps is None:
+        raise PatternFileError(f"{path}: cap_rings without caps")
+    problem = rings_problem(rings, caps)
+    if problem is not None:
+        raise PatternFileError(f"{path}: {problem}")
+    return rings.astype(np.float64).reshape(-1, 2)
 
 
 def _caps(path: Path, z) -> np.ndarray:

@@ -38,14 +38,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.ndimage import gaussian_filter, zoom
+from scipy.ndimage import distance_transform_edt, gaussian_filter, map_coordinates, zoom
 
 from ..config.job import Job
 from ..errors import JobError
-from ..geometry.caps import cap_shares
+from ..geometry.caps import cap_shares, design_bands, ring_shares, ring_table
 from ..geometry.domain import centres_in_box, polygon_cell_fractions
 from ..geometry.limits import MAX_RANDOM_FILL
 from .periodic import fold, period_classes
@@ -89,6 +89,8 @@ class Designed:
         sizes: ``(low, high)`` diameters, mm, the map asks for when the job's one dot
             size cannot keep QA's close gap at its largest fill (:func:`sizes_asked`), or
             None.
+        cap_ink: ``[n]`` the graded caps' band inks (``[backlight.leds] cap_ink``), or
+            None when the caps are solid or there are none.
     """
 
     fill: np.ndarray
@@ -96,6 +98,7 @@ class Designed:
     history: list[dict]
     last: Simulation
     sizes: tuple[float, float] | None = None
+    cap_ink: np.ndarray | None = None
 
 
 def sizes_asked(job: Job, fill_max: float) -> tuple[float, float] | None:
@@ -189,11 +192,15 @@ def design(
     n_iter = iterations or p.iterations
     live = panel > 0.5
     seen = live & _in_area(job, nx, ny, dx, dy)
+    grades = None
     if prints_on_film(job):
         if start is None:
             check_iterations(job, n_iter)
         phi = np.full((ny, nx), lo) if start is None else np.array(start, np.float64)
-        step = _film_step(job, nx, ny, dx, dy, (inside, panel, capped), live, target, seen)
+        if job.domain.cap_rings is not None:
+            grades = Grades(job, nx, ny, dx, dy)
+        shares = (inside, panel, capped)
+        step = _film_step(job, nx, ny, dx, dy, shares, live, target, seen, grades)
     else:
         # the level starts at LEVEL_START of the top (never under the floor) and reaches
         # the top by the last update however few the iterations: fill_range is honoured
@@ -208,7 +215,8 @@ def design(
         last = it == n_iter - 1
         n_rays = total if last else min(total, max(1000, total // 16) * 2**it)
         cov = Coverage(phi * inside, x0, y0, dx, dy)
-        sim = simulate(job, n_rays, seed + 7919 * it, coverage=cov, bins=(nx, ny))
+        now = job if grades is None else grades.job(job)
+        sim = simulate(now, n_rays, seed + 7919 * it, coverage=cov, bins=(nx, ny))
         figures = _figures(it, sim)
         history.append(figures)
         if report is not None:
@@ -222,8 +230,14 @@ def design(
             f"{job.source or 'job'}: the designed map is empty: the luminance follows the "
             "target without any ink (nothing to print), or design.fill_range leaves none"
         )
-    sizes = sizes_asked(job, float(phi.max())) if prints_on_film(job) else None
-    return Designed(phi, (dx, dy), history, sim, sizes)
+    sizes = None
+    if prints_on_film(job):
+        dotted = inside > 1e-9
+        sizes = sizes_asked(job, float(phi[dotted].max()) if dotted.any() else 0.0)
+        if capped is not None:
+            phi = _extended(phi, dotted & live)
+    ink = None if grades is None else grades.ink
+    return Designed(phi, (dx, dy), history, sim, sizes, ink)
 
 
 def _figures(it: int, sim: Simulation) -> dict:
@@ -300,7 +314,78 @@ def _guide_step(inside, live, target, smoothing, lo, hi, level, growth, seen):
     return step
 
 
-def _film_step(job, nx, ny, dx, dy, shares, live, target, seen):
+def _extended(phi: np.ndarray, dotted: np.ndarray) -> np.ndarray:
+    """``phi`` with each cell where no dot may go (under a cap) set to the nearest
+    dotted cell's fill, so a map read between cell centres (``generate`` interpolates)
+    gives the dots beside a cap the fill designed for them."""
+    if dotted.all() or not dotted.any():
+        return phi
+    _, (iy, ix) = distance_transform_edt(~dotted, return_indices=True)
+    return phi[iy, ix]
+
+
+#: Angles a band samples the cells' corrections at.
+ANGLES = 32
+
+
+class Grades:
+    """The ink of graded caps' bands (:func:`optdot.geometry.caps.ring_table`) as the
+    design sizes them. Each band takes the film rule's step on its own: its relative
+    transmission ``1 - k ink`` is multiplied by ``q ** gamma`` and the level's factor
+    like a cell's, where ``log q`` is the cells' smoothed log ratio sampled on a circle
+    at the band's middle radius (bilinear between cell centres, :data:`ANGLES` angles,
+    the mean over the LEDs whose centre cells are judged, all LEDs when none is). A band
+    keeps its own ink from step to step: it is corrected by the luminance about its
+    radius, not reset to the mean ink of the cells it crosses (which flattens the
+    profile the LED's light asks for).
+
+    Attributes:
+        ink: ``[n]`` the bands' ink shares now; rings: their printed rings ``[k, 2]``
+            mm; capped: ``[ny, nx]`` the share of each design cell they print.
+    """
+
+    def __init__(self, job: Job, nx: int, ny: int, dx: float, dy: float) -> None:
+        leds = job.backlight.leds
+        self.diameter = float(leds.cap)
+        self.caps = job.domain.caps
+        given = leds.cap_ink
+        n = design_bands(self.diameter)
+        self.ink = np.zeros(n) if isinstance(given, str) else np.array(given, np.float64)
+        self.grid = (*job.box[:2], dx, dy, nx, ny)
+        self._set(self.ink)
+
+    def _set(self, ink: np.ndarray) -> None:
+        self.ink = ink
+        self.rings = ring_table(self.diameter, ink)
+        self.capped = ring_shares(self.caps, self.rings, *self.grid)
+
+    def job(self, job: Job) -> Job:
+        """``job`` printing the rings of now."""
+        return replace(job, domain=replace(job.domain, cap_rings=self.rings))
+
+    def update(self, logq: np.ndarray, judged: np.ndarray, k: float, level: float) -> None:
+        """One step of the bands: ``logq`` ``[ny, nx]`` the cells' log ratios, ``k`` the
+        ink's contrast, ``level`` the factor the step scales every transmission by."""
+        x0, y0, dx, dy, nx, ny = self.grid
+        n = len(self.ink)
+        r = (np.arange(n) + 0.5) * 0.5 * self.diameter / n
+        cx, cy = self.caps[:, 0], self.caps[:, 1]
+        ix = np.clip(((cx - x0) / dx).astype(int), 0, nx - 1)
+        iy = np.clip(((cy - y0) / dy).astype(int), 0, ny - 1)
+        pick = judged[iy, ix]
+        if not pick.any():
+            pick[:] = True
+        an = 2 * math.pi * (np.arange(ANGLES) + 0.5) / ANGLES
+        px = cx[pick, None, None] + r[None, :, None] * np.cos(an)
+        py = cy[pick, None, None] + r[None, :, None] * np.sin(an)
+        at = [((py - y0) / dy - 0.5).ravel(), ((px - x0) / dx - 0.5).ravel()]
+        got = map_coordinates(logq, at, order=1, mode="nearest").reshape(px.shape)
+        band = got.mean(axis=(0, 2))
+        v = (1.0 - k * self.ink) * np.exp(GAMMA * band) * level
+        self._set(np.clip((1.0 - v) / k, 0.0, 1.0))
+
+
+def _film_step(job, nx, ny, dx, dy, shares, live, target, seen, grades=None):
     """The film rule's update ``step(phi, sim) -> phi`` (see the module doc): the map's
     clear share carries light through, so the multiplicative step acts on each cell's
     relative transmission ``v = 1 - k phi`` (``k = 1 - T_ink / T_clear``), and the map is
@@ -316,7 +401,11 @@ def _film_step(job, nx, ny, dx, dy, shares, live, target, seen):
     With caps (``shares`` = ``(inside, panel, capped)``: :func:`_shares`) a cell's ink is
     its cap share plus the fill over the share dots may use, ``c = (capped + phi inside)
     / panel``: the step acts on ``v = 1 - k c`` and the fill is what gives the new ``v``
-    (a cell a cap darkens more than it should keeps the least fill)."""
+    (a cell a cap darkens more than it should keeps the least fill).
+
+    Graded caps (``grades``: :class:`Grades`): ``capped`` is the share their rings
+    print now; the bands take the same step over their own radius
+    (:meth:`Grades.update`) and the fill makes up the rest of each cell."""
     lo, hi = job.design.fill_range
     k = job.backlight.ink_contrast
     classes = period_classes(job, nx, ny, dx, dy)
@@ -329,17 +418,21 @@ def _film_step(job, nx, ny, dx, dy, shares, live, target, seen):
         if classes is not None:
             logq = fold(logq, w, classes)
         logq = _smoothed(logq, w, job.design.smoothing)
-        if capped is None:
+        now = capped if grades is None else grades.capped
+        if now is None:
             ink = phi
         else:
-            ink = (capped + phi * inside) / np.maximum(panel, 1e-12)
+            ink = (now + phi * inside) / np.maximum(panel, 1e-12)
         v = (1.0 - k * ink) * np.exp(GAMMA * logq)
         top = float(v[judged].max())
-        if top > 0:
-            v *= (1.0 - k * lo) / top
+        level = (1.0 - k * lo) / top if top > 0 else 1.0
+        v *= level
         fill = (1.0 - v) / k
-        if capped is not None:
-            fill = (fill * panel - capped) / np.maximum(inside, 1e-12)
+        if grades is not None:
+            grades.update(logq, judged, k, level)
+            now = grades.capped
+        if now is not None:
+            fill = (fill * panel - now) / np.maximum(inside, 1e-12)
         return np.where(live, np.clip(fill, lo, hi), 0.0)
 
     return step

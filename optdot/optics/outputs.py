@@ -155,10 +155,16 @@ def map_png(path: Path, fill: np.ndarray) -> None:
 
 
 def designed_job(
-    job: Job, map_path: Path, job_path: Path, sizes: tuple[float, float] | None = None
+    job: Job,
+    map_path: Path,
+    job_path: Path,
+    sizes: tuple[float, float] | None = None,
+    cap_ink: np.ndarray | None = None,
 ) -> str:
     """TOML of ``job`` reading its map from ``map_path``, to be written at ``job_path``;
-    with ``sizes``, its dots' diameters ``[low, high]`` mm (the claim rule sizes them)."""
+    with ``sizes``, its dots' diameters ``[low, high]`` mm (the claim rule sizes them);
+    with ``cap_ink``, its graded caps' band inks (``[backlight.leds] cap_ink``, 4
+    decimals)."""
     if job.source is None:
         raise JobError("the designed job needs the job file it comes from")
     raw = tomllib.loads(Path(job.source).read_text(encoding="utf-8-sig"))
@@ -169,6 +175,9 @@ def designed_job(
     raw["density"] = {"grid": rel, "interpolation": "linear"}
     if sizes is not None:
         raw["dots"] = {**raw.get("dots", {}), "diameter": [sizes[0], sizes[1]]}
+    if cap_ink is not None:
+        ink = [round(float(f), 4) for f in cap_ink]
+        raw["backlight"]["leds"] = {**raw["backlight"]["leds"], "cap_ink": ink}
     return job_toml(_ordered(raw))
 
 
@@ -186,7 +195,9 @@ def write_design(
 ) -> None:
     """Write the designed map (CSV, optional PNG) and the job that uses it."""
     text = map_csv(designed.fill)
-    job_text = designed_job(job, out_csv, out_job, designed.sizes) if out_job is not None else None
+    job_text = None
+    if out_job is not None:
+        job_text = designed_job(job, out_csv, out_job, designed.sizes, designed.cap_ink)
     write_text(out_csv, text)
     if out_png is not None:
         map_png(out_png, designed.fill)

@@ -370,11 +370,15 @@ def _print(job: Job, dots: DotSource | None, coverage: Coverage | None) -> Print
     other = _other_coverage(job)
     phi2 = np.ascontiguousarray(other.grid, dtype=np.float64)
     g2 = np.array([other.x0, other.y0, other.dx, other.dy], np.float64)
-    if dots is not None:  # what the pattern prints
-        caps = caps_of(dots)
-    else:
-        caps = job.domain.caps if job.domain.caps is not None else no_caps()
+    printed = dots.outline if dots is not None else job.domain  # the pattern's own caps
+    caps = (
+        caps_of(dots) if dots is not None else no_caps() if printed.caps is None else printed.caps
+    )
     cap_start, cap, cap_g = cap_grid(caps, job.box)
+    if printed is None or printed.cap_rings is None:
+        ring = np.array([[0.0, np.inf]])  # solid caps, whatever their diameters
+    else:
+        ring = np.ascontiguousarray(printed.cap_rings**2, np.float64)
     if dots is None:
         cov = coverage or coverage_of(job)
         phi = np.ascontiguousarray(cov.grid, dtype=np.float64)
@@ -398,10 +402,24 @@ def _print(job: Job, dots: DotSource | None, coverage: Coverage | None) -> Print
             cap_start,
             cap,
             cap_g,
+            ring,
         )
     start, x, y, foot, cg = dot_grid(dots, job.box)
     return Print(
-        True, np.zeros((1, 1)), np.ones(4), start, x, y, foot, cg, phi2, g2, cap_start, cap, cap_g
+        True,
+        np.zeros((1, 1)),
+        np.ones(4),
+        start,
+        x,
+        y,
+        foot,
+        cg,
+        phi2,
+        g2,
+        cap_start,
+        cap,
+        cap_g,
+        ring,
     )
 
 

@@ -147,6 +147,9 @@ class Print(NamedTuple):
             the coverage, so ``phi`` is the coverage where no cap is): ``[cells + 1]``
             CSR by cell and ``[m, 3]`` rows ``(x, y, r^2)``, mm; cap_g: ``[7]`` their
             cell grid (as ``cg``).
+        cap_ring: ``[k, 2]`` the rings each cap prints, ``(r_in^2, r_out^2)`` mm^2 about
+            its centre (a solid cap: ``[[0, inf]]``; graded caps:
+            :func:`optdot.geometry.caps.ring_table`).
     """
 
     explicit: bool
@@ -162,6 +165,7 @@ class Print(NamedTuple):
     cap_start: np.ndarray
     cap: np.ndarray
     cap_g: np.ndarray
+    cap_ring: np.ndarray
 
 
 class Scene(NamedTuple):
@@ -329,8 +333,9 @@ def _on_dot(x, y, explicit, phi, g, start, dx_, dy_, foot, cg, u):
 
 
 @nb.njit(cache=True, inline="always")
-def _on_cap(x, y, cap_start, cap, cap_g):
-    """Does the point (x, y) lie on a cap (``cap`` rows ``(x, y, r^2)``, by cell)?"""
+def _on_cap(x, y, cap_start, cap, cap_g, cap_ring):
+    """Does the point (x, y) lie on the ink of a cap (``cap`` rows ``(x, y, r^2)``, by
+    cell; ``cap_ring`` the rings each prints, squared radii)?"""
     nx, ny = int(cap_g[4]), int(cap_g[5])
     jx = int(math.floor((x - cap_g[0]) / cap_g[2]))
     jy = int(math.floor((y - cap_g[1]) / cap_g[3]))
@@ -343,8 +348,12 @@ def _on_cap(x, y, cap_start, cap, cap_g):
             for k in range(cap_start[c], cap_start[c + 1]):
                 ddx = x - cap[k, 0]
                 ddy = y - cap[k, 1]
-                if ddx * ddx + ddy * ddy <= cap[k, 2]:
-                    return True
+                d2 = ddx * ddx + ddy * ddy
+                if d2 <= cap[k, 2]:  # caps do not overlap: this one or none
+                    for i in range(cap_ring.shape[0]):
+                        if cap_ring[i, 0] <= d2 <= cap_ring[i, 1]:
+                            return True
+                    return False
     return False
 
 
@@ -353,10 +362,10 @@ def _marked(x, y, mark, pr, u):
     """Is there a dot of print ``mark`` (1 the job's, 2 the second map) at (x, y)? ``pr``:
     the :class:`Print`'s fields as a tuple; ``u`` a uniform draw (the coverage test). A
     cap of print 1 is ink whatever ``u``."""
-    explicit, phi, g, phi2, g2, start, dx_, dy_, foot, cg, cap_start, cap, cap_g = pr
+    explicit, phi, g, phi2, g2, start, dx_, dy_, foot, cg, cap_start, cap, cap_g, ring = pr
     if mark == 2:
         return _on_dot(x, y, False, phi2, g2, start, dx_, dy_, foot, cg, u)
-    if cap.shape[0] > 0 and _on_cap(x, y, cap_start, cap, cap_g):
+    if cap.shape[0] > 0 and _on_cap(x, y, cap_start, cap, cap_g, ring):
         return True
     return _on_dot(x, y, explicit, phi, g, start, dx_, dy_, foot, cg, u)
 
@@ -426,6 +435,7 @@ def trace(seed, first, count, scene):  # pragma: no cover - compiled
         pr.cap_start,
         pr.cap,
         pr.cap_g,
+        pr.cap_ring,
     )
     top = layer.shape[0]  # the top face's index
     max_events = st.max_events

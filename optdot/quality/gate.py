@@ -300,12 +300,25 @@ def judge(
 CAP_TOLERANCE = 1e-3
 
 
-def caps_check(printed: np.ndarray, wanted: np.ndarray) -> Check:
+def caps_check(
+    printed: np.ndarray,
+    wanted: np.ndarray,
+    printed_rings: np.ndarray | None = None,
+    wanted_rings: np.ndarray | None = None,
+) -> Check:
     """The gate line of caps over LEDs (:mod:`optdot.geometry.caps`): how many of the job's
     caps ``wanted`` ``[m, 3]`` (x, y, diameter mm) the dots' file does not print as a cap
     of that diameter within :data:`CAP_TOLERANCE`, plus caps it prints that the job does
-    not ask for. An LED without its cap is a bright spot; one too many a dark one."""
+    not ask for. An LED without its cap is a bright spot; one too many a dark one. Graded
+    caps (``*_rings`` ``[k, 2]`` ``(r_in, r_out)`` mm; None: solid) must print the job's
+    rings within the tolerance, else every cap counts."""
     from scipy.spatial import cKDTree
+
+    from ..geometry.caps import ring_table
+
+    def table(caps: np.ndarray, rings: np.ndarray | None) -> np.ndarray:
+        d = float(caps[:, 2].max()) if len(caps) else 0.0
+        return ring_table(d, None) if rings is None else np.asarray(rings).reshape(-1, 2)
 
     def unmatched(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         if len(b) == 0:
@@ -315,10 +328,20 @@ def caps_check(printed: np.ndarray, wanted: np.ndarray) -> Check:
 
     missing = unmatched(wanted, printed)
     extra = unmatched(printed, wanted)
+    a, b = table(printed, printed_rings), table(wanted, wanted_rings)
+    graded = printed_rings is not None or wanted_rings is not None
+    if (
+        graded
+        and len(printed)
+        and len(wanted)
+        and not (a.shape == b.shape and np.all(np.abs(a - b) <= CAP_TOLERANCE))
+    ):
+        missing[:] = True  # every cap prints other rings than the job's
     where = [list(map(float, r[:2])) for r in (*wanted[missing], *printed[extra])][:10]
     bad = int(missing.sum() + extra.sum())
     return Check(
-        f"caps over LEDs missing, extra or of another size (of {len(wanted)} the job prints)",
+        f"caps over LEDs missing, extra, of another size or other rings (of {len(wanted)} "
+        "the job prints)",
         bad,
         0,
         bad == 0,
