@@ -74,7 +74,7 @@ def test_the_tracer_s_cap_test_agrees_with_brute_force(rows, seed):
         <= 0.5 * caps[None, :, 2]
     ).any(axis=1)
     solid = np.array([[0.0, np.inf]])
-    got = np.array([_on_cap(x, y, start, cap, grid, solid) for x, y in pts])
+    got = np.array([_on_cap(x, y, start, cap, grid, solid) == 1 for x, y in pts])
     # a point within 1e-12 of a rim may go either way
     rim = np.abs(
         np.hypot(*(pts[:, None, :] - caps[None, :, :2]).transpose(2, 0, 1)) - 0.5 * caps[:, 2]

@@ -149,7 +149,7 @@ def ring_table(diameter: float, ink: np.ndarray | None) -> np.ndarray:
             w = p
         elif w > p - line:
             w = p - line
-        b = round((a + w) / RING_GRID) * RING_GRID
+        b = min(round((a + w) / RING_GRID) * RING_GRID, big_r)
         a = round(a / RING_GRID) * RING_GRID
         carry = want - math.pi * (b * b - a * a) if b > a else want
         if b <= a:

@@ -417,7 +417,11 @@ def _film_step(job, nx, ny, dx, dy, shares, live, target, seen, grades=None):
         logq, w = _log_ratio(sim.counts, panel, live, target, judged)
         if classes is not None:
             logq = fold(logq, w, classes)
+        import os
+
+        sharp = logq if os.environ.get("SHARP") else None
         logq = _smoothed(logq, w, job.design.smoothing)
+        sharp = np.where(w > 1e-9, sharp / np.maximum(w, 1e-9), 0.0) if sharp is not None else logq
         now = capped if grades is None else grades.capped
         if now is None:
             ink = phi
@@ -429,7 +433,7 @@ def _film_step(job, nx, ny, dx, dy, shares, live, target, seen, grades=None):
         v *= level
         fill = (1.0 - v) / k
         if grades is not None:
-            grades.update(logq, judged, k, level)
+            grades.update(sharp, judged, k, level)
             now = grades.capped
         if now is not None:
             fill = (fill * panel - now) / np.maximum(inside, 1e-12)

@@ -334,8 +334,9 @@ def _on_dot(x, y, explicit, phi, g, start, dx_, dy_, foot, cg, u):
 
 @nb.njit(cache=True, inline="always")
 def _on_cap(x, y, cap_start, cap, cap_g, cap_ring):
-    """Does the point (x, y) lie on the ink of a cap (``cap`` rows ``(x, y, r^2)``, by
-    cell; ``cap_ring`` the rings each prints, squared radii)?"""
+    """Where the point (x, y) lies among the caps (``cap`` rows ``(x, y, r^2)``, by
+    cell; ``cap_ring`` the rings each prints, squared radii): 1 on a cap's ink, 0 within
+    a cap but between its rings (clear: no dot is there either), -1 outside every cap."""
     nx, ny = int(cap_g[4]), int(cap_g[5])
     jx = int(math.floor((x - cap_g[0]) / cap_g[2]))
     jy = int(math.floor((y - cap_g[1]) / cap_g[3]))
@@ -352,9 +353,9 @@ def _on_cap(x, y, cap_start, cap, cap_g, cap_ring):
                 if d2 <= cap[k, 2]:  # caps do not overlap: this one or none
                     for i in range(cap_ring.shape[0]):
                         if cap_ring[i, 0] <= d2 <= cap_ring[i, 1]:
-                            return True
-                    return False
-    return False
+                            return 1
+                    return 0
+    return -1
 
 
 @nb.njit(cache=True, inline="always")
@@ -365,8 +366,10 @@ def _marked(x, y, mark, pr, u):
     explicit, phi, g, phi2, g2, start, dx_, dy_, foot, cg, cap_start, cap, cap_g, ring = pr
     if mark == 2:
         return _on_dot(x, y, False, phi2, g2, start, dx_, dy_, foot, cg, u)
-    if cap.shape[0] > 0 and _on_cap(x, y, cap_start, cap, cap_g, ring):
-        return True
+    if cap.shape[0] > 0:
+        at = _on_cap(x, y, cap_start, cap, cap_g, ring)
+        if at >= 0:  # on a cap's ink, or clear between its rings
+            return at == 1
     return _on_dot(x, y, explicit, phi, g, start, dx_, dy_, foot, cg, u)
 
 
