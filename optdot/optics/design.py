@@ -405,7 +405,10 @@ def _film_step(job, nx, ny, dx, dy, shares, live, target, seen, grades=None):
 
     Graded caps (``grades``: :class:`Grades`): ``capped`` is the share their rings
     print now; the bands take the same step over their own radius
-    (:meth:`Grades.update`) and the fill makes up the rest of each cell."""
+    (:meth:`Grades.update`), and a cell the caps' rim crosses is filled with the ink
+    it asks for, like a cell without caps. (Making up the rings' shortfall with the dots
+    would divide it by the cell's dotted share: a sliver of dots at the rim would ask
+    for the top fill, and the largest dots the job's sizes allow.)"""
     lo, hi = job.design.fill_range
     k = job.backlight.ink_contrast
     classes = period_classes(job, nx, ny, dx, dy)
@@ -417,11 +420,7 @@ def _film_step(job, nx, ny, dx, dy, shares, live, target, seen, grades=None):
         logq, w = _log_ratio(sim.counts, panel, live, target, judged)
         if classes is not None:
             logq = fold(logq, w, classes)
-        import os
-
-        sharp = logq if os.environ.get("SHARP") else None
         logq = _smoothed(logq, w, job.design.smoothing)
-        sharp = np.where(w > 1e-9, sharp / np.maximum(w, 1e-9), 0.0) if sharp is not None else logq
         now = capped if grades is None else grades.capped
         if now is None:
             ink = phi
@@ -433,9 +432,9 @@ def _film_step(job, nx, ny, dx, dy, shares, live, target, seen, grades=None):
         v *= level
         fill = (1.0 - v) / k
         if grades is not None:
-            grades.update(sharp, judged, k, level)
+            grades.update(logq, judged, k, level)
             now = grades.capped
-        if now is not None:
+        if grades is None and now is not None:
             fill = (fill * panel - now) / np.maximum(inside, 1e-12)
         return np.where(live, np.clip(fill, lo, hi), 0.0)
 
