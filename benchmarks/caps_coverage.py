@@ -1,7 +1,7 @@
 """Caps over the LEDs of the Lambertian direct-lit stack, in the coverage mode (issue 38).
 
-Run: python benchmarks/caps_coverage.py [--caps 0 0.8 1.0] [--fill-max 0.7] [--cell 0.5]
-         [--rays 4e7]
+Run: python benchmarks/caps_coverage.py [--caps 0 0.8 1.0] [--graded] [--fill-max 0.7]
+         [--cell 0.5] [--smoothing 1] [--rays 4e7]
 
 The issue's direct-lit stack with Lambertian LEDs (``backlight.py direct --profile
 lambertian``: 60 x 40 mm, 5 mm pitch, 1.5 mm optical distance) stops at min/max 0.575
@@ -13,8 +13,9 @@ but ``--fill-max``), then traced in the coverage mode (the caps as exact discs, 
 coverage around them) with ``--rays`` rays in 0.5 mm bins; printed: design seconds, the
 issue's uniformity (min/max over the panel less 5 mm) with a bin's noise, 9-point,
 efficiency, and the luminance of the inner LEDs' pitch cells folded onto one (10 x 10
-bins of 0.5 mm, the LED at the centre) with the fill under it. The real dots of one
-setting: ``backlight.py direct --cap D``.
+bins of 0.5 mm, the LED at the centre) with the fill under it. ``--graded`` prints the
+caps as rings the design sizes (``cap_ink = "design"``) and prints the bands' ink. The
+real dots of one setting: ``backlight.py direct --cap D [--graded]``.
 """
 
 from __future__ import annotations

@@ -379,6 +379,7 @@ def _print(job: Job, dots: DotSource | None, coverage: Coverage | None) -> Print
         ring = np.array([[0.0, np.inf]])  # solid caps, whatever their diameters
     else:
         ring = np.ascontiguousarray(printed.cap_rings**2, np.float64)
+    caps_part = (cap_start, cap, cap_g, ring)
     if dots is None:
         cov = coverage or coverage_of(job)
         phi = np.ascontiguousarray(cov.grid, dtype=np.float64)
@@ -388,39 +389,11 @@ def _print(job: Job, dots: DotSource | None, coverage: Coverage | None) -> Print
             phi = np.where(free > 1e-9, np.minimum(phi / np.maximum(free, 1e-9), 1.0), 0.0)
         g = np.array([cov.x0, cov.y0, cov.dx, cov.dy], np.float64)
         start, x, y = np.zeros(2, np.int64), np.zeros(1), np.zeros(1)
-        return Print(
-            False,
-            phi,
-            g,
-            start,
-            x,
-            y,
-            np.zeros((1, 6)),
-            np.ones(7),
-            phi2,
-            g2,
-            cap_start,
-            cap,
-            cap_g,
-            ring,
-        )
-    start, x, y, foot, cg = dot_grid(dots, job.box)
-    return Print(
-        True,
-        np.zeros((1, 1)),
-        np.ones(4),
-        start,
-        x,
-        y,
-        foot,
-        cg,
-        phi2,
-        g2,
-        cap_start,
-        cap,
-        cap_g,
-        ring,
-    )
+        dots_part = (False, phi, g, start, x, y, np.zeros((1, 6)), np.ones(7))
+    else:
+        start, x, y, foot, cg = dot_grid(dots, job.box)
+        dots_part = (True, np.zeros((1, 1)), np.ones(4), start, x, y, foot, cg)
+    return Print(*dots_part, phi2, g2, *caps_part)
 
 
 def cap_grid(caps: np.ndarray, box) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
