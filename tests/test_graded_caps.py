@@ -64,6 +64,17 @@ def test_the_ring_table_prints_the_bands_ink_in_widths_a_mask_can_hold(diameter,
         assert abs(got - want) <= quantum
 
 
+@pytest.mark.parametrize("share", [0.05, 0.3, 0.85, 0.97])
+def test_a_share_no_single_ring_can_print_is_kept_over_the_bands(share):
+    """Error diffusion: 0.05 of a 50 µm band is a 2.5 µm ring (none can print) and 0.85
+    one of 42.5 µm (it leaves less than 10 µm clear); over 30 bands the ink still comes
+    out right."""
+    rings = ring_table(3.0, [share] * 30)
+    printed = math.pi * float((rings[:, 1] ** 2 - rings[:, 0] ** 2).sum())
+    rim = math.pi * (1.5**2 - (1.5 - RING_LINE) ** 2)  # the last ring the carry may miss
+    assert printed == pytest.approx(share * math.pi * 1.5**2, abs=rim)
+
+
 def test_a_solid_cap_is_one_disc_and_full_bands_merge():
     assert np.array_equal(ring_table(0.8, None), [[0.0, 0.4]])
     assert np.allclose(ring_table(0.8, [1.0] * 8), [[0.0, 0.4]])
