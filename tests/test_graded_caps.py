@@ -211,11 +211,11 @@ def _pattern(tmp_path):
 def test_graded_caps_survive_every_mask_and_klayout_reads_their_ink(tmp_path):
     import dataclasses
 
-    from exporters.dxf import write_dxf
-    from exporters.gds import write_gds, write_oas
-    from exporters.options import ExportOptions
-    from exporters.readback import read_any
     from optdot.errors import ExportError
+    from optdot.exporters.dxf import write_dxf
+    from optdot.exporters.gds import write_gds, write_oas
+    from optdot.exporters.options import ExportOptions
+    from optdot.exporters.readback import read_any
     from optdot.io.patterns import load_pattern, save_pattern
 
     job, p = _pattern(tmp_path)
