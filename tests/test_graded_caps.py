@@ -232,6 +232,11 @@ def test_graded_caps_survive_every_mask_and_klayout_reads_their_ink(tmp_path):
         assert np.abs(back.outline.cap_rings - want).max() <= 2e-6, name
     with pytest.raises(ExportError, match="R12"):
         write_dxf(p, tmp_path / "r12.dxf", dataclasses.replace(opts, dxf_version="R12"))
+    from optdot.exporters.speos import write_speos
+
+    with pytest.raises(ExportError, match="graded caps"):
+        write_speos(p, tmp_path / "p.OPT3DMapping", opts)
+    assert not (tmp_path / "p.OPT3DMapping").exists() and not (tmp_path / "r12.dxf").exists()
 
     import klayout.db as kdb
 
