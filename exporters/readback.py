@@ -145,11 +145,17 @@ def _layout_caps(
     caps = np.array(rows, np.float64).reshape(-1, 3)
     if not tables:
         return caps, None
-    if len(tables) != len(rows) or any(
+    return caps, _one_table(path, tables, len(rows))
+
+
+def _one_table(path: Path, tables: list[np.ndarray], n_caps: int) -> np.ndarray:
+    """The ring table every graded cap of a mask prints (one a cap, each ``[k, 2]`` mm,
+    equal within 2 nm), or one line saying they differ."""
+    if len(tables) != n_caps or any(
         t.shape != tables[0].shape or not np.allclose(t, tables[0], atol=2e-6) for t in tables
     ):
         raise PatternFileError(f"{path}: graded caps must all print the same rings")
-    return caps, tables[0]
+    return tables[0]
 
 
 def _cell_rings(path: Path, name: str, pts: list, to_mm: float, reach: float) -> np.ndarray:
@@ -447,15 +453,8 @@ def _dxf_rings(path: Path, caps: np.ndarray, graded: list) -> np.ndarray | None:
         if d[k] > 1e-6:
             raise PatternFileError(f"{path}: a cap's ring HATCH at ({x:g}, {y:g}) has no cap")
         tables.setdefault(k, []).append((r_in, r_out))
-    first = np.array(sorted(tables[min(tables)]), np.float64)
-    for rows in tables.values():
-        t = np.array(sorted(rows), np.float64)
-        if (
-            len(tables) != len(caps)
-            or t.shape != first.shape
-            or not np.allclose(t, first, atol=2e-6)
-        ):
-            raise PatternFileError(f"{path}: graded caps must all print the same rings")
+    one = [np.array(sorted(rows), np.float64) for rows in tables.values()]
+    first = _one_table(path, one, len(caps))
     problem = rings_problem(first, caps)
     if problem is not None:
         raise PatternFileError(f"{path}: {problem}")

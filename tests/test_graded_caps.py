@@ -336,3 +336,21 @@ def test_no_dot_of_the_coverage_lands_between_a_cap_s_rings(tmp_path):
     fine = simulate(bare, rays, seed=5, coverage=Coverage(0.5 * free, 0.0, 0.0, 0.05, 0.05))
     noise = 3 * math.sqrt(2 * fine.efficiency * (1 - fine.efficiency) / rays)
     assert abs(coarse.efficiency - fine.efficiency) <= noise + 0.002
+
+
+def test_a_mask_whose_caps_print_different_rings_is_refused(tmp_path):
+    import ezdxf
+
+    from optdot.errors import PatternFileError
+    from optdot.exporters.dxf import write_dxf
+    from optdot.exporters.options import ExportOptions
+    from optdot.exporters.readback import read_any
+
+    _, p = _pattern(tmp_path)
+    write_dxf(p, tmp_path / "p.dxf", ExportOptions())
+    doc = ezdxf.readfile(tmp_path / "p.dxf")
+    msp = doc.modelspace()
+    msp.delete_entity(msp.query("HATCH")[0])  # one cap loses a ring
+    doc.saveas(tmp_path / "odd.dxf")
+    with pytest.raises(PatternFileError, match="same rings"):
+        read_any(tmp_path / "odd.dxf")
