@@ -9,13 +9,16 @@ relaxed and corrected tiles are held at once (the merged dots, 32 B a dot, are k
 the end: see :func:`run_tiles`). With a wide correction pass (the default formulation)
 the correction is split by a barrier: every tile's first pass and its deposit, the wide
 field from all of them, then row by row the first passes moved along it and the
-guarantee passes; the first passes are held across the barrier and kept to the end in
-place of the merged dots, which are let go. The wide pass is solved as many times as the
-formulation says (``lowpass_last_steps``), each time from where the dots stand: each
-round after the first deposits every tile's first pass moved along the fields before it
-(``STEP``: the moves are made again from the first pass, which is held anyway, rather
-than a copy of every tile's dots held across each barrier), and its field is a barrier;
-the corrected dots are the first pass moved along every round's field in turn. Finished
+guarantee passes; the first passes' positions (``SLIM``: 16 B a dot) are held across
+the barrier and kept to the end in place of the merged dots, which are let go, and each
+tile's containers are thrown again after it (:func:`optdot.tiling.tasks.containers`:
+holding them too took the 55-inch TV's first passes from 1.8 to 3.6 GB). The wide pass
+is solved as many times as the formulation says (``lowpass_last_steps``), each time from
+where the dots stand: each round after the first deposits every tile's first pass moved
+along the fields before it (``STEP``: the moves are made again from the first pass,
+which is held anyway, rather than a copy of every tile's dots held across each
+barrier), and its field is a barrier; the corrected dots are the first pass moved along
+every round's field in turn. Finished
 tiles are handed to ``sink`` one at a time, in the order they finish; what the sink writes
 depends only on the tile, so the output is the same whatever the order.
 """
@@ -45,6 +48,7 @@ from .tasks import (
     coarse_task,
     correct_tile,
     deposit_task,
+    first_positions,
     held_dots,
     initial_task,
     legalize_tile,
@@ -67,14 +71,14 @@ _WEIGHTS = {"relax": 1.0, "seams": 0.25, "merge": 0.0, "correct": 0.2, "shift": 
 
 #: Kinds of task in the schedule, in the order a wave submits them (the guarantee
 #: passes: ``LEGAL`` and ``LEGAL + 1``, by row parity).
-INITIAL, DEPOSIT, COARSE, RELAX, SEAMS, MERGE, CORRECT, WDEPOSIT, WIDE, STEP, SHIFT, LEGAL = range(
-    -3, 9
+INITIAL, DEPOSIT, COARSE, RELAX, SEAMS, MERGE, CORRECT, WDEPOSIT, SLIM, WIDE, STEP, SHIFT, LEGAL = (
+    range(-3, 10)
 )
 #: Names of the kinds in :func:`needed`.
 KIND_NAMES = {
     INITIAL: "initial", DEPOSIT: "deposit", COARSE: "coarse", RELAX: "relax", SEAMS: "seams",
-    MERGE: "merge", CORRECT: "correct", WDEPOSIT: "wdeposit", WIDE: "wide", STEP: "step",
-    SHIFT: "shift",
+    MERGE: "merge", CORRECT: "correct", WDEPOSIT: "wdeposit", SLIM: "slim", WIDE: "wide",
+    STEP: "step", SHIFT: "shift",
 }  # fmt: skip
 
 
@@ -262,6 +266,7 @@ def needed(
         "merge": merge,
         "correct": correct,
         "wdeposit": correct if wide and not have_wide else set(),
+        "slim": correct if wide else set(),
         "wide": {(0, 0)} if wide and held and not have_wide else set(),
         "step": correct if wide and steps > 1 and not have_wide else set(),
         "shift": held if wide else set(),
@@ -325,6 +330,7 @@ def run_tiles(
         schedule.append((j + 3, CORRECT, j, 0, (i, j), 0))  # correct: needs merged j-1..j+1
         if wide:
             schedule.append((j + 3, WDEPOSIT, j, 0, (i, j), 0))
+            schedule.append((j + 3, SLIM, j, 0, (i, j), 0))  # what is held of the first pass
             for r in range(1, steps):  # moved along rounds 0..r-1's fields, deposited
                 schedule.append((first + 2 * r - 1, STEP, j, 0, (i, j), r))
             schedule.append((after + j + 1, SHIFT, j, 0, (i, j), steps - 1))
@@ -356,6 +362,7 @@ def run_tiles(
     seams: dict = {}
     merged: dict = {}
     firsts: dict = {}  # the first correction pass (the corrected dots, without a wide pass)
+    slims: dict = {}  # its positions alone, held across the wide pass's barriers
     wdeposits: dict = {}  # (round, tile): deposit on the wide lattice
     have_wide = all(field_name(r) in given for r in range(steps))
     wide_fields = {r: executor.share(given[field_name(r)]) for r in range(steps) if have_wide}
@@ -395,6 +402,8 @@ def run_tiles(
         elif kind == WDEPOSIT:
             h = executor.submit("wdeposit", key, wide_deposit_task, jobf, firsts[i, j])
             wdeposits[0, (i, j)] = h
+        elif kind == SLIM:
+            slims[i, j] = executor.submit("slim", key, first_positions, firsts[i, j])
         elif kind == WIDE:
             parts = [wdeposits[r, t] for t in tiles]
             name = field_name(r)
@@ -402,11 +411,16 @@ def run_tiles(
             wide_fields[r] = made[name] = h
         elif kind == STEP:
             fields_so_far = [wide_fields[k] for k in range(r)]
-            h = executor.submit(f"wdeposit{r}", key, wide_step, jobf, firsts[i, j], *fields_so_far)
+            h = executor.submit(
+                f"wdeposit{r}", key, wide_step, jobf, plan, coarse, i, j, slims[i, j],
+                *fields_so_far,
+            )  # fmt: skip
             wdeposits[r, (i, j)] = h
         elif kind == SHIFT:
             every = [wide_fields[k] for k in range(steps)]
-            h = executor.submit("shift", key, wide_shift, jobf, firsts[i, j], *every)
+            h = executor.submit(
+                "shift", key, wide_shift, jobf, plan, coarse, i, j, slims[i, j], *every
+            )
             corrected[i, j] = h
             kind_of[id(h)] = "shift"
         else:
@@ -437,18 +451,19 @@ def run_tiles(
     # lost with a dead worker is made again from it, which Dask would otherwise have
     # forgotten once every correction that read it was done ("cancelled: already
     # forgotten", seen with a frozen worker). Without a wide pass that is the merged dots
-    # of nine tiles (and the seam moves); with one, the tile's first pass and the wide
-    # field (the merged dots, 32 B a dot, are then let go once every first pass is made:
-    # the wide pass holds every tile's first pass across its barrier instead).
+    # of nine tiles (and the seam moves); with one, the tile's first pass's positions and
+    # the wide field (the merged dots, 32 B a dot, are then let go once every first pass is
+    # made: the wide pass holds every tile's first positions, 16 B a dot, across its
+    # barrier instead; the full first pass is let go once they and its deposit are made).
     # So do the panel-wide fields and the deposits they were solved from (a few cells a
     # tile): a relaxation or a correction lost with a dead worker needs its field again.
     keep = [*deposits.values(), coarse]
     if wide:
-        keep += [*firsts.values(), *wdeposits.values(), *wide_fields.values()]
+        keep += [*slims.values(), *wdeposits.values(), *wide_fields.values()]
     else:
         keep += [*merged.values(), *seams.values()]
     initial.clear(), relaxed.clear(), seams.clear(), merged.clear(), corrected.clear()
-    deposits.clear(), firsts.clear(), wdeposits.clear(), wide_fields.clear()
+    deposits.clear(), firsts.clear(), slims.clear(), wdeposits.clear(), wide_fields.clear()
     coarse = None
     final.clear()
     made.clear()

@@ -82,9 +82,10 @@ runs over the whole panel; a task only chooses which dots are mobile and which a
    so it is solved over the whole panel like the throw's field: every tile's corrected
    dots are deposited (:func:`optdot.stages.wide_part`), one task solves the field from
    all of them, and each tile's corrected dots move along it. A barrier: no guarantee
-   pass starts before every tile is corrected, so every tile's corrected dots are held
-   at once; the merged dots, needed by no task after the corrections, are let go
-   instead. Notebook crop tiled at 15 mm: strongest blob 0.51 JND, p99 0.18 (without the
+   pass starts before every tile is corrected, so every tile's corrected positions are
+   held at once (:func:`first_positions`; its containers are thrown again after the
+   barrier, :func:`containers`); the merged dots, needed by no task after the
+   corrections, are let go instead. Notebook crop tiled at 15 mm: strongest blob 0.51 JND, p99 0.18 (without the
    pass 1.18 / 0.65; one process 0.87 / 0.23); led tiled: coverage RMS (0.5 mm) 0.029 %
    (0.065 % without), seams 0.021 % against 0.032 % inside.
 
@@ -315,22 +316,44 @@ def wide_task(job: Job, *parts: LatticePart) -> CoarseField | None:
     return stages.wide_solve(job, list(parts))
 
 
-def wide_shift(job: Job, dots: TileDots, *fields: CoarseField) -> TileDots:
-    """A tile's dots after its first correction pass (:func:`correct_tile`) moved along
-    the panel's wide fields (:func:`wide_task`), one round after the other: the
-    correction's last pass."""
-    xy = dots.xy.copy()
+def containers(job: Job, plan: TilePlan, coarse: CoarseField | None, i: int, j: int) -> np.ndarray:
+    """Tile ``(i, j)``'s containers as its relaxation made them (:func:`relax_tile`): its
+    throw moved along the panel-wide field, thrown again (every step a pure function, so
+    the same bytes), ``[n, 2]`` mm."""
+    return stages.coarse_shift(job, coarse, initial_task(job, plan, i, j))
+
+
+def first_positions(dots: TileDots) -> np.ndarray:
+    """What the run holds of a tile's first correction pass across the wide pass's
+    barrier: its positions, ``[n, 2]`` mm (16 B a dot; the containers, 16 B more, are
+    thrown again after the barrier, :func:`containers`: on the 55-inch TV the held first
+    passes were 3.6 GB of a 6.9 GB peak)."""
+    return dots.xy
+
+
+def wide_shift(
+    job: Job, plan: TilePlan, coarse: CoarseField | None, i: int, j: int, xy: np.ndarray,
+    *fields: CoarseField,
+) -> TileDots:  # fmt: skip
+    """Tile ``(i, j)``'s dots after its first correction pass (``xy``,
+    :func:`first_positions`) moved along the panel's wide fields (:func:`wide_task`), one
+    round after the other: the correction's last pass; with the tile's containers
+    (:func:`containers`, the panel-wide field ``coarse``)."""
+    xy = xy.copy()
     if len(xy):
         for f in fields:
             xy += f.displacement(xy)
-    return TileDots(dots.tile, dots.xy0, xy)
+    return TileDots((i, j), containers(job, plan, coarse, i, j), xy)
 
 
-def wide_step(job: Job, dots: TileDots, *fields: CoarseField) -> LatticePart | None:
+def wide_step(
+    job: Job, plan: TilePlan, coarse: CoarseField | None, i: int, j: int, xy: np.ndarray,
+    *fields: CoarseField,
+) -> LatticePart | None:  # fmt: skip
     """A round of the wide pass after the first: a tile's first-pass dots moved along the
     rounds' fields before it (:func:`wide_shift`) and deposited for this round's field
     (:func:`wide_deposit_task`)."""
-    return wide_deposit_task(job, wide_shift(job, dots, *fields))
+    return wide_deposit_task(job, wide_shift(job, plan, coarse, i, j, xy, *fields))
 
 
 def correct_tile(job: Job, plan: TilePlan, dots: TileDots, *around: TileDots) -> TileDots:
