@@ -4,7 +4,9 @@ Writes each panel's job and map (fill 0.08-0.42, LEDs along the bottom long edge
 cells) under ``benchmarks/out/panels/`` (not committed), runs ``optdot generate`` as a
 subprocess and prints dots, seconds, dots/s and the peak RSS of the whole process tree
 (the command, the Dask scheduler, nannies and workers), sampled every 0.2 s; then the QA
-summary and the seam table (bands along tile borders against tile interiors).
+summary and the seam table (bands along tile borders against tile interiors). Beside the
+peak: what each process held at that moment (the command, then its children largest first:
+the Dask workers).
 
     python benchmarks/panels.py notebook --single        # single process and tiled
     python benchmarks/panels.py notebook monitor tv      # tiled only
@@ -100,11 +102,18 @@ def mixed_pairs_too_close(dataset: Path, gap: float) -> tuple[int, int]:
     return len(pairs), int((dist < limit - 1e-9).sum())
 
 
+#: Each process's RSS (GiB) at the last :func:`run`'s peak: the command first, then its
+#: children (the Dask workers, and a resource tracker) largest first.
+PEAK_SPLIT: list[float] = []
+
+
 def run(cmd: list[str]) -> tuple[float, float, int, str]:
-    """``(seconds, peak RSS of the tree in GiB, exit code, stderr)`` of a command."""
+    """``(seconds, peak RSS of the tree in GiB, exit code, stderr)`` of a command; what
+    each process held at that peak is left in :data:`PEAK_SPLIT`."""
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
     peak = [0]
+    split: list[float] = []
     done = threading.Event()
 
     def watch() -> None:
@@ -112,13 +121,18 @@ def run(cmd: list[str]) -> tuple[float, float, int, str]:
         while not done.is_set():
             try:
                 procs = [root, *root.children(recursive=True)]
-                rss = 0
+                each = []
                 for p in procs:
                     try:
-                        rss += p.memory_info().rss
+                        each.append(p.memory_info().rss)
                     except psutil.Error:
-                        pass
-                peak[0] = max(peak[0], rss)
+                        each.append(0)
+                if sum(each) > peak[0]:
+                    peak[0] = sum(each)
+                    split[:] = [
+                        each[0] / 2**30,
+                        *sorted((b / 2**30 for b in each[1:]), reverse=True),
+                    ]
             except psutil.Error:
                 pass
             time.sleep(0.2)
@@ -128,6 +142,7 @@ def run(cmd: list[str]) -> tuple[float, float, int, str]:
     err = proc.communicate()[1]
     done.set()
     th.join()
+    PEAK_SPLIT[:] = split
     return time.perf_counter() - t0, peak[0] / 2**30, proc.returncode, err
 
 
@@ -157,7 +172,11 @@ def blob_places(blobs: list[dict], box, xs, ys, seam_mm: float = 1.5, edge_mm: f
 
 
 def report(label: str, dots: int, secs: float, gib: float) -> None:
-    print(f"| {label} | {dots:,} | {secs:.0f} | {dots / secs:,.0f} | {gib:.2f} |", flush=True)
+    each = " + ".join(f"{g:.2f}" for g in PEAK_SPLIT)
+    print(
+        f"| {label} | {dots:,} | {secs:.0f} | {dots / secs:,.0f} | {gib:.2f} ({each}) |",
+        flush=True,
+    )
 
 
 def qa_summary(pattern: Path, job: Path) -> dict:
@@ -188,7 +207,10 @@ def main() -> None:
         "--check", action="store_true", help="count mixed-pair violations; compare worker runs"
     )
     args = ap.parse_args()
-    print("| run | dots | s | dots/s | peak GiB (all processes) |\n|---|---|---|---|---|")
+    print(
+        "| run | dots | s | dots/s | peak GiB, all processes (the command + each child) |"
+        "\n|---|---|---|---|---|"
+    )
     sys.stdout.flush()
     for name in args.panels:
         job = write_panel(name, args.sizes, args.max_iter)

@@ -140,7 +140,7 @@ def _on_cluster(job, plan, scheduler, workers, worker_memory, announce) -> Itera
             check_interrupt()
             time.sleep(0.1)
         warm.result()
-        yield OnDask(cluster.client)
+        yield OnDask(cluster.client, cluster.memory_per_worker * cluster.workers)
 
 
 def _warm() -> int:

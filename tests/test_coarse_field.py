@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from optdot import stages
 from optdot.config.schema import load_job
@@ -25,6 +27,55 @@ from optdot.tiling.plan import plan_tiles
 from optdot.tiling.run import tiny_job
 
 from .conftest import SAMPLES
+
+
+def _bincount_deposit(xy, weight, x0, y0, h, shape):
+    """The cloud-in-cell deposit as numpy writes it: four ``np.bincount`` (one a corner of
+    the clouds) added in turn; what :func:`_deposit` must equal bit for bit."""
+    ny, nx = shape
+    gx = (xy[:, 0] - x0) / h[0] - 0.5
+    gy = (xy[:, 1] - y0) / h[1] - 0.5
+    ix = np.floor(gx).astype(np.int64)
+    iy = np.floor(gy).astype(np.int64)
+    fx, fy = gx - ix, gy - iy
+    inside = (gx >= -0.5) & (gx < nx - 0.5) & (gy >= -0.5) & (gy < ny - 0.5)
+    out = np.zeros(ny * nx)
+    for dx, wx in ((0, 1.0 - fx), (1, fx)):
+        for dy, wy in ((0, 1.0 - fy), (1, fy)):
+            cx, cy = ix + dx, iy + dy
+            keep = inside | ((cx >= 0) & (cx < nx) & (cy >= 0) & (cy < ny))
+            cx = np.clip(cx[keep], 0, nx - 1)
+            cy = np.clip(cy[keep], 0, ny - 1)
+            w = (weight * wx * wy)[keep]
+            out += np.bincount(cy * nx + cx, w, minlength=ny * nx)
+    return out.reshape(ny, nx)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    n=st.integers(0, 300),
+    nx=st.integers(1, 9),
+    ny=st.integers(1, 9),
+    spill=st.floats(0.0, 2.0),
+    seed=st.integers(0, 2**31),
+)
+def test_the_compiled_deposit_sums_as_numpy_does(n, nx, ny, spill, seed):
+    """The compiled cloud-in-cell deposit gives numpy's sums bit for bit (the same order
+    of additions), for dots inside the grid, on its border cells' outer halves and past
+    it (a neighbour tile's dots, which give only what falls in), so the correction's
+    fields keep their bytes."""
+    rng = np.random.default_rng(seed)
+    hx, hy = 0.3, 0.2
+    x0, y0 = -1.0, 2.0
+    lo = np.array([x0, y0]) - spill * np.array([hx, hy])
+    hi = np.array([x0 + nx * hx, y0 + ny * hy]) + spill * np.array([hx, hy])
+    xy = lo + rng.random((n, 2)) * (hi - lo)
+    xy[: n // 10] = np.round(xy[: n // 10] / 0.1) * 0.1  # some on cell faces and centres
+    w = rng.random(n)
+    got = _deposit(xy, w, x0, y0, (hx, hy), (ny, nx))
+    want = _bincount_deposit(xy, w, x0, y0, (hx, hy), (ny, nx))
+    assert got.shape == (ny, nx)
+    np.testing.assert_array_equal(got, want)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

@@ -51,6 +51,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba as nb
 import numpy as np
 from scipy.fft import dctn, idctn, next_fast_len
 from scipy.ndimage import gaussian_filter, label, map_coordinates
@@ -91,24 +92,43 @@ def _deposit(xy: np.ndarray, weight: np.ndarray, x0: float, y0: float, h, shape)
     step ``h = (hx, hy)`` from ``(x0, y0)`` (cell centres at ``x0 + (i + 0.5) hx``),
     ``[ny, nx]``. A dot inside the grid's box keeps all its weight (what falls past a
     border cell's centre lands in that cell: at a wall, nothing is lost); a dot outside
-    it (a neighbour tile's, around a tile's window) gives only the share that falls in."""
+    it (a neighbour tile's, around a tile's window) gives only the share that falls in.
+    Compiled (:func:`_cic`); the same sums, in the same order, as four ``np.bincount``
+    of the cloud's corners added in turn (tests/test_lowpass.py holds it to them)."""
     ny, nx = shape
-    gx = (xy[:, 0] - x0) / h[0] - 0.5
-    gy = (xy[:, 1] - y0) / h[1] - 0.5
-    ix = np.floor(gx).astype(np.int64)
-    iy = np.floor(gy).astype(np.int64)
-    fx, fy = gx - ix, gy - iy
-    inside = (gx >= -0.5) & (gx < nx - 0.5) & (gy >= -0.5) & (gy < ny - 0.5)
-    out = np.zeros(ny * nx)
-    for dx, wx in ((0, 1.0 - fx), (1, fx)):
-        for dy, wy in ((0, 1.0 - fy), (1, fy)):
-            cx, cy = ix + dx, iy + dy
-            keep = inside | ((cx >= 0) & (cx < nx) & (cy >= 0) & (cy < ny))
-            cx = np.clip(cx[keep], 0, nx - 1)
-            cy = np.clip(cy[keep], 0, ny - 1)
-            w = (weight * wx * wy)[keep]
-            out += np.bincount(cy * nx + cx, w, minlength=ny * nx)
-    return out.reshape(ny, nx)
+    xy = np.ascontiguousarray(xy, dtype=np.float64)
+    weight = np.ascontiguousarray(np.broadcast_to(np.asarray(weight, np.float64), len(xy)))
+    return _cic(xy, weight, float(x0), float(y0), float(h[0]), float(h[1]), nx, ny)
+
+
+@nb.njit(cache=True)
+def _cic(xy, weight, x0, y0, hx, hy, nx, ny):  # pragma: no cover - compiled
+    """:func:`_deposit`'s sums: each corner of the clouds in turn, dots in index order,
+    into a grid of its own that is then added to the total."""
+    n = xy.shape[0]
+    out = np.zeros((ny, nx))
+    part = np.zeros((ny, nx))
+    for corner in range(4):
+        dx = corner // 2
+        dy = corner % 2
+        part[:] = 0.0
+        for k in range(n):
+            gx = (xy[k, 0] - x0) / hx - 0.5
+            gy = (xy[k, 1] - y0) / hy - 0.5
+            ix = int(np.floor(gx))
+            iy = int(np.floor(gy))
+            fx = gx - ix
+            fy = gy - iy
+            inside = (gx >= -0.5) & (gx < nx - 0.5) & (gy >= -0.5) & (gy < ny - 0.5)
+            cx = ix + dx
+            cy = iy + dy
+            if not (inside or (cx >= 0 and cx < nx and cy >= 0 and cy < ny)):
+                continue
+            wx = fx if dx else 1.0 - fx
+            wy = fy if dy else 1.0 - fy
+            part[min(max(cy, 0), ny - 1), min(max(cx, 0), nx - 1)] += weight[k] * wx * wy
+        out += part
+    return out
 
 
 Window = tuple[float, float, float, float]

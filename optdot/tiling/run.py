@@ -9,10 +9,11 @@ relaxed and corrected tiles are held at once (the merged dots, 32 B a dot, are k
 the end: see :func:`run_tiles`). With a wide correction pass (the default formulation)
 the correction is split by a barrier: every tile's first pass and its deposit, the wide
 field from all of them, then row by row the first passes moved along it and the
-guarantee passes; the first passes' positions (``SLIM``: 16 B a dot) are held across
-the barrier and kept to the end in place of the merged dots, which are let go, and each
-tile's containers are thrown again after it (:func:`optdot.tiling.tasks.containers`:
-holding them too took the 55-inch TV's first passes from 1.8 to 3.6 GB). The wide pass
+guarantee passes; the first passes are held across the barrier and kept to the end in
+place of the merged dots, which are let go: on a panel whose first passes would take
+more than :data:`HOLD_SHARE` of the workers' memory, only their positions (``SLIM``: 16 B
+a dot, not 32), each tile's containers thrown again after it
+(:func:`optdot.tiling.tasks.containers`; the same bytes either way). The wide pass
 is solved as many times as the formulation says (``lowpass_last_steps``), each time from
 where the dots stand: each round after the first deposits every tile's first pass moved
 along the fields before it (``STEP``: the moves are made again from the first pass,
@@ -122,7 +123,16 @@ def _legal(job: Job, plan: TilePlan, dots: TileDots, *neighbours: TileDots | Fin
 
 
 class InProcess:
-    """Runs each task when it is submitted (tests, and tiles without a cluster)."""
+    """Runs each task when it is submitted (tests, and tiles without a cluster).
+
+    Attributes:
+        memory: bytes the run may hold at once (:func:`slim_first_passes`; 0: no bound).
+    """
+
+    memory: int = 0
+
+    def __init__(self, memory: int = 0) -> None:
+        self.memory = memory
 
     def share(self, value: Any) -> Any:
         return value
@@ -154,6 +164,7 @@ class OnDask:
     peak)."""
 
     client: Any
+    memory: int = 0  # the workers' memory together, bytes (0: not known)
     retries: int = 2
     run_id: str = field(default_factory=lambda: uuid.uuid4().hex[:8])
     submitted: int = 0
@@ -212,12 +223,27 @@ class TiledRun:
     seconds: float
 
 
+#: Share of the workers' memory the first correction passes may take while the wide pass
+#: holds them (32 B a dot): past it only their positions are held (16 B a dot) and each
+#: tile's containers are thrown again after the barrier (:func:`optdot.tiling.tasks.
+#: containers`, ~0.4 µs a dot). The 55-inch TV's 114M dots on 2 workers of 9.4 GB:
+#: 3.6 GB held, peak 6.9 GB; slim, 5.7 GB. The monitor's 28.6M (0.9 GB) keep them.
+HOLD_SHARE = 0.1
+
+
+def slim_first_passes(plan: TilePlan, memory: int) -> bool:
+    """Whether a run of ``plan`` on workers of ``memory`` bytes together (0: not known,
+    nothing is slimmed) holds only its first passes' positions across the wide pass."""
+    return memory > 0 and 32 * int(plan.quotas.sum()) > HOLD_SHARE * memory
+
+
 def needed(
     plan: TilePlan,
     todo: set[tuple[int, int]],
     wide: bool = False,
     given: frozenset[str] = frozenset(),
     steps: int = 1,
+    slim: bool = False,
 ) -> dict[str, set[tuple[int, int]]]:
     """The tasks that tiles ``todo`` need, when every other tile is finished (a resumed
     run): ``{"initial", "deposit", "coarse", "relax", "seams", "merge", "correct",
@@ -266,7 +292,7 @@ def needed(
         "merge": merge,
         "correct": correct,
         "wdeposit": correct if wide and not have_wide else set(),
-        "slim": correct if wide else set(),
+        "slim": correct if wide and slim else set(),
         "wide": {(0, 0)} if wide and held and not have_wide else set(),
         "step": correct if wide and steps > 1 and not have_wide else set(),
         "shift": held if wide else set(),
@@ -305,6 +331,7 @@ def run_tiles(
     }
     steps = wide_steps(job)
     wide = steps > 0
+    slim = wide and slim_first_passes(plan, executor.memory)
     # with a wide pass: every tile's first correction pass and its deposit, then the
     # wide field (a barrier: it needs all of them); each further round deposits every
     # tile's first pass moved along the fields so far, then its field (a barrier); then
@@ -330,7 +357,8 @@ def run_tiles(
         schedule.append((j + 3, CORRECT, j, 0, (i, j), 0))  # correct: needs merged j-1..j+1
         if wide:
             schedule.append((j + 3, WDEPOSIT, j, 0, (i, j), 0))
-            schedule.append((j + 3, SLIM, j, 0, (i, j), 0))  # what is held of the first pass
+            if slim:  # what is held of the first pass
+                schedule.append((j + 3, SLIM, j, 0, (i, j), 0))
             for r in range(1, steps):  # moved along rounds 0..r-1's fields, deposited
                 schedule.append((first + 2 * r - 1, STEP, j, 0, (i, j), r))
             schedule.append((after + j + 1, SHIFT, j, 0, (i, j), steps - 1))
@@ -344,7 +372,7 @@ def run_tiles(
         if arrays is not None:
             given[name] = CoarseField.from_arrays(arrays)
     if finished or given:
-        need = needed(plan, set(tiles) - set(finished), wide, frozenset(given), steps)
+        need = needed(plan, set(tiles) - set(finished), wide, frozenset(given), steps, slim)
         schedule = [e for e in schedule if e[4] in need[KIND_NAMES.get(e[1], "legal")]]
     schedule.sort()
     held: dict = {}
@@ -362,7 +390,8 @@ def run_tiles(
     seams: dict = {}
     merged: dict = {}
     firsts: dict = {}  # the first correction pass (the corrected dots, without a wide pass)
-    slims: dict = {}  # its positions alone, held across the wide pass's barriers
+    slims: dict = {}  # its positions alone, held across the wide pass's barriers (slim)
+    held_first = slims if slim else firsts  # what the wide pass's rounds start from
     wdeposits: dict = {}  # (round, tile): deposit on the wide lattice
     have_wide = all(field_name(r) in given for r in range(steps))
     wide_fields = {r: executor.share(given[field_name(r)]) for r in range(steps) if have_wide}
@@ -412,14 +441,14 @@ def run_tiles(
         elif kind == STEP:
             fields_so_far = [wide_fields[k] for k in range(r)]
             h = executor.submit(
-                f"wdeposit{r}", key, wide_step, jobf, plan, coarse, i, j, slims[i, j],
+                f"wdeposit{r}", key, wide_step, jobf, plan, coarse, i, j, held_first[i, j],
                 *fields_so_far,
             )  # fmt: skip
             wdeposits[r, (i, j)] = h
         elif kind == SHIFT:
             every = [wide_fields[k] for k in range(steps)]
             h = executor.submit(
-                "shift", key, wide_shift, jobf, plan, coarse, i, j, slims[i, j], *every
+                "shift", key, wide_shift, jobf, plan, coarse, i, j, held_first[i, j], *every
             )
             corrected[i, j] = h
             kind_of[id(h)] = "shift"
@@ -459,7 +488,7 @@ def run_tiles(
     # tile): a relaxation or a correction lost with a dead worker needs its field again.
     keep = [*deposits.values(), coarse]
     if wide:
-        keep += [*slims.values(), *wdeposits.values(), *wide_fields.values()]
+        keep += [*held_first.values(), *wdeposits.values(), *wide_fields.values()]
     else:
         keep += [*merged.values(), *seams.values()]
     initial.clear(), relaxed.clear(), seams.clear(), merged.clear(), corrected.clear()

@@ -82,10 +82,11 @@ runs over the whole panel; a task only chooses which dots are mobile and which a
    so it is solved over the whole panel like the throw's field: every tile's corrected
    dots are deposited (:func:`optdot.stages.wide_part`), one task solves the field from
    all of them, and each tile's corrected dots move along it. A barrier: no guarantee
-   pass starts before every tile is corrected, so every tile's corrected positions are
-   held at once (:func:`first_positions`; its containers are thrown again after the
-   barrier, :func:`containers`); the merged dots, needed by no task after the
-   corrections, are let go instead. Notebook crop tiled at 15 mm: strongest blob 0.51 JND, p99 0.18 (without the
+   pass starts before every tile is corrected, so every tile's corrected dots are held
+   at once (on a panel large for the workers' memory, their positions alone:
+   :func:`first_positions`, the containers thrown again after the barrier,
+   :func:`containers`); the merged dots, needed by no task after the corrections, are
+   let go instead. Notebook crop tiled at 15 mm: strongest blob 0.51 JND, p99 0.18 (without the
    pass 1.18 / 0.65; one process 0.87 / 0.23); led tiled: coverage RMS (0.5 mm) 0.029 %
    (0.065 % without), seams 0.021 % against 0.032 % inside.
 
@@ -324,36 +325,41 @@ def containers(job: Job, plan: TilePlan, coarse: CoarseField | None, i: int, j: 
 
 
 def first_positions(dots: TileDots) -> np.ndarray:
-    """What the run holds of a tile's first correction pass across the wide pass's
-    barrier: its positions, ``[n, 2]`` mm (16 B a dot; the containers, 16 B more, are
-    thrown again after the barrier, :func:`containers`: on the 55-inch TV the held first
-    passes were 3.6 GB of a 6.9 GB peak)."""
+    """What a run short of memory holds of a tile's first correction pass across the wide
+    pass's barrier (:func:`optdot.tiling.run.slim_first_passes`): its positions, ``[n,
+    2]`` mm (16 B a dot; the containers, 16 B more, are thrown again after the barrier,
+    :func:`containers`: on the 55-inch TV the held first passes were 3.6 GB of a 6.9 GB
+    peak)."""
     return dots.xy
 
 
 def wide_shift(
-    job: Job, plan: TilePlan, coarse: CoarseField | None, i: int, j: int, xy: np.ndarray,
-    *fields: CoarseField,
+    job: Job, plan: TilePlan, coarse: CoarseField | None, i: int, j: int,
+    first: TileDots | np.ndarray, *fields: CoarseField,
 ) -> TileDots:  # fmt: skip
-    """Tile ``(i, j)``'s dots after its first correction pass (``xy``,
-    :func:`first_positions`) moved along the panel's wide fields (:func:`wide_task`), one
-    round after the other: the correction's last pass; with the tile's containers
-    (:func:`containers`, the panel-wide field ``coarse``)."""
-    xy = xy.copy()
+    """Tile ``(i, j)``'s dots after its first correction pass (``first``: the pass, or its
+    positions alone, :func:`first_positions`) moved along the panel's wide fields
+    (:func:`wide_task`), one round after the other: the correction's last pass; with the
+    tile's containers (the pass's, or thrown again: :func:`containers`, the panel-wide
+    field ``coarse``)."""
+    if isinstance(first, TileDots):
+        xy0, xy = first.xy0, first.xy.copy()
+    else:
+        xy0, xy = containers(job, plan, coarse, i, j), first.copy()
     if len(xy):
         for f in fields:
             xy += f.displacement(xy)
-    return TileDots((i, j), containers(job, plan, coarse, i, j), xy)
+    return TileDots((i, j), xy0, xy)
 
 
 def wide_step(
-    job: Job, plan: TilePlan, coarse: CoarseField | None, i: int, j: int, xy: np.ndarray,
-    *fields: CoarseField,
+    job: Job, plan: TilePlan, coarse: CoarseField | None, i: int, j: int,
+    first: TileDots | np.ndarray, *fields: CoarseField,
 ) -> LatticePart | None:  # fmt: skip
     """A round of the wide pass after the first: a tile's first-pass dots moved along the
     rounds' fields before it (:func:`wide_shift`) and deposited for this round's field
     (:func:`wide_deposit_task`)."""
-    return wide_deposit_task(job, wide_shift(job, plan, coarse, i, j, xy, *fields))
+    return wide_deposit_task(job, wide_shift(job, plan, coarse, i, j, first, *fields))
 
 
 def correct_tile(job: Job, plan: TilePlan, dots: TileDots, *around: TileDots) -> TileDots:
