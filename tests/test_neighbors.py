@@ -184,3 +184,17 @@ def test_few_dots_far_apart_give_the_dense_grids_pairs_in_its_order(n, seed, spr
     np.testing.assert_array_equal(ptr, dense_ptr)
     np.testing.assert_array_equal(nbr, dense_nbr)
     np.testing.assert_array_equal(csr_to_pairs(ptr, nbr), pairs_brute_force(xy, r, skin))
+
+
+def test_the_search_compiles_once_for_one_radius_and_for_radii_per_dot():
+    """One radius (a copy) and radii per dot (a read-only view) reach the compiled search
+    with the same types, so a first run compiles it once, not twice (7 s each)."""
+    from optdot.spatial.cellgrid import _pairs_csr, neighbor_grid
+
+    rng = np.random.default_rng(3)
+    xy = rng.random((500, 2))
+    neighbor_grid(xy, 0.02)
+    neighbor_grid(xy, np.full(500, 0.02))
+    neighbor_grid(xy, np.full(500, 0.02)[::1].copy())
+    radii = {sig[1] for sig in _pairs_csr.signatures}
+    assert radii and all(not t.mutable for t in radii), radii

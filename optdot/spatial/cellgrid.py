@@ -290,6 +290,9 @@ def _search(
     xy = np.ascontiguousarray(xy, dtype=np.float64)
     n = xy.shape[0]
     reff = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, np.float64), (n,)))
+    # read-only whether a view (radii per dot) or a copy (one radius): one signature for
+    # the compiled search, not two (each took numba 7 s to compile on a first run)
+    reff.flags.writeable = False
     if n == 0:
         empty = CellGrid(
             0.0, 0.0, 1.0, 1, 1, np.zeros(2, np.int64), np.zeros(0, np.int32), np.zeros(1)
