@@ -94,7 +94,7 @@ def _deposit(xy: np.ndarray, weight: np.ndarray, x0: float, y0: float, h, shape)
     border cell's centre lands in that cell: at a wall, nothing is lost); a dot outside
     it (a neighbour tile's, around a tile's window) gives only the share that falls in.
     Compiled (:func:`_cic`); the same sums, in the same order, as four ``np.bincount``
-    of the cloud's corners added in turn (tests/test_lowpass.py holds it to them)."""
+    of the cloud's corners added in turn (tests/test_coarse_field.py holds it to them)."""
     ny, nx = shape
     xy = np.ascontiguousarray(xy, dtype=np.float64)
     weight = np.ascontiguousarray(np.broadcast_to(np.asarray(weight, np.float64), len(xy)))

@@ -19,9 +19,9 @@ where the dots stand: each round after the first deposits every tile's first pas
 along the fields before it (``STEP``: the moves are made again from the first pass,
 which is held anyway, rather than a copy of every tile's dots held across each
 barrier), and its field is a barrier; the corrected dots are the first pass moved along
-every round's field in turn. Finished
-tiles are handed to ``sink`` one at a time, in the order they finish; what the sink writes
-depends only on the tile, so the output is the same whatever the order.
+every round's field in turn. Finished tiles are handed to ``sink`` one at a time, in the
+order they finish; what the sink writes depends only on the tile, so the output is the
+same whatever the order.
 """
 
 from __future__ import annotations
@@ -225,9 +225,10 @@ class TiledRun:
 
 #: Share of the workers' memory the first correction passes may take while the wide pass
 #: holds them (32 B a dot): past it only their positions are held (16 B a dot) and each
-#: tile's containers are thrown again after the barrier (:func:`optdot.tiling.tasks.
-#: containers`, ~0.4 µs a dot). The 55-inch TV's 114M dots on 2 workers of 9.4 GB:
-#: 3.6 GB held, peak 6.9 GB; slim, 5.7 GB. The monitor's 28.6M (0.9 GB) keep them.
+#: tile's containers are thrown again after the barrier
+#: (:func:`optdot.tiling.tasks.containers`, ~0.4 µs a dot). The 55-inch TV's 114M dots on
+#: 2 workers of 9.4 GB: 3.6 GB held, peak 6.9 GB; slim, 5.7 GB. The monitor's 27M dots
+#: (0.9 GB) keep them.
 HOLD_SHARE = 0.1
 
 

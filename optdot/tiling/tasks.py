@@ -86,9 +86,9 @@ runs over the whole panel; a task only chooses which dots are mobile and which a
    at once (on a panel large for the workers' memory, their positions alone:
    :func:`first_positions`, the containers thrown again after the barrier,
    :func:`containers`); the merged dots, needed by no task after the corrections, are
-   let go instead. Notebook crop tiled at 15 mm: strongest blob 0.51 JND, p99 0.18 (without the
-   pass 1.18 / 0.65; one process 0.87 / 0.23); led tiled: coverage RMS (0.5 mm) 0.029 %
-   (0.065 % without), seams 0.021 % against 0.032 % inside.
+   let go instead. Notebook crop tiled at 15 mm: strongest blob 0.51 JND, p99 0.18
+   (without the pass 1.18 / 0.65; one process 0.87 / 0.23); led tiled: coverage RMS
+   (0.5 mm) 0.029 % (0.065 % without), seams 0.021 % against 0.032 % inside.
 
 5. **guarantee** (:func:`legalize_tile`). The formulation's hard-core iterations (which
    clear the pairs under 60 µm the correction made), then :func:`optdot.stages.finish`:
