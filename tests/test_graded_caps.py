@@ -81,13 +81,15 @@ def test_a_solid_cap_is_one_disc_and_full_bands_merge():
     assert len(ring_table(0.8, [0.0] * 8)) == 0
 
 
+# no subnormal coordinates: GEOS, the reference, loses 2e-4 of the area when a corner
+# sits at 2e-313 (shapely gives 0.95642 there, 0.95661 at 0 and at 1e-300)
 @settings(max_examples=80, deadline=None)
 @given(
-    st.floats(-1, 1),
-    st.floats(-1, 1),
+    st.floats(-1, 1, allow_subnormal=False),
+    st.floats(-1, 1, allow_subnormal=False),
     st.floats(0.01, 1.5),
-    st.floats(-2, 1),
-    st.floats(-2, 1),
+    st.floats(-2, 1, allow_subnormal=False),
+    st.floats(-2, 1, allow_subnormal=False),
     st.floats(0.01, 2),
     st.floats(0.01, 2),
 )
