@@ -227,8 +227,8 @@ class TiledRun:
 #: holds them (32 B a dot): past it only their positions are held (16 B a dot) and each
 #: tile's containers are thrown again after the barrier
 #: (:func:`optdot.tiling.tasks.containers`, ~0.4 µs a dot). The 55-inch TV's 114M dots on
-#: 2 workers of 9.4 GB: 3.6 GB held, peak 6.9 GB; slim, 5.7 GB. The monitor's 27M dots
-#: (0.9 GB) keep them.
+#: 2 workers of 9.4 GiB: 3.6 GB held, peak 6.75 GiB; slim, 5.61 GiB. The monitor's 27M
+#: dots (0.9 GB) keep them.
 HOLD_SHARE = 0.1
 
 

@@ -328,7 +328,7 @@ def first_positions(dots: TileDots) -> np.ndarray:
     """What a run short of memory holds of a tile's first correction pass across the wide
     pass's barrier (:func:`optdot.tiling.run.slim_first_passes`): its positions, ``[n,
     2]`` mm (16 B a dot; the containers, 16 B more, are thrown again after the barrier,
-    :func:`containers`: on the 55-inch TV the held first passes were 3.6 GB of a 6.9 GB
+    :func:`containers`: on the 55-inch TV the held first passes were 3.6 GB of a 6.75 GiB
     peak)."""
     return dots.xy
 
