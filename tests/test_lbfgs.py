@@ -94,3 +94,24 @@ def test_a_rejected_pair_never_overwrites_the_history_in_use(monkeypatch):
     # the 6th iteration's pair was rejected: the next direction uses exactly the 3 pairs
     # the 6th used, untouched
     assert len(seen[5]) == 3 and seen[6] == seen[5]
+
+
+@pytest.mark.parametrize("first_move", [0.0, 1e-3, 0.1])
+def test_first_move_bounds_the_steepest_descent_step(first_move):
+    """The first trial moves no coordinate farther than ``first_move`` (when the fixed
+    guess ``gamma0`` would move it farther), and exactly that far along the gradient."""
+    rng = np.random.default_rng(4)
+    a = rng.uniform(0.5, 20, 40)
+    x0 = rng.normal(size=40)
+    tried = []
+
+    def fun(x, g):
+        tried.append(x.copy())
+        g[:] = a * x
+        return 0.5 * float((a * x * x).sum())
+
+    res = minimize_lbfgs(fun, x0, max_iter=50, gamma0=0.25, first_move=first_move)
+    g0 = a * x0
+    step = 0.25 if first_move == 0.0 else min(0.25, first_move / np.abs(g0).max())
+    np.testing.assert_allclose(tried[1] - x0, -step * g0, rtol=1e-12, atol=1e-15)
+    assert res.fun < 1e-6 * fun(x0, np.empty(40))

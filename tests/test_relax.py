@@ -2,6 +2,8 @@ import numpy as np
 import pytest
 
 from optdot.relax import VerletPenalty, relax
+from optdot.relax.circles import container_half_sides
+from optdot.relax.penalty import PenaltyTerms
 from optdot.testing import pairs_brute_force, penalty_reference
 from tests.test_penalty import make_terms
 
@@ -44,3 +46,32 @@ def test_relax_reaches_scipy_minimum():
     res = relax(xy, terms, max_iter=300)
     assert res.history == sorted(res.history, reverse=True)  # Armijo: never increases
     assert res.penalty - best < 0.02 * (f0 - best)
+
+
+def test_the_first_step_keeps_the_list_built_at_the_start():
+    """A thrown pattern's first L-BFGS step is accepted at its first trial and needs no
+    rebuild of the Verlet list: the step is bounded by the skin (``first_move``). Scaled
+    by a fixed guess it moved dots by many radii, was rejected, and each trial rebuilt
+    the list."""
+    rng = np.random.default_rng(7)
+    n = 3000
+    xy = rng.random((n, 2)) * [3.0, 2.0]
+    r = np.full(n, 0.05)  # fill ~0.2 at 23 µm dots: the led sample's crowding
+    terms = PenaltyTerms(
+        radius=r,
+        panel_radius=r,
+        center=xy.copy(),
+        half_side=container_half_sides(r, 3.5),
+        box=(0.0, 0.0, 3.0, 2.0),
+        dmin=0.046,
+        dot_radius=0.023,
+        w_hard=15.0,
+        empty=np.zeros((1, 1), np.uint8),
+        grid_box=(0.0, 0.0, 3.0, 2.0),
+        core=np.full(n, 0.0305),
+    )
+    res = relax(xy, terms, max_iter=1, skin=0.3)
+    assert res.nit == 1
+    assert res.nfev == 2
+    assert res.rebuilds == 1
+    assert res.penalty < 0.9 * relax(xy, terms, max_iter=0).penalty

@@ -182,6 +182,7 @@ def minimize_lbfgs(
     gamma0: float = 0.25,
     callback: Callable[[int, float], bool | None] | None = None,
     gtol: float = 0.0,
+    first_move: float = 0.0,
 ) -> LbfgsResult:
     """Minimize ``fun`` from ``x0`` by L-BFGS.
 
@@ -195,6 +196,9 @@ def minimize_lbfgs(
         callback: called as ``callback(iteration, f)`` after every iteration; a true
             return value stops the run (status :data:`HALTED`), e.g. on a time budget.
         gtol: stop when the largest gradient component is at most ``gtol`` (0 = off).
+        first_move: the largest move of any coordinate on a steepest-descent step (the
+            first, and after a restart), in ``x``'s units (0 = off): the step is
+            ``min(gamma0, first_move / max|g|)``.
 
     Returns:
         :class:`LbfgsResult`.
@@ -213,7 +217,12 @@ def minimize_lbfgs(
     d = np.empty(N)
     x_new = np.empty(N)
     g_new = np.empty(N)
-    gamma = gamma0
+
+    def first_gamma(g: np.ndarray) -> float:
+        big = float(np.abs(g).max(initial=0.0))
+        return min(gamma0, first_move / big) if first_move > 0.0 and big > 0.0 else gamma0
+
+    gamma = first_gamma(g)
     history: list[float] = []
     message = f"reached max_iter = {max_iter}"
     status = MAX_ITER
@@ -226,7 +235,7 @@ def minimize_lbfgs(
             break
         gd = _two_loop(g, S, Y, rho, slots, gamma, d)
         if not gd < 0.0:  # not a descent direction: restart from steepest descent
-            slots, gamma = [], gamma0
+            slots, gamma = [], first_gamma(g)
             gd = _two_loop(g, S, Y, rho, slots, gamma, d)
         step = 1.0
         ok = False
