@@ -19,6 +19,7 @@ from optdot.relax.lowpass import (
     coarse_field,
     coverage_error,
     deposit_part,
+    gradient_at,
     live_potential,
 )
 from optdot.stages.settings import job_spacing
@@ -49,6 +50,39 @@ def _bincount_deposit(xy, weight, x0, y0, h, shape):
             w = (weight * wx * wy)[keep]
             out += np.bincount(cy * nx + cx, w, minlength=ny * nx)
     return out.reshape(ny, nx)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    m=st.integers(0, 200),
+    nx=st.integers(2, 9),
+    ny=st.integers(2, 9),
+    spill=st.floats(0.0, 3.0),
+    seed=st.integers(0, 2**31),
+)
+def test_the_gradient_sampled_at_points_is_numpys_gradient_interpolated(m, nx, ny, spill, seed):
+    """:func:`gradient_at` gives ``np.gradient`` interpolated by ``map_coordinates``
+    (linear, indices clamped), at points inside the grid, between its border cells'
+    centres and past them (a window's dots near or beyond its edge), to rounding; a
+    single-precision potential differenced in double."""
+    from scipy.ndimage import map_coordinates
+
+    rng = np.random.default_rng(seed)
+    phi = rng.normal(size=(ny, nx))
+    if seed % 2:  # a window's potential, solved in single precision
+        phi = phi.astype(np.float32)
+    hx, hy = 0.3, 0.2
+    row = rng.uniform(-spill, ny - 1 + spill, m)
+    col = rng.uniform(-spill, nx - 1 + spill, m)
+    row[: m // 5] = np.round(row[: m // 5])  # some on cell centres
+    uy, ux = np.gradient(phi.astype(np.float64), hy, hx)
+    want = np.column_stack([
+        map_coordinates(ux, [row, col], order=1, mode="nearest"),
+        map_coordinates(uy, [row, col], order=1, mode="nearest"),
+    ])  # fmt: skip
+    got = gradient_at(phi, hx, hy, row, col)
+    assert got.shape == (m, 2)
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
 
 
 @settings(max_examples=40, deadline=None)

@@ -109,23 +109,57 @@ def _axpy(x, a, d, out):  # pragma: no cover - compiled
 
 @nb.njit(parallel=True, cache=True)
 def _store(s_out, y_out, x_new, x, g_new, g):  # pragma: no cover - compiled
-    """``s <- x_new - x``, ``y <- g_new - g``; returns ``(s . y, y . y)``."""
+    """``s <- x_new - x``, ``y <- g_new - g``; returns ``(s . y, y . y)``.
+
+    Four partial sums of each per block, as in :func:`_update_dot`: with one running sum
+    each, the loop waited on its additions (13 ms at 2.4M entries against 4 ms for
+    :func:`_update_dot`, which moves 60 % of its bytes)."""
     n = x.shape[0]
     nblock = (n + BLOCK - 1) // BLOCK
     psy = np.zeros(nblock)
     pyy = np.zeros(nblock)
     for b in nb.prange(nblock):
-        sy = 0.0
-        yy = 0.0
-        for k in range(b * BLOCK, min((b + 1) * BLOCK, n)):
-            s = x_new[k] - x[k]
-            y = g_new[k] - g[k]
-            s_out[k] = s
-            y_out[k] = y
-            sy += s * y
-            yy += y * y
-        psy[b] = sy
-        pyy[b] = yy
+        lo = b * BLOCK
+        hi = min(lo + BLOCK, n)
+        a0 = a1 = a2 = a3 = 0.0  # s . y
+        b0 = b1 = b2 = b3 = 0.0  # y . y
+        k = lo
+        while k + 4 <= hi:
+            s0 = x_new[k] - x[k]
+            s1 = x_new[k + 1] - x[k + 1]
+            s2 = x_new[k + 2] - x[k + 2]
+            s3 = x_new[k + 3] - x[k + 3]
+            y0 = g_new[k] - g[k]
+            y1 = g_new[k + 1] - g[k + 1]
+            y2 = g_new[k + 2] - g[k + 2]
+            y3 = g_new[k + 3] - g[k + 3]
+            s_out[k] = s0
+            s_out[k + 1] = s1
+            s_out[k + 2] = s2
+            s_out[k + 3] = s3
+            y_out[k] = y0
+            y_out[k + 1] = y1
+            y_out[k + 2] = y2
+            y_out[k + 3] = y3
+            a0 += s0 * y0
+            a1 += s1 * y1
+            a2 += s2 * y2
+            a3 += s3 * y3
+            b0 += y0 * y0
+            b1 += y1 * y1
+            b2 += y2 * y2
+            b3 += y3 * y3
+            k += 4
+        while k < hi:
+            s0 = x_new[k] - x[k]
+            y0 = g_new[k] - g[k]
+            s_out[k] = s0
+            y_out[k] = y0
+            a0 += s0 * y0
+            b0 += y0 * y0
+            k += 1
+        psy[b] = (a0 + a1) + (a2 + a3)
+        pyy[b] = (b0 + b1) + (b2 + b3)
     sy = 0.0
     yy = 0.0
     for b in range(nblock):
