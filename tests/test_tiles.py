@@ -154,7 +154,8 @@ def test_varying_sizes_tile_with_the_same_bytes_on_two_workers_and_one(tiled_siz
     pairs = cKDTree(p.xy).query_pairs(reach, output_type="ndarray")
     dist = np.hypot(*(p.xy[pairs[:, 0]] - p.xy[pairs[:, 1]]).T)
     limit = 0.5 * (p.diameter[pairs[:, 0]] + p.diameter[pairs[:, 1]]) + job.optimize.gap
-    assert len(pairs) > 500 and (dist >= limit - 1e-9).all()
+    # (a few hundred pairs within reach of the largest dots: the check sees real pairs)
+    assert len(pairs) > 200 and (dist >= limit - 1e-9).all()
     manifest = open_dataset(two).manifest
     assert manifest["diameter_mm"] == float(np.median(p.diameter))
     assert manifest["uniform_diameter_mm"] is None
