@@ -52,15 +52,22 @@ def _bincount_deposit(xy, weight, x0, y0, h, shape):
     return out.reshape(ny, nx)
 
 
+def grid_cases(points: int, fewest_cells: int, spill: float):
+    """Hypothesis cases of points on a small grid: ``n`` points (up to ``points``), an
+    ``nx`` by ``ny`` grid (``fewest_cells`` to 9 a side), points reaching ``spill``
+    cells past it, a ``seed``."""
+    return given(
+        n=st.integers(0, points),
+        nx=st.integers(fewest_cells, 9),
+        ny=st.integers(fewest_cells, 9),
+        spill=st.floats(0.0, spill),
+        seed=st.integers(0, 2**31),
+    )
+
+
 @settings(max_examples=40, deadline=None)
-@given(
-    m=st.integers(0, 200),
-    nx=st.integers(2, 9),
-    ny=st.integers(2, 9),
-    spill=st.floats(0.0, 3.0),
-    seed=st.integers(0, 2**31),
-)
-def test_the_gradient_sampled_at_points_is_numpys_gradient_interpolated(m, nx, ny, spill, seed):
+@grid_cases(200, 2, 3.0)
+def test_the_gradient_sampled_at_points_is_numpys_gradient_interpolated(n, nx, ny, spill, seed):
     """:func:`gradient_at` gives ``np.gradient`` interpolated by ``map_coordinates``
     (linear, indices clamped), at points inside the grid, between its border cells'
     centres and past them (a window's dots near or beyond its edge), to rounding; a
@@ -72,27 +79,21 @@ def test_the_gradient_sampled_at_points_is_numpys_gradient_interpolated(m, nx, n
     if seed % 2:  # a window's potential, solved in single precision
         phi = phi.astype(np.float32)
     hx, hy = 0.3, 0.2
-    row = rng.uniform(-spill, ny - 1 + spill, m)
-    col = rng.uniform(-spill, nx - 1 + spill, m)
-    row[: m // 5] = np.round(row[: m // 5])  # some on cell centres
+    row = rng.uniform(-spill, ny - 1 + spill, n)
+    col = rng.uniform(-spill, nx - 1 + spill, n)
+    row[: n // 5] = np.round(row[: n // 5])  # some on cell centres
     uy, ux = np.gradient(phi.astype(np.float64), hy, hx)
     want = np.column_stack([
         map_coordinates(ux, [row, col], order=1, mode="nearest"),
         map_coordinates(uy, [row, col], order=1, mode="nearest"),
     ])  # fmt: skip
     got = gradient_at(phi, hx, hy, row, col)
-    assert got.shape == (m, 2)
+    assert got.shape == (n, 2)
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
 
 
 @settings(max_examples=40, deadline=None)
-@given(
-    n=st.integers(0, 300),
-    nx=st.integers(1, 9),
-    ny=st.integers(1, 9),
-    spill=st.floats(0.0, 2.0),
-    seed=st.integers(0, 2**31),
-)
+@grid_cases(300, 1, 2.0)
 def test_the_compiled_deposit_sums_as_numpy_does(n, nx, ny, spill, seed):
     """The compiled cloud-in-cell deposit gives numpy's sums bit for bit (the same order
     of additions), for dots inside the grid, on its border cells' outer halves and past
