@@ -205,9 +205,9 @@ def gradient_at(
     clamped to the grid, as ``scipy.ndimage.map_coordinates(..., order=1,
     mode="nearest")`` does, but differenced only at the four cells around each point,
     not over the whole grid (the tiles' correction samples nine windows a tile, each at
-    a quarter to all of the tile's dots: ``tests/test_lowpass.py`` holds it to numpy's
-    and scipy's). ``phi`` is ``[ny, nx]`` (float64, or float32: differenced in double
-    precision) with ``nx, ny >= 2``."""
+    a quarter to all of the tile's dots: ``tests/test_coarse_field.py`` holds it to
+    numpy's and scipy's). ``phi`` is ``[ny, nx]`` (float64, or float32: differenced in
+    double precision) with ``nx, ny >= 2``."""
     return _gradient_at(
         np.ascontiguousarray(phi), float(hx), float(hy),
         np.ascontiguousarray(row, dtype=np.float64), np.ascontiguousarray(col, dtype=np.float64),

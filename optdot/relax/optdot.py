@@ -101,7 +101,7 @@ def first_move(terms: PenaltyTerms, skin: float) -> float:
     skin of the median dot (``skin`` times its interaction radius).
 
     L-BFGS knows no scale before its first pair of steps. Its first trial along the
-    gradient, scaled by a fixed guess, moved dots up to 1 mm (20 radii) on the led sample
+    gradient, scaled by a fixed guess, moved dots up to 1 mm (20 radii) on the led map
     and was rejected three times; each trial moved so many dots past the Verlet skin that
     the list was rebuilt four times for one step (5 of a 1.2M-dot run's 15 rebuilds). A
     first step bounded by the skin is accepted at once, leaves the list built at the start
