@@ -135,7 +135,7 @@ def test_verlet_update_never_changes_a_list_it_handed_out():
 def test_counting_sort_in_parallel_ranges_is_the_stable_sort():
     """The cell sort split over index ranges gives what one serial stable sort gives:
     every cell's dots in index order, whatever the number of ranges."""
-    from optdot.spatial.cellgrid import _bin_points
+    from optdot.spatial.cellgrid import Workspace, bin_points
 
     rng = np.random.default_rng(5)
     n = 4 * 65536 + 17  # enough dots for four ranges
@@ -147,8 +147,9 @@ def test_counting_sort_in_parallel_ranges_is_the_stable_sort():
         (xy[:, 0] / cell).astype(int), nx - 1
     )
     want = np.argsort(cid, kind="stable")
-    for parts in (1, 2, 3, 4):
-        start, order, bx, by, br, cellmax = _bin_points(xy, reff, 0.0, 0.0, cell, nx, ny, parts)
+    ws = Workspace()  # kept arrays, written over by each sort: nothing of the last may stay
+    for parts in (1, 2, 3, 4, 2):
+        start, order, bx, by, br, cellmax = bin_points(xy, reff, 0.0, 0.0, cell, nx, ny, parts, ws)
         np.testing.assert_array_equal(order, want)
         np.testing.assert_array_equal(start, np.searchsorted(cid[want], np.arange(nx * ny + 1)))
         np.testing.assert_array_equal(bx, xy[want, 0])
@@ -180,7 +181,7 @@ def test_few_dots_far_apart_give_the_dense_grids_pairs_in_its_order(n, seed, spr
     x0, y0, cell, nx, ny = cellgrid._grid_shape(xy, cellgrid.cell_side(r, skin))
     assume(nx * ny > cellgrid.SPARSE_CELLS * n)  # the bisected path is the one taken
     ptr, nbr = neighbor_pairs(xy, r, skin)
-    dense_ptr, dense_nbr, _, _ = cellgrid._search(xy, r, skin, None, 8)
+    dense_ptr, dense_nbr, _, _, _, _ = cellgrid._search(xy, r, skin, None, 8)
     np.testing.assert_array_equal(ptr, dense_ptr)
     np.testing.assert_array_equal(nbr, dense_nbr)
     np.testing.assert_array_equal(csr_to_pairs(ptr, nbr), pairs_brute_force(xy, r, skin))
@@ -198,3 +199,36 @@ def test_the_search_compiles_once_for_one_radius_and_for_radii_per_dot():
     neighbor_grid(xy, np.full(500, 0.02)[::1].copy())
     radii = {sig[1] for sig in _pairs_csr.signatures}
     assert radii and all(not t.mutable for t in radii), radii
+
+
+@settings(max_examples=20, deadline=None)
+@given(
+    sizes=st.lists(st.integers(1, 12000), min_size=2, max_size=3),
+    seed=st.integers(0, 2**31),
+    per_dot=st.integers(1, 12),
+    skin=st.floats(0.0, 0.5),
+)
+def test_a_verlet_rebuild_lays_out_the_rows_as_the_block_split_does(sizes, seed, per_dot, skin):
+    """The search that splits rows into blocks while copying them (a Verlet list's
+    rebuild, into the memory of the last one) gives :meth:`PairList.from_csr`'s list of
+    the plain search exactly: the same pointers, rows, block ends and cross rows, also
+    when chunks overflow (a small ``per_dot``) and when the kept arrays held a larger or
+    smaller list before."""
+    from optdot.spatial.blocks import PairList
+    from optdot.spatial.cellgrid import Workspace, block_pairs, cell_side
+
+    rng = np.random.default_rng(seed)
+    ws = Workspace()
+    for n in sizes:
+        side = np.sqrt(n) * 0.05
+        xy = rng.random((n, 2)) * [side, side]
+        r = 0.02 * rng.uniform(0.8, 1.6, n)
+        cell = cell_side(r, skin)
+        got, grid = block_pairs(xy, r, skin, cell, per_dot, ws)
+        ptr, nbr, want_grid = neighbor_grid(xy, r, skin, cell, per_dot)
+        want = PairList.from_csr(ptr, nbr)
+        for name in ("ptr", "nbr", "mid", "cross", "skip", "ei", "ej"):
+            np.testing.assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
+        np.testing.assert_array_equal(grid.order, want_grid.order)
+        np.testing.assert_array_equal(grid.start, want_grid.start)
+        np.testing.assert_array_equal(grid.cellmax, want_grid.cellmax)

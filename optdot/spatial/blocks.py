@@ -66,6 +66,13 @@ class PairList:
     @classmethod
     def from_csr(cls, ptr: np.ndarray, nbr: np.ndarray) -> PairList:
         """Wrap a CSR half list from :func:`optdot.spatial.cellgrid.neighbor_pairs`."""
-        nbr2, mid, cross = _split_blocks(ptr, nbr)
+        return cls.from_split(ptr, *_split_blocks(ptr, nbr))
+
+    @classmethod
+    def from_split(
+        cls, ptr: np.ndarray, nbr: np.ndarray, mid: np.ndarray, cross: np.ndarray
+    ) -> PairList:
+        """A list whose rows are already laid out for the blocks (``nbr``, ``mid``,
+        ``cross`` as above), with no dot skipped and no extra pair."""
         none = np.zeros(0, np.int32)
-        return cls(ptr, nbr2, mid, np.zeros(len(ptr) - 1, np.bool_), cross, none, none)
+        return cls(ptr, nbr, mid, np.zeros(len(ptr) - 1, np.bool_), cross, none, none)

@@ -18,6 +18,8 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+from .blocks import BLOCK, PairList
+
 #: Most index ranges the counting sort splits the dots into (each holds a count per cell;
 #: the sort is stable, so its result is the same for any split).
 _BIN_PARTS = 4
@@ -39,8 +41,13 @@ def _cell_id(x, y, x0, y0, cell, nx, ny):  # pragma: no cover - compiled
 
 
 @nb.njit(parallel=True, cache=True)
-def _bin_points(xy, reff, x0, y0, cell, nx, ny, parts):  # pragma: no cover - compiled
-    """Counting sort of the dots into cells; returns cell starts and sorted copies.
+def _bin_points(
+    xy, reff, x0, y0, cell, nx, ny, parts, cid, at, start, order, bx, by, br, cellmax
+):  # pragma: no cover - compiled
+    """Counting sort of the dots into cells, written into the arrays given (any contents:
+    every entry is overwritten): ``cid`` ``[n]`` int64, ``at`` at least ``[parts *
+    ncell]`` int64, ``start`` ``[ncell + 1]`` int64, ``order`` ``[n]`` int32, the sorted
+    copies ``bx``, ``by``, ``br`` ``[n]`` and ``cellmax`` ``[ncell]``.
 
     The copies (index, x, y, radius in cell order) make every cell scan read contiguous
     memory, which is what the scan's speed depends on. The sort is stable (a cell's dots
@@ -50,16 +57,15 @@ def _bin_points(xy, reff, x0, y0, cell, nx, ny, parts):  # pragma: no cover - co
     """
     n = xy.shape[0]
     ncell = nx * ny
-    cid = np.empty(n, np.int64)
     for i in nb.prange(n):
         cid[i] = _cell_id(xy[i, 0], xy[i, 1], x0, y0, cell, nx, ny)
     parts = max(1, min(parts, n // 65536))
     step = (n + parts - 1) // parts
-    at = np.zeros((parts, ncell), np.int64)  # counts, then each range's next slot
+    at = at[: parts * ncell].reshape((parts, ncell))  # counts, then each range's next slot
     for p in nb.prange(parts):
+        at[p, :] = 0
         for i in range(p * step, min((p + 1) * step, n)):
             at[p, cid[i]] += 1
-    start = np.empty(ncell + 1, np.int64)
     running = 0
     for c in range(ncell):
         start[c] = running
@@ -68,10 +74,6 @@ def _bin_points(xy, reff, x0, y0, cell, nx, ny, parts):  # pragma: no cover - co
             at[p, c] = running
             running += m
     start[ncell] = running
-    order = np.empty(n, np.int32)
-    bx = np.empty(n)
-    by = np.empty(n)
-    br = np.empty(n)
     for p in nb.prange(parts):
         for i in range(p * step, min((p + 1) * step, n)):
             c = cid[i]
@@ -81,13 +83,57 @@ def _bin_points(xy, reff, x0, y0, cell, nx, ny, parts):  # pragma: no cover - co
             by[k] = xy[i, 1]
             br[k] = reff[i]
             at[p, c] = k + 1
-    cellmax = np.zeros(ncell)
     for c in nb.prange(ncell):
         m = 0.0
         for k in range(start[c], start[c + 1]):
             m = max(m, br[k])
         cellmax[c] = m
-    return start, order, bx, by, br, cellmax
+
+
+class Workspace:
+    """The arrays of a cell-grid search, kept from one search to the next: a Verlet list
+    rebuilt a dozen times over one relaxation writes every rebuild into the same memory.
+    Fresh arrays for each rebuild cost more than the search's own work on a virtual
+    machine, where every new page is a fault of ~5-13 µs (1.2M dots: 83 MB of new pages
+    a rebuild). What a search returns lives in these arrays until the next search with
+    the same workspace; ``Workspace(keep=False)`` hands out fresh arrays every time.
+    """
+
+    def __init__(self, keep: bool = True) -> None:
+        self.keep = keep
+        self._arrays: dict[str, np.ndarray] = {}
+
+    def take(self, name: str, size: int, dtype, spare: float = 1.0) -> np.ndarray:
+        """``[size]`` array of ``dtype`` (contents undefined): the kept one when it is
+        large enough, else a new one of ``size * spare`` entries (kept)."""
+        a = self._arrays.get(name)
+        if a is None or a.shape[0] < size or a.dtype != dtype:
+            a = np.empty(max(int(size * spare), size), dtype)
+            if self.keep:
+                self._arrays[name] = a
+        return a[:size]
+
+
+def bin_points(
+    xy: np.ndarray, reff: np.ndarray, x0: float, y0: float, cell: float, nx: int, ny: int,
+    parts: int, ws: Workspace | None = None,
+) -> tuple[np.ndarray, ...]:  # fmt: skip
+    """:func:`_bin_points` into ``ws``'s arrays (fresh ones without): ``(start [ncell +
+    1], order [n], bx [n], by [n], br [n], cellmax [ncell])``."""
+    ws = Workspace(keep=False) if ws is None else ws
+    n, ncell = xy.shape[0], nx * ny
+    out = (
+        ws.take("start", ncell + 1, np.int64),
+        ws.take("order", n, np.int32),
+        ws.take("bx", n, np.float64),
+        ws.take("by", n, np.float64),
+        ws.take("br", n, np.float64),
+        ws.take("cellmax", ncell, np.float64),
+    )
+    cid = ws.take("cid", n, np.int64)
+    at = ws.take("at", max(1, min(parts, n // 65536)) * ncell, np.int64)
+    _bin_points(xy, reff, x0, y0, cell, nx, ny, parts, cid, at, *out)
+    return out
 
 
 @nb.njit(cache=True)
@@ -177,18 +223,45 @@ def _pairs_sparse(xy, reff, grow, x0, y0, cell, nx, ny):  # pragma: no cover - c
     return ptr, nbr[: ptr[n]].copy()
 
 
+@nb.njit(cache=True, inline="always")
+def _put_row(i, src, lo, m, nbr, at, split, mid, has_cross):  # pragma: no cover - compiled
+    """Row i's ``m`` partners ``src[lo:lo + m]`` written to ``nbr`` from ``at``; with
+    ``split``, its partners in i's block of :data:`~optdot.spatial.blocks.BLOCK` first,
+    then the others (each in scan order), the end of the first kept in ``mid[i]``."""
+    if not split:
+        nbr[at : at + m] = src[lo : lo + m]
+        return
+    b = i // BLOCK
+    k = at
+    for q in range(lo, lo + m):
+        if src[q] // BLOCK == b:
+            nbr[k] = src[q]
+            k += 1
+    mid[i] = k
+    for q in range(lo, lo + m):
+        if src[q] // BLOCK != b:
+            nbr[k] = src[q]
+            k += 1
+    has_cross[i] = k > mid[i]
+
+
 @nb.njit(parallel=True, cache=True)
-def _pairs_csr(xy, reff, grow, x0, y0, cell, nx, ny, per_dot, parts):  # pragma: no cover - compiled
-    """One scan per dot into per-chunk segments of ``per_dot * _CHUNK`` slots, then one
-    copy into the CSR arrays; a chunk whose segment overflowed is scanned again."""
-    start, order, bx, by, br, cellmax = _bin_points(xy, reff, x0, y0, cell, nx, ny, parts)
+def _pairs_csr(
+    xy, reff, grow, x0, y0, cell, nx, ny, per_dot, split, bins, seg, ptr, nbr, mid, has_cross
+):  # pragma: no cover - compiled
+    """One scan per dot into per-chunk segments of ``per_dot * _CHUNK`` slots (``seg``,
+    at least that many a chunk), then one copy into the CSR arrays; a chunk whose segment
+    overflowed is scanned again. ``bins``: :func:`_bin_points`'s sorted dots. ``ptr``
+    ``[n + 1]`` is written; ``nbr`` is used when large enough, else a new one is made;
+    with ``split`` each row is laid out for the block kernels (:func:`_put_row`, ``mid``
+    and ``has_cross`` ``[n]`` written). Returns ``(nbr [K], overflowed)``."""
+    start, order, bx, by, br, cellmax = bins
     no_keys = np.zeros(0, np.int64)  # a dense grid: rows from ``start``
     n = xy.shape[0]
     nchunk = (n + _CHUNK - 1) // _CHUNK
     cap = per_dot * _CHUNK
-    seg = np.empty(nchunk * cap, np.int32)
-    counts = np.zeros(n + 1, np.int64)
     over = np.zeros(nchunk, np.bool_)
+    ptr[0] = 0
     for c in nb.prange(nchunk):
         row = np.empty(256, np.int32)
         pos = c * cap
@@ -197,27 +270,41 @@ def _pairs_csr(xy, reff, grow, x0, y0, cell, nx, ny, per_dot, parts):  # pragma:
             m = _scan(
                 i, xy, reff, grow, start, no_keys, order, bx, by, br, x0, y0, cell, nx, ny, row
             )
-            counts[i + 1] = m
+            ptr[i + 1] = m
             if m >= row.shape[0] or pos + m > end:
                 over[c] = True
             elif not over[c]:
                 seg[pos : pos + m] = row[:m]
                 pos += m
-    ptr = np.cumsum(counts)
-    nbr = np.empty(ptr[n], np.int32)
+    for i in range(n):
+        ptr[i + 1] += ptr[i]
+    if ptr[n] > nbr.shape[0]:
+        nbr = np.empty(ptr[n], np.int32)
+    else:
+        nbr = nbr[: ptr[n]]
     for c in nb.prange(nchunk):
         a = c * _CHUNK
         b = min(a + _CHUNK, n)
         if not over[c]:
-            nbr[ptr[a] : ptr[b]] = seg[c * cap : c * cap + ptr[b] - ptr[a]]
+            lo = c * cap
+            if not split:
+                nbr[ptr[a] : ptr[b]] = seg[lo : lo + ptr[b] - ptr[a]]
+                continue
+            for i in range(a, b):
+                m = ptr[i + 1] - ptr[i]
+                _put_row(i, seg, lo, m, nbr, ptr[i], split, mid, has_cross)
+                lo += m
             continue
-        row = np.empty(counts[a + 1 : b + 1].max() + 1, np.int32)
+        big = 0
+        for i in range(a, b):
+            big = max(big, ptr[i + 1] - ptr[i])
+        row = np.empty(big + 1, np.int32)
         for i in range(a, b):
             m = _scan(
                 i, xy, reff, grow, start, no_keys, order, bx, by, br, x0, y0, cell, nx, ny, row
             )
-            nbr[ptr[i] : ptr[i] + m] = row[:m]
-    return ptr, nbr, start, order, cellmax, over.any()
+            _put_row(i, row, 0, m, nbr, ptr[i], split, mid, has_cross)
+    return nbr, over.any()
 
 
 @dataclass
@@ -282,31 +369,49 @@ def _search(
     cell: float | None,
     per_dot: int,
     sparse: bool = False,
-) -> tuple[np.ndarray, np.ndarray, CellGrid | None, bool]:
-    """(ptr, nbr, grid, overflow) of the cell-grid search (see :func:`neighbor_list`).
-    With ``sparse``, a grid of more than :data:`SPARSE_CELLS` cells a dot is searched by
-    bisection (:func:`_pairs_sparse`, the same pairs in the same order) and no grid is
-    returned."""
+    ws: Workspace | None = None,
+    split: bool = False,
+) -> tuple[np.ndarray, np.ndarray, CellGrid | None, bool, np.ndarray, np.ndarray]:
+    """(ptr, nbr, grid, overflow, mid, has_cross) of the cell-grid search (see
+    :func:`neighbor_list`). With ``sparse``, a grid of more than :data:`SPARSE_CELLS`
+    cells a dot is searched by bisection (:func:`_pairs_sparse`, the same pairs in the
+    same order) and no grid is returned. With ``split``, rows are laid out for the block
+    kernels (same-block partners first, ``mid`` ``[n]`` int64 their end, ``has_cross``
+    ``[n]`` bool: :meth:`~optdot.spatial.blocks.PairList.from_csr`'s layout); else
+    ``mid`` and ``has_cross`` are empty. The arrays returned live in ``ws`` when given."""
     xy = np.ascontiguousarray(xy, dtype=np.float64)
     n = xy.shape[0]
     reff = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, np.float64), (n,)))
     # read-only whether a view (radii per dot) or a copy (one radius): one signature for
     # the compiled search, not two (each took numba 7 s to compile on a first run)
     reff.flags.writeable = False
+    mid, has_cross = np.zeros(n if split else 0, np.int64), np.zeros(n if split else 0, bool)
     if n == 0:
         empty = CellGrid(
             0.0, 0.0, 1.0, 1, 1, np.zeros(2, np.int64), np.zeros(0, np.int32), np.zeros(1)
         )
-        return np.zeros(1, np.int64), np.zeros(0, np.int32), empty, False
+        return np.zeros(1, np.int64), np.zeros(0, np.int32), empty, False, mid, has_cross
     grow = 1.0 + float(skin)
     x0, y0, cell, nx, ny = _grid_shape(xy, cell_side(reff, skin) if cell is None else cell)
     if sparse and nx * ny > SPARSE_CELLS * n:  # a few dots far apart (a Verlet list's movers)
         ptr, nbr = _pairs_sparse(xy, reff, grow, x0, y0, cell, nx, ny)
-        return ptr, nbr, None, False
-    ptr, nbr, start, order, cellmax, over = _pairs_csr(
-        xy, reff, grow, x0, y0, cell, nx, ny, max(int(per_dot), 1), bin_parts()
+        return ptr, nbr, None, False, mid, has_cross
+    fresh = ws is None
+    ws = Workspace(keep=False) if ws is None else ws
+    bins = bin_points(xy, reff, x0, y0, cell, nx, ny, bin_parts(), ws)
+    per = max(int(per_dot), 1)
+    seg = ws.take("seg", (n + _CHUNK - 1) // _CHUNK * per * _CHUNK, np.int32)
+    ptr = ws.take("ptr", n + 1, np.int64)
+    # a kept list's room for the pairs: the search's own guess; a fresh one is made to size
+    nbr = np.zeros(0, np.int32) if fresh else ws.take("nbr", per * n, np.int32)
+    if split:
+        mid, has_cross = ws.take("mid", n, np.int64), ws.take("has_cross", n, np.bool_)
+    nbr, over = _pairs_csr(
+        xy, reff, grow, x0, y0, cell, nx, ny, per, split, bins, seg, ptr, nbr, mid, has_cross
     )
-    return ptr, nbr, CellGrid(x0, y0, cell, nx, ny, start, order, cellmax), bool(over)
+    start, order, _, _, _, cellmax = bins
+    grid = CellGrid(x0, y0, cell, nx, ny, start, order, cellmax)
+    return ptr, nbr, grid, bool(over), mid, has_cross
 
 
 @dataclass(frozen=True, eq=False)
@@ -368,7 +473,7 @@ def neighbor_list(
     r = np.broadcast_to(np.asarray(radius, np.float64), (n,))
     none = np.zeros(0, np.int32)
     if halo_xy is None or len(halo_xy) == 0:
-        ptr, nbr, grid, over = _search(xy, r, skin, cell, per_dot)
+        ptr, nbr, grid, over, _, _ = _search(xy, r, skin, cell, per_dot)
         return NeighborList(ptr, nbr, none, none, over, grid)
     halo_xy = np.ascontiguousarray(halo_xy, dtype=np.float64).reshape(-1, 2)
     if halo_radius is None:
@@ -376,7 +481,7 @@ def neighbor_list(
             raise ValueError("halo_radius is required when radius is per dot")
         halo_radius = radius
     hr = np.broadcast_to(np.asarray(halo_radius, np.float64), (len(halo_xy),))
-    ptr, nbr, grid, over = _search(
+    ptr, nbr, grid, over, _, _ = _search(
         np.concatenate([xy, halo_xy]), np.concatenate([r, hr]), skin, cell, per_dot
     )
     row = np.repeat(np.arange(len(ptr) - 1, dtype=np.int64), np.diff(ptr))
@@ -413,8 +518,24 @@ def neighbor_grid(
     ``per_dot`` is the expected partners per dot (a guess: more costs memory, fewer a
     second scan of the chunks that overflow; the result is the same).
     """
-    ptr, nbr, grid, _ = _search(xy, radius, skin, cell, per_dot)
+    ptr, nbr, grid, _, _, _ = _search(xy, radius, skin, cell, per_dot)
     return ptr, nbr, grid
+
+
+def block_pairs(
+    xy: np.ndarray,
+    radius: np.ndarray,
+    skin: float,
+    cell: float,
+    per_dot: int,
+    ws: Workspace,
+) -> tuple[PairList, CellGrid]:
+    """:func:`neighbor_grid`'s pairs laid out for the block kernels, as
+    :meth:`PairList.from_csr <optdot.spatial.blocks.PairList.from_csr>` would lay them out
+    (the same rows in the same order), written while copying the search's rows: no
+    second pass, no second list. Both results live in ``ws`` until its next search."""
+    ptr, nbr, grid, _, mid, has_cross = _search(xy, radius, skin, cell, per_dot, ws=ws, split=True)
+    return PairList.from_split(ptr, nbr, mid, np.flatnonzero(has_cross)), grid
 
 
 def neighbor_pairs(
@@ -431,7 +552,7 @@ def neighbor_pairs(
         ``(ptr, nbr)``: CSR half list, ``ptr`` ``[n + 1]`` int64, ``nbr`` ``[K]`` int32;
         every unordered pair appears once.
     """
-    ptr, nbr, _, _ = _search(xy, radius, skin, None, 8, sparse=True)
+    ptr, nbr, _, _, _, _ = _search(xy, radius, skin, None, 8, sparse=True)
     return ptr, nbr
 
 

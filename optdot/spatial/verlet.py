@@ -2,7 +2,8 @@
 
 The search itself (:mod:`optdot.spatial.cellgrid`) is a pure function; this module
 decides when to call it. Each :meth:`VerletList.update` returns a fresh
-:class:`~optdot.spatial.blocks.PairList` and never changes one it handed out before.
+:class:`~optdot.spatial.blocks.PairList`; one handed out before stays as it was until the
+next full rebuild, which writes the new list into the same memory.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import numba as nb
 import numpy as np
 
 from .blocks import PairList
-from .cellgrid import CellGrid, cell_side, neighbor_grid, neighbor_pairs
+from .cellgrid import CellGrid, Workspace, block_pairs, cell_side, neighbor_pairs
 
 
 @nb.njit(cache=True)
@@ -173,16 +174,20 @@ class VerletList:
         self._is_mover = np.zeros(0, np.bool_)
         self.rebuilds = 0
         self.n_movers = 0
+        # every rebuild writes into the last one's memory (:class:`.cellgrid.Workspace`)
+        self._ws = Workspace()
 
     def _rebuild(self, xy: np.ndarray) -> None:
-        # guess partners per dot from the last build (+25 %); drop the old list first so
-        # the two never sit in memory together
+        # guess partners per dot from the last build (+25 %); the new list is written
+        # over the old one, which nothing uses past this point
         per_dot = 8 if self.pairs is None else 2 + 5 * len(self.pairs.nbr) // (4 * len(xy))
         self.pairs = self.grid = None
-        ptr, nbr, self.grid = neighbor_grid(xy, self.reff, self.skin, self.cell, per_dot)
-        self.pairs = PairList.from_csr(ptr, nbr)
-        self._is_mover = np.zeros(len(xy), np.bool_)
-        self.ref = xy.copy()
+        self.pairs, self.grid = block_pairs(xy, self.reff, self.skin, self.cell, per_dot, self._ws)
+        if self.ref is None or self.ref.shape != xy.shape:
+            self.ref = np.empty_like(xy)
+            self._is_mover = np.zeros(len(xy), np.bool_)
+        np.copyto(self.ref, xy)
+        self._is_mover[:] = False
         self.n_movers = 0
         self.rebuilds += 1
 
@@ -190,7 +195,8 @@ class VerletList:
         """The pair list valid at positions ``xy`` (``[n, 2]`` mm).
 
         Returns a new :class:`PairList` whenever its contents change; a list returned
-        earlier is never modified (its arrays may be shared with the new one)."""
+        earlier is not modified until the next full rebuild writes over it (its arrays
+        may be shared with the new one)."""
         if self.pairs is None:
             self._rebuild(xy)
         new = _new_movers(xy, self.ref, self.limit, self._is_mover)
