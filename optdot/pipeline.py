@@ -18,7 +18,7 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -42,13 +42,14 @@ from .preflight import (
     check_job,
     use_tiles,
 )
-from .quality.gate import QAResult, caps_check, run_qa
-from .quality.provenance import mask_lines, provenance
 from .relax.formulation import Formulation
 from .relax.optdot import Progress
 from .runtime.memory import check_memory
 from .tiled import Announce, generate_tiled
 from .tiling.run import TileProgress
+
+if TYPE_CHECKING:  # QA (scipy.spatial among it) is loaded by the commands that judge
+    from .quality.gate import QAResult
 
 __all__ = [
     "MAX_RANDOM_FILL",
@@ -280,6 +281,9 @@ def qa(
         view: overrides of the visibility check, keys of :class:`QAParams`
             (``view``, ``view_distance``, ``view_luminance``, ``psf``, ``max_jnd``).
     """
+    from .quality.gate import caps_check, run_qa
+    from .quality.provenance import provenance
+
     dots = pattern if pattern is not None else dataset
     if dots is None:
         raise ValueError("qa needs the dots")
@@ -398,6 +402,7 @@ def export(
                 write_reports(result, reports, title)
         raise QAGateError(result)
     from .exporters import ExportOptions
+    from .quality.provenance import mask_lines
 
     options = replace(options or ExportOptions(), provenance=mask_lines(result.provenance))
     done: list[tuple[str, Path, str]] = []

@@ -1,3 +1,6 @@
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -88,3 +91,19 @@ def test_same_bytes_on_one_and_two_threads(method):
     assert one.n > 8192
     assert pattern_csv_bytes(one) == pattern_csv_bytes(two)
     assert one.xy.tobytes() == two.xy.tobytes()
+
+
+def test_the_generate_command_loads_only_what_generating_needs():
+    """Imports are a quarter of a small job's command: QA (scipy.spatial among it),
+    scipy's sparse solvers (a map with dead cells), Dask, pyarrow, matplotlib and the
+    mask writers load only in the commands and runs that use them."""
+    heavy = (
+        "optdot.quality.gate", "scipy.spatial", "scipy.sparse", "dask", "distributed",
+        "pyarrow", "matplotlib", "gdstk", "ezdxf",
+    )  # fmt: skip
+    code = (
+        "import sys, optdot.cli.main, optdot.pipeline, optdot.stages, optdot.relax.lowpass; "
+        f"print(sorted(m for m in {heavy!r} if m in sys.modules))"
+    )
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert run.stdout.strip() == "[]", run.stdout

@@ -9,14 +9,17 @@ edge index the optimizer measures distances with in :mod:`optdot.geometry.edges`
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse
 import shapely
 from shapely.geometry import MultiPolygon, Polygon
 from shapely.geometry.polygon import orient
 
 from ..errors import GeometryError
+
+if TYPE_CHECKING:  # scipy.sparse costs ~0.15 s of a command's start: loaded when used
+    import scipy.sparse
 
 #: Default flattening tolerance of arcs and curves, mm (1 µm).
 DEFAULT_TOLERANCE = 0.001
@@ -166,6 +169,8 @@ def _deposit_weights(n: int, k: int) -> scipy.sparse.csr_matrix:
     """``[n, n k]`` sparse: the cloud-in-cell weights of ``n k`` sub-cell centres (``k`` a
     cell) to the ``n`` cell centres of one axis, all weight kept past the outermost
     centres."""
+    import scipy.sparse
+
     u = (np.arange(n * k) + 0.5) / k - 0.5
     i = np.floor(u).astype(np.int64)
     t = u - i

@@ -55,7 +55,6 @@ import numba as nb
 import numpy as np
 from scipy.fft import dctn, idctn, next_fast_len
 from scipy.ndimage import gaussian_filter, label, map_coordinates
-from scipy.sparse.linalg import LinearOperator, cg
 
 from ..geometry.density import DensityMap
 from ..geometry.domain import Domain
@@ -264,6 +263,8 @@ def live_potential(a: np.ndarray, live: np.ndarray, hx: float, hy: float) -> np.
     (:func:`neumann_potential`) when every cell is live; else conjugate gradients on the
     live cells' 5-point Laplacian, preconditioned by that transform (exact but for the
     faces to dead cells, so a few tens of iterations; at most :data:`CG_ITER`)."""
+    from scipy.sparse.linalg import LinearOperator, cg  # loaded when a map has dead cells
+
     if live.all():
         return neumann_potential(a, hx, hy)
     ny, nx = a.shape
