@@ -4,7 +4,15 @@ second) answered as one at any later point: ``optdot: interrupted``, exit 130.
 
 While the modules load, a signal only sets the stop flag (:mod:`optdot.runtime.stop`):
 raised as an exception inside a library's import, an interrupt was swallowed there (the
-run went on) or left CPython killing itself with SIGINT at exit."""
+run went on) or left CPython killing itself with SIGINT at exit.
+
+Before numpy loads, the command turns off numpy's request for transparent huge pages
+(``NUMPY_MADVISE_HUGEPAGE=0``, for itself and the workers it starts; a value the user set
+is kept). numpy asks for them on every array of 4 MB or more, and where the kernel
+defragments synchronously for such requests (``transparent_hugepage/defrag`` =
+``madvise``, a common default) a first touch can stall on compaction: the 1.2M-dot map in
+one process spent 2.8-3.1 s in the kernel against 1.7-2.0 s without, 19.6 against 18.9 s
+in all (medians of 4, alternated; BENCHMARKS.md, session 29; numpy issue 31590)."""
 
 from __future__ import annotations
 
@@ -19,9 +27,16 @@ def _note(signum, frame) -> None:
     mark_interrupted()
 
 
+def process_defaults() -> None:
+    """Settings the command's process and its workers start with, unless set already:
+    ``NUMPY_MADVISE_HUGEPAGE=0`` (see the module doc). Read by numpy when it loads."""
+    os.environ.setdefault("NUMPY_MADVISE_HUGEPAGE", "0")
+
+
 def run() -> None:
     """Load the command line and run it; the command's own handlers take over from here
     (:func:`optdot.cli.app.user_errors`), and see a signal that came before them."""
+    process_defaults()
     for s in (signal.SIGINT, signal.SIGTERM):
         signal.signal(s, _note)
     from .cli import main

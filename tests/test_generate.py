@@ -107,3 +107,28 @@ def test_the_generate_command_loads_only_what_generating_needs():
     )
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert run.stdout.strip() == "[]", run.stdout
+
+
+@pytest.mark.parametrize(("preset", "huge"), [(None, "False"), ("1", "True")])
+def test_the_command_asks_numpy_for_no_huge_pages_unless_the_user_did(preset, huge):
+    """numpy's request for transparent huge pages stalls large runs on kernel compaction
+    (optdot.console): the command turns it off before numpy loads, for itself and its
+    workers; a NUMPY_MADVISE_HUGEPAGE the user set is kept."""
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k != "NUMPY_MADVISE_HUGEPAGE"}
+    if preset is not None:
+        env["NUMPY_MADVISE_HUGEPAGE"] = preset
+    code = (
+        "import os, sys\n"
+        "sys.argv = ['optdot', '--version']\n"
+        "from optdot import console\n"
+        "try:\n    console.run()\nexcept SystemExit:\n    pass\n"
+        "import numpy\n"
+        "print(numpy._core.multiarray._get_madvise_hugepage(), "
+        "os.environ['NUMPY_MADVISE_HUGEPAGE'])"
+    )
+    run = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env
+    )
+    assert run.stdout.split()[-2:] == [huge, preset or "0"], run.stdout
