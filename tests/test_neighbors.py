@@ -232,3 +232,27 @@ def test_a_verlet_rebuild_lays_out_the_rows_as_the_block_split_does(sizes, seed,
         np.testing.assert_array_equal(grid.order, want_grid.order)
         np.testing.assert_array_equal(grid.start, want_grid.start)
         np.testing.assert_array_equal(grid.cellmax, want_grid.cellmax)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    n=st.integers(1, 3000),
+    seed=st.integers(0, 2**31),
+    scale=st.floats(1e-3, 1e3),
+    strided=st.booleans(),
+)
+def test_the_compiled_bounding_box_is_numpys(n, seed, scale, strided):
+    """:func:`optdot.spatial.window.bounds` (compiled: numpy's axis-0 min and max of an
+    ``[n, 2]`` array are ~80x slower) gives numpy's box exactly, for any layout."""
+    import pytest
+
+    from optdot.spatial.window import bounds
+
+    rng = np.random.default_rng(seed)
+    xy = (rng.random((n, 4 if strided else 2)) - 0.3) * scale
+    if strided:
+        xy = xy[:, ::2]  # a view with a stride, as a column slice of a wider array
+    want = (*xy.min(axis=0), *xy.max(axis=0))
+    assert bounds(xy) == want
+    with pytest.raises(ValueError):
+        bounds(np.zeros((0, 2)))

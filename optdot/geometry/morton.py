@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..spatial.window import bounds
+
 
 def spatial_order(xy: np.ndarray) -> np.ndarray:
     """Permutation sorting points along a Morton (Z-order) curve, ``[n]`` int64.
@@ -13,8 +15,9 @@ def spatial_order(xy: np.ndarray) -> np.ndarray:
     xy = np.asarray(xy, dtype=np.float64)
     if len(xy) == 0:
         return np.zeros(0, np.int64)
-    lo = xy.min(axis=0)
-    span = max(float((xy.max(axis=0) - lo).max()), 1e-300)
+    x0, y0, x1, y1 = bounds(xy)
+    lo = np.array([x0, y0])
+    span = max(float((np.array([x1, y1]) - lo).max()), 1e-300)
     q = np.minimum(((xy - lo) / span * 65535.0).astype(np.uint64), 65535)
     code = _spread(q[:, 0]) | (_spread(q[:, 1]) << np.uint64(1))
     return np.argsort(code, kind="stable")

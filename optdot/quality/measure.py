@@ -48,7 +48,7 @@ from ..geometry.orientation import Orientation, axis
 from ..geometry.shapes import CIRCLE, Footprints
 from ..pattern import coverage_pixels
 from ..runtime.memory import available_bytes
-from ..spatial.window import in_rect
+from ..spatial.window import bounds, in_rect
 from .metrics import (
     PatchGrid,
     SquareGrid,
@@ -160,7 +160,7 @@ def _first_pass(
         if not len(xy):
             continue
         d = dots.diameter
-        f.boxes[k] = (*xy.min(axis=0), *xy.max(axis=0))
+        f.boxes[k] = bounds(xy)
         if dots.angle is not None:
             _add_angles(f, xy, dots.angle, field)
         if uniform is None:

@@ -19,6 +19,7 @@ from scipy.spatial import cKDTree
 
 from ..geometry.density import DensityMap
 from ..geometry.domain import polygon_cell_fractions
+from ..spatial.window import bounds
 
 
 def psi6(xy: np.ndarray, tree: cKDTree | None = None) -> np.ndarray:
@@ -46,7 +47,8 @@ def patch_coherence(
     """Mean over ``patch``-mm squares of |mean psi6| (high = hexagonal grains)."""
     if len(xy) == 0:
         return 0.0
-    grid = PatchGrid.over(xy.min(axis=0), xy.max(axis=0), patch)
+    x0, y0, x1, y1 = bounds(xy)
+    grid = PatchGrid.over(np.array([x0, y0]), np.array([x1, y1]), patch)
     sums = grid.sums(xy, psi)
     return grid.coherence(*sums, total=complex(psi.sum()), n=len(xy), min_dots=min_dots)
 

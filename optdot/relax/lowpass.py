@@ -58,6 +58,7 @@ from scipy.ndimage import gaussian_filter, label, map_coordinates
 
 from ..geometry.density import DensityMap
 from ..geometry.domain import Domain
+from ..spatial.window import bounds
 
 #: Grid cells at most (memory: a few float64 arrays of this size).
 MAX_CELLS = 1 << 25
@@ -477,7 +478,8 @@ def deposit_part(xy: np.ndarray, weight: np.ndarray, lattice: Lattice) -> Lattic
     xy = np.column_stack([
         np.clip(xy[:, 0], g.x0, x1 - edge), np.clip(xy[:, 1], g.y0, y1 - edge),
     ])  # fmt: skip
-    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    lo0, lo1, hi0, hi1 = bounds(xy)
+    lo, hi = (lo0, lo1), (hi0, hi1)
     # one cell past the cells each dot's cloud reaches: no weight is clipped at a part's
     # side unless that side is the lattice's own (where a full deposit clips it too)
     i0 = max(0, int(math.floor((lo[0] - g.x0) / g.hx)) - 1)

@@ -19,6 +19,7 @@ import numba as nb
 import numpy as np
 
 from .blocks import BLOCK, PairList
+from .window import bounds
 
 #: Most index ranges the counting sort splits the dots into (each holds a count per cell;
 #: the sort is stable, so its result is the same for any split).
@@ -330,18 +331,6 @@ class CellGrid:
     cellmax: np.ndarray
 
 
-@nb.njit(cache=True)
-def _bounds(xy):  # pragma: no cover - compiled
-    x0 = x1 = xy[0, 0]
-    y0 = y1 = xy[0, 1]
-    for i in range(1, xy.shape[0]):
-        x0 = min(x0, xy[i, 0])
-        x1 = max(x1, xy[i, 0])
-        y0 = min(y0, xy[i, 1])
-        y1 = max(y1, xy[i, 1])
-    return x0, y0, x1, y1
-
-
 #: Cells a dot beyond which :func:`neighbor_pairs` bisects the dots' cell ids instead of
 #: binning them into the whole grid (whose arrays and loops are the size of the grid:
 #: the movers of a large panel's Verlet list spread over ~10^7 cells).
@@ -354,7 +343,7 @@ def cell_side(reff: np.ndarray, skin: float) -> float:
 
 
 def _grid_shape(xy: np.ndarray, cell: float) -> tuple[float, float, float, int, int]:
-    x0, y0, x1, y1 = _bounds(xy)
+    x0, y0, x1, y1 = bounds(xy)
     # never so small a cell that the grid explodes
     cell = max(cell, max(x1 - x0, y1 - y0) / 8192.0, np.finfo(float).tiny)
     nx = int((x1 - x0) / cell) + 1

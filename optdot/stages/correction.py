@@ -39,6 +39,7 @@ from ..relax.lowpass import (
 from ..relax.optdot import relax_staged
 from ..relax.result import RelaxResult
 from ..sampling.initial import Rect
+from ..spatial.window import bounds, grown
 from .settings import areas, rule_diameters, stage_settings
 from .walls import with_phantoms
 
@@ -249,8 +250,7 @@ def correction_passes(job, form, res, xy0, rho, frozen, diameters, phantom):
     area, spacing = areas(job, rho[real], None if diameters is None else diameters[real])
     # the dots' box grown by a spacing (clipped to the map's): the target must cover the
     # strip between the outermost centres and the walls, whose coverage they carry
-    lo, hi = xy0[real].min(axis=0) - spacing, xy0[real].max(axis=0) + spacing
-    window = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+    window = grown(bounds(xy0[real]), spacing)
     s = stage_settings(job)
     settings = dataclasses.replace(s.relax, max_iter=form.lowpass_iter)
     sigmas = form.lowpass_sigmas()

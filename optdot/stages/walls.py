@@ -11,6 +11,7 @@ import numpy as np
 from ..config.job import Job
 from ..relax.formulation import Formulation
 from ..sampling.phantoms import phantom_dots
+from ..spatial.window import bounds, grown, in_rect
 
 
 def with_phantoms(job, form, xy0, rho, start, frozen, diameters):
@@ -86,7 +87,5 @@ def phantoms_near(job: Job, form: Formulation, xy0: np.ndarray):
     its window, so they do not depend on the tiling."""
     reach = phantom_reach(job, form)
     xy, rho, d = job_phantoms(job, reach)
-    lo = xy0.min(axis=0) - reach
-    hi = xy0.max(axis=0) + reach
-    m = (xy[:, 0] >= lo[0]) & (xy[:, 0] <= hi[0]) & (xy[:, 1] >= lo[1]) & (xy[:, 1] <= hi[1])
+    m = in_rect(xy, grown(bounds(xy0), reach))
     return xy[m], rho[m], d[m]
