@@ -94,22 +94,23 @@ def _bin_points(
 class Workspace:
     """The arrays of a cell-grid search, kept from one search to the next: a Verlet list
     rebuilt a dozen times over one relaxation writes every rebuild into the same memory.
-    Fresh arrays for each rebuild cost more than the search's own work on a virtual
-    machine, where every new page is a fault of ~5-13 µs (1.2M dots: 83 MB of new pages
-    a rebuild). What a search returns lives in these arrays until the next search with
-    the same workspace; ``Workspace(keep=False)`` hands out fresh arrays every time.
+    Fresh arrays made every rebuild touch fresh pages (1.2M dots: 83 MB a rebuild, 211k
+    page faults over a run, 10k now); in isolation a rebuild takes 226-286 ms against
+    242-332 ms (BENCHMARKS.md, session 29). What a search returns lives in these arrays
+    until the next search with the same workspace; ``Workspace(keep=False)`` hands out
+    fresh arrays every time.
     """
 
     def __init__(self, keep: bool = True) -> None:
         self.keep = keep
         self._arrays: dict[str, np.ndarray] = {}
 
-    def take(self, name: str, size: int, dtype, spare: float = 1.0) -> np.ndarray:
+    def take(self, name: str, size: int, dtype) -> np.ndarray:
         """``[size]`` array of ``dtype`` (contents undefined): the kept one when it is
-        large enough, else a new one of ``size * spare`` entries (kept)."""
+        large enough, else a new one (kept when the workspace keeps its arrays)."""
         a = self._arrays.get(name)
         if a is None or a.shape[0] < size or a.dtype != dtype:
-            a = np.empty(max(int(size * spare), size), dtype)
+            a = np.empty(size, dtype)
             if self.keep:
                 self._arrays[name] = a
         return a[:size]
