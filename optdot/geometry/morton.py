@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..spatial.window import bounds
-
 
 def spatial_order(xy: np.ndarray) -> np.ndarray:
     """Permutation sorting points along a Morton (Z-order) curve, ``[n]`` int64.
@@ -15,9 +13,11 @@ def spatial_order(xy: np.ndarray) -> np.ndarray:
     xy = np.asarray(xy, dtype=np.float64)
     if len(xy) == 0:
         return np.zeros(0, np.int64)
-    x0, y0, x1, y1 = bounds(xy)
-    lo = np.array([x0, y0])
-    span = max(float((np.array([x1, y1]) - lo).max()), 1e-300)
+    # column by column: numpy's min and max along the first axis of an [n, 2] array walk
+    # it with a stride of two, 30x slower (optdot.spatial.window.bounds)
+    x, y = xy[:, 0], xy[:, 1]
+    lo = np.array([x.min(), y.min()])
+    span = max(float((np.array([x.max(), y.max()]) - lo).max()), 1e-300)
     q = np.minimum(((xy - lo) / span * 65535.0).astype(np.uint64), 65535)
     code = _spread(q[:, 0]) | (_spread(q[:, 1]) << np.uint64(1))
     return np.argsort(code, kind="stable")
