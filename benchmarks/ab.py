@@ -7,7 +7,10 @@ temporary git worktrees, warms each one's numba cache, then alternates old/new r
 ``generate()`` in fresh child processes, ``--rounds`` times. Each run prints the
 in-process timings (initial dots, relaxation, guarantee pass, total; imports excluded),
 then the medians. Comparing runs made minutes apart on this machine is meaningless; runs
-made in alternation are not.
+made in alternation are not. The children call ``generate()``, not the command: what the
+command sets up before numpy loads (``NUMPY_MADVISE_HUGEPAGE=0``, ``optdot.console``) is
+not in these figures; time the command itself (``/usr/bin/time optdot generate ...``,
+the old tree by ``PYTHONPATH=<tree> python -P -m optdot``) to see it.
 """
 
 from __future__ import annotations
