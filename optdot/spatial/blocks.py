@@ -19,6 +19,28 @@ import numpy as np
 BLOCK = 4096
 
 
+@nb.njit(cache=True, inline="always")
+def put_row(i, src, lo, m, nbr, at, split, mid, has_cross):  # pragma: no cover - compiled
+    """Row i's ``m`` partners ``src[lo:lo + m]`` written to ``nbr`` from ``at``; with
+    ``split``, its partners in i's block of :data:`BLOCK` first, then the others (each in
+    their order), the end of the first kept in ``mid[i]``, ``has_cross[i]`` set."""
+    if not split:
+        nbr[at : at + m] = src[lo : lo + m]
+        return
+    b = i // BLOCK
+    k = at
+    for q in range(lo, lo + m):
+        if src[q] // BLOCK == b:
+            nbr[k] = src[q]
+            k += 1
+    mid[i] = k
+    for q in range(lo, lo + m):
+        if src[q] // BLOCK != b:
+            nbr[k] = src[q]
+            k += 1
+    has_cross[i] = k > mid[i]
+
+
 @nb.njit(parallel=True, cache=True)
 def _split_blocks(ptr, nbr):  # pragma: no cover - compiled
     """Reorder each dot's partners: same BLOCK first; returns (nbr', mid, cross)."""
@@ -27,18 +49,7 @@ def _split_blocks(ptr, nbr):  # pragma: no cover - compiled
     mid = np.empty(n, np.int64)
     has_cross = np.zeros(n, np.bool_)
     for i in nb.prange(n):
-        b = i // BLOCK
-        k = ptr[i]
-        for q in range(ptr[i], ptr[i + 1]):
-            if nbr[q] // BLOCK == b:
-                out[k] = nbr[q]
-                k += 1
-        mid[i] = k
-        for q in range(ptr[i], ptr[i + 1]):
-            if nbr[q] // BLOCK != b:
-                out[k] = nbr[q]
-                k += 1
-        has_cross[i] = k > mid[i]
+        put_row(i, nbr, ptr[i], ptr[i + 1] - ptr[i], out, ptr[i], True, mid, has_cross)
     return out, mid, np.flatnonzero(has_cross)
 
 

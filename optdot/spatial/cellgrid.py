@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from .blocks import BLOCK, PairList
+from .blocks import PairList, put_row
 from .window import bounds
 
 #: Most index ranges the counting sort splits the dots into (each holds a count per cell;
@@ -225,28 +225,6 @@ def _pairs_sparse(xy, reff, grow, x0, y0, cell, nx, ny):  # pragma: no cover - c
     return ptr, nbr[: ptr[n]].copy()
 
 
-@nb.njit(cache=True, inline="always")
-def _put_row(i, src, lo, m, nbr, at, split, mid, has_cross):  # pragma: no cover - compiled
-    """Row i's ``m`` partners ``src[lo:lo + m]`` written to ``nbr`` from ``at``; with
-    ``split``, its partners in i's block of :data:`~optdot.spatial.blocks.BLOCK` first,
-    then the others (each in scan order), the end of the first kept in ``mid[i]``."""
-    if not split:
-        nbr[at : at + m] = src[lo : lo + m]
-        return
-    b = i // BLOCK
-    k = at
-    for q in range(lo, lo + m):
-        if src[q] // BLOCK == b:
-            nbr[k] = src[q]
-            k += 1
-    mid[i] = k
-    for q in range(lo, lo + m):
-        if src[q] // BLOCK != b:
-            nbr[k] = src[q]
-            k += 1
-    has_cross[i] = k > mid[i]
-
-
 @nb.njit(parallel=True, cache=True)
 def _pairs_csr(
     xy, reff, grow, x0, y0, cell, nx, ny, per_dot, split, bins, seg, ptr, nbr, mid, has_cross
@@ -255,8 +233,9 @@ def _pairs_csr(
     at least that many a chunk), then one copy into the CSR arrays; a chunk whose segment
     overflowed is scanned again. ``bins``: :func:`_bin_points`'s sorted dots. ``ptr``
     ``[n + 1]`` is written; ``nbr`` is used when large enough, else a new one is made;
-    with ``split`` each row is laid out for the block kernels (:func:`_put_row`, ``mid``
-    and ``has_cross`` ``[n]`` written). Returns ``(nbr [K], overflowed)``."""
+    with ``split`` each row is laid out for the block kernels
+    (:func:`~optdot.spatial.blocks.put_row`; ``mid`` and ``has_cross`` ``[n]`` written).
+    Returns ``(nbr [K], overflowed)``."""
     start, order, bx, by, br, cellmax = bins
     no_keys = np.zeros(0, np.int64)  # a dense grid: rows from ``start``
     n = xy.shape[0]
@@ -294,7 +273,7 @@ def _pairs_csr(
                 continue
             for i in range(a, b):
                 m = ptr[i + 1] - ptr[i]
-                _put_row(i, seg, lo, m, nbr, ptr[i], split, mid, has_cross)
+                put_row(i, seg, lo, m, nbr, ptr[i], split, mid, has_cross)
                 lo += m
             continue
         big = 0
@@ -305,7 +284,7 @@ def _pairs_csr(
             m = _scan(
                 i, xy, reff, grow, start, no_keys, order, bx, by, br, x0, y0, cell, nx, ny, row
             )
-            _put_row(i, row, 0, m, nbr, ptr[i], split, mid, has_cross)
+            put_row(i, row, 0, m, nbr, ptr[i], split, mid, has_cross)
     return nbr, over.any()
 
 
