@@ -44,6 +44,7 @@ from .preflight import (
 )
 from .relax.formulation import Formulation
 from .relax.optdot import Progress
+from .runtime.kernels import warm
 from .runtime.memory import check_memory
 from .tiled import Announce, generate_tiled
 from .tiling.run import TileProgress
@@ -102,6 +103,8 @@ def generate(
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     stage = stage or (lambda name: None)
+    if opt.method != "md":
+        warm("generate", announce=stage)  # a first run: its kernels on all cores
 
     stage("throwing darts")
     xy_init = stages.throw(job, n, opt.seed, None, where)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import tempfile
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -21,6 +22,7 @@ from .io.dataset_write import write_dataset
 from .io.manifest import manifest_of
 from .pattern import Pattern
 from .preflight import _check_gathered, _check_room, _check_tile_memory
+from .runtime import kernels
 from .runtime.cluster import connect, embedded_workers, scheduler_address
 from .runtime.stop import check_interrupt
 from .tiling.plan import TilePlan, plan_tiles
@@ -135,12 +137,38 @@ def _on_cluster(job, plan, scheduler, workers, worker_memory, announce) -> Itera
                 f"{kind}: {cluster.workers} workers, dashboard {cluster.dashboard or 'n/a'}; "
                 f"{plan.count} tiles ({plan.nx} x {plan.ny}) of ~{int(plan.quotas.mean()):,} dots"
             )
-        warm = cluster.client.submit(_warm, pure=False)  # compile once, not per worker
-        while not warm.done():  # a first run compiles for a minute: stay stoppable
-            check_interrupt()
-            time.sleep(0.1)
+        _compile_on_workers(cluster.client, cluster.embedded)
+        warm = cluster.client.submit(_warm, pure=False)  # the rest once, not per worker
+        _wait([warm])
         warm.result()
         yield OnDask(cluster.client, cluster.memory_per_worker * cluster.workers)
+
+
+def _wait(futures: list) -> None:
+    """Wait for Dask ``futures``, stoppable (a first run compiles for half a minute)."""
+    while not all(f.done() for f in futures):
+        check_interrupt()
+        time.sleep(0.1)
+
+
+def _compile_on_workers(client, embedded: bool) -> None:
+    """On a cold cache, the tiled run's listed kernels (:mod:`optdot.runtime.kernels`)
+    compiled on all workers of the embedded cluster at once, each claiming the next unit
+    in a folder they share (the workers of a cluster the run was pointed at may not
+    share one); what is left is compiled by :func:`_warm`."""
+    if not embedded:
+        return
+    workers = sorted(client.scheduler_info()["workers"])
+    todo = client.submit(kernels.cold, "tiles", pure=False).result()
+    work = kernels.units(todo)
+    if len(work) < 2 or len(workers) < 2:
+        return
+    with tempfile.TemporaryDirectory(prefix="optdot-compile-") as claims:
+        futures = [
+            client.submit(kernels.compile_claimed, work, claims, workers=[w], pure=False)
+            for w in workers[: len(work)]
+        ]
+        _wait(futures)
 
 
 def _warm() -> int:

@@ -1,0 +1,209 @@
+"""The kernels each kind of work compiles, for a first run's compile in several processes
+(:mod:`optdot.runtime.kernels`), and what a first run's compile takes.
+
+    python benchmarks/kernels.py            # check optdot/runtime/kernels.json (exit 1: stale)
+    python benchmarks/kernels.py --write    # record it again (cold caches: ~2 minutes)
+    python benchmarks/kernels.py --time     # a cold led-sample generate, 1 process and all cores
+
+Each group's work runs in a fresh process: ``generate`` the README's led sample in one
+process (written to NPZ) and QA on it, ``tiles`` the tiny tiled job a cluster's workers
+warm up with (one numba thread). Then every numba dispatcher of an
+optdot module lists its signatures. ``--write`` runs each on an empty numba cache
+(``NUMBA_CACHE_DIR`` in a temporary folder) and times every compile (numba's compile
+events; each compile's own time, without the functions compiled inside it). A function
+compiled inside a kernel's compile (called from compiled code) is listed in that kernel's
+unit; the check leaves them out: a run on a warm cache loads a kernel whole.
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import json
+import os
+import pickle
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+LED = ROOT / "samples" / "led" / "job.toml"
+GROUPS = ("generate", "tiles")
+
+
+def _work(group: str, folder: Path) -> None:
+    """Run ``group``'s work in this process."""
+    from optdot import load_job
+    from optdot.io.patterns import load_pattern
+    from optdot.pipeline import generate_to, qa
+
+    if group == "generate":
+        job = load_job(LED)
+        generate_to(job, folder / "led.npz", tiles="off")
+        qa(load_pattern(folder / "led.npz", job.box), job)
+    else:
+        from optdot.tiling.run import warm_up
+
+        warm_up()
+
+
+def _child(group: str, folder: Path, out: Path) -> None:
+    """Run ``group``'s work, then write the signatures of every optdot dispatcher (and
+    the seconds each compile took here) to ``out`` as JSON lines."""
+    from numba.core import event
+    from numba.core.dispatcher import Dispatcher
+
+    seconds: dict[tuple, float] = {}  # each compile's own, without the compiles inside it
+    depth: dict[tuple, int] = {}  # 0: called from Python; 1: compiled inside such; ...
+    root: dict[tuple, tuple] = {}  # the kernel called from Python it was compiled for
+    stack: list[list] = []  # [key, start, seconds of the compiles inside it]
+
+    class Timer(event.Listener):
+        def on_start(self, ev):
+            key = self._key(ev)
+            depth.setdefault(key, len(stack))
+            root.setdefault(key, stack[0][0] if stack else key)
+            stack.append([key, time.perf_counter(), 0.0])
+
+        def on_end(self, ev):
+            key, t0, inside = stack.pop()
+            took = time.perf_counter() - t0
+            seconds[key] = took - inside
+            if stack:
+                stack[-1][2] += took
+
+        @staticmethod
+        def _key(ev):
+            d = ev.data["dispatcher"]
+            return (id(d), tuple(map(str, ev.data["args"])))
+
+    event.register("numba:compile", Timer())
+    _work(group, folder)
+    from optdot.runtime.kernels import signature_text
+
+    listed = []
+    for name, mod in sorted(sys.modules.items()):
+        if not name.startswith("optdot"):
+            continue
+        for attr, d in sorted(vars(mod).items()):
+            if isinstance(d, Dispatcher) and d.py_func.__module__ == name:
+                listed += [(name, attr, d, sig) for sig in d.signatures]
+    text = {(id(d), tuple(map(str, s))): f"{m}.{a}{signature_text(s)}" for m, a, d, s in listed}
+    with open(out, "w") as fh:
+        for name, attr, d, sig in listed:
+            key = (id(d), tuple(map(str, sig)))
+            entry = {
+                "module": name,
+                "name": attr,
+                "types": signature_text(sig),
+                "seconds": seconds.get(key, 0.0),
+                "depth": depth.get(key, 0),
+                "unit": text.get(root.get(key, key), text[key]),
+                "signature": base64.b64encode(pickle.dumps(sig, protocol=4)).decode(),
+            }
+            fh.write(json.dumps(entry) + "\n")
+
+
+def record(cold: bool) -> list:
+    """Every group's kernels (:class:`optdot.runtime.kernels.Kernel`, signatures loaded),
+    in module, name and signature order; timed on empty caches when ``cold``."""
+    from optdot.runtime.kernels import Kernel
+
+    found: dict[tuple, Kernel] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        for group in GROUPS:
+            env = dict(os.environ, OPTDOT_COMPILE_PROCESSES="1")  # every compile timed here
+            if cold:
+                cache = folder / f"cache-{group}"
+                cache.mkdir()
+                env["NUMBA_CACHE_DIR"] = str(cache)
+            if group == "tiles":
+                env["NUMBA_NUM_THREADS"] = "1"
+            out = folder / f"{group}.jsonl"
+            args = [sys.executable, __file__, "--child", group, str(folder), str(out)]
+            subprocess.run(args, env=env, check=True)
+            for line in out.read_text().splitlines():
+                e = json.loads(line)
+                key = (e["module"], e["name"], e["types"])
+                old = found.get(key)
+                groups = tuple(sorted(set(old.groups if old else ()) | {group}))
+                secs = max(e["seconds"], old.seconds if old else 0.0)
+                unit, depth = (old.unit, old.depth) if old else (e["unit"], e["depth"])
+                sig = pickle.loads(base64.b64decode(e["signature"]))
+                found[key] = Kernel(*key, secs, groups, unit, depth, sig)
+    return [found[k] for k in sorted(found)]
+
+
+def check() -> int:
+    """Compare :data:`optdot.runtime.kernels.MANIFEST` with what the code calls now."""
+    from optdot.runtime.kernels import MANIFEST
+
+    listed = {  # a run on a warm cache loads a kernel whole: its callees are not seen
+        (e["module"], e["name"], e["types"], tuple(e["groups"]))
+        for e in json.loads(MANIFEST.read_text())["kernels"]
+        if not e["depth"]
+    }
+    now = {(k.module, k.name, k.types, k.groups) for k in record(cold=False)}
+    for e in sorted(now - listed):
+        print("not listed:", *e)
+    for e in sorted(listed - now):
+        print("listed, not called:", *e)
+    if now != listed:
+        print(f"{MANIFEST.name} is stale: python benchmarks/kernels.py --write")
+        return 1
+    print(f"{MANIFEST.name}: {len(now)} kernels, as the code calls them")
+    return 0
+
+
+def write() -> None:
+    """Record :data:`optdot.runtime.kernels.MANIFEST` on empty caches."""
+    import numba
+
+    from optdot.runtime.kernels import MANIFEST, encode
+
+    kernels = record(cold=True)
+    MANIFEST.write_text(json.dumps(encode(kernels, numba.__version__), indent=1) + "\n")
+    total = sum(k.seconds for k in kernels)
+    print(f"{MANIFEST}: {len(kernels)} kernels, {total:.1f} s of compile as recorded")
+
+
+def timed() -> None:
+    """A cold led-sample generate, compiled in one process and then on all cores."""
+    from _common import machine
+
+    print(machine())
+    for label, procs in (("1 process", "1"), ("all cores", "")):
+        with tempfile.TemporaryDirectory() as tmp:
+            env = dict(os.environ, NUMBA_CACHE_DIR=tmp)
+            if procs:
+                env["OPTDOT_COMPILE_PROCESSES"] = procs
+            out = Path(tmp) / "led.npz"
+            t = time.perf_counter()
+            subprocess.run(["optdot", "generate", str(LED), "-o", str(out), "-q"], env=env,
+                           check=True)  # fmt: skip
+            print(f"{label}: cold generate of the led sample {time.perf_counter() - t:.1f} s")
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--write", action="store_true", help="record kernels.json again")
+    p.add_argument("--time", action="store_true", help="time a cold generate")
+    p.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
+    a = p.parse_args()
+    if a.child:
+        _child(a.child[0], Path(a.child[1]), Path(a.child[2]))
+        return 0
+    if a.time:
+        timed()
+        return 0
+    if a.write:
+        write()
+        return 0
+    return check()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,197 @@
+"""A first run's compile in several processes (optdot.runtime.kernels): the list of kernels
+is what the code calls, the shares are fair, helpers write numba's cache, and the bytes
+of a run do not depend on who compiled its kernels."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from optdot.runtime import kernels
+
+ROOT = Path(__file__).resolve().parents[1]
+TINY = ROOT / "samples" / "tiny" / "job.toml"
+
+
+def test_units_hold_each_kernel_once_longest_first():
+    listed = kernels.manifest()
+    todo = [i for i, k in enumerate(listed) if "generate" in k.groups]
+    work = kernels.units(todo)
+    assert sorted(i for u in work for i in u) == todo
+    for u in work:
+        assert len({listed[i].unit for i in u}) == 1
+        assert sum(listed[i].depth == 0 for i in u) == 1  # one kernel called from Python
+    totals = [sum(listed[i].seconds for i in u) for u in work]
+    assert totals == sorted(totals, reverse=True)
+    big = next(u for u in work if any(listed[i].name == "_penalty_kernel" for i in u))
+    assert {listed[i].name for i in big} >= {"_penalty_kernel", "signed_distance"}
+
+
+def test_claimed_units_are_left_to_their_claimer(tmp_path, monkeypatch):
+    compiled: list[list[int]] = []
+    monkeypatch.setattr(kernels, "compile_kernels", lambda m: compiled.append(m) or len(m))
+    work = [[4, 7], [1], [2, 3, 5]]
+    (tmp_path / "1").write_text("")  # another process has unit 1
+    assert kernels.compile_claimed(work, str(tmp_path)) == 5
+    assert compiled == [[4, 7], [2, 3, 5]]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["0", "1", "2"]
+    assert kernels.compile_claimed(work, str(tmp_path)) == 0  # all claimed now
+    assert compiled == [[4, 7], [2, 3, 5]]
+
+
+def test_manifest_lists_what_the_code_calls():
+    """The recorder's check: each group's work run now lists the same kernels and
+    signatures as kernels.json (a stale list fails here: re-record it)."""
+    out = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "kernels.py")],
+        capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "as the code calls them" in out.stdout
+
+
+def test_manifest_installed_and_loaded():
+    listed = kernels.manifest()
+    assert listed, "kernels.json missing from the installed package"
+    groups = {g for k in listed for g in k.groups}
+    assert groups == {"generate", "tiles"}
+    names = {(k.module, k.name) for k in listed if "generate" in k.groups}
+    assert ("optdot.relax.penalty", "_penalty_kernel") in names
+    assert all(k.signature is not None for k in listed)  # recorded with this numba
+    doc = json.loads(kernels.MANIFEST.read_text())
+    again = kernels.decode(doc, "0.0.0")  # another numba: the signatures are not used
+    assert all(k.signature is None for k in again)
+    assert [k.types for k in again] == [k.types for k in listed]
+
+
+def test_processes_allowed(monkeypatch):
+    monkeypatch.setenv(kernels.PROCESSES_ENV, "1")
+    assert kernels.processes_allowed() == 1
+    monkeypatch.setenv(kernels.PROCESSES_ENV, "64")
+    assert kernels.processes_allowed() == kernels.MAX_PROCESSES
+    for bad in ("", "zero", "-2", "0"):
+        monkeypatch.setenv(kernels.PROCESSES_ENV, bad)
+        assert kernels.processes_allowed() == min(kernels.usable_cores(), kernels.MAX_PROCESSES)
+
+
+HELPERS = """
+import sys
+from optdot.runtime import kernels
+todo = kernels.cold("generate")
+assert len(kernels.units(todo)) > 4, todo
+assert kernels.warm("generate", processes=2) == len(todo)
+assert kernels.cold("generate") == []
+listed = kernels.manifest()
+theirs = 0
+for i in todo:  # a unit the helper compiled: loaded from the cache it wrote
+    d = listed[i].dispatcher()
+    if listed[i].depth == 0 and listed[i].signature not in d.overloads:
+        d.compile(listed[i].signature)
+        assert d.stats.cache_hits[listed[i].signature] == 1, listed[i]
+        theirs += 1
+assert theirs > 0
+from optdot import load_job
+from optdot.pipeline import generate_to
+generate_to(load_job(sys.argv[1]), sys.argv[2], tiles="off")
+"""
+
+
+def test_a_cold_cache_compiled_by_helpers_gives_the_same_bytes(tmp_path):
+    """An empty numba cache: the generate group's kernels compiled by this process and a
+    helper, each the units it claimed; the helper's come from the cache it wrote; the
+    pattern is the bytes of a run on the usual (warm) cache."""
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
+    env.pop(kernels.PROCESSES_ENV, None)
+    cold_out = tmp_path / "cold.npz"
+    run = subprocess.run(
+        [sys.executable, "-c", HELPERS, str(TINY), str(cold_out)],
+        env=env, capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr[-3000:]
+    warm_out = tmp_path / "warm.npz"
+    from optdot import load_job
+    from optdot.pipeline import generate_to
+
+    generate_to(load_job(TINY), warm_out, tiles="off")
+    assert cold_out.read_bytes() == warm_out.read_bytes()
+
+
+class _Done:
+    def __init__(self, value):
+        self.value = value
+
+    def done(self):
+        return True
+
+    def result(self):
+        return self.value
+
+
+class _Client:
+    """A Dask client that runs each task at once, recording where it was sent."""
+
+    def __init__(self, workers):
+        self.workers = workers
+        self.sent: list[tuple] = []
+
+    def scheduler_info(self):
+        return {"workers": {w: {} for w in self.workers}}
+
+    def submit(self, fn, *args, workers=None, pure=True):
+        self.sent.append((fn.__name__, workers))
+        return _Done(fn(*args))
+
+
+def test_a_tiled_first_run_compiles_on_every_worker(monkeypatch):
+    from optdot import tiled
+
+    compiled: list[list[int]] = []
+
+    def cold(group):
+        return [0, 1, 2, 3] if group == "tiles" else []
+
+    def units(indices):
+        return [[0], [1, 3], [2]]
+
+    def compile_kernels(members):
+        compiled.append(members)
+        return len(members)
+
+    monkeypatch.setattr(kernels, "cold", cold)
+    monkeypatch.setattr(kernels, "units", units)
+    monkeypatch.setattr(kernels, "compile_kernels", compile_kernels)
+    client = _Client(["tcp://b:2", "tcp://a:1", "tcp://c:3", "tcp://d:4"])
+    tiled._compile_on_workers(client, embedded=True)
+    # the cold kernels asked of one worker, then one task on each worker that has a unit
+    assert client.sent == [
+        ("cold", None),
+        ("compile_claimed", ["tcp://a:1"]),
+        ("compile_claimed", ["tcp://b:2"]),
+        ("compile_claimed", ["tcp://c:3"]),
+    ]
+    assert compiled == [[0], [1, 3], [2]]  # each unit once: the claims folder is shared
+    client = _Client(["tcp://a:1", "tcp://b:2"])
+    tiled._compile_on_workers(client, embedded=False)  # workers may not share a folder
+    assert client.sent == []
+
+
+def test_generate_warms_its_kernels_first(monkeypatch, tiny_job):
+    import dataclasses
+
+    from optdot import pipeline
+
+    asked: list[str] = []
+    monkeypatch.setattr(pipeline, "warm", lambda group, announce=None: asked.append(group))
+    small = dataclasses.replace(
+        tiny_job, optimize=dataclasses.replace(tiny_job.optimize, max_iter=5)
+    )
+    pipeline.generate(small)
+    assert asked == ["generate"]
+    md = dataclasses.replace(small, optimize=dataclasses.replace(small.optimize, method="md"))
+    pipeline.generate(md)  # the MD baseline's kernels are not listed
+    assert asked == ["generate"]
