@@ -158,17 +158,19 @@ def _compile_on_workers(client, embedded: bool) -> None:
     share one); what is left is compiled by :func:`_warm`."""
     if not embedded:
         return
-    workers = sorted(client.scheduler_info()["workers"])
-    todo = client.submit(kernels.cold, "tiles", pure=False).result()
-    work = kernels.units(todo)
-    if len(work) < 2 or len(workers) < 2:
+    try:
+        workers = sorted(client.scheduler_info()["workers"])
+        work = kernels.units(client.submit(kernels.cold, "tiles", pure=False).result())
+        if len(work) < 2 or len(workers) < 2:
+            return
+        with tempfile.TemporaryDirectory(prefix="optdot-compile-") as claims:
+            futures = [
+                client.submit(kernels.compile_claimed, work, claims, workers=[w], pure=False)
+                for w in workers[: len(work)]
+            ]
+            _wait(futures)
+    except Exception:  # not needed for a correct run: what failed, _warm compiles
         return
-    with tempfile.TemporaryDirectory(prefix="optdot-compile-") as claims:
-        futures = [
-            client.submit(kernels.compile_claimed, work, claims, workers=[w], pure=False)
-            for w in workers[: len(work)]
-        ]
-        _wait(futures)
 
 
 def _warm() -> int:

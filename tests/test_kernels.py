@@ -195,3 +195,14 @@ def test_generate_warms_its_kernels_first(monkeypatch, tiny_job):
     md = dataclasses.replace(small, optimize=dataclasses.replace(small.optimize, method="md"))
     pipeline.generate(md)  # the MD baseline's kernels are not listed
     assert asked == ["generate"]
+
+
+def test_a_listed_signature_the_code_no_longer_takes_is_skipped(monkeypatch):
+    from numba import types
+
+    good = next(k for k in kernels.manifest() if k.name == "_bounds")
+    stale = kernels.Kernel(
+        good.module, good.name, "(int64)", 0.1, ("generate",), "", 0, (types.int64,)
+    )
+    monkeypatch.setattr(kernels, "manifest", lambda: (stale, good))
+    assert kernels.compile_kernels([0, 1]) == 1  # no error: the stale one is left

@@ -174,12 +174,18 @@ def units(indices: list[int]) -> list[list[int]]:
 
 def compile_kernels(indices: list[int]) -> int:
     """Compile (and cache) the kernels ``indices`` of :func:`manifest` in this process,
-    the deepest first (:attr:`Kernel.depth`); returns how many."""
+    the deepest first (:attr:`Kernel.depth`); returns how many compiled. One that does
+    not compile (a list older than the code) is left to the run's first call."""
     kernels = manifest()
+    done = 0
     for i in sorted(indices, key=lambda i: (-kernels[i].depth, i)):
         check_interrupt()
-        kernels[i].dispatcher().compile(kernels[i].signature)
-    return len(indices)
+        try:
+            kernels[i].dispatcher().compile(kernels[i].signature)
+        except Exception:
+            continue
+        done += 1
+    return done
 
 
 def compile_claimed(work: list[list[int]], claims: str) -> int:
@@ -233,14 +239,23 @@ def warm(group: str, processes: int | None = None, announce=None) -> int:
         return 0
     if announce is not None:
         announce("compiling kernels (first run)")
+    try:
+        _compile_together(work, count)
+    except OSError:  # no temporary folder, no process: the run compiles on first call
+        pass
+    return len(todo) - len(cold(group))
+
+
+def _compile_together(work: list[list[int]], count: int) -> None:
+    """:func:`compile_claimed` in this process and ``count - 1`` helpers, sharing a
+    temporary claims folder; the helpers are stopped if this process stops."""
     with tempfile.TemporaryDirectory(prefix="optdot-compile-") as claims:
         args = [sys.executable, "-m", __name__, claims, json.dumps(work)]
         quiet = subprocess.DEVNULL
-        helpers = [
-            subprocess.Popen(args, stdin=quiet, stdout=quiet, stderr=quiet)
-            for _ in range(count - 1)
-        ]
+        helpers: list[subprocess.Popen] = []
         try:
+            for _ in range(count - 1):
+                helpers.append(subprocess.Popen(args, stdin=quiet, stdout=quiet, stderr=quiet))
             compile_claimed(work, claims)
             for p in helpers:
                 while p.poll() is None:
@@ -251,7 +266,6 @@ def warm(group: str, processes: int | None = None, announce=None) -> int:
                 if p.poll() is None:
                     p.kill()
                     p.wait()
-    return len(todo) - len(cold(group))
 
 
 def main(argv: list[str]) -> int:
