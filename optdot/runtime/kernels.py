@@ -50,7 +50,7 @@ MANIFEST = Path(__file__).with_name("kernels.json")
 PROCESSES_ENV = "OPTDOT_COMPILE_PROCESSES"
 
 #: Processes that compile at once, at most: each holds numba and LLVM (~0.3 GB), and
-#: past four the largest kernel (the penalty's, ~12 s) bounds the wait anyway.
+#: past four the largest unit (the penalty kernel's, 15-20 s) bounds the wait anyway.
 MAX_PROCESSES = 4
 
 
@@ -66,9 +66,9 @@ class Kernel:
         groups: the work that calls it: ``"generate"``, ``"tiles"``.
         unit: the kernel called from Python (``"module.name(types)"``) whose compile
             compiled this one: a unit is compiled in one process.
-        depth: 0 for a kernel called from Python, 1 for one it calls, ...: a share
-            compiles the deepest first, so a caller in another process finds them
-            cached sooner.
+        depth: 0 for a kernel called from Python, 1 for one it calls, ...: a unit is
+            compiled deepest first, so that a caller in another process finds the
+            functions it shares with this unit cached sooner.
         signature: the argument types (numba types), or None when not loaded.
     """
 
