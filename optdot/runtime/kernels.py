@@ -145,10 +145,11 @@ def manifest() -> tuple[Kernel, ...]:
 
 
 def cached(kernel: Kernel) -> bool:
-    """Whether numba's cache on disk has an index for ``kernel``'s function (in this
-    process's cache directory). True when it cannot tell."""
+    """Whether numba's cache on disk (in this process's cache folder) has a current index
+    for ``kernel``'s function: one written by this numba from this source file (numba
+    reads an index of an older install as empty). True when it cannot tell."""
     try:
-        return Path(kernel.dispatcher()._cache._cache_file._index_path).exists()
+        return bool(kernel.dispatcher()._cache._cache_file._load_index())
     except Exception:
         return True
 
