@@ -1,6 +1,6 @@
 """A first run's compile in several processes (optdot.runtime.kernels): the list of kernels
-is what the code calls, the shares are fair, helpers write numba's cache, and the bytes
-of a run do not depend on who compiled its kernels."""
+is what the code calls, each unit is compiled once, helpers write numba's cache, and the
+bytes of a run do not depend on who compiled its kernels."""
 
 from __future__ import annotations
 
@@ -10,10 +10,22 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from optdot.runtime import kernels
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = ROOT / "samples" / "tiny" / "job.toml"
+
+
+def _recorded_with_this_numba() -> bool:
+    import numba
+
+    return json.loads(kernels.MANIFEST.read_text())["numba"] == numba.__version__
+
+
+#: Why a test needs the list's signatures skips: a numba newer than the list's.
+STALE = "kernels.json was recorded with another numba: python benchmarks/kernels.py --write"
 
 
 def test_units_hold_each_kernel_once_longest_first():
@@ -60,8 +72,11 @@ def test_manifest_installed_and_loaded():
     assert groups == {"generate", "tiles"}
     names = {(k.module, k.name) for k in listed if "generate" in k.groups}
     assert ("optdot.relax.penalty", "_penalty_kernel") in names
-    assert all(k.signature is not None for k in listed)  # recorded with this numba
     doc = json.loads(kernels.MANIFEST.read_text())
+    if not _recorded_with_this_numba():
+        assert all(k.signature is None for k in listed)  # another numba: the list unused
+        pytest.skip(STALE)
+    assert all(k.signature is not None for k in listed)
     again = kernels.decode(doc, "0.0.0")  # another numba: the signatures are not used
     assert all(k.signature is None for k in again)
     assert [k.types for k in again] == [k.types for k in listed]
@@ -103,6 +118,8 @@ def test_a_cold_cache_compiled_by_helpers_gives_the_same_bytes(tmp_path):
     """An empty numba cache: the generate group's kernels compiled by this process and a
     helper, each the units it claimed; the helper's come from the cache it wrote; the
     pattern is the bytes of a run on the usual (warm) cache."""
+    if not _recorded_with_this_numba():
+        pytest.skip(STALE)
     cache = tmp_path / "cache"
     cache.mkdir()
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
@@ -200,6 +217,8 @@ def test_generate_warms_its_kernels_first(monkeypatch, tiny_job):
 def test_a_listed_signature_the_code_no_longer_takes_is_skipped(monkeypatch):
     from numba import types
 
+    if not _recorded_with_this_numba():
+        pytest.skip(STALE)
     good = next(k for k in kernels.manifest() if k.name == "_bounds")
     stale = kernels.Kernel(
         good.module, good.name, "(int64)", 0.1, ("generate",), "", 0, (types.int64,)
