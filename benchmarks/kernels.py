@@ -28,6 +28,8 @@ import tempfile
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # _common, panels
+
 ROOT = Path(__file__).resolve().parent.parent
 LED = ROOT / "samples" / "led" / "job.toml"
 GROUPS = ("generate", "tiles")
@@ -171,20 +173,36 @@ def write() -> None:
 
 
 def timed() -> None:
-    """A cold led-sample generate, compiled in one process and then on all cores."""
+    """A cold led-sample generate, compiled in one process and then on all cores: dots,
+    seconds, dots/s and the peak RSS of all its processes (helpers included)."""
+    import numpy as np
     from _common import machine
+    from panels import PEAK_SPLIT, optdot, run
+
+    from optdot.runtime.kernels import PROCESSES_ENV
 
     print(machine())
-    for label, procs in (("1 process", "1"), ("all cores", "")):
-        with tempfile.TemporaryDirectory() as tmp:
-            env = dict(os.environ, NUMBA_CACHE_DIR=tmp)
-            if procs:
-                env["OPTDOT_COMPILE_PROCESSES"] = procs
-            out = Path(tmp) / "led.npz"
-            t = time.perf_counter()
-            subprocess.run(["optdot", "generate", str(LED), "-o", str(out), "-q"], env=env,
-                           check=True)  # fmt: skip
-            print(f"{label}: cold generate of the led sample {time.perf_counter() - t:.1f} s")
+    print("| compile | dots | s | dots/s | peak GiB, all processes (each) |")
+    print("|---|---|---|---|---|")
+    saved = dict(os.environ)
+    try:
+        for label, procs in (("1 process", "1"), ("all cores", None)):
+            with tempfile.TemporaryDirectory() as tmp:
+                os.environ["NUMBA_CACHE_DIR"] = tmp
+                os.environ.pop(PROCESSES_ENV, None)
+                if procs:
+                    os.environ[PROCESSES_ENV] = procs
+                out = Path(tmp) / "led.npz"
+                secs, peak, code, err = run(optdot("generate", LED, "-o", out, "-q"))
+                if code:
+                    raise SystemExit(err)
+                dots = len(np.load(out)["xy"])
+                each = " + ".join(f"{g:.2f}" for g in PEAK_SPLIT)
+                rate = f"{dots / secs:,.0f}"
+                print(f"| {label} | {dots:,} | {secs:.1f} | {rate} | {peak:.2f} ({each}) |")
+    finally:
+        os.environ.clear()
+        os.environ.update(saved)
 
 
 def main() -> int:
