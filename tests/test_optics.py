@@ -16,7 +16,14 @@ import pytest
 from optdot.config.schema import load_job
 from optdot.optics.design import design
 from optdot.optics.simulate import Coverage, simulate
-from optdot.optics.trace import FATES, UNFINISHED, _fresnel, last_at_most
+from optdot.optics.trace import (
+    FATES,
+    RAY_CHUNK,
+    UNFINISHED,
+    _fresnel,
+    last_at_most,
+    trace,
+)
 
 from .conftest import SAMPLES, cli, one_error
 
@@ -208,6 +215,26 @@ def test_same_seed_same_counts_on_any_thread_count(lossy):
     assert one.fates == two.fates and np.array_equal(one.counts, two.counts)
     other = simulate(job, 50_000, seed=10, dots=pattern)
     assert not np.array_equal(other.counts, one.counts)
+
+
+def test_a_ray_ends_the_same_whatever_call_or_chunk_traced_it(lossy):
+    """The tracer's parallel loop runs chunks of :data:`RAY_CHUNK` rays: every ray, at a
+    chunk's edges too and from any first index, ends as it does traced alone."""
+    from optdot.optics.scene import scene_of
+
+    job, pattern = lossy
+    scene = scene_of(job, 10_000, dots=pattern)
+    first, count = 37, 3 * RAY_CHUNK + 5
+    fate, x, y = trace(11, first, count, scene)
+    edges = [0, 1, RAY_CHUNK - 1, RAY_CHUNK, 2 * RAY_CHUNK + 1, count - 2, count - 1]
+    for j in edges + list(range(5, count, 97)):
+        f1, x1, y1 = trace(11, first + j, 1, scene)
+        assert (f1[0], x1[0], y1[0]) == (fate[j], x[j], y[j]), j
+    tail = trace(11, first + RAY_CHUNK + 3, count - RAY_CHUNK - 3, scene)
+    assert all(
+        np.array_equal(a[RAY_CHUNK + 3 :], b) for a, b in zip((fate, x, y), tail, strict=True)
+    )
+    assert len(set(fate.tolist())) > 2  # rays end in several ways
 
 
 def test_real_dots_agree_with_the_coverage_mode_in_5mm_cells(tmp_path):

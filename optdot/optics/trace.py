@@ -181,6 +181,8 @@ _M1 = np.uint64(0xBF58476D1CE4E5B9)
 _M2 = np.uint64(0x94D049BB133111EB)
 _S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(11)
 _TO_UNIT = 1.0 / 9007199254740992.0  # 2**-53
+#: Rays a task of :func:`trace`'s parallel loop traces (:func:`_trace_rays`).
+RAY_CHUNK = 1024
 
 
 @nb.njit(cache=True, inline="always")
@@ -402,51 +404,22 @@ def _scatter_through(state, dxn, dyn, dz, mode, sigma, n_to):
     return state, dxn, dyn, dz
 
 
-@nb.njit(cache=True, parallel=True)
-def trace(seed, first, count, scene):  # pragma: no cover - compiled
-    """Trace rays ``first .. first + count - 1`` through ``scene``.
+@nb.njit(cache=True)
+def _trace_rays(
+    seed, first, lo, hi, emit, emit_start, prof_theta, prof_cdf, prof_mode, layer, face,
+    walls, normals, pr_arrays, max_events, fate, ex, ey,
+):  # pragma: no cover - compiled  # fmt: skip
+    """Rays ``first + lo .. first + hi - 1`` (:func:`trace`'s tables unpacked,
+    ``pr_arrays`` the :class:`Print` as a tuple), each one's fate and end written at
+    ``lo .. hi - 1`` of ``fate``, ``ex``, ``ey``.
 
-    Args:
-        seed: run seed (int). first, count: global index of the first ray, number of rays.
-        scene: a :class:`Scene`.
-
-    Returns:
-        ``(fate [count] int8, x [count] float32, y [count] float32)``: how and where each
-        ray ended (where it left the top face, for extracted rays).
-    """
-    src, st, pr = scene.sources, scene.stack, scene.print
-    emit, emit_start, prof_theta, prof_cdf, prof_mode = (
-        src.emit,
-        src.start,
-        src.theta,
-        src.cdf,
-        src.mode,
-    )
-    layer, face, walls, normals = st.layer, st.face, st.walls, st.normals
-    # the print as a plain tuple (numba's parallel loop cannot carry a record inside it)
-    pr_arrays = (
-        pr.explicit,
-        pr.phi,
-        pr.g,
-        pr.phi2,
-        pr.g2,
-        pr.start,
-        pr.x,
-        pr.y,
-        pr.foot,
-        pr.cg,
-        pr.cap_start,
-        pr.cap,
-        pr.cap_g,
-        pr.cap_ring,
-    )
+    A serial loop of its own, which :func:`trace` runs in parallel over chunks: numba's
+    parallel passes analyse the whole body of a ``prange`` loop, and with a ray's life
+    there the tracer took ~55 s to compile on a first run (~20 s this way, at the
+    same speed and with the same results: every ray draws from its own generator)."""
     top = layer.shape[0]  # the top face's index
-    max_events = st.max_events
-    fate = np.empty(count, np.int8)
-    ex = np.empty(count, np.float32)
-    ey = np.empty(count, np.float32)
     n_emit = emit.shape[0]
-    for j in nb.prange(count):
+    for j in range(lo, hi):
         i = first + j
         state = _mix(np.uint64(seed) * _M1 ^ np.uint64(i) * _M2 + _GOLDEN)
         # -- birth
@@ -694,4 +667,54 @@ def trace(seed, first, count, scene):  # pragma: no cover - compiled
         fate[j] = end
         ex[j] = x
         ey[j] = y
+
+
+@nb.njit(cache=True, parallel=True)
+def trace(seed, first, count, scene):  # pragma: no cover - compiled
+    """Trace rays ``first .. first + count - 1`` through ``scene``.
+
+    Args:
+        seed: run seed (int). first, count: global index of the first ray, number of rays.
+        scene: a :class:`Scene`.
+
+    Returns:
+        ``(fate [count] int8, x [count] float32, y [count] float32)``: how and where each
+        ray ended (where it left the top face, for extracted rays).
+    """
+    src, st, pr = scene.sources, scene.stack, scene.print
+    emit, emit_start, prof_theta, prof_cdf, prof_mode = (
+        src.emit,
+        src.start,
+        src.theta,
+        src.cdf,
+        src.mode,
+    )
+    layer, face, walls, normals = st.layer, st.face, st.walls, st.normals
+    # the print as a plain tuple (numba's parallel loop cannot carry a record inside it)
+    pr_arrays = (
+        pr.explicit,
+        pr.phi,
+        pr.g,
+        pr.phi2,
+        pr.g2,
+        pr.start,
+        pr.x,
+        pr.y,
+        pr.foot,
+        pr.cg,
+        pr.cap_start,
+        pr.cap,
+        pr.cap_g,
+        pr.cap_ring,
+    )
+    max_events = st.max_events
+    fate = np.empty(count, np.int8)
+    ex = np.empty(count, np.float32)
+    ey = np.empty(count, np.float32)
+    for c in nb.prange((count + RAY_CHUNK - 1) // RAY_CHUNK):
+        _trace_rays(
+            seed, first, c * RAY_CHUNK, min(count, (c + 1) * RAY_CHUNK), emit, emit_start,
+            prof_theta, prof_cdf, prof_mode, layer, face, walls, normals, pr_arrays,
+            max_events, fate, ex, ey,
+        )  # fmt: skip
     return fate, ex, ey
