@@ -29,6 +29,7 @@ from .formats import FORMATS
 from .geometry.caps import no_caps
 from .geometry.domain import Domain
 from .geometry.morton import spatial_order
+from .geometry.shapes import CIRCLE, DotShape
 from .io.atomic import transaction
 from .io.dataset import is_dataset
 from .io.outputs import check_outputs
@@ -42,6 +43,7 @@ from .preflight import (
     check_job,
     use_tiles,
 )
+from .quality.conformance import DotRule
 from .relax.formulation import Formulation
 from .relax.optdot import Progress
 from .runtime.kernels import warm
@@ -258,6 +260,24 @@ def with_job_panel(pattern: Pattern, job: Job | None) -> Pattern:
     return replace(pattern, box=job.box, outline=outline)
 
 
+def dot_rule(job: Job) -> DotRule:
+    """The footprints ``job`` draws, as QA holds a file's dots to them."""
+    shape = job.shape if job.shape is not None else DotShape(CIRCLE, (job.diameter,))
+    return DotRule(shape, job.sizes)
+
+
+def own_collision(dots: DotSource, job: Job | None) -> float:
+    """The centre distance under which dots of one size collide, mm: the job's
+    ``qa.collision_distance`` when it sets one, else the file's own diameter plus the
+    job's gap (never the job's diameter: a file of larger dots than the job's would pass
+    with overlaps; the footprint check fails it besides)."""
+    if job is not None and job.qa.collision_distance is not None:
+        return job.qa.collision_distance
+    own = dots.uniform_diameter
+    own = dots.nominal_diameter if own is None else own
+    return own + (job.optimize.gap if job is not None else 0.0)
+
+
 def qa(
     pattern: DotSource | None,
     job: Job | None = None,
@@ -303,7 +323,7 @@ def qa(
     if close_gap is not None:
         params = replace(params, close_gap=close_gap)
     if collision is None:
-        collision = job.collision_distance if job else dots.nominal_diameter
+        collision = own_collision(dots, job)
     if job is None:
         result = run_qa(dots, None, params, collision)
     else:
@@ -321,6 +341,7 @@ def qa(
             job.viewing_area,
             field,
             job.ink,
+            dot_rule(job),
         )
     wanted = job.domain.caps if job is not None else None
     if job is not None and (wanted is not None or len(caps_of(dots))):

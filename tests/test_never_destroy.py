@@ -157,3 +157,26 @@ def test_a_keep_out_file_with_parentheses_is_an_input_never_overwritten(tiny):
     xy = np.loadtxt(tiny / "k.csv", delimiter=",", skiprows=1)[:, :2]
     inside = (xy[:, 0] > 1) & (xy[:, 0] < 2) & (xy[:, 1] > 0.5) & (xy[:, 1] < 1.5)
     assert len(xy) > 100 and not inside.any()  # the file was read as the keep-out
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ("export", "{p}", "--csv", "{loop}.csv"),
+        ("export", "{p}", "--gds", "{loop}.gds"),
+        ("qa", "{p}", "--json", "{loop}.json"),
+        ("generate", "{job}", "-o", "{loop}.csv"),
+        ("generate", "{job}", "-o", "{loop}.parquet"),
+    ],
+    ids=["export-csv", "export-gds", "qa-json", "generate-csv", "generate-parquet"],
+)
+def test_an_output_that_is_a_symlink_loop_gets_one_line(tiny, args):
+    """``ln -s loop.csv loop.csv``: exit 2 and one line naming it (was exit 70, an
+    internal error from resolving the path); the link is left as it was."""
+    loop = tiny / "loop"
+    ext = args[-1].rsplit(".", 1)[1]
+    link = tiny / f"loop.{ext}"
+    link.symlink_to(link.name)
+    filled = [a.format(p=tiny / "p.csv", job=tiny / "job.toml", loop=loop) for a in args]
+    one_error(filled, 2, "symbolic link loop")
+    assert link.is_symlink() and os.readlink(link) == link.name

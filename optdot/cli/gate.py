@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 import click
+import numpy as np
 
 from ..config.viewing import VIEW_PRESETS
 from ..io.outputs import check_outputs
@@ -82,6 +83,75 @@ def _on_the_panel(path: Path, pattern, job) -> None:
             f"this job's panel [{x0:g}, {y0:g}, {x1:g}, {y1:g}] mm (the dots span "
             f"[{lo[0]:.4g}, {lo[1]:.4g}, {hi[0]:.4g}, {hi[1]:.4g}]): give the job it was made with"
         )
+
+
+def traced_as_made(path: Path, pattern, job) -> None:
+    """Refuse to trace a pattern that is not ``job``'s: footprints of another kind or size
+    than the job's dots (an ellipse pattern under a prism job), or dots that leave a band
+    of the panel empty where the map asks for dots (a CSV of a smaller panel: a CSV keeps
+    no panel box for :func:`made_for` to compare). QA reports both as failed checks; a
+    trace would report the luminance of a guide nobody asked for.
+
+    Raises:
+        JobError: one line naming the file and what differs.
+    """
+    from ..errors import JobError
+    from ..pipeline import dot_rule
+    from ..quality.conformance import footprint_text
+
+    rule = dot_rule(job)
+    feet = pattern.shape
+    stray = rule.stray(feet)
+    if stray.any():
+        i = int(np.flatnonzero(stray)[0])
+        raise JobError(
+            f"{path}: {int(stray.sum()):,} of its {pattern.n:,} dots are not this job's "
+            f"{rule.describe()} (the first: {footprint_text(feet.kind, feet.size[i])}): "
+            "trace a pattern with the job it was made for"
+        )
+    band = _empty_band(pattern, job)
+    if band is not None:
+        raise JobError(f"{path}: {band}: give the job it was made with")
+
+
+def _empty_band(pattern, job) -> str | None:
+    """Where the dots leave a band along one side of the map's non-zero cells wider than
+    a run's dots ever do, in words, or None: wider than 2 mm, 2 map cells and 10 dot
+    spacings at the map's lowest non-zero fill."""
+    d = job.density
+    grid = np.asarray(d.grid)
+    on = grid > 0
+    if not on.any() or not pattern.n:
+        return None
+    cw, ch = d.cell_size
+    cols, rows = np.flatnonzero(on.any(axis=0)), np.flatnonzero(on.any(axis=1))
+    x0, y0, x1, y1 = job.box
+    want = (
+        max(d.x0 + cols[0] * cw, x0),
+        max(d.y0 + rows[0] * ch, y0),
+        min(d.x0 + (cols[-1] + 1) * cw, x1),
+        min(d.y0 + (rows[-1] + 1) * ch, y1),
+    )
+    lo, hi = pattern.xy.min(axis=0), pattern.xy.max(axis=0)
+    spacing = float(np.sqrt(float(np.median(pattern.shape.area())) / float(grid[on].min())))
+    gaps = {
+        "left": (lo[0] - want[0], cw),
+        "bottom": (lo[1] - want[1], ch),
+        "right": (want[2] - hi[0], cw),
+        "top": (want[3] - hi[1], ch),
+    }
+    for side, (gap, cell) in gaps.items():
+        if gap > max(EMPTY_BAND_MM, 2.0 * cell, 10.0 * spacing):
+            return (
+                f"its dots span [{lo[0]:.4g}, {lo[1]:.4g}, {hi[0]:.4g}, {hi[1]:.4g}] mm, "
+                f"leaving {gap:.3g} mm empty along the {side} of this job's map "
+                f"[{want[0]:.4g}, {want[1]:.4g}, {want[2]:.4g}, {want[3]:.4g}] mm"
+            )
+    return None
+
+
+#: Narrowest empty band along a side of the map that :func:`traced_as_made` refuses, mm.
+EMPTY_BAND_MM = 2.0
 
 
 def made_for(path: Path, box, job) -> None:

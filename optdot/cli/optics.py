@@ -87,9 +87,10 @@ def simulate(
     check_outputs(outs, inputs)
     dots = None
     if pattern is not None:
-        from .gate import _read_with_job
+        from .gate import _read_with_job, traced_as_made
 
         dots = _read_with_job(pattern, job)
+        traced_as_made(pattern, dots, job)
     t0 = time.perf_counter()
     sim = run(job, rays, seed, dots=dots, bin_mm=bin_mm, spot_mm=spot_mm, border_mm=border_mm)
     if halo and is_direct(job):

@@ -318,11 +318,8 @@ class Job:
 
     def shape_scale(self, diameters: np.ndarray) -> np.ndarray:
         """``[n]`` factors shaped dots of area-equivalent ``diameters`` (``[n]`` mm) are
-        their footprint (``dots.length``, ``width``, ...) scaled by, to 1e-4 (the size
-        rule's diameters are rounded to 1 nm: unrounded, a dot at ``dots.scale``'s low
-        end of 1 would be 80.001 µm long, not the 80 µm asked for; 1e-4 of a scale is
-        nm on a footprint, far under the rule's 0.5 µm steps)."""
-        return np.round(np.asarray(diameters, np.float64) / self.shape.equivalent_diameter, 4)
+        their footprint scaled by (:meth:`DotShape.scale_of`)."""
+        return self.shape.scale_of(diameters)
 
     @property
     def _low_scale(self) -> float:

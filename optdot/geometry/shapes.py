@@ -42,6 +42,11 @@ class Kind:
     #: The kind's number in a packed footprint (:func:`packed`, the compiled kernels).
     code: int = -1
 
+    def __reduce__(self):
+        """Pickled by name, so a kind sent to a worker or read in a child process comes
+        back as the registry's own (kinds are compared by identity)."""
+        return (kind_named, (self.name,))
+
     def shape_params(self, size: np.ndarray) -> np.ndarray:
         """``[n, 3]`` the numbers :func:`on_packed` tests a point against, mm (or mm²)."""
         raise NotImplementedError
@@ -585,6 +590,11 @@ KINDS: dict[str, Kind] = {k.name: k for k in (Circle(), Ellipse(), RoundedRect()
 CIRCLE = KINDS["circle"]
 
 
+def kind_named(name: str) -> Kind:
+    """The registry's kind of ``name`` (what a pickled kind comes back as)."""
+    return KINDS[name]
+
+
 @dataclass(frozen=True)
 class DotShape:
     """A job's dot: one kind at one size (``[dots] shape`` and its sizes).
@@ -619,6 +629,14 @@ class DotShape:
         """The diameter of the disc of the same area, mm: what sets the spacing and the
         count (one footprint per ``area / fill``)."""
         return 2.0 * math.sqrt(self.area / math.pi)
+
+    def scale_of(self, diameters: np.ndarray) -> np.ndarray:
+        """``[n]`` factors dots of area-equivalent ``diameters`` (``[n]`` mm) are this
+        footprint (``dots.length``, ``width``, ...) scaled by, to 1e-4 (the size rule's
+        diameters are rounded to 1 nm: unrounded, a dot at ``dots.scale``'s low end of 1
+        would be 80.001 µm long, not the 80 µm asked for; 1e-4 of a scale is nm on a
+        footprint, far under the rule's 0.5 µm steps)."""
+        return np.round(np.asarray(diameters, np.float64) / self.equivalent_diameter, 4)
 
     def footprints(self, angle: np.ndarray, scale: np.ndarray | None = None) -> Footprints:
         """The footprints of ``len(angle)`` dots at ``angle`` (``[n]`` rad), each this

@@ -16,7 +16,7 @@ from .dataset_write import check_dataset_target
 
 def check_target(target: str | Path, inputs: tuple[Path, ...] = ()) -> None:
     """Refuse, before any work, an output that cannot be written or would overwrite an
-    input: a missing or unwritable directory, a directory in the way, anything but a
+    input: a symbolic link loop, a missing or unwritable directory, a directory in the way, anything but a
     regular file in the way (a device node, a FIFO, a socket), a name longer than the
     file system allows, or the same file as one of ``inputs``.
 
@@ -24,6 +24,13 @@ def check_target(target: str | Path, inputs: tuple[Path, ...] = ()) -> None:
         ExportError: one line naming the file and the problem.
     """
     target = Path(target)
+    try:
+        target.resolve()
+    except (RuntimeError, OSError):  # Python < 3.13 raises RuntimeError on a loop
+        raise ExportError(
+            f"{target}: is a symbolic link loop (it leads back to itself); remove the link "
+            "or choose another name"
+        ) from None
     directory = target.parent if str(target.parent) else Path(".")
     if not directory.is_dir():
         raise ExportError(f"{target}: output directory {directory} does not exist")
@@ -58,11 +65,11 @@ def check_outputs(outputs: dict[str, str | Path], inputs: tuple = ()) -> None:
     """
     seen: dict[Path, str] = {}
     for what, p in outputs.items():
+        check_target(p, inputs)  # first: a link loop gets its own line, not resolve()'s
         rp = Path(p).resolve()
         if rp in seen:
             raise ExportError(f"{p}: given for both --{seen[rp]} and --{what}")
         seen[rp] = what
-        check_target(p, inputs)
 
 
 def _same_file(a: Path, b: Path) -> bool:

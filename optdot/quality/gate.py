@@ -23,6 +23,7 @@ from ..geometry.density import DensityMap
 from ..geometry.domain import Domain
 from ..geometry.orientation import Orientation
 from ..pattern import DotSource
+from .conformance import DotRule
 from .measure import measure
 from .source import Source, source_of
 
@@ -111,6 +112,7 @@ def run_qa(
     area: tuple[float, float, float, float] | None = None,
     orientation: Orientation | None = None,
     ink: float | None = None,
+    rule: DotRule | None = None,
 ) -> QAResult:
     """Measure ``dots`` (a pattern in memory, or a dataset tile by tile in bounded
     memory, its checksums verified first) and apply the gate.
@@ -127,10 +129,12 @@ def run_qa(
         orientation: the field shaped dots should follow (the job's), or None.
         ink: the printed film's ink contrast (the job's :attr:`~optdot.config.job.Job.ink`:
             its luminance goes as ``1 - ink * coverage``), or None for a guide's dots.
+        rule: the footprints the job draws (kind, sizes): a dot that is not one of them
+            fails the gate; None (no job) leaves them unchecked.
     """
     dots.verify()
     src = source_of(dots, box, outline)
-    return judge(src, density, params, collision, collision_gap, area, orientation, ink)
+    return judge(src, density, params, collision, collision_gap, area, orientation, ink, rule)
 
 
 def judge(
@@ -142,6 +146,7 @@ def judge(
     area: tuple[float, float, float, float] | None = None,
     orientation: Orientation | None = None,
     ink: float | None = None,
+    rule: DotRule | None = None,
 ) -> QAResult:
     """Measure ``src`` (:func:`optdot.quality.measure.measure`) and make the gate lines.
 
@@ -168,6 +173,7 @@ def judge(
         area,
         orientation,
         ink,
+        rule,
     )
     m, w = got.metrics, got.where
     if gaps is None:
@@ -206,6 +212,19 @@ def judge(
             m["psi6_coherence_2mm"] <= params.max_psi6_coherence,
         ),
     ]
+    own = m.get("footprints")
+    if own is not None:
+        first = own["first_not_the_jobs"]
+        checks.append(
+            Check(
+                f"dots whose footprint is not the job's {own['job']}"
+                + (f" (the first: {first})" if first else ""),
+                own["not_the_jobs"],
+                0,
+                own["not_the_jobs"] == 0,
+                w["footprints"],
+            )
+        )
     shape = m.get("shape")
     if shape:
         checks.append(

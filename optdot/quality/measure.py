@@ -49,6 +49,7 @@ from ..geometry.shapes import CIRCLE, Footprints
 from ..pattern import coverage_pixels
 from ..runtime.memory import available_bytes
 from ..spatial.window import bounds, in_rect
+from .conformance import DotRule, footprint_text
 from .metrics import (
     PatchGrid,
     SquareGrid,
@@ -61,7 +62,7 @@ from .metrics import (
 from .seams import seam_sums
 from .source import Source, gather
 from .summary import Measured, summarize
-from .sums import FirstSums, SecondSums, add_nested, keep
+from .sums import FirstSums, SecondSums, add_nested, cat, keep
 from .visibility import LuminanceGrid, visibility
 from .walls import WallProfiler
 
@@ -94,6 +95,7 @@ def measure(
     area: tuple[float, float, float, float] | None = None,
     field: Orientation | None = None,
     ink: float | None = None,
+    rule: DotRule | None = None,
 ) -> Measured:
     """Measure every QA number of ``src``.
 
@@ -113,14 +115,24 @@ def measure(
             angles' largest and mean difference from it are measured.
         ink: a printed film's ink contrast (luminance ``1 - ink * coverage``), or None
             (a guide's dots: luminance as the coverage); see the visibility check.
+        rule: the footprints the job draws (:class:`~optdot.quality.conformance.DotRule`):
+            the dots that are not one of them are counted (``metrics["footprints"]``);
+            None: not checked.
     """
     if src.uniform_diameter is None and src.n and gaps is None:
         raise ValueError("dots of varying size are judged by edge gaps: pass gaps")
     if src.uniform_diameter is not None:
         gaps = None
-    first = _first_pass(src, density, view, field)
+    first = _first_pass(src, density, view, field, rule)
     second = _second_pass(src, density, first, close, collision, gaps)
     got = summarize(src, density, smoothing, close, collision, first, second, gaps, field)
+    if rule is not None:
+        got.metrics["footprints"] = {
+            "job": rule.describe(),
+            "not_the_jobs": first.stray,
+            "first_not_the_jobs": first.stray_example,
+        }
+        got.where["footprints"] = [list(map(float, p)) for p in cat(first.where_stray, (2,))]
     if first.luminance is not None and view is not None and density is not None:
         vis, arrays = visibility(first.luminance, density, src.outline, view, area, ink)
         got.metrics["visibility"] = vis
@@ -134,6 +146,7 @@ def _first_pass(
     density: DensityMap | None,
     view: Viewing | None = None,
     field: Orientation | None = None,
+    rule: DotRule | None = None,
 ) -> FirstSums:
     x0, y0, x1, y1 = src.box
     onx, ony = coverage_pixels(src.box, src.nominal_diameter, OVERVIEW_PX)
@@ -163,6 +176,8 @@ def _first_pass(
         f.boxes[k] = bounds(xy)
         if dots.angle is not None:
             _add_angles(f, xy, dots.angle, field)
+        if rule is not None:
+            _add_strays(f, xy, dots, rule)
         if uniform is None:
             f.diameters.append(d)
         area = None if uniform is not None else dots.area()
@@ -212,6 +227,21 @@ def _add_angles(f: FirstSums, xy: np.ndarray, angle: np.ndarray, field: Orientat
         err = np.abs(np.degrees(axis(angle - field.at(xy))))
         f.field_error_max = max(f.field_error_max, float(err.max()))
         f.field_error_sum += float(err.sum())
+
+
+def _add_strays(f: FirstSums, xy: np.ndarray, dots: Footprints, rule: DotRule) -> None:
+    """Count the dots whose footprint the job does not draw, keep where they are and
+    the first one in words."""
+    bad = rule.stray(dots)
+    if not bad.any():
+        return
+    f.stray += int(bad.sum())
+    keep(f.where_stray, xy[bad], 20)
+    keep(f.defects, xy[bad], MAX_MARKS)
+    if f.stray_example is None:
+        i = int(np.flatnonzero(bad)[0])
+        x, y = xy[i]
+        f.stray_example = f"{footprint_text(dots.kind, dots.size[i])} at ({x:.3f}, {y:.3f}) mm"
 
 
 def grain_window(densest, box) -> tuple[float, float, float, float]:

@@ -36,6 +36,9 @@ class FirstSums:
     angle_hist: np.ndarray | None = None  # [36] shaped dots per 5° of their axis
     field_error_max: float = 0.0  # largest |angle - field| of shaped dots, degrees
     field_error_sum: float = 0.0
+    stray: int = 0  # dots whose footprint is not the job's (:mod:`.conformance`)
+    where_stray: list[np.ndarray] = field(default_factory=list)
+    stray_example: str | None = None  # the first such footprint, in words
 
 
 @dataclass

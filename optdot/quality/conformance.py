@@ -1,0 +1,102 @@
+"""Whether a file's dots are the job's: the footprints QA holds a pattern or mask to.
+
+A mask whose dots are not the ones the job asks for must not pass the gate, however well
+spaced they are: circles under an ellipse job, a 60 µm dot among 46 µm ones, prisms with
+15 µm corners where the job asks for 5 µm. :class:`DotRule` is the job's dot as a value
+(its kind, its size, and the size rule when sizes vary); :meth:`DotRule.stray` tells, dot by
+dot, which footprints the job could not have drawn:
+
+- another kind than the job's: every dot;
+- one size: any size parameter off the job's by more than :data:`TOLERANCE`;
+- sizes that vary (``[dots] diameter = [lo, hi]``): a dot's area-equivalent diameter
+  must be one of the rule's (in the range, on its step: :meth:`DotSizes.quantise`), and a
+  shaped dot's every parameter the job's footprint scaled to that diameter (so a corner
+  radius or an aspect of its own is caught too).
+
+Angles are held to the job's orientation field by the gate's own line (where the field is
+a function of position; random angles have nothing to hold them to).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry.shapes import CIRCLE, DotShape, Footprints, Kind
+from ..geometry.sizes import DotSizes
+
+#: How far a footprint's size parameter may be off the job's, mm (0.1 µm): masks read
+#: back recover sizes to 1–2 nm (vertices on a 1 nm grid), and the size rule's steps are
+#: 0.5 µm by default, so a size off its step is caught.
+TOLERANCE = 1e-4
+
+
+@dataclass(frozen=True)
+class DotRule:
+    """The footprints a job draws.
+
+    Attributes:
+        shape: the job's dot at its nominal size (a circle job: a circle of its diameter;
+            with ``sizes``, the shaped dot whose area-equivalent diameter is scaled).
+        sizes: how diameters vary, or None for one size.
+    """
+
+    shape: DotShape
+    sizes: DotSizes | None = None
+
+    def describe(self) -> str:
+        """The job's dot in words, sizes in µm: ``circle 46 µm``, ``ellipse 80 × 40 µm``,
+        ``rounded_rectangle 120 × 30 µm, corner_radius 5 µm``, or with sizes
+        ``circle 30–120 µm on 0.5 µm steps``."""
+        if self.sizes is not None and self.shape.kind is CIRCLE:
+            s = self.sizes
+            return f"circle {_um(s.low)}–{_um(s.high)} µm on {_um(s.step)} µm steps"
+        text = footprint_text(self.shape.kind, self.shape.size)
+        if self.sizes is not None:
+            s = self.sizes
+            text += (
+                f", scaled to diameters {_um(s.low)}–{_um(s.high)} µm on {_um(s.step)} µm steps"
+            )
+        return text
+
+    def expected(self, dots: Footprints) -> np.ndarray:
+        """``[n, k]`` the size parameters (mm) the job gives each of ``dots`` (of the
+        job's kind): its one size, or the job's footprint at the rule's diameter nearest
+        each dot's own."""
+        kind, size = self.shape.kind, np.asarray(self.shape.size, np.float64)
+        if self.sizes is None:
+            return np.broadcast_to(size, (dots.n, len(size)))
+        d = self.sizes.quantise(dots.equivalent_diameter())
+        if kind is CIRCLE:
+            return d[:, None]
+        return kind.drawable(np.round(np.outer(self.shape.scale_of(d), size), 6))
+
+    def stray(self, dots: Footprints) -> np.ndarray:
+        """``[n]`` bool: the dots whose footprint the job does not draw (see the module)."""
+        if dots.kind is not self.shape.kind:
+            return np.ones(dots.n, bool)
+        if not dots.n:
+            return np.zeros(0, bool)
+        off = np.abs(dots.size - self.expected(dots))
+        return ~np.all(off <= TOLERANCE, axis=1)
+
+
+def footprint_text(kind: Kind, size) -> str:
+    """One footprint of ``kind`` and ``size`` (``[k]`` mm) in words, µm: ``circle 56.6
+    µm``, ``ellipse 80 × 40 µm``, ``rounded_rectangle 120 × 30 µm, corner_radius 15 µm``."""
+    size = [float(v) for v in size]
+    if kind.round:
+        return f"{kind.name} {_um(size[0])} µm"
+    text = f"{kind.name} {_um(size[0])} × {_um(size[1])} µm"
+    for p, v in zip(kind.params[2:], size[2:], strict=True):
+        text += f", {p} {_um(v)} µm"
+    return text
+
+
+def _um(mm: float) -> str:
+    """A length in mm as µm, 4 significant digits."""
+    return f"{mm * 1e3:.4g}"
+
+
+__all__ = ["TOLERANCE", "DotRule", "footprint_text"]
