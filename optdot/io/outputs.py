@@ -16,9 +16,9 @@ from .dataset_write import check_dataset_target
 
 def check_target(target: str | Path, inputs: tuple[Path, ...] = ()) -> None:
     """Refuse, before any work, an output that cannot be written or would overwrite an
-    input: a symbolic link loop, a missing or unwritable directory, a directory in the way, anything but a
-    regular file in the way (a device node, a FIFO, a socket), a name longer than the
-    file system allows, or the same file as one of ``inputs``.
+    input: a symbolic link loop, a missing or unwritable directory, a directory in the
+    way, anything but a regular file in the way (a device node, a FIFO, a socket), a name
+    longer than the file system allows, or the same file as one of ``inputs``.
 
     Raises:
         ExportError: one line naming the file and the problem.
