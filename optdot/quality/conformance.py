@@ -55,9 +55,7 @@ class DotRule:
         text = footprint_text(self.shape.kind, self.shape.size)
         if self.sizes is not None:
             s = self.sizes
-            text += (
-                f", scaled to diameters {_um(s.low)}–{_um(s.high)} µm on {_um(s.step)} µm steps"
-            )
+            text += f", scaled to diameters {_um(s.low)}–{_um(s.high)} µm on {_um(s.step)} µm steps"
         return text
 
     def expected(self, dots: Footprints) -> np.ndarray:
