@@ -61,6 +61,37 @@ __all__ = [
 ]
 
 
+def _checkout_exporters() -> None:
+    """Make ``optdot.exporters`` importable when this is a source checkout's ``optdot/``
+    (Python started at the checkout's root imports this folder before the installed
+    package): the installed package maps the top-level ``exporters/`` folder in as
+    ``optdot.exporters`` (pyproject.toml's ``package-dir``); here a finder does the same,
+    for that one name. Installed, ``optdot/exporters`` exists and nothing is added."""
+    import sys
+    from importlib.abc import MetaPathFinder
+    from importlib.util import spec_from_file_location
+    from pathlib import Path
+
+    here = Path(__file__).resolve().parent
+    top = here.parent / "exporters"
+    if (here / "exporters").is_dir() or not (top / "__init__.py").is_file():
+        return
+
+    class CheckoutExporters(MetaPathFinder):
+        def find_spec(self, name, path=None, target=None):
+            if name != "optdot.exporters":
+                return None
+            return spec_from_file_location(
+                name, top / "__init__.py", submodule_search_locations=[str(top)]
+            )
+
+    if not any(type(f).__name__ == "CheckoutExporters" for f in sys.meta_path):
+        sys.meta_path.append(CheckoutExporters())
+
+
+_checkout_exporters()
+
+
 def __getattr__(name: str):
     if name in _API:
         value = getattr(import_module(_API[name]), _ALIASES.get(name, name))

@@ -225,3 +225,49 @@ def test_a_listed_signature_the_code_no_longer_takes_is_skipped(monkeypatch):
     )
     monkeypatch.setattr(kernels, "manifest", lambda: (stale, good))
     assert kernels.compile_kernels([0, 1]) == 1  # no error: the stale one is left
+
+
+SETTLE = """
+import os, sys
+import numba, numpy as np
+
+@numba.njit(parallel=True)
+def first(x):
+    s = 0.0
+    for i in numba.prange(len(x)):
+        s += x[i]
+    return s
+
+first(np.ones(8))  # numba's thread pool starts at its default size
+os.environ["NUMBA_NUM_THREADS"] = "1"  # then a Dask nanny sets the variable
+if sys.argv[1] == "settled":
+    from optdot.runtime.cluster import single_threaded
+    single_threaded()  # what a tiled run's worker does before its work
+
+@numba.njit(parallel=True)
+def second(x):  # a cold cache's compile re-reads the variable
+    s = 0.0
+    for i in numba.prange(len(x)):
+        s += 2.0 * x[i]
+    return s
+
+print(second(np.ones(8)), numba.get_num_threads())
+"""
+
+
+def test_a_compile_after_the_pool_started_survives_a_changed_thread_variable(tmp_path):
+    """The README's tiled example after a plain ``generate`` in one interpreter crashed a
+    worker's first compile ("Cannot set NUMBA_NUM_THREADS to a different value once the
+    threads have been launched"): NUMBA_NUM_THREADS changed after numba's pool started.
+    Unsettled, the compile fails as it did; settled, it runs on one thread."""
+    script = tmp_path / "settle.py"
+    script.write_text(SETTLE)
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_NUM_THREADS"}
+    env["NUMBA_CACHE_DIR"] = str(tmp_path / "cache")
+    run = [sys.executable, "-P", str(script)]
+    raw = subprocess.run([*run, "raw"], capture_output=True, text=True, env=env)
+    if (os.cpu_count() or 1) > 1:
+        assert raw.returncode != 0 and "Cannot set NUMBA_NUM_THREADS" in raw.stderr
+    got = subprocess.run([*run, "settled"], capture_output=True, text=True, env=env)
+    assert got.returncode == 0, got.stderr
+    assert got.stdout.split() == ["16.0", "1"]

@@ -206,6 +206,13 @@ def made_for(path: Path, box, job) -> None:
 )
 @click.option("--force", is_flag=True, help="Write masks even if the QA gate fails.")
 @click.option(
+    "--no-job",
+    is_flag=True,
+    help="Write without a job, knowingly: the gate then judges the spacing alone; without "
+    "--job (or a job file as SOURCE) nothing is written and the exit code is 5 unless "
+    "this is given.",
+)
+@click.option(
     "--overwrite",
     is_flag=True,
     help="Replace an existing mask (GDS/OAS/DXF) that differs from the new one.",
@@ -230,6 +237,7 @@ def export(
     top_cell,
     dxf_version,
     force,
+    no_job,
     overwrite,
     html_path,
     json_path,
@@ -281,6 +289,8 @@ def export(
         made_for(source, stream.box, job)
     else:
         pattern = _read_with_job(source, job)
+    if job is None and not (no_job or force):
+        _incomplete_export(pattern if pattern is not None else stream, reports, quiet)
     lines: list[str] = []
     from .progress import ProgressBar
 
@@ -427,18 +437,39 @@ def qa(
     if not result.passed:
         sys.exit(1)
     if job is None and not no_job:
-        click.echo(
-            "optdot: incomplete: without --job the pattern's coverage, empty cells and "
-            "visibility were not checked (exit 5); give the job, or --no-job to judge the "
-            "spacing alone",
-            err=True,
-        )
+        click.echo(INCOMPLETE_TEXT.format(""), err=True)
         sys.exit(INCOMPLETE)
     sys.exit(0)
 
 
-#: Exit code of ``qa`` when the gate passed but the map's checks were skipped (no job).
+#: Exit code of ``qa`` and ``export`` when the gate passed but the map's checks were
+#: skipped (no job, no ``--no-job``); ``export`` then writes nothing.
 INCOMPLETE = 5
+
+#: What ``qa`` and ``export`` say when they exit :data:`INCOMPLETE`.
+INCOMPLETE_TEXT = (
+    "optdot: incomplete: without --job the pattern's coverage, empty cells and visibility "
+    "were not checked (exit 5){}; give the job, or --no-job to judge the spacing alone"
+)
+
+
+def _incomplete_export(dots, reports: dict, quiet: bool) -> None:
+    """``export`` without a job: the gate judged, its report written, nothing else, and
+    the exit code ``qa`` gives the same pattern (1 failed, else :data:`INCOMPLETE`)."""
+    from ..io.atomic import transaction
+    from ..pipeline import qa as run_gate
+    from ..quality.report import write_reports
+
+    result = run_gate(dots, None)
+    with transaction():
+        write_reports(result, reports, title="optdot QA: pattern")
+    if not quiet:
+        _print_checks(result, lambda line: click.echo(line, err=True))
+    if not result.passed:
+        click.echo(f"optdot: QA gate failed ({result.failures()}); nothing written", err=True)
+        sys.exit(1)
+    click.echo(INCOMPLETE_TEXT.format("; nothing written"), err=True)
+    sys.exit(INCOMPLETE)
 
 
 def _print_checks(result, echo=click.echo) -> None:

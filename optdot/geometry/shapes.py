@@ -28,6 +28,10 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+#: Sizes of a footprint within this of each other make a disc (:meth:`Kind.disc`), mm:
+#: files hold sizes to 1 nm, masks read back to 1-2 nm.
+DISC_SLACK = 2e-6
+
 
 class Kind:
     """One kind of footprint: how its size parameters make a shape. Methods take
@@ -50,6 +54,12 @@ class Kind:
     def shape_params(self, size: np.ndarray) -> np.ndarray:
         """``[n, 3]`` the numbers :func:`on_packed` tests a point against, mm (or mm²)."""
         raise NotImplementedError
+
+    def disc(self, size: np.ndarray) -> np.ndarray:
+        """``[n]`` the diameter of the disc each footprint of ``size`` (``[n, k]`` mm) is,
+        mm, NaN where it is not a disc (its sizes equal within :data:`DISC_SLACK`): how a
+        circle a mask reader recognises matches a kind that draws a disc."""
+        return np.full(len(size), np.nan)
 
     def undrawable(self, size: np.ndarray) -> np.ndarray:
         """``[n]`` bool: sizes (``[n, k]`` mm) no footprint of this kind has (a width
@@ -132,6 +142,9 @@ class Circle(Kind):
     def undrawable(self, size: np.ndarray) -> np.ndarray:
         return ~(size[:, 0] > 0)
 
+    def disc(self, size: np.ndarray) -> np.ndarray:
+        return size[:, 0].astype(np.float64, copy=True)
+
     def area(self, size: np.ndarray) -> np.ndarray:
         return np.pi * 0.25 * size[:, 0] ** 2
 
@@ -190,6 +203,9 @@ class Ellipse(Kind):
 
     def area(self, size: np.ndarray) -> np.ndarray:
         return np.pi * 0.25 * size[:, 0] * size[:, 1]
+
+    def disc(self, size: np.ndarray) -> np.ndarray:
+        return np.where(np.abs(size[:, 0] - size[:, 1]) <= DISC_SLACK, size[:, 1], np.nan)
 
     def extent(self, size: np.ndarray) -> np.ndarray:
         return 0.5 * size[:, 0]
@@ -267,6 +283,11 @@ class RoundedRect(Kind):
 
     def shape_params(self, size: np.ndarray) -> np.ndarray:
         return np.column_stack(self._core(size))
+
+    def disc(self, size: np.ndarray) -> np.ndarray:
+        w = size[:, 1]
+        round_ = (np.abs(size[:, 0] - w) <= DISC_SLACK) & (np.abs(w - 2 * size[:, 2]) <= DISC_SLACK)
+        return np.where(round_, w, np.nan)
 
     def undrawable(self, size: np.ndarray) -> np.ndarray:
         rc = size[:, 2]

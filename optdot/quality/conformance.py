@@ -6,7 +6,8 @@ spaced they are: circles under an ellipse job, a 60 µm dot among 46 µm ones, p
 (its kind, its size, and the size rule when sizes vary); :meth:`DotRule.stray` tells, dot by
 dot, which footprints the job could not have drawn:
 
-- another kind than the job's: every dot;
+- another kind than the job's: every dot, unless both draw the same disc (a capsule as
+  long as it is wide, which a mask reader recognises as a circle);
 - one size: any size parameter off the job's by more than :data:`TOLERANCE`;
 - sizes that vary (``[dots] diameter = [lo, hi]``): a dot's area-equivalent diameter
   must be one of the rule's (in the range, on its step: :meth:`DotSizes.quantise`), and a
@@ -59,9 +60,9 @@ class DotRule:
         return text
 
     def expected(self, dots: Footprints) -> np.ndarray:
-        """``[n, k]`` the size parameters (mm) the job gives each of ``dots`` (of the
-        job's kind): its one size, or the job's footprint at the rule's diameter nearest
-        each dot's own."""
+        """``[n, k]`` the size parameters (mm, the job's kind's) the job gives each of
+        ``dots``: its one size, or the job's footprint at the rule's diameter nearest each
+        dot's own (area-equivalent, whatever the dot's kind)."""
         kind, size = self.shape.kind, np.asarray(self.shape.size, np.float64)
         if self.sizes is None:
             return np.broadcast_to(size, (dots.n, len(size)))
@@ -71,13 +72,16 @@ class DotRule:
         return kind.drawable(np.round(np.outer(self.shape.scale_of(d), size), 6))
 
     def stray(self, dots: Footprints) -> np.ndarray:
-        """``[n]`` bool: the dots whose footprint the job does not draw (see the module)."""
-        if dots.kind is not self.shape.kind:
-            return np.ones(dots.n, bool)
+        """``[n]`` bool: the dots whose footprint the job does not draw (see the module).
+        A dot of another kind is the job's only where both are the same disc (a
+        capsule as long as it is wide, read back from a mask as a circle)."""
         if not dots.n:
             return np.zeros(0, bool)
-        off = np.abs(dots.size - self.expected(dots))
-        return ~np.all(off <= TOLERANCE, axis=1)
+        want = self.expected(dots)
+        if dots.kind is self.shape.kind:
+            return ~np.all(np.abs(dots.size - want) <= TOLERANCE, axis=1)
+        off = np.abs(dots.kind.disc(dots.size) - self.shape.kind.disc(want))
+        return ~(off <= TOLERANCE)
 
 
 def footprint_text(kind: Kind, size) -> str:

@@ -63,11 +63,33 @@ def worker_environment() -> dict[str, str]:
     return env
 
 
+def settle_numba_threads() -> None:
+    """Make this process's ``NUMBA_NUM_THREADS`` the size of numba's running thread pool.
+
+    numba reads the variable when it is imported and again before every compile, and
+    refuses a compile ("Cannot set NUMBA_NUM_THREADS to a different value once the
+    threads have been launched") when it changed after the pool started. A worker whose
+    nanny sets it to 1 after something imported numba and started the pool (or a
+    process whose environment a library changed) would then fail at its first compile,
+    as a cold cache's tiled run does. Before the pool starts, the variable is adopted;
+    after, the variable is put back to the pool's size (``numba.set_num_threads``, not
+    the variable, is what limits the threads a kernel uses)."""
+    import numba
+    from numba.core import config
+    from numba.np.ufunc import parallel
+
+    if parallel._is_initialized:
+        os.environ["NUMBA_NUM_THREADS"] = str(config.NUMBA_NUM_THREADS)
+    else:
+        config.reload_config()
+
+
 def single_threaded() -> None:
     """Run numba's parallel kernels on one thread in this Dask thread (results do not
     depend on it; the thread count of the cluster is Dask's)."""
     import numba
 
+    settle_numba_threads()
     if numba.get_num_threads() != 1:
         numba.set_num_threads(1)
 

@@ -1,5 +1,7 @@
 """Preloaded into every embedded Dask worker process (``distributed.worker.preload``).
 
+Its numba thread count is settled to the worker's environment (see :func:`dask_setup`).
+
 A Ctrl-C in the terminal reaches the whole process group: the command stops the run
 itself (one line, exit 130) and closes the cluster, so a worker has nothing to do with
 the signal but print a traceback. Workers therefore ignore SIGINT; they still stop when
@@ -21,5 +23,11 @@ _ignore_interrupts()
 
 
 def dask_setup(worker) -> None:  # noqa: ARG001 - Dask's preload hook
-    """Dask calls this in the worker once it starts (the import above did the work)."""
+    """Dask calls this in the worker once it starts, after its nanny set the worker's
+    environment: interrupts ignored (the import above did it too), and numba's thread
+    count settled to that environment before any kernel compiles here
+    (:func:`optdot.runtime.cluster.settle_numba_threads`)."""
+    from .cluster import settle_numba_threads
+
     _ignore_interrupts()
+    settle_numba_threads()
