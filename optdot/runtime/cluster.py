@@ -74,7 +74,6 @@ def settle_numba_threads() -> None:
     as a cold cache's tiled run does. Before the pool starts, the variable is adopted;
     after, the variable is put back to the pool's size (``numba.set_num_threads``, not
     the variable, is what limits the threads a kernel uses)."""
-    import numba
     from numba.core import config
     from numba.np.ufunc import parallel
 
