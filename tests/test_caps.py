@@ -193,7 +193,7 @@ def test_masks_carry_the_caps_and_read_them_back(tmp_path, fmt):
     suffix = fmt.split("-")[0]
     out = tmp_path / f"m.{suffix}"
     extra = ["--flatten"] if fmt == "gds-flat" else []
-    rc, err, _ = cli("export", tmp_path / "p.npz", f"--{suffix}", out, *extra)
+    rc, err, _ = cli("export", tmp_path / "p.npz", f"--{suffix}", out, *extra, "--no-job")
     assert rc == 0, err
     from optdot.exporters.readback import read_any
     from optdot.io.patterns import load_pattern
@@ -284,9 +284,13 @@ def test_qa_fails_a_pattern_whose_caps_differ_from_the_job_s(tmp_path):
 def test_a_csv_refuses_caps_and_a_speos_mapping_carries_them(tmp_path):
     job_path = direct_job(tmp_path, 10.0, 10.0, 0.3, leds=CAPPED)
     assert cli("generate", job_path, "-o", tmp_path / "p.npz", "-q")[0] == 0
-    one_error(("export", tmp_path / "p.npz", "--csv", tmp_path / "p.csv"), 2, "caps", "CSV")
+    one_error(
+        ("export", tmp_path / "p.npz", "--csv", tmp_path / "p.csv", "--no-job"), 2, "caps", "CSV"
+    )
     assert not (tmp_path / "p.csv").exists()
-    rc, err, _ = cli("export", tmp_path / "p.npz", "--speos", tmp_path / "p.OPT3DMapping")
+    rc, err, _ = cli(
+        "export", tmp_path / "p.npz", "--speos", tmp_path / "p.OPT3DMapping", "--no-job"
+    )
     assert rc == 0, err
     from optdot.io.patterns import load_pattern
 

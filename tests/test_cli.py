@@ -112,7 +112,16 @@ def test_klayout_reads_dxf(exported):
 
 
 def test_dxf_r12(tmp_path, exported):
-    r = run("export", exported["csv"], "--dxf", tmp_path / "r12.dxf", "--dxf-version", "R12", "-q")
+    r = run(
+        "export",
+        exported["csv"],
+        "--dxf",
+        tmp_path / "r12.dxf",
+        "--dxf-version",
+        "R12",
+        "-q",
+        "--no-job",
+    )
     assert r.exit_code == 0, r.output
     doc = ezdxf.readfile(tmp_path / "r12.dxf")
     assert doc.dxfversion == "AC1009"

@@ -88,7 +88,9 @@ def test_a_read_only_target_is_never_replaced(tmp_path, tiny_csv):
     for p in outs.values():
         p.write_bytes(b"OLD")
     os.chmod(outs["dxf"], 0o444)
-    r = optdot_limited(10**9, "export", tiny_csv, "--gds", outs["gds"], "--dxf", outs["dxf"])
+    r = optdot_limited(
+        10**9, "export", tiny_csv, "--gds", outs["gds"], "--dxf", outs["dxf"], "--no-job"
+    )
     assert r.returncode == 2 and "is read-only (mode 0444)" in r.stderr, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
     assert all(p.read_bytes() == b"OLD" for p in outs.values())
@@ -99,7 +101,7 @@ def test_a_read_only_target_is_never_replaced(tmp_path, tiny_csv):
 
 @pytest.mark.parametrize("where", ["/sys/optdot-test.gds", "/proc/optdot-test.gds"])
 def test_an_unwritable_place_is_one_line(tiny_csv, where):
-    r = optdot_limited(10**9, "export", tiny_csv, "--gds", where)
+    r = optdot_limited(10**9, "export", tiny_csv, "--gds", where, "--no-job")
     assert r.returncode == 2 and r.stderr.startswith(f"optdot: error: {where}"), r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
 
@@ -116,7 +118,9 @@ def test_a_failed_output_replaces_none_of_the_set(tmp_path, tiny_csv):
     for p in outs.values():
         p.write_bytes(b"OLD")
     limit = (sizes["oas"] + sizes["dxf"]) // 2
-    r = optdot_limited(limit, "export", tiny_csv, "--oas", outs["oas"], "--dxf", outs["dxf"], "-q")
+    r = optdot_limited(
+        limit, "export", tiny_csv, "--oas", outs["oas"], "--dxf", outs["dxf"], "-q", "--no-job"
+    )
     assert r.returncode == 2 and str(outs["dxf"]) in r.stderr, r.stderr
     assert all(p.read_bytes() == b"OLD" for p in outs.values())
     assert sorted(p.name for p in tmp_path.iterdir()) == ["full.dxf", "full.oas", "v.dxf", "v.oas"]

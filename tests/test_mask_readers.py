@@ -230,7 +230,15 @@ def test_a_top_cell_named_like_a_tile_or_dot_cell_is_refused(tmp_path, tiny_patt
         write_gds(sized, tmp_path / "m.gds", ExportOptions(top_cell="DOT_30000"))
     save_pattern(tiny_pattern, tmp_path / "p.csv")
     one_error(
-        ["export", tmp_path / "d.parquet", "--gds", tmp_path / "m.gds", "--top-cell", "T0_0"],
+        [
+            "export",
+            tmp_path / "d.parquet",
+            "--gds",
+            tmp_path / "m.gds",
+            "--top-cell",
+            "T0_0",
+            "--no-job",
+        ],  # fmt: skip
         2,
         "cell name",
     )

@@ -175,7 +175,7 @@ def test_a_shaped_dataset_is_exported_and_checked_part_by_part(tiled_shapes, tmp
         assert r.metrics[key] == mem.metrics[key]
     assert r.metrics["shape"]["shapely_disagreements"] == 0
     assert r.metrics["orientation"]["field_error_max_deg"] < 1e-5
-    rc = optdot("export", d / "two.parquet", "--gds", tmp_path / "m.gds", "-q")
+    rc = optdot("export", d / "two.parquet", "--gds", tmp_path / "m.gds", "-q", "--no-job")
     assert rc.returncode == 0, rc.stderr
     q, p = read_any(tmp_path / "m.gds"), load_dataset(d / "two.parquet")
     a, b = np.lexsort(q.xy.T), np.lexsort(p.xy.T)
