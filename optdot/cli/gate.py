@@ -476,6 +476,7 @@ def _print_checks(result, echo=click.echo) -> None:
     """The gate as a user reads it: one line per check (PASS, FAIL, or WARN for an
     advisory one over its level), the checks skipped, the visibility summary, and the
     verdict (PASS, PASS WITH WARNINGS or FAIL) last."""
+    from ..quality.gate import jnd_text
     from ..quality.gate import number_text as _num
 
     for c in result.checks:
@@ -490,7 +491,7 @@ def _print_checks(result, echo=click.echo) -> None:
         echo(
             f"visibility ({vis['view']}, {vis['distance_mm']:g} mm, "
             f"{vis['luminance_cd_m2']:g} cd/m², PSF sigma {vis['psf_sigma_mm']:g} mm): "
-            f"largest |JND| {vis['max_jnd']:.2f} at ({x:.2f}, {y:.2f}) mm, "
+            f"largest |JND| {jnd_text(vis['max_jnd'])} at ({x:.2f}, {y:.2f}) mm, "
             f"{vis['blobs_over_1_jnd']} blobs over 1 JND" + _panel_jnd(vis)
         )
     echo(f"verdict: {result.verdict}")
@@ -510,11 +511,13 @@ def _places(where: list) -> str:
 def _panel_jnd(vis: dict) -> str:
     """`` in the viewing area; the whole panel's largest ... at ...`` when the job names a
     viewing area, else nothing."""
+    from ..quality.gate import jnd_text
+
     if "panel_max_jnd" not in vis:
         return ""
     px, py = vis["panel_max_jnd_at_mm"]
     return (
-        f" in the viewing area; the whole panel's largest {vis['panel_max_jnd']:.2f} "
+        f" in the viewing area; the whole panel's largest {jnd_text(vis['panel_max_jnd'])} "
         f"at ({px:.2f}, {py:.2f}) mm"
     )
 

@@ -27,7 +27,7 @@ from .conformance import DotRule
 from .measure import measure
 from .source import Source, source_of
 
-__all__ = ["Check", "QAResult", "caps_check", "judge", "run_qa"]
+__all__ = ["Check", "QAResult", "caps_check", "jnd_text", "judge", "run_qa"]
 
 
 @dataclass
@@ -378,3 +378,16 @@ def number_text(v) -> str:
     if isinstance(v, numbers.Real):
         return f"{float(v):.4g}"
     return str(v)
+
+
+def jnd_text(v: float, limit: float = 1.0) -> str:
+    """A JND for a reader: 2 decimals, more where 2 would put it on the other side of
+    ``limit`` or onto it (0.9973 is "0.997", not "1.00" beside "0 regions over 1")."""
+    v = float(v)
+    text = f"{v:.2f}"
+    for digits in range(2, 7):
+        text = f"{v:.{digits}f}"
+        shown = float(text)
+        if (shown < limit) == (v < limit) and (shown > limit) == (v > limit):
+            return text
+    return text

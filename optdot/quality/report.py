@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io.atomic import atomic_path, expect_tail
-from .gate import QAResult
+from .gate import QAResult, jnd_text
 from .visibility import BLOB_JND
 
 
@@ -200,7 +200,7 @@ def _visibility_section(result: QAResult) -> str:
         px, py = vis["panel_max_jnd_at_mm"]
         where = (
             f" in the viewing area ({a[0]:g}..{a[2]:g} x {a[1]:g}..{a[3]:g} mm, the dashed "
-            f"frame; the bezel hides the rest); over the whole panel {vis['panel_max_jnd']:.2f}"
+            f"frame; the bezel hides the rest); over the whole panel {jnd_text(vis['panel_max_jnd'])}"
             f" at ({px:.2f}, {py:.2f}) mm"
         )
     coarse = (
@@ -211,7 +211,7 @@ def _visibility_section(result: QAResult) -> str:
     return f"""<h2>Will a viewer see it?</h2>
 <p>Viewing: <b>{html.escape(str(vis["view"]))}</b>, {vis["distance_mm"]:g} mm,
 {vis["luminance_cd_m2"]:g} cd/m², stack blur (PSF sigma) {vis["psf_sigma_mm"]:g} mm.
-Largest |JND| <b>{vis["max_jnd"]:.2f}</b> at ({x:.2f}, {y:.2f}) mm{where};
+Largest |JND| <b>{jnd_text(vis["max_jnd"])}</b> at ({x:.2f}, {y:.2f}) mm{where};
 {vis["blobs_over_1_jnd"]} region(s) over 1 JND.{coarse}</p>
 <p>The map is the luminance the dots give after the stack's blur, relative to the target
 map (the intended gradient is not an error), as contrast against the eye's 2° surround,
@@ -242,14 +242,27 @@ def _grain_text(m) -> str:
     w = g["window_mm"]
     fill = g.get("fill_range")
     fills = f", fill {fill[0]:.3g}–{fill[1]:.3g}" if fill else ""
+    changes = bool(fill) and fill[1] > MAP_CHANGES * fill[0]
+    s = f"{g['s_ka_0.3_1']:.2g}" if changes else f"<b>{g['s_ka_0.3_1']:.2g}</b>"
+    if changes:  # the map's own gradient is long-wavelength structure: not grain
+        judged = (
+            "The map's fill changes inside this window, and its own gradient is structure "
+            "at these wavelengths that random dots do not have: S here is not compared with "
+            "random dots' 1; judge the grain on a part of the panel where the map is even."
+        )
+    else:
+        judged = "Random (Poisson) dots give 1; optdot's own pattern on an even map ~0.00001."
     return (
-        f"<p>Grain: structure factor S = <b>{g['s_ka_0.3_1']:.2g}</b> at wavelengths of 6–20 "
+        f"<p>Grain: structure factor S = {s} at wavelengths of 6–20 "
         f"dot spacings (k·a 0.3–1) and {g['s_ka_1_3']:.2g} at 2–6 (k·a 1–3), over "
         f"({w[0]:.1f}, {w[1]:.1f})–({w[2]:.1f}, {w[3]:.1f}) mm around the densest square "
-        f"({g['dots']:,} dots{fills}). Random (Poisson) dots give 1; optdot's own pattern on "
-        "a uniform map ~0.00001; a map that changes inside the window adds its own "
-        "long-wavelength structure.</p>"
+        f"({g['dots']:,} dots{fills}). {judged}</p>"
     )
+
+
+#: A grain window whose highest fill exceeds its lowest by this factor is on a map that
+#: changes (its S is not judged against random dots').
+MAP_CHANGES = 1.1
 
 
 def _simulation_section(result: QAResult) -> str:
