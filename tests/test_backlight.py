@@ -569,3 +569,12 @@ def test_a_film_design_needs_two_iterations_and_a_slowly_leaking_stack_is_advise
     )
     line = one_error(("simulate", trap, "--rays", "2000"), 2, "light hardly leaves")
     assert "a sheet that transmits more" in line and "edge_reflectance" not in line
+
+
+def test_a_guide_design_needs_two_iterations_too(tmp_path):
+    """One iteration only traces the flat start: a guide's map of one iteration was that
+    flat map at the fill floor, written with exit 0."""
+    path = Path(__file__).parents[1] / "samples" / "lgp" / "job.toml"
+    one_error(("design", path, "-o", tmp_path / "m.csv", "--iterations", "1"), 2,
+              "design.iterations = 1", "at least 2", "flat map")  # fmt: skip
+    assert not (tmp_path / "m.csv").exists()

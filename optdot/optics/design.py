@@ -130,12 +130,14 @@ def sizes_asked(job: Job, fill_max: float) -> tuple[float, float] | None:
 
 
 def check_iterations(job: Job, n_iter: int) -> None:
-    """Refuse a film's design of one iteration (it would return the bare film's empty
-    map: the first iteration only traces it)."""
-    if prints_on_film(job) and n_iter < 2:
+    """Refuse a design of one iteration: the first iteration only traces the map it
+    starts from (a film's bare film, a guide's flat level), so one would return that
+    start, never a designed map."""
+    if n_iter < 2:
+        start = "the bare film" if prints_on_film(job) else "a flat map at its starting level"
         raise JobError(
-            f"{job.source or 'job'}: design.iterations = {n_iter}: a film's map needs at "
-            "least 2 (the first traces the bare film, the next its first map)"
+            f"{job.source or 'job'}: design.iterations = {n_iter}: a map needs at least 2 "
+            f"(the first traces {start}, the next the first designed map)"
         )
 
 
@@ -193,9 +195,9 @@ def design(
     live = panel > 0.5
     seen = live & _in_area(job, nx, ny, dx, dy)
     grades = None
+    if start is None:
+        check_iterations(job, n_iter)
     if prints_on_film(job):
-        if start is None:
-            check_iterations(job, n_iter)
         phi = np.full((ny, nx), lo) if start is None else np.array(start, np.float64)
         if job.domain.cap_rings is not None:
             grades = Grades(job, nx, ny, dx, dy)
