@@ -45,4 +45,17 @@ def run() -> None:
         sys.stderr.write("optdot: interrupted\n")
         sys.stderr.flush()
         os._exit(130)  # nothing is open yet
-    main(prog_name="optdot")
+    try:
+        main(prog_name="optdot")
+    finally:
+        ended()
+
+
+def ended() -> None:
+    """The command has ended and its exit code is decided: SIGINT and SIGTERM are ignored
+    from here. Python resets a signal whose handler is a Python function to the default
+    action as the interpreter shuts down, so a SIGTERM in those last moments killed the
+    process (exit 143) after ``design`` wrote its outputs or ``export`` printed its
+    refusal; an ignored signal is left ignored, and the command's own code stands."""
+    for s in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(s, signal.SIG_IGN)

@@ -450,3 +450,44 @@ def test_a_signal_after_the_command_ended_keeps_its_exit_code():
         assert signal.getsignal(signal.SIGTERM) == signal.SIG_IGN
     finally:
         signal.signal(signal.SIGTERM, before)
+
+
+LATE_SIGNAL = """
+import os, signal, sys, time
+
+class LateTerm:
+    # torn down with __main__, after Python reset its signal handlers: a SIGTERM as late
+    # as a signal can come
+    def __del__(self):
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.2)
+
+late = LateTerm()
+sys.argv = ["optdot", *sys.argv[1:]]
+from optdot.console import run
+run()
+"""
+
+
+def test_a_sigterm_while_the_interpreter_shuts_down_keeps_the_command_s_code(tmp_path):
+    """A SIGTERM as the interpreter shuts down (after Python reset its handlers) killed
+    the process by the default action, exit 143 (design after writing its outputs,
+    export after its refusal line); the command's own code stands: 0 for a check that
+    passed, 2 for a refusal."""
+    import subprocess
+    import sys
+
+    from .conftest import SAMPLES
+
+    script = tmp_path / "late.py"
+    script.write_text(LATE_SIGNAL)
+    ok = subprocess.run(
+        [sys.executable, "-P", str(script), "check", SAMPLES / "tiny" / "job.toml"],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    assert ok.returncode == 0, (ok.returncode, ok.stderr)
+    bad = subprocess.run(
+        [sys.executable, "-P", str(script), "check", tmp_path / "missing.toml"],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    assert bad.returncode == 2, (bad.returncode, bad.stderr)
