@@ -578,3 +578,34 @@ def test_a_guide_design_needs_two_iterations_too(tmp_path):
     one_error(("design", path, "-o", tmp_path / "m.csv", "--iterations", "1"), 2,
               "design.iterations = 1", "at least 2", "flat map")  # fmt: skip
     assert not (tmp_path / "m.csv").exists()
+
+
+@pytest.mark.parametrize("leak, refused", [(0.0002, True), (0.0006, False)])
+def test_a_near_lossless_stack_is_refused_or_warned_of(tmp_path, leak, refused):
+    """Reflector 1, a specular frame of 1, ink that reflects all, no haze and one sheet
+    letting 0.02 % through: 24 % of its rays ended unfinished at the event limit and the
+    run passed the probe with exit 0 (efficiency 76 % where nothing absorbs). Now the
+    probe refuses it; a stack that leaks a little more runs, and says what share of its
+    rays it lost to the limit (on stderr and in the JSON)."""
+    import json
+
+    trap = direct_job(
+        tmp_path,
+        cavity={"gap": 1.5, "reflector": 1.0},
+        film={"thickness": 0.2, "dot_reflectance": 1.0, "dot_transmittance": 0.0,
+              "haze": "none"},
+        sheets=[{"transmittance": leak, "reflectance": 1 - leak}],
+        top={"frame": 1.0, "frame_finish": "specular"},
+    )  # fmt: skip
+    args = ("simulate", trap, "--rays", "1000", "--no-halo", "--json", tmp_path / "s.json")
+    if refused:
+        one_error(args, 2, "light hardly leaves", "would end unfinished")
+        assert not (tmp_path / "s.json").exists()
+        return
+    rc, err, out = cli(*args)
+    assert rc == 0, err
+    got = json.loads((tmp_path / "s.json").read_text())
+    unfinished = got["shares"]["unfinished"]
+    assert unfinished > 0.005
+    assert err[-1].startswith("optdot: warning: ") and f"{unfinished:.1%}" in err[-1]
+    assert got["warnings"] and "unfinished" in got["warnings"][0]

@@ -99,6 +99,8 @@ def simulate(
         sim.extra["halo"] = one_led(job, max(rays // 4, 1000), seed, dots=dots)
     seconds = time.perf_counter() - t0  # printed, not written: same seed, same bytes
     _print_simulation(sim, seconds)
+    for warning in sim.summary().get("warnings", []):
+        click.echo(f"optdot: warning: {warning}", err=True)
     with transaction():
         if json_path is not None:
             write_text(json_path, simulation_json(sim, job, pattern, dots.n if dots else None))
