@@ -435,7 +435,7 @@ def test_the_designed_job_is_the_original_with_its_map(tmp_path):
     assert a.domain.geometry.equals(b.domain.geometry)
 
 
-@pytest.mark.parametrize("fill_range, iterations", [([0.3, 0.35], 1), ([0.3, 0.35], 3),
+@pytest.mark.parametrize("fill_range, iterations", [([0.3, 0.35], 2), ([0.3, 0.35], 3),
                                                     ([0.0, 0.4], 3), ([0.0, 0.4], 2)])  # fmt: skip
 def test_design_honours_its_fill_range_with_few_iterations(tmp_path, fill_range, iterations):
     """A floor above the continuation's start, or too few iterations to climb from 1/8 of
