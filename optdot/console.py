@@ -33,10 +33,51 @@ def process_defaults() -> None:
     os.environ.setdefault("NUMPY_MADVISE_HUGEPAGE", "0")
 
 
+class QuietStdout:
+    """``sys.stdout`` that stops writing, silently, once its reader has gone (a pipe
+    closed early: ``optdot qa ... | head -1``): the command still finishes its work and
+    exits with its own code (the gate's verdict), not 1 with nothing said."""
+
+    def __init__(self, stream) -> None:
+        self._stream = stream
+        self.reader_gone = False
+
+    def write(self, text):
+        if not self.reader_gone:
+            try:
+                return self._stream.write(text)
+            except BrokenPipeError:
+                self._gone()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self.reader_gone:
+            try:
+                self._stream.flush()
+            except BrokenPipeError:
+                self._gone()
+
+    def _gone(self) -> None:
+        """Stop writing; what the stream still holds goes to the null device when
+        Python flushes it at exit (a closed pipe would raise there)."""
+        self.reader_gone = True
+        try:
+            null = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(null, self._stream.fileno())
+            os.close(null)
+        except (OSError, ValueError):
+            pass
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
 def run() -> None:
     """Load the command line and run it; the command's own handlers take over from here
     (:func:`optdot.cli.app.user_errors`), and see a signal that came before them."""
     process_defaults()
+    if sys.stdout is not None:
+        sys.stdout = QuietStdout(sys.stdout)
     for s in (signal.SIGINT, signal.SIGTERM):
         signal.signal(s, _note)
     from .cli import main

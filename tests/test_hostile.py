@@ -374,3 +374,67 @@ def test_a_reader_that_hangs_is_stopped_and_one_that_works_is_not(monkeypatch):
         isolate.in_child(time.sleep, 60)
     assert time.monotonic() - t0 < 10
     assert isolate.in_child(_spin, 2.5) == "done"
+
+
+# --- the messages of the fifth round ------------------------------------------------------
+
+ELLIPSE_MAP = (
+    '[dots]\nshape = "ellipse"\nlength = 0.08\nwidth = 0.04\n\n[orientation]\nmap = "a.{}"\n'
+)
+
+
+def _ellipse_job(tiny, ext: str) -> str:
+    text = (tiny / "job.toml").read_text().replace("[dots]\ndiameter = 0.046\n", "")
+    (tiny / "e.toml").write_text(text + ELLIPSE_MAP.format(ext))
+    return str(tiny / "e.toml")
+
+
+def test_an_image_given_as_an_angle_map_is_named_as_one(tiny):
+    """A PNG angle map: "'utf-8' codec can't decode byte 0x89"; now what it is."""
+    from PIL import Image
+
+    Image.fromarray(np.zeros((4, 4), np.uint8)).save(tiny / "a.png")
+    one_error(("check", _ellipse_job(tiny, "png")), 2, "a.png", "is a PNG image", "CSV")
+
+
+def test_a_value_is_echoed_as_a_number_not_numpy_s_repr(tiny):
+    (tiny / "a.csv").write_text("0,10\n20,nan\n")
+    line = one_error(("check", _ellipse_job(tiny, "csv")), 2, "row 2, column 2 = nan")
+    assert "np.float64" not in line
+
+
+def test_an_led_profile_of_strings_is_refused(tmp_path):
+    from optdot.config.light_guide import profile_table
+    from optdot.errors import JobError
+
+    assert profile_table([[0, 1.0], [90, 0]], "leds", "job") == ((0.0, 1.0), (90.0, 0.0))
+    for rows in ([["0", "1"], ["90", "0"]], [[0, True], [90, 0]]):
+        with pytest.raises(JobError, match="two or more rows of numbers"):
+            profile_table(rows, "leds", "job")
+
+
+@pytest.mark.parametrize(
+    "args, code",
+    [(("check", "{job}"), 0), (("qa", "{p}", "--job", "{job}"), 0), (("qa", "{p}"), 5)],
+    ids=["check", "qa", "qa-without-job"],
+)
+def test_stdout_closed_early_keeps_the_command_s_own_code(tiny, tiny_pattern, args, code):
+    """``optdot check JOB | true``: exit 1 (the gate's failure code) with nothing said;
+    now the command finishes and exits with its own code, saying nothing of the pipe."""
+    import os
+    import subprocess
+    import sys
+
+    save_pattern(tiny_pattern, tiny / "p.npz")
+    filled = [a.format(job=tiny / "job.toml", p=tiny / "p.npz") for a in args]
+    read, write = os.pipe()
+    os.close(read)  # the reader is gone before the first line
+    try:
+        got = subprocess.run(
+            [sys.executable, "-P", "-m", "optdot", *filled],
+            stdout=write, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+    finally:
+        os.close(write)
+    assert got.returncode == code, got.stderr
+    assert "Broken pipe" not in got.stderr and "Traceback" not in got.stderr

@@ -25,6 +25,13 @@ def load_grid(path: Path, what: str = "density grid") -> np.ndarray:
         raise JobError(f"{path}: {what} {problem}")
     if binary:
         return _load_npy(path, what)
+    image = _image_kind(path)
+    if image is not None:
+        raise JobError(
+            f"{path}: {what} is {image} image, not a grid: give it as a CSV of numbers "
+            "(row 0 = bottom) or .npy"
+            + (" (a map as an image: [density] image)" if what == "density grid" else "")
+        )
     try:
         text = path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as e:
@@ -50,6 +57,27 @@ def load_grid(path: Path, what: str = "density grid") -> np.ndarray:
     if not rows:
         raise JobError(f"{path}: {what} is empty")
     return np.array(rows, dtype=np.float64)
+
+
+#: The first bytes of the image formats a grid may be mistaken for.
+IMAGE_SIGNATURES = {
+    b"\x89PNG": "a PNG",
+    b"II*\x00": "a TIFF",
+    b"MM\x00*": "a TIFF",
+    b"\xff\xd8\xff": "a JPEG",
+    b"GIF8": "a GIF",
+    b"BM": "a BMP",
+}
+
+
+def _image_kind(path: Path) -> str | None:
+    """``"a PNG"`` (and the like) when ``path`` starts as an image does, else None."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(8)
+    except OSError:
+        return None
+    return next((k for sig, k in IMAGE_SIGNATURES.items() if head.startswith(sig)), None)
 
 
 def _load_npy(path: Path, what: str = "density grid") -> np.ndarray:

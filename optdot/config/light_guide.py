@@ -310,9 +310,14 @@ def led_profile(value: Any, names: tuple[str, ...], lab: str, where: str):
 
 def profile_table(rows: list, lab: str, where: str) -> tuple[tuple[float, float], ...]:
     """An LED's angular profile ``[[angle_deg, intensity], ...]`` validated (angles rising
-    within 0..90, intensities >= 0, not all 0)."""
+    within 0..90, intensities >= 0, not all 0; numbers, not strings that read as them)."""
+    numbers = isinstance(rows, list | tuple) and all(
+        isinstance(r, list | tuple)
+        and all(isinstance(v, int | float) and not isinstance(v, bool) for v in r)
+        for r in rows
+    )
     try:
-        table = np.array(rows, dtype=np.float64)
+        table = np.array(rows, dtype=np.float64) if numbers else np.zeros((0, 0))
     except (TypeError, ValueError):
         table = np.zeros((0, 0))
     ok = table.ndim == 2 and table.shape[1:] == (2,) and len(table) >= 2
@@ -328,8 +333,8 @@ def profile_table(rows: list, lab: str, where: str) -> tuple[tuple[float, float]
         )
     if not ok:
         raise JobError(
-            f"{where}: {lab}.profile must be [[angle_deg, intensity], ...]: two or more rows, "
-            "angles rising within 0..90, intensities >= 0 and not all 0"
+            f"{where}: {lab}.profile must be [[angle_deg, intensity], ...]: two or more rows "
+            "of numbers, angles rising within 0..90, intensities >= 0 and not all 0"
         )
     return tuple((float(a), float(i)) for a, i in table)
 

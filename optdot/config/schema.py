@@ -410,8 +410,8 @@ def _dot_sizes(
         if bad.any():
             iy, ix = np.argwhere(bad)[0]
             raise JobError(
-                f"{path}: dots.diameter_grid: row {iy + 1}, column {ix + 1}: {grid[iy, ix]!r} "
-                f"is not a diameter in the range [{low:g}, {high:g}] mm"
+                f"{path}: dots.diameter_grid: row {iy + 1}, column {ix + 1}: "
+                f"{float(grid[iy, ix])!r} is not a diameter in the range [{low:g}, {high:g}] mm"
             )
     sizes = DotSizes(low, high, step, spacing, qa.effective_close_gap, grid)
     return low, sizes, path

@@ -232,8 +232,8 @@ def orientation(
         if bad.any():
             iy, ix = np.argwhere(bad)[0]
             raise JobError(
-                f"{path}: orientation.map: row {iy + 1}, column {ix + 1} = {grid[iy, ix]!r} is "
-                "not an angle in degrees, -360..360"
+                f"{path}: orientation.map: row {iy + 1}, column {ix + 1} = "
+                f"{float(grid[iy, ix])!r} is not an angle in degrees, -360..360"
             )
         return Orientation("map", math.radians(angle), grid=np.radians(grid), box=box)
     return Orientation("constant", math.radians(angle))
