@@ -109,6 +109,8 @@ def simulate(
 
 
 def _print_simulation(sim, seconds: float, echo=click.echo) -> None:
+    from ..figures import structure_text
+
     s = sim.summary()
     mode = "real dots" if sim.mode == "dots" else "map coverage"
     echo(
@@ -138,6 +140,7 @@ def _print_simulation(sim, seconds: float, echo=click.echo) -> None:
             f"(noise alone {s['luminance_rms_noise']:.2%}), min {s['luminance_min']:.3f}, "
             f"max {s['luminance_max']:.3f} of the mean"
         )
+        echo(f"  {structure_text(s)}")
     else:
         echo(f"luminance over {region}{less}, {bins}: no light reached them")
     if "outside_max" in s:

@@ -11,7 +11,9 @@ same stack and dots, and measures the exitance around it from where each ray lef
   half (a tenth) of its peak, linear between rings (a bare Lambertian source at height
   ``h`` gives ``2 h tan(arccos(0.5 ** 0.25)) = 1.287 h`` and ``2.941 h``);
 - the **shares** of its extracted light inside its own pitch cell and the 3 x 3 cells
-  around it (what a neighbouring zone receives is the rest).
+  around it (what a neighbouring zone receives is the rest);
+- the **lit-alone map**: the exitance over the square around the LED that the rings
+  reach, in bins of :data:`MAP_BINS_PER_PITCH` per pitch, relative to the same peak.
 
 Rings run out to the nearest panel edge, so the profile is never cut by the frame.
 """
@@ -32,6 +34,8 @@ from .trace import FATES, UNCOUPLED
 
 #: Rings per LED pitch (or per cavity gap without a grid) of the radial profile.
 RINGS_PER_PITCH = 40
+#: Bins per LED pitch (or cavity gap) of the lit-alone map around the LED.
+MAP_BINS_PER_PITCH = 8
 
 
 def halo_led(job: Job) -> int:
@@ -59,7 +63,8 @@ def halo(
         JSON-ready figures: ``led_mm``, ``rays``, ``extracted``, ``width50_mm``,
         ``width10_mm`` (None when no light left the top, or it never fell that low within
         the panel), ``share_own_cell``, ``share_3x3`` (None without a pitch), ``dr_mm`` and
-        ``profile`` (``[[r_mm, L / peak], ...]``).
+        ``profile`` (``[[r_mm, L / peak], ...]``), ``map`` (``[ny][nx]`` L / peak, rows
+        from the bottom) over ``map_extent_mm`` (``[x0, x1, y0, y1]``).
 
     Raises:
         JobError: the job is not direct-lit.
@@ -79,8 +84,14 @@ def halo(
     own = near = 0
     px_, py_ = bl.leds.pitch if bl.leds.pitch is not None else (math.inf, math.inf)
     fates = np.zeros(len(FATES), np.int64)
+    cell = scale / MAP_BINS_PER_PITCH
+    side = max(1, int(reach / cell))
+    square = (cx - side * cell, cx + side * cell, cy - side * cell, cy + side * cell)
+    lit = np.zeros((2 * side, 2 * side), np.int64)
     scene = scene_of(job, rays, dots, coverage, only_led=k)
     for px, py in traced(job, scene, seed, rays, fates, progress):
+        h, _, _ = np.histogram2d(py, px, bins=(2 * side, 2 * side), range=(square[2:], square[:2]))
+        lit += h.astype(np.int64)
         dx, dy = px - cx, py - cy
         r = np.hypot(dx, dy)
         i = (r / dr).astype(np.int64)
@@ -111,6 +122,8 @@ def halo(
         "profile": [
             [round(float(a), 6), round(float(b), 6)] for a, b in zip(centres, rel, strict=True)
         ],
+        "map_extent_mm": [round(float(v), 6) for v in square],
+        "map": np.round(lit / (cell * cell) / peak if peak > 0 else lit * 0.0, 5).tolist(),
     }
 
 

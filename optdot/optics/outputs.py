@@ -83,52 +83,55 @@ def write_text(path: Path, text: str) -> None:
 
 
 def luminance_png(path: Path, sim: Simulation, title: str) -> None:
-    """The relative luminance over the panel with the 9 spots, as a PNG."""
+    """The relative luminance over the panel with the 9 spots, beside its smoothed view
+    (the Monte Carlo noise said on each, and the rays that would bring it to 1 %), and
+    for a direct-lit stack the halo of one LED lit alone (its map and radial profile),
+    as a PNG."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.patches import Circle
 
+    from ..figures import halo_pair, luminance_pair, noise_text
+
     x0, y0, x1, y1 = sim.box
-    lum = sim.luminance
-    fig, ax = plt.subplots(figsize=(7.5, 7.5 * (y1 - y0) / (x1 - x0) + 1.2), dpi=110)
-    vals = lum[sim.measured] if sim.measured.any() else lum.ravel()
-    lo, hi = np.percentile(vals, [1, 99]) if len(vals) else (0.0, 1.0)
-    span = max(abs(1 - lo), abs(hi - 1), 0.02)
-    im = ax.imshow(
-        lum,
-        origin="lower",
-        extent=(x0, x1, y0, y1),
-        cmap="RdBu_r",
-        vmin=1 - span,
-        vmax=1 + span,
-        interpolation="nearest",
+    figures = sim.summary()
+    halo = figures.get("halo")
+    rows = 2 if halo else 1
+    heights = [5.2 * min((y1 - y0) / (x1 - x0), 1.5) + 1.2, 5.6][:rows]
+    fig, axes = plt.subplots(
+        rows, 2, figsize=(13, sum(heights)), dpi=110, squeeze=False, layout="constrained",
+        gridspec_kw={"height_ratios": heights},
+    )  # fmt: skip
+    raw, _ = luminance_pair(
+        axes[0], sim.luminance, (x0, x1, y0, y1), figures["luminance_rms_noise"]
     )
-    for sx, sy, _ in sim.spots:
-        ax.add_patch(Circle((sx, sy), sim.spot / 2, fill=False, color="k", lw=0.8))
     m = sim.measured
-    if m.any() and not m.all() and min(m.shape) > 1:  # the bins the figures are taken over
-        ny, nx = sim.measured.shape
-        ax.contour(
-            np.linspace(x0 + 0.5 * sim.bin[0], x1 - 0.5 * sim.bin[0], nx),
-            np.linspace(y0 + 0.5 * sim.bin[1], y1 - 0.5 * sim.bin[1], ny),
-            sim.measured.astype(float), levels=[0.5], colors="k", linewidths=0.9,
-            linestyles="--",
-        )  # fmt: skip
-    over = float(lum.max()) > 1 + span or float(lum.min()) < 1 - span  # hot spots: arrows
+    for ax in axes[0]:
+        for sx, sy, _ in sim.spots:
+            ax.add_patch(Circle((sx, sy), sim.spot / 2, fill=False, color="k", lw=0.8))
+        if m.any() and not m.all() and min(m.shape) > 1:  # the bins the figures are taken over
+            ny, nx = m.shape
+            ax.contour(
+                np.linspace(x0 + 0.5 * sim.bin[0], x1 - 0.5 * sim.bin[0], nx),
+                np.linspace(y0 + 0.5 * sim.bin[1], y1 - 0.5 * sim.bin[1], ny),
+                m.astype(float), levels=[0.5], colors="k", linewidths=0.9, linestyles="--",
+            )  # fmt: skip
+    lo, hi = raw.get_clim()
+    lum = sim.luminance
+    over = float(lum.max()) > hi or float(lum.min()) < lo  # hot spots: arrows
     fig.colorbar(
-        im, ax=ax, label="luminance / mean", shrink=0.8, extend="both" if over else "neither"
-    )
+        raw, ax=list(axes[0]), label="luminance / mean", shrink=0.8,
+        extend="both" if over else "neither",
+    )  # fmt: skip
+    if halo:
+        halo_pair(axes[1], halo)
     u9, _ = sim.uniformity9()
-    rms, noise, _, _ = sim.rms()
-    ax.set_title(
-        f"{title}: efficiency {sim.efficiency:.1%}, 9-point {u9:.3f}, RMS {rms:.1%} "
-        f"(noise {noise:.1%})",
-        fontsize=9,
+    fig.suptitle(
+        f"{title}: efficiency {sim.efficiency:.1%}, 9-point {u9:.3f}; {noise_text(figures)}",
+        fontsize=10,
     )
-    ax.set_xlabel("x, mm")
-    ax.set_ylabel("y, mm")
     buf = io.BytesIO()
     fig.savefig(buf, format="png", bbox_inches="tight")
     plt.close(fig)

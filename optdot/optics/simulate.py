@@ -122,6 +122,18 @@ class Simulation:
         noise = math.sqrt(float(np.mean(1.0 / np.maximum(c, 1.0))))
         return float(rel.std()), noise, float(rel.min()), float(rel.max())
 
+    def resolution(self) -> tuple[float, int | None]:
+        """``(structure, rays)``: the luminance's RMS beyond the Monte Carlo noise (``sqrt(
+        RMS² - noise²)``, 0 when the noise explains it all) and the rays that would bring
+        the noise to :data:`RESOLVED_NOISE` of the mean (None: no light measured). The
+        noise falls as one over the root of the rays."""
+        rms, noise, _, _ = self.rms()
+        if not (math.isfinite(rms) and math.isfinite(noise)):
+            return math.nan, None
+        structure = math.sqrt(max(rms * rms - noise * noise, 0.0))
+        rays = int(math.ceil(self.rays * (noise / RESOLVED_NOISE) ** 2))
+        return structure, rays
+
     def hidden_peak(self) -> tuple[float, tuple[float, float]] | None:
         """The brightest bin outside the measured region that holds light (relative to
         the measured mean) and its centre, mm; None when every lit bin is measured."""
@@ -142,6 +154,7 @@ class Simulation:
         rms, noise, lo, hi = self.rms()
         shares = {k: v / inj for k, v in self.fates.items() if k != "not_coupled"}
         hidden = self.hidden_peak()
+        structure, resolving = self.resolution()
         warned = unfinished_warning(shares)
         outside = (
             {"outside_max": hidden[0], "outside_max_at_mm": [round(v, 4) for v in hidden[1]]}
@@ -165,6 +178,8 @@ class Simulation:
             "spots": [[float(a), float(b), int(c)] for a, b, c in self.spots],
             "luminance_rms": rms,
             "luminance_rms_noise": noise,
+            "luminance_structure": structure,
+            "rays_for_1pct_noise": resolving,
             "luminance_min": lo,
             "luminance_max": hi,
             "bin_mm": list(self.bin),
@@ -332,6 +347,10 @@ def fates_of(scene: Scene, fates: np.ndarray) -> dict[str, int]:
         if sheets or name != "absorbed_sheets"
     }
 
+
+#: The Monte Carlo noise (RMS of a bin, of the mean) :meth:`Simulation.resolution` asks
+#: the rays for.
+RESOLVED_NOISE = 0.01
 
 #: Rays of the probe that checks, before the run, that light can leave the guide.
 PROBE_RAYS = 1000

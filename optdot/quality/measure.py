@@ -126,6 +126,14 @@ def measure(
     first = _first_pass(src, density, view, field, rule)
     second = _second_pass(src, density, first, close, collision, gaps)
     got = summarize(src, density, smoothing, close, collision, first, second, gaps, field)
+    if first.size_lo is not None:
+        got.metrics["footprint_mm"] = {
+            "kind": src.kind.name,
+            **{
+                p: {"min": float(lo), "max": float(hi)}
+                for p, lo, hi in zip(src.kind.params, first.size_lo, first.size_hi, strict=True)
+            },
+        }
     if rule is not None:
         got.metrics["footprints"] = {
             "job": rule.describe(),
@@ -178,6 +186,10 @@ def _first_pass(
             _add_angles(f, xy, dots.angle, field)
         if rule is not None:
             _add_strays(f, xy, dots, rule)
+        if dots.kind is not CIRCLE:  # each size parameter's range, for the report
+            lo, hi = dots.size.min(axis=0), dots.size.max(axis=0)
+            f.size_lo = lo if f.size_lo is None else np.minimum(f.size_lo, lo)
+            f.size_hi = hi if f.size_hi is None else np.maximum(f.size_hi, hi)
         if uniform is None:
             f.diameters.append(d)
         area = None if uniform is not None else dots.area()
@@ -356,7 +368,7 @@ def _second_pass(
         s.grain_xy.append(own[in_rect(own, s.grain_window, closed=False)])
         inz = in_rect(own, zoom, closed=False)
         s.zoom_xy.append(own[inz])
-        s.zoom_d.append(d[inz])
+        s.zoom_d.append(dots.take(inz))
     s.patches = (patches, p_cnt, p_re, p_im)
     return s
 

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..figures import halo_pair, luminance_pair, structure_text
 from ..io.atomic import atomic_path, expect_tail
 from .gate import QAResult, jnd_text
 from .visibility import BLOB_JND
@@ -159,7 +160,7 @@ figure{{display:inline-block;margin:.5em}}img{{max-width:560px}}</style></head><
 <h1>{html.escape(title)}</h1><div class="verdict" id="verdict">{verdict}</div>
 {_warnings_text(result)}
 {_provenance_text(result)}
-<p>{m["dots"]:,} dots, diameter {_diameter_text(m["diameter_mm"])}, panel {box[2] - box[0]:.3f} × {box[3] - box[1]:.3f} mm</p>
+<p>{m["dots"]:,} dots, {_dots_text(m)}, panel {box[2] - box[0]:.3f} × {box[3] - box[1]:.3f} mm</p>
 <h2>Gate</h2><table><tr><th></th><th>check</th><th>value</th><th>limit</th><th>where (mm, first 5)</th></tr>{rows}</table>
 {seen}
 <h2>Spacing, order and coverage</h2>
@@ -184,7 +185,7 @@ def _visibility_section(result: QAResult) -> str:
     blobs = "".join(
         f"<tr><td>{b['x_mm']:.2f}, {b['y_mm']:.2f}</td><td>{b.get('kind', '')}</td>"
         f"<td>{b['area_mm2']:.3g}</td>"
-        f"<td>{b['contrast_percent']:+.3f}</td><td>{b['jnd']:+.2f}</td><td>{b['semu']:.2f}</td></tr>"
+        f"<td>{b['contrast_percent']:+.3f}</td><td>{'-' if b['jnd'] < 0 else '+'}{jnd_text(abs(b['jnd']))}</td><td>{b['semu']:.2f}</td></tr>"
         for b in vis["blobs"][:10]
     )
     table = (
@@ -278,25 +279,45 @@ def _simulation_section(result: QAResult) -> str:
 
     lum, ext, spots = result.arrays["luminance"]
     w, h = ext[1] - ext[0], ext[3] - ext[2]
-    fig, ax = plt.subplots(figsize=(10, max(2.5, min(8.0, 10 * h / max(w, 1e-9) + 1))))
-    span = max(0.02, min(0.5, float(np.percentile(np.abs(lum - 1), 99)) if lum.size else 0.1))
-    im = ax.imshow(lum, origin="lower", extent=ext, cmap="RdBu_r", vmin=1 - span, vmax=1 + span)
-    over = bool(lum.size) and (float(lum.max()) > 1 + span or float(lum.min()) < 1 - span)
-    _colorbar(fig, ax, im, "luminance / mean", "both" if over else "neither")
-    for sx, sy, _ in spots:
-        ax.add_patch(
-            Circle(
-                (sx, sy), 0.5 * (sim.get("spot_diameter_mm") or 0), fill=False, color="k", lw=0.8
-            )
-        )
+    halo = result.arrays.get("halo")
+    heights = [max(2.5, min(6.0, 5.2 * h / max(w, 1e-9) + 1.2)), 5.6][: 2 if halo else 1]
+    fig, axes = plt.subplots(
+        len(heights), 2, figsize=(12, sum(heights)), squeeze=False, layout="constrained",
+        gridspec_kw={"height_ratios": heights},
+    )  # fmt: skip
+    noise = sim.get("luminance_rms_noise") or 0.0
+    im, _ = luminance_pair(axes[0], lum, ext, noise)
+    lo, hi = im.get_clim()
+    over = bool(lum.size) and (float(lum.max()) > hi or float(lum.min()) < lo)
+    fig.colorbar(
+        im, ax=list(axes[0]), label="luminance / mean", shrink=0.8,
+        extend="both" if over else "neither",
+    )  # fmt: skip
     area = sim.get("viewing_area_mm")
-    _frame(ax, area)
-    ax.set(
-        xlabel="x (mm)",
-        ylabel="y (mm)",
-        title=_wrap("Simulated luminance (circles: 9-point spots)"),
-    )
+    for ax in axes[0]:
+        for sx, sy, _ in spots:
+            ax.add_patch(
+                Circle(
+                    (sx, sy), 0.5 * (sim.get("spot_diameter_mm") or 0), fill=False, color="k",
+                    lw=0.8,
+                )
+            )  # fmt: skip
+        _frame(ax, area)
+    if halo:
+        halo_pair(axes[1], halo)
+    fig.suptitle("Simulated luminance (circles: 9-point spots)", fontsize=10)
     png = _png_base64(fig)
+    halo_text = ""
+    if halo:
+        hx, hy = halo["led_mm"]
+        w50, w10 = (
+            f"{v:.3g} mm" if v is not None else "beyond the panel"
+            for v in (halo.get("width50_mm"), halo.get("width10_mm"))
+        )
+        halo_text = (
+            f" The LED at ({hx:.2f}, {hy:.2f}) mm lit alone (below): its halo is {w50} wide at "
+            f"half its peak and {w10} at a tenth."
+        )
     region = (
         "the viewing area (dashed)"
         if area
@@ -322,8 +343,9 @@ def _simulation_section(result: QAResult) -> str:
 {mode}.{other} Efficiency <b>{_n(sim.get("efficiency"), ".1%")}</b> ± {_n(sim.get("efficiency_sigma"), ".2%")};
 9-point uniformity <b>{_n(sim.get("uniformity_9point"), ".3f")}</b> ± {_n(sim.get("uniformity_9point_sigma"), ".3f")};
 luminance RMS {_n(sim.get("luminance_rms"), ".2%")} over {region}
-(Monte Carlo noise alone {_n(sim.get("luminance_rms_noise"), ".2%")}), min {_n(sim.get("luminance_min"), ".3f")},
-max {_n(sim.get("luminance_max"), ".3f")} of the mean.{outside} Compare it with the JND map above: the JND map
+(Monte Carlo noise alone {_n(sim.get("luminance_rms_noise"), ".2%")}: {html.escape(structure_text(sim))}), min {_n(sim.get("luminance_min"), ".3f")},
+max {_n(sim.get("luminance_max"), ".3f")} of the mean.{outside}{halo_text} The bins as traced carry the rays' noise; the smoothed view beside them
+shows what is structure. Compare it with the JND map above: the JND map
 judges the dots against the map, this one the map and the dots against the LEDs.</p>
 <figure><img style="max-width:100%" alt="simulated luminance" src="data:image/png;base64,{png}"></figure>
 """
@@ -392,7 +414,8 @@ def _png_base64(fig) -> str:
     import matplotlib.pyplot as plt
 
     buf = io.BytesIO()
-    fig.tight_layout()
+    if fig.get_layout_engine() is None:  # a constrained layout lays itself out
+        fig.tight_layout()
     fig.savefig(buf, format="png", dpi=90, metadata={"Software": None})
     plt.close(fig)
     return base64.b64encode(buf.getvalue()).decode("ascii")
@@ -403,7 +426,7 @@ def _figures(result: QAResult) -> list[tuple[str, str]]:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.collections import EllipseCollection, LineCollection
+    from matplotlib.collections import EllipseCollection, LineCollection, PolyCollection
 
     out: list[tuple[str, str]] = []
     a = result.arrays
@@ -437,10 +460,19 @@ def _figures(result: QAResult) -> list[tuple[str, str]]:
     tx0, ty0, tx1, ty1 = a["tile"]
     s = min(1.0, tx1 - tx0)
     fig, ax = plt.subplots(figsize=(5, 5))
-    zxy, zd, seg = a["zoom"]
-    ax.add_collection(
-        EllipseCollection(zd, zd, 0, units="xy", offsets=zxy, offset_transform=ax.transData, fc="k")
-    )
+    zxy, feet, seg = a["zoom"]
+    if feet.kind.round:
+        zd = feet.diameter
+        ax.add_collection(
+            EllipseCollection(
+                zd, zd, 0, units="xy", offsets=zxy, offset_transform=ax.transData, fc="k"
+            )
+        )
+    else:  # the true footprints, each at its size and angle
+        tol = 0.002 * float(np.median(feet.extent())) if feet.n else 1e-4
+        ax.add_collection(
+            PolyCollection([feet.outline(k, tol) + zxy[k] for k in range(feet.n)], fc="k")
+        )
     if len(seg):
         ax.add_collection(LineCollection(seg, colors="orange", linewidths=1))
     ax.set(
@@ -452,6 +484,25 @@ def _figures(result: QAResult) -> list[tuple[str, str]]:
         title=_wrap("True-scale zoom of the densest region (close pairs in orange)"),
     )
     save(fig, "densest region")
+
+    turned = m.get("orientation")
+    if turned and "histogram_5deg_from_-90" in turned:
+        fig, ax = plt.subplots(figsize=(6, 3.5))
+        ax.stairs(turned["histogram_5deg_from_-90"], np.arange(-90, 91, 5), fill=True)
+        err = (
+            f"; off the field by {turned['field_error_mean_deg']:.2g}° on average, "
+            f"{turned['field_error_max_deg']:.2g}° at most"
+            if "field_error_max_deg" in turned
+            else ""
+        )
+        ax.set(
+            xlabel="long axis, degrees from +x",
+            ylabel="dots",
+            xlim=(-90, 90),
+            xticks=np.arange(-90, 91, 30),
+            title=_wrap("Angles of the dots' long axes, per 5°" + err),
+        )
+        save(fig, "angles")
 
     fig, ax = plt.subplots(figsize=(6, 3.5))
     if a["nn_hist"] is not None:
@@ -506,6 +557,21 @@ def _figures(result: QAResult) -> list[tuple[str, str]]:
         )
         save(fig, "spectrum")
     return out
+
+
+def _dots_text(m: dict) -> str:
+    """The dots' footprints in words: ``diameter 46.0 µm`` (a range when sizes vary), or
+    a shaped kind with each size parameter (a range where it varies)."""
+    feet = m.get("footprint_mm")
+    if not feet:
+        return f"diameter {_diameter_text(m['diameter_mm'])}"
+    sizes = []
+    for name, r in feet.items():
+        if name == "kind":
+            continue
+        lo, hi = r["min"] * 1e3, r["max"] * 1e3
+        sizes.append(f"{name} {lo:.4g} µm" if hi - lo < 1e-6 else f"{name} {lo:.4g}–{hi:.4g} µm")
+    return f"{html.escape(feet['kind'])}: " + ", ".join(sizes)
 
 
 def _diameter_text(d) -> str:

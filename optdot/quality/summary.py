@@ -11,7 +11,7 @@ import numpy as np
 
 from ..geometry.density import DensityMap
 from ..geometry.orientation import Orientation
-from ..geometry.shapes import CIRCLE
+from ..geometry.shapes import CIRCLE, Footprints
 from .metrics import coverage, disc_area, radial_spectrum
 from .seams import seam_finish
 from .source import Source
@@ -135,7 +135,8 @@ def summarize(
     arrays["spectrum"] = (freq, power)
     arrays["tile"] = tile
     arrays["overview"] = (f.overview, f.overview_extent)
-    arrays["zoom"] = (cat(s.zoom_xy, (2,)), cat(s.zoom_d, ()), cat(s.segments, (2, 2)))
+    zoom = Footprints.concat(s.zoom_d, src.kind)
+    arrays["zoom"] = (cat(s.zoom_xy, (2,)), zoom, cat(s.segments, (2, 2)))
     if len(power):
         lo = freq > 0.3 / (np.median(nn) if n > 1 else 1)
         m["spectrum_peak_ratio"] = (

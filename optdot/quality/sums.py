@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from ..geometry.shapes import Footprints
 from .metrics import SquareGrid
 from .visibility import LuminanceGrid
 from .walls import WallProfiler
@@ -39,6 +40,8 @@ class FirstSums:
     stray: int = 0  # dots whose footprint is not the job's (:mod:`.conformance`)
     where_stray: list[np.ndarray] = field(default_factory=list)
     stray_example: str | None = None  # the first such footprint, in words
+    size_lo: np.ndarray | None = None  # [k] shaped dots' smallest size parameters, mm
+    size_hi: np.ndarray | None = None  # [k] and largest
 
 
 @dataclass
@@ -58,7 +61,7 @@ class SecondSums:
     grain_xy: list[np.ndarray] = field(default_factory=list)
     grain_window: tuple[float, float, float, float] | None = None
     zoom_xy: list[np.ndarray] = field(default_factory=list)
-    zoom_d: list[np.ndarray] = field(default_factory=list)
+    zoom_d: list[Footprints] = field(default_factory=list)  # the zoom's dots' footprints
     segments: list[np.ndarray] = field(default_factory=list)
     requeried: int = 0
     shapely_pairs: int = 0  # near pairs of shaped dots checked again with shapely
