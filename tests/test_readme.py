@@ -64,3 +64,37 @@ def test_all_readme_blocks_run_in_one_interpreter(tmp_path):
     assert r.returncode == 0, r.stderr[-3000:]
     assert (tmp_path / "led.gds").exists() and (tmp_path / "led.parquet").is_dir()
     assert r.stdout.strip().splitlines()[-1] in ("PASS", "PASS WITH WARNINGS")
+
+
+def _figures_script():
+    import importlib.util
+
+    path = ROOT / "benchmarks" / "readme_figures.py"
+    spec = importlib.util.spec_from_file_location("readme_figures", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_every_marked_figure_is_one_the_script_makes():
+    """The README marks each walk-through figure once, and the script makes each."""
+    script = _figures_script()
+    text = README.read_text()
+    shown = {m.group(1): m.group(2) for m in script.MARK.finditer(text)}
+    assert set(shown) == set(script.FIGURES)
+    assert script.differences(text, shown) == []
+    assert script.differences(text, {**shown, "lgp.u9": "0.5 ± 0.1"}) == [
+        f"lgp.u9: the README says {shown['lgp.u9']!r}, the walk-through gives '0.5 ± 0.1'"
+    ]
+
+
+@pytest.mark.slow
+def test_the_readme_s_figures_are_today_s_outputs():
+    """Every walk-through figure the README quotes (lgp's 9-point was 0.941 where the
+    run gave 0.939, minled's range 0.858–1.110 where it gave 0.901–1.159) is what the
+    walk-through prints today: ``python benchmarks/readme_figures.py --check``."""
+    r = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "readme_figures.py"), "--check"],
+        capture_output=True, text=True, cwd=ROOT,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stdout + r.stderr[-2000:]
