@@ -88,11 +88,12 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
         if (p.layer, p.datatype) == (opts.outline_layer, opts.outline_datatype)
     ]
     rings = [p.points * to_mm for p in outline]
+    seed = _seed_of([str(p.get_gds_property(1) or "") for p in outline[:1]])
     xy = np.round(np.concatenate(centres), 6)
     kinds = {d.kind for d in diameters}
     if kinds == {CIRCLE}:
         d = np.concatenate([d.size[:, 0] for d in diameters])
-        return _pattern(path, xy, d, rings, True, caps=caps, cap_rings=cap_rings)
+        return _seeded(_pattern(path, xy, d, rings, True, caps=caps, cap_rings=cap_rings), seed)
     if len(kinds) > 1:
         raise PatternFileError(
             f"{path}: the dot layer holds {' and '.join(sorted(k.name for k in kinds))} dots; "
@@ -103,7 +104,28 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
         np.round(np.concatenate([d.size for d in diameters]), 6),
         np.radians(degrees(np.concatenate([d.angle for d in diameters]))),
     )
-    return _pattern(path, xy, dots.diameter, rings, True, dots, caps, cap_rings)
+    return _seeded(_pattern(path, xy, dots.diameter, rings, True, dots, caps, cap_rings), seed)
+
+
+def _seed_of(lines: list[str]) -> int | None:
+    """The seed a mask's provenance line names (``provenance: optdot X seed N
+    sha256:...``), or None."""
+    for line in lines:
+        m = re.search(r"\bseed (\d+)\b", line)
+        if m:
+            return int(m.group(1))
+    return None
+
+
+def _dxf_seed(doc) -> int | None:
+    """The seed a drawing's provenance (its ``seed`` custom property) names, or None."""
+    value = str(doc.header.custom_vars.get("seed", "") or "").strip()
+    return int(value) if value.isdigit() else None
+
+
+def _seeded(pattern: Pattern, seed: int | None) -> Pattern:
+    """``pattern`` with the seed its mask's provenance names in its ``meta``."""
+    return pattern if seed is None else replace(pattern, meta={**pattern.meta, "seed": seed})
 
 
 def _is_cap_cell(name: str) -> bool:
@@ -394,7 +416,8 @@ def _read_dxf(path: Path) -> Pattern:
         )
         xy = np.round(np.array([f.centre for f in fits]), 6)
         cap_rings = _dxf_rings(path, _rows(caps), graded)
-        return _pattern(path, xy, dots.diameter, rings, False, dots, _rows(caps), cap_rings)
+        made = _pattern(path, xy, dots.diameter, rings, False, dots, _rows(caps), cap_rings)
+        return _seeded(made, _dxf_seed(doc))
     if not xy_l:
         raise PatternFileError(f"{path}: no CIRCLE entities on layer DOTS")
     xy = np.array(xy_l, dtype=np.float64) * scale
@@ -407,7 +430,8 @@ def _read_dxf(path: Path) -> Pattern:
             "dots need a radius > 0"
         )
     cap_rings = _dxf_rings(path, _rows(caps), graded)
-    return _pattern(path, np.round(xy, 6), 2 * radii, rings, caps=_rows(caps), cap_rings=cap_rings)
+    made = _pattern(path, np.round(xy, 6), 2 * radii, rings, caps=_rows(caps), cap_rings=cap_rings)
+    return _seeded(made, _dxf_seed(doc))
 
 
 def _dxf_graded(path: Path, e, kind: str, scale: float, caps: list, graded: list) -> None:

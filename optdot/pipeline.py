@@ -305,7 +305,6 @@ def qa(
             (``view``, ``view_distance``, ``view_luminance``, ``psf``, ``max_jnd``).
     """
     from .quality.gate import caps_check, run_qa
-    from .quality.provenance import provenance
 
     dots = pattern if pattern is not None else dataset
     if dots is None:
@@ -354,12 +353,51 @@ def qa(
                 job.domain.cap_rings,
             )
         )
+    result.provenance = provenance_of(dots, job)
+    return result
+
+
+def _refuse_kept_masks(dots: DotSource, job: Job | None, outputs, options, hint: str) -> None:
+    """Refuse, before the gate runs, to write over a kept mask that cannot be what this
+    run writes: a GDSII, or a DXF of a release with custom properties, carries the
+    provenance digest of the run that wrote it as plain text, so a kept one without this
+    run's digest has other bytes (the transaction would refuse it after the gate; the
+    gate of a large pattern takes seconds to minutes). Other masks are compared after
+    writing, as before.
+
+    Raises:
+        ExportError: the first such mask, in the transaction's words.
+    """
+    from .io.atomic import lacks_text
+    from .quality.provenance import mask_lines
+
+    dxf_props = options is None or getattr(options, "dxf_version", "R2010") != "R12"
+    plain = [Path(p) for f, p in outputs.items() if f == "gds" or (f == "dxf" and dxf_props)]
+    if not any(p.is_file() for p in plain):
+        return
+    head = mask_lines(provenance_of(dots, job))[0]
+    digest = head.rsplit("sha256:", 1)[1] if "sha256:" in head else ""
+    if len(digest) != 64:  # the head line cut short: nothing to look for
+        return
+    for path in plain:
+        if path.is_file() and lacks_text(path, digest.encode()):
+            raise ExportError(
+                f"{path}: a different file is already there and is kept ({hint}); "
+                "nothing was written"
+            )
+
+
+def provenance_of(dots: DotSource, job: Job | None) -> dict[str, Any]:
+    """What made ``dots`` (:func:`optdot.quality.provenance.provenance`): the job, its
+    inputs, the dots' file and the seed (the dots' own, else the job's when they were made
+    in this run)."""
+    from .quality.provenance import provenance
+
     source = dots.label or None
     seed = dots.meta.get("seed")
     if seed is None and job is not None and source is None:
         seed = job.optimize.seed  # made from this job in this run
-    result.provenance = provenance(job, source, seed)
-    return result
+    return provenance(job, source, seed)
 
 
 def export(
@@ -418,6 +456,9 @@ def export(
     check_outputs({**outputs, **reports}, inputs)
     title = f"optdot QA: {Path(source).name if source else 'pattern'}"
     stage = stage or (lambda name: None)
+    hint = "give --overwrite to replace it, or another name"
+    if not overwrite:  # before the gate: a kept mask this run cannot write again
+        _refuse_kept_masks(pattern or stream, job, outputs, options, hint)
     stage("QA gate")
     result = qa(pattern, job, dataset=stream)
     if not result.passed and not force:
@@ -432,7 +473,6 @@ def export(
     done: list[tuple[str, Path, str]] = []
     stage("writing")
     keep = () if overwrite else [p for f, p in outputs.items() if FORMATS[f].mask]
-    hint = "give --overwrite to replace it, or another name"
     with transaction(keep, hint, replace_masks=overwrite):
         for fmt, path in outputs.items():
             if stream is not None and FORMATS[fmt].streamed:

@@ -271,3 +271,24 @@ def test_simulate_refuses_a_pattern_that_is_not_the_job_s(made, tmp_path):
     save_pattern(own, tmp_path / "own.csv")
     rc, err, out = cli("simulate", path, tmp_path / "own.csv", "--rays", 1000)
     assert rc == 0, err
+
+
+def test_a_kept_mask_is_refused_before_the_gate(made, tmp_path):
+    """``export`` onto a kept mask ran the whole gate (12 s on a large pattern) before
+    refusing; a GDSII or DXF without this run's provenance digest is refused first: a
+    pattern whose gate would fail gets the kept-mask line, not the gate's."""
+    import optdot
+    from optdot.errors import ExportError
+
+    path, job, p = made["circle"]
+    for fmt in ("gds", "dxf"):
+        out = tmp_path / f"m.{fmt}"
+        optdot.export(p, {fmt: out}, job)
+        before = out.read_bytes()
+        optdot.export(p, {fmt: out}, job, overwrite=False)  # the same bytes again: allowed
+        xy = p.xy.copy()
+        xy[1] = xy[0] + [0.01, 0.0]  # a collision: this gate would fail
+        bad = Pattern(xy, p.diameter, p.box, meta={"seed": 99})
+        with pytest.raises(ExportError, match="is kept"):
+            optdot.export(bad, {fmt: out}, job, overwrite=False)
+        assert out.read_bytes() == before

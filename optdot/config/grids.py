@@ -145,6 +145,11 @@ def _hint(row: list[str], rows: list[list[float]]) -> str:
     for sep, name in ((";", "semicolons"), ("\t", "tabs")):
         if sep in cell and all(_is_float(c) for c in cell.split(sep) if c.strip()):
             return f" (the values are separated by {name}: the grid must be comma-separated)"
+    if not rows and row and not row[0].strip() and all(_is_float(c) for c in row[1:]):
+        return (
+            " (a header row over an index column, as pandas' to_csv writes: write the grid "
+            "with index=False, header=False; the grid holds numbers only)"
+        )
     if not rows and not any(_is_float(c) for c in row):
         return " (a header row? the grid holds numbers only; start a comment line with #)"
     return ""

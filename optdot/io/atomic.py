@@ -81,6 +81,21 @@ def writable_target(target: str | Path) -> Path:
     return target
 
 
+def lacks_text(path: Path, text: bytes, block: int = 1 << 20) -> bool:
+    """Whether the file ``path`` does not hold the bytes ``text`` anywhere (read in
+    blocks that overlap by ``len(text)``; an unreadable file holds nothing)."""
+    tail = b""
+    try:
+        with open(path, "rb") as fh:
+            while chunk := fh.read(block):
+                if text in tail + chunk:
+                    return False
+                tail = chunk[-len(text) :]
+    except OSError:
+        return True
+    return True
+
+
 def refuse_read_only(target: Path) -> None:
     """A file whose write bits are all off was protected on purpose: never replace it
     (checked on the mode, so that it holds for root too)."""
