@@ -20,6 +20,7 @@ from optdot.io.dataset import MANIFEST, load_dataset, open_dataset
 from optdot.io.dataset_write import save_dataset
 from optdot.io.patterns import load_pattern, save_pattern
 from optdot.pipeline import generate, generate_tiled, qa
+from optdot.runtime.stop import stop_note
 from optdot.tiling.plan import plan_tiles
 from optdot.tiling.run import InProcess
 
@@ -51,6 +52,9 @@ def _resumed(job, tmp_path, stop_after: int) -> int:
     generate_tiled(job, full, plan=plan, executor=InProcess())
     with pytest.raises(KeyboardInterrupt):
         generate_tiled(job, out, plan=plan, executor=_Counting(stop_after=stop_after))
+    # what the interrupt's line adds: the tiles kept, and that the same command resumes
+    note = stop_note()
+    assert "finished tiles are kept in" in note and "resumes from them" in note, note
     again = _Counting()
     generate_tiled(job, out, plan=plan, executor=again)
     names = sorted(p.name for p in full.iterdir())

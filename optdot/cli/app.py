@@ -51,7 +51,10 @@ def user_errors(fn):
             click.echo(f"optdot: error: {shorten(str(e))}", err=True)
             sys.exit(e.exit_code)
         except KeyboardInterrupt:
-            click.echo("optdot: interrupted", err=True)
+            from ..runtime.stop import stop_note
+
+            note = stop_note()
+            click.echo("optdot: interrupted" + (f"; {note}" if note else ""), err=True)
             sys.exit(130)
         except Exception as e:
             if not _caused_by_interrupt(e):

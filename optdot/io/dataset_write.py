@@ -31,7 +31,7 @@ from ..errors import ExportError, PatternFileError, one_line
 from ..files import sha256_file
 from ..geometry.orientation import degrees
 from ..geometry.shapes import CIRCLE, Footprints, Kind
-from ..runtime.stop import check_interrupt
+from ..runtime.stop import check_interrupt, note_on_stop
 from .atomic import install_directory, short_name
 from .dataset import open_dataset, read_part_file
 from .manifest import (
@@ -295,6 +295,7 @@ def write_dataset(
     directory = target.parent if str(target.parent) else Path(".")
     check_dataset_target(target)
     resumed: dict[int, dict[str, Any]] = {}
+    note_on_stop("")  # a note of an earlier run in this process is not this run's
     extras: dict[str, dict[str, Any]] = {}
     if resume_key is not None:
         tmp, resumed, extras = _open_staging(target, resume_key)
@@ -346,10 +347,15 @@ def write_dataset(
         if target.is_dir():
             check_dataset_target(target)
         install_directory(tmp, target)
-    except BaseException:
+    except BaseException as e:
         nothing_to_resume = not writer.parts and not writer.extras  # e.g. no cluster
         if resume_key is None or (tmp / MANIFEST).exists() or nothing_to_resume:
             shutil.rmtree(tmp, ignore_errors=True)
+        elif isinstance(e, KeyboardInterrupt):
+            note_on_stop(
+                f"{len(writer.parts):,} finished tiles are kept in {tmp}: the same command "
+                "resumes from them"
+            )
         raise
 
 

@@ -9,6 +9,7 @@ process-wide: a command runs one job.
 from __future__ import annotations
 
 _interrupted = False
+_note = ""
 
 
 def mark_interrupted() -> None:
@@ -28,3 +29,15 @@ def check_interrupt() -> None:
     """Raise ``KeyboardInterrupt`` when a stop was requested (a safe point)."""
     if _interrupted:
         raise KeyboardInterrupt
+
+
+def note_on_stop(text: str) -> None:
+    """What the stop leaves behind, for the interrupt's one line (a tiled run's finished
+    tiles kept for the rerun to resume from)."""
+    global _note
+    _note = text
+
+
+def stop_note() -> str:
+    """The note :func:`note_on_stop` left, or ""."""
+    return _note
