@@ -31,6 +31,9 @@ from optdot.runtime.memory import max_dots_read
 from .gds import quietly
 from .options import ExportOptions
 
+#: How far a graded cap's ring polygon's area may be off its annulus', as a share (the
+#: polygon is drawn within the export tolerance, far under it).
+RING_AREA_SHARE = 0.01
 #: Largest spread of a dot polygon's vertex radii: 2 nm plus this share of the radius
 #: (vertices are snapped to the 1 nm grid).
 RADIUS_SPREAD = 1e-3
@@ -190,8 +193,22 @@ def _cell_rings(path: Path, name: str, pts: list, to_mm: float, reach: float) ->
         r = np.hypot(p.points[:, 0], p.points[:, 1]) * to_mm
         holds = bool(gdstk.inside([(0.0, 0.0)], p)[0])
         r_out = float(r.max())
+        r_in = 0.0 if holds else float(r.min())
+        # a ring's vertices lie on its two circles (a disc's on one): a polygon reaching
+        # r_in and r_out elsewhere (a triangle, a spoke) prints other ink than a ring
+        slack = 2e-6 + RADIUS_SPREAD * r_out
+        off = np.minimum(np.abs(r - r_out), np.abs(r - r_in) if not holds else np.inf)
+        x, y = p.points[:, 0] * to_mm, p.points[:, 1] * to_mm
+        area = 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+        ring = math.pi * (r_out * r_out - r_in * r_in)
+        if float(off.max()) > slack or abs(area - ring) > RING_AREA_SHARE * ring:
+            raise PatternFileError(
+                f"{path}: cap cell {name}: a polygon on the dots' layer is not a ring about "
+                f"the cap's centre (its area {area:.4g} mm² against the ring's {ring:.4g}, "
+                f"a vertex {float(off.max()) * 1e3:.3g} µm off its circles)"
+            )
         r_out = reach if reach < r_out <= reach + 1e-5 else r_out  # vertices on the nm grid
-        rows.append((0.0 if holds else round(float(r.min()), 6), round(r_out, 6)))
+        rows.append((0.0 if holds else round(r_in, 6), round(r_out, 6)))
     rings = np.array(sorted(rows), np.float64).reshape(-1, 2)
     problem = rings_problem(rings, np.array([[0.0, 0.0, 2 * reach]]))
     if problem is not None:
@@ -373,7 +390,8 @@ def _read_dxf(path: Path) -> Pattern:
         scale = mm_per_unit(doc, path)
         xy_l, r_l, rings, shaped, caps, graded = [], [], [], [], [], []
         for e in drawn_entities(doc.modelspace(), path):
-            layer, kind = e.dxf.get("layer", "0"), e.dxftype()
+            # DXF layer names are case-insensitive: "dots" is the layer DOTS
+            layer, kind = str(e.dxf.get("layer", "0")).upper(), e.dxftype()
             if layer == "DOTS" and kind in ("POINT", "HATCH") and e.has_xdata(CAP_APPID):
                 _dxf_graded(path, e, kind, scale, caps, graded)
             elif layer == "DOTS" and kind == "CIRCLE" and e.has_xdata(CAP_APPID):

@@ -14,6 +14,7 @@ callback) and the command line only parses options and prints what it returns.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
@@ -43,7 +44,7 @@ from .preflight import (
     check_job,
     use_tiles,
 )
-from .quality.conformance import DotRule
+from .quality.conformance import DotRule, SizeBand
 from .relax.formulation import Formulation
 from .relax.optdot import Progress
 from .runtime.kernels import warm
@@ -261,9 +262,37 @@ def with_job_panel(pattern: Pattern, job: Job | None) -> Pattern:
 
 
 def dot_rule(job: Job) -> DotRule:
-    """The footprints ``job`` draws, as QA holds a file's dots to them."""
+    """The footprints ``job`` draws, as QA holds a file's dots to them; with sizes, the
+    band of diameters each place may have (:func:`size_band`)."""
     shape = job.shape if job.shape is not None else DotShape(CIRCLE, (job.diameter,))
-    return DotRule(shape, job.sizes)
+    return DotRule(shape, job.sizes, size_band(job))
+
+
+#: How far a dot may have moved from the cell whose rule diameter it was given, mm (at
+#: least a map cell): relaxation moves dots a fraction of a spacing.
+SIZE_REACH_MM = 0.5
+
+
+def size_band(job: Job) -> SizeBand | None:
+    """The diameters the size rule gives each map cell's dots, as a band: the smallest
+    and largest rule diameter within :data:`SIZE_REACH_MM` (a dot is sized where it was
+    thrown, then moves), widened by the size fit's freedom
+    (:data:`optdot.relax.resize.FREEDOM`) and kept in the range; None for one size."""
+    from scipy.ndimage import maximum_filter, minimum_filter
+
+    from .relax.resize import FREEDOM
+
+    sizes = job.sizes
+    if sizes is None:
+        return None
+    cells = np.asarray(job.cell_diameters, np.float64)
+    dx, dy = job.density.cell_size
+    kx, ky = (max(1, math.ceil(SIZE_REACH_MM / c)) for c in (dx, dy))
+    size = (2 * ky + 1, 2 * kx + 1)
+    low = np.maximum(minimum_filter(cells, size, mode="nearest") / (1 + FREEDOM), sizes.low)
+    high = np.minimum(maximum_filter(cells, size, mode="nearest") * (1 + FREEDOM), sizes.high)
+    d = job.density
+    return SizeBand(low, high, (d.x0, d.y0, d.x0 + d.width, d.y0 + d.height))
 
 
 def own_collision(dots: DotSource, job: Job | None) -> float:
@@ -295,8 +324,8 @@ def qa(
             None to measure ``dataset`` (the older spelling).
         job: the target map and thresholds (None: defaults, no map checks); its panel
             box and outline are the panel's.
-        collision: collision distance, mm (default: the job's diameter + gap, else the
-            pattern's nominal diameter).
+        collision: collision distance, mm (default: the job's ``qa.collision_distance``
+            when set, else the dots' own diameter + the job's gap: :func:`own_collision`).
         close: too-close distance, mm (default: the job's ``qa.close_distance``).
             ``collision`` and ``close`` are centre distances for dots of one size; dots of
             varying size are judged by edge gaps: ``close_gap`` (default the job's
@@ -328,6 +357,12 @@ def qa(
     else:
         outline = None if job.domain.rectangle else job.domain
         gap = job.optimize.gap  # dots of varying size collide below it
+        if dots.uniform_diameter is None and job.shape is None and job.sizes is None:
+            # a one-size job's centre distances, as edge gaps: a file whose sizes differ
+            # (by a nudge the footprint check lets through) is held to the same limits
+            gap = job.collision_distance - job.diameter
+            if params.close_gap is None:
+                params = replace(params, close_gap=max(params.close_distance - job.diameter, 0))
         field = job.orientation if job.shape and job.orientation.follows_position else None
         result = run_qa(
             dots,
@@ -362,7 +397,8 @@ def _refuse_kept_masks(dots: DotSource, job: Job | None, outputs, options, hint:
     run writes: a GDSII, or a DXF of a release with custom properties, carries the
     provenance digest of the run that wrote it as plain text, so a kept one without this
     run's digest has other bytes (the transaction would refuse it after the gate; the
-    gate of a large pattern takes seconds to minutes). Other masks are compared after
+    gate of a large pattern takes seconds to minutes). Other masks (OASIS, whose
+    properties may be compressed; DXF R12 and R2000, which hold none) are compared after
     writing, as before.
 
     Raises:
@@ -371,7 +407,9 @@ def _refuse_kept_masks(dots: DotSource, job: Job | None, outputs, options, hint:
     from .io.atomic import lacks_text
     from .quality.provenance import mask_lines
 
-    dxf_props = options is None or getattr(options, "dxf_version", "R2010") != "R12"
+    version = "R2010" if options is None else str(getattr(options, "dxf_version", "R2010"))
+    # ezdxf writes custom properties (the provenance) from R2004 on
+    dxf_props = version[:1] == "R" and version[1:].isdigit() and int(version[1:]) >= 2004
     plain = [Path(p) for f, p in outputs.items() if f == "gds" or (f == "dxf" and dxf_props)]
     if not any(p.is_file() for p in plain):
         return

@@ -292,3 +292,79 @@ def test_a_kept_mask_is_refused_before_the_gate(made, tmp_path):
         with pytest.raises(ExportError, match="is kept"):
             optdot.export(bad, {fmt: out}, job, overwrite=False)
         assert out.read_bytes() == before
+
+
+def test_a_nudged_dot_does_not_dodge_the_job_s_centre_distances(tmp_path):
+    """A one-size job with ``qa.collision_distance = 0.070``: its own dots fail it; the
+    same dots with one 0.05 µm larger (within the footprint tolerance) were judged by edge
+    gaps at ``optimize.gap`` instead, and passed."""
+    path = write_job(tmp_path, GRID, optimize={"max_iter": 60, "seed": 3, "gap": 0.005},
+                     qa={"collision_distance": 0.070})  # fmt: skip
+    job = load_job(path)
+    p = generate(job)
+    own = qa(p, job)
+    assert not own.passed and own.metrics["pairs_below_collision"] > 0
+    d = p.diameter.copy()
+    d[0] += 0.00005
+    nudged = qa(Pattern(p.xy, d, p.box), job)
+    assert nudged.metrics["footprints"]["not_the_jobs"] == 0
+    assert nudged.metrics["pairs_below_collision"] == own.metrics["pairs_below_collision"]
+    assert not nudged.passed
+
+
+def test_a_size_the_rule_does_not_give_that_place_fails(tmp_path):
+    """Sizes 30–120 µm on a pitch rule: 30 µm dots everywhere (each a size of the range,
+    on its step) passed where the rule asks for 34–96 µm."""
+    grid = np.tile(np.linspace(0.1, 0.35, 8), (6, 1))
+    dots = {"diameter": "[0.030, 0.120]", "spacing": 0.15}
+    job = load_job(write_job(tmp_path, grid, dots=dots, domain={"width": 4.0, "height": 3.0}))
+    p = generate(job)
+    assert qa(p, job).metrics["footprints"]["not_the_jobs"] == 0
+    small = Pattern(p.xy, np.full(p.n, 0.030), p.box)
+    got = qa(small, job).metrics["footprints"]["not_the_jobs"]
+    assert got > 0.8 * p.n, got
+
+
+def test_export_with_force_still_needs_a_job(made, tmp_path):
+    """``--force`` writes through a failed gate; it did the same through a missing job
+    (exit 0, no word). The job, or ``--no-job``, is still asked for."""
+    _, _, p = made["circle"]
+    save_pattern(p, tmp_path / "p.npz")
+    rc, err, _ = cli("export", tmp_path / "p.npz", "--gds", tmp_path / "m.gds", "--force")
+    assert rc == 5 and not (tmp_path / "m.gds").exists(), err
+    rc, err, _ = cli("export", tmp_path / "p.npz", "--gds", tmp_path / "m.gds", "--no-job")
+    assert rc == 0, err
+
+
+@pytest.mark.parametrize("version", ["R2000", "R12", "R2018"])
+def test_the_same_dxf_again_is_written_whatever_its_release(made, tmp_path, version):
+    """A DXF R2000 holds no custom properties, so no provenance digest: the early refusal
+    of kept masks refused the very same run again."""
+    path, _, p = made["circle"]
+    save_pattern(p, tmp_path / "p.npz")
+    args = ("export", tmp_path / "p.npz", "--job", path, "--dxf", tmp_path / "k.dxf",
+            "--dxf-version", version, "-q")  # fmt: skip
+    assert cli(*args)[0] == 0
+    rc, err, _ = cli(*args)
+    assert rc == 0, err
+
+
+def test_circles_on_a_lowercase_dots_layer_are_read(made, tmp_path):
+    """DXF layer names are case-insensitive: 50 overlapping circles on layer ``dots``
+    were left out of QA (0 collisions, PASS)."""
+    import ezdxf
+
+    from optdot.exporters.readback import read_any
+
+    path, job, p = made["circle"]
+    save_pattern(p, tmp_path / "p.npz")
+    assert cli("export", tmp_path / "p.npz", "--job", path, "--dxf", tmp_path / "m.dxf",
+               "-q")[0] == 0  # fmt: skip
+    doc = ezdxf.readfile(tmp_path / "m.dxf")
+    msp = doc.modelspace()
+    for k in range(50):
+        msp.add_circle((0.5 + 0.02 * k, 0.7), 0.0283, dxfattribs={"layer": "dots"})
+    doc.saveas(tmp_path / "extra.dxf")
+    assert read_any(tmp_path / "extra.dxf").n == p.n + 50
+    r = qa(read_any(tmp_path / "extra.dxf"), job)
+    assert r.metrics["pairs_below_collision"] >= 49 and not r.passed

@@ -356,3 +356,31 @@ def test_a_mask_whose_caps_print_different_rings_is_refused(tmp_path):
     doc.saveas(tmp_path / "odd.dxf")
     with pytest.raises(PatternFileError, match="same rings"):
         read_any(tmp_path / "odd.dxf")
+
+
+def test_a_graded_cap_drawn_as_triangles_is_refused(tmp_path):
+    """A GDSII whose graded cap cell holds triangles reaching the rings' radii: the
+    reader took each polygon's nearest and farthest vertex for a ring and QA passed."""
+    import gdstk
+
+    from optdot.errors import PatternFileError
+    from optdot.exporters.gds import write_gds
+    from optdot.exporters.options import ExportOptions
+    from optdot.exporters.readback import read_any
+
+    _, p = _pattern(tmp_path)
+    write_gds(p, tmp_path / "p.gds", ExportOptions())
+    assert read_any(tmp_path / "p.gds").n == p.n
+    lib = gdstk.read_gds(str(tmp_path / "p.gds"))
+    cell = next(c for c in lib.cells if c.name.startswith("CAP_"))
+    swapped = 0
+    for poly in [q for q in cell.polygons if (q.layer, q.datatype) == (1, 0)]:
+        r = np.hypot(*poly.points.T)
+        lo, hi = float(r.min()), float(r.max())
+        cell.remove(poly)
+        cell.add(gdstk.Polygon([(lo, 0), (hi, 0), (0, hi)], layer=1))  # a spoke, not a ring
+        swapped += 1
+    assert swapped
+    lib.write_gds(str(tmp_path / "forged.gds"))
+    with pytest.raises(PatternFileError, match="not a ring about the cap's centre"):
+        read_any(tmp_path / "forged.gds")

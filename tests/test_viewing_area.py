@@ -296,5 +296,5 @@ def test_the_luminance_plot_draws_the_measured_region(tmp_path, monkeypatch):
     luminance_png(tmp_path / "l.png", sim, "t")
     # the bins as traced and their smoothed view: the measured region on each
     assert len(drawn) == 2 and all(d[0] == "contour" for d in drawn)
-    for _, (x, y, mask) in drawn:
+    for _, (_, _, mask) in drawn:
         assert np.array_equal(mask, sim.measured.astype(float))

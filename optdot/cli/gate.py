@@ -101,7 +101,7 @@ def traced_as_made(path: Path, pattern, job) -> None:
 
     rule = dot_rule(job)
     feet = pattern.shape
-    stray = rule.stray(feet)
+    stray = rule.stray(feet, pattern.xy)
     if stray.any():
         i = int(np.flatnonzero(stray)[0])
         raise JobError(
@@ -289,7 +289,7 @@ def export(
         made_for(source, stream.box, job)
     else:
         pattern = _read_with_job(source, job)
-    if job is None and not (no_job or force):
+    if job is None and not no_job:  # --force overrides a failed gate, not a missing job
         _incomplete_export(pattern if pattern is not None else stream, reports, quiet)
     lines: list[str] = []
     from .progress import ProgressBar

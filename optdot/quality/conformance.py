@@ -10,9 +10,11 @@ dot, which footprints the job could not have drawn:
   long as it is wide, which a mask reader recognises as a circle);
 - one size: any size parameter off the job's by more than :data:`TOLERANCE`;
 - sizes that vary (``[dots] diameter = [lo, hi]``): a dot's area-equivalent diameter
-  must be one of the rule's (in the range, on its step: :meth:`DotSizes.quantise`), and a
-  shaped dot's every parameter the job's footprint scaled to that diameter (so a corner
-  radius or an aspect of its own is caught too).
+  must be one of the rule's (in the range, on its step: :meth:`DotSizes.quantise`) and
+  one the rule gives the place it stands (:class:`SizeBand`: its neighbourhood's cell
+  diameters, widened by the size fit's freedom), and a shaped dot's every parameter the
+  job's footprint scaled to that diameter (so a corner radius or an aspect of its own is
+  caught too).
 
 Angles are held to the job's orientation field by the gate's own line (where the field is
 a function of position; random angles have nothing to hold them to).
@@ -33,6 +35,31 @@ from ..geometry.sizes import DotSizes
 TOLERANCE = 1e-4
 
 
+@dataclass(frozen=True, eq=False)
+class SizeBand:
+    """The area-equivalent diameters a job of varying sizes gives a dot where it stands:
+    the size rule's diameters of the cells around it, widened by the freedom of the size
+    fit (:mod:`optdot.relax.resize`), per map cell.
+
+    Attributes:
+        low, high: ``[ny, nx]`` the band's ends in each cell, mm.
+        box: ``(x0, y0, x1, y1)`` the cells cover, mm.
+    """
+
+    low: np.ndarray
+    high: np.ndarray
+    box: tuple[float, float, float, float]
+
+    def at(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``([n], [n])`` the band's ends at the points ``xy`` (``[n, 2]`` mm; outside the
+        box, the nearest cell's), mm."""
+        ny, nx = self.low.shape
+        x0, y0, x1, y1 = self.box
+        ix = np.clip(np.floor((xy[:, 0] - x0) / (x1 - x0) * nx).astype(np.int64), 0, nx - 1)
+        iy = np.clip(np.floor((xy[:, 1] - y0) / (y1 - y0) * ny).astype(np.int64), 0, ny - 1)
+        return self.low[iy, ix], self.high[iy, ix]
+
+
 @dataclass(frozen=True)
 class DotRule:
     """The footprints a job draws.
@@ -41,10 +68,14 @@ class DotRule:
         shape: the job's dot at its nominal size (a circle job: a circle of its diameter;
             with ``sizes``, the shaped dot whose area-equivalent diameter is scaled).
         sizes: how diameters vary, or None for one size.
+        band: with ``sizes``, the diameters the rule gives each place (a dot of the
+            range's smallest size where the rule asks for its largest is not the job's),
+            or None (any diameter of the range anywhere).
     """
 
     shape: DotShape
     sizes: DotSizes | None = None
+    band: SizeBand | None = None
 
     def describe(self) -> str:
         """The job's dot in words, sizes in µm: ``circle 46 µm``, ``ellipse 80 × 40 µm``,
@@ -71,17 +102,25 @@ class DotRule:
             return d[:, None]
         return kind.drawable(np.round(np.outer(self.shape.scale_of(d), size), 6))
 
-    def stray(self, dots: Footprints) -> np.ndarray:
-        """``[n]`` bool: the dots whose footprint the job does not draw (see the module).
-        A dot of another kind is the job's only where both are the same disc (a
-        capsule as long as it is wide, read back from a mask as a circle)."""
+    def stray(self, dots: Footprints, xy: np.ndarray | None = None) -> np.ndarray:
+        """``[n]`` bool: the dots whose footprint the job does not draw (see the module),
+        centred at ``xy`` (``[n, 2]`` mm; with a :attr:`band`, a size must also be one the
+        rule gives that place). A dot of another kind is the job's only where both are the
+        same disc (a capsule as long as it is wide, read back from a mask as a circle)."""
         if not dots.n:
             return np.zeros(0, bool)
         want = self.expected(dots)
         if dots.kind is self.shape.kind:
-            return ~np.all(np.abs(dots.size - want) <= TOLERANCE, axis=1)
-        off = np.abs(dots.kind.disc(dots.size) - self.shape.kind.disc(want))
-        return ~(off <= TOLERANCE)
+            bad = ~np.all(np.abs(dots.size - want) <= TOLERANCE, axis=1)
+        else:
+            off = np.abs(dots.kind.disc(dots.size) - self.shape.kind.disc(want))
+            bad = ~(off <= TOLERANCE)
+        if self.band is not None and xy is not None and self.sizes is not None:
+            lo, hi = self.band.at(xy)
+            d = dots.equivalent_diameter()
+            slack = self.sizes.step + TOLERANCE  # the fit's quantisation, the scale's rounding
+            bad |= (d < lo - slack) | (d > hi + slack)
+        return bad
 
 
 def footprint_text(kind: Kind, size) -> str:
@@ -101,4 +140,4 @@ def _um(mm: float) -> str:
     return f"{mm * 1e3:.4g}"
 
 
-__all__ = ["TOLERANCE", "DotRule", "footprint_text"]
+__all__ = ["TOLERANCE", "DotRule", "SizeBand", "footprint_text"]

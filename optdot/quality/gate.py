@@ -384,7 +384,7 @@ def jnd_text(v: float, limit: float = 1.0) -> str:
     """A JND for a reader: 2 decimals, more where 2 would put it on the other side of
     ``limit`` or onto it (0.9973 is "0.997", not "1.00" beside "0 regions over 1")."""
     v = float(v)
-    text = f"{v:.2f}"
+    text = ""
     for digits in range(2, 7):
         text = f"{v:.{digits}f}"
         shown = float(text)

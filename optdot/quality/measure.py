@@ -244,7 +244,7 @@ def _add_angles(f: FirstSums, xy: np.ndarray, angle: np.ndarray, field: Orientat
 def _add_strays(f: FirstSums, xy: np.ndarray, dots: Footprints, rule: DotRule) -> None:
     """Count the dots whose footprint the job does not draw, keep where they are and
     the first one in words."""
-    bad = rule.stray(dots)
+    bad = rule.stray(dots, xy)
     if not bad.any():
         return
     f.stray += int(bad.sum())
