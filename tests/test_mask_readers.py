@@ -194,7 +194,9 @@ def test_a_dot_beyond_the_gdsii_range_is_refused_whatever_box_it_claims(tmp_path
     (tmp_path / "far.csv").write_text("x_mm,y_mm,diameter_mm\n1,1,0.046\n3000,1,0.046\n")
     # without a job the dots' own box is the panel: the writer's range check refuses
     one_error(
-        ["export", tmp_path / "far.csv", "--gds", tmp_path / "far.gds", "--force"], 2, "32-bit"
+        ["export", tmp_path / "far.csv", "--gds", tmp_path / "far.gds", "--force", "--no-job"],
+        2,
+        "32-bit",
     )
     assert not (tmp_path / "far.gds").exists()
     # with a job, a dot 3 m outside its panel is refused before anything is written

@@ -48,7 +48,9 @@ def test_varying_sizes_scale_by_the_reference_diameter(tmp_path, tiny_pattern):
     src = tmp_path / "p.npz"
     save_pattern(p, src)
     out = tmp_path / "p.OPT3DMapping"
-    r = run("export", src, "--speos", out, "--speos-reference-diameter", 0.05, "--force")
+    r = run(
+        "export", src, "--speos", out, "--speos-reference-diameter", 0.05, "--force", "--no-job"
+    )
     assert r.returncode == 0, r.stderr
     _, _, scale = parse(out)
     np.testing.assert_allclose(scale, np.repeat((d / 0.05)[:, None], 3, axis=1), atol=5e-7)

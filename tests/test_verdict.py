@@ -122,7 +122,9 @@ def test_an_svg_of_a_window_says_so(tmp_path):
     xy = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)[:n] * 0.1 + 0.05
     p = Pattern(xy=xy, diameter=0.046, box=(0.0, 0.0, side, side))
     save_pattern(p, tmp_path / "big.csv")
-    rc, err, _ = cli("export", tmp_path / "big.csv", "--svg", tmp_path / "b.svg", "--force")
+    rc, err, _ = cli(
+        "export", tmp_path / "big.csv", "--svg", tmp_path / "b.svg", "--force", "--no-job"
+    )
     assert rc == 0, err
     line = next(x for x in err if x.startswith(str(tmp_path / "b.svg")))
     shown = (tmp_path / "b.svg").read_text().count("<circle")
