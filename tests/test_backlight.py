@@ -451,6 +451,7 @@ def _guide(tmp: Path, film: bool) -> Path:
     return tmp / f"g{int(film)}.toml"
 
 
+@pytest.mark.slow
 def test_a_film_designed_over_a_guide_lifts_its_9_point_uniformity(tmp_path):
     """The guide's map designed first (six iterations: near its design, as a user's first
     try), then a film over it, its map designed by the film rule with the guide's dots

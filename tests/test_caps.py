@@ -187,6 +187,7 @@ def test_caps_survive_npz_and_datasets_and_bad_caps_are_refused(tmp_path):
 
 
 @pytest.mark.parametrize("fmt", ["gds", "oas", "dxf", "gds-flat"])
+@pytest.mark.slow
 def test_masks_carry_the_caps_and_read_them_back(tmp_path, fmt):
     job_path = direct_job(tmp_path, 10.0, 10.0, 0.3, leds=CAPPED)
     assert cli("generate", job_path, "-o", tmp_path / "p.npz", "-q")[0] == 0

@@ -140,6 +140,7 @@ def test_previews(exported):
     assert exported["svg"].read_text().count("<circle") == load_pattern(exported["csv"]).n
 
 
+@pytest.mark.slow
 def test_qa_clean_pattern_passes(exported, tmp_path):
     for fmt in ("csv", "gds", "oas", "dxf"):
         r = run(

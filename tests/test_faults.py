@@ -45,6 +45,7 @@ def tiny_csv(tmp_path_factory, tiny_pattern):
 
 
 @pytest.mark.parametrize("fmt", FORMATS)
+@pytest.mark.slow
 def test_a_write_past_the_file_size_limit_keeps_the_old_file(tmp_path, tiny_csv, fmt):
     full = tmp_path / f"full.{fmt}"
     exporters.write(load_pattern(tiny_csv), fmt, full)
@@ -165,6 +166,7 @@ def test_an_interrupt_in_the_middle_of_a_set_replaces_nothing(tmp_path, tiny_pat
         ("SIGINT", 0.9),
     ],
 )
+@pytest.mark.slow
 def test_a_signal_during_export_leaves_the_old_files(tmp_path, signame, delay):
     """At any point of the run (imports, numba's cache load, relaxation, writing): exit 130,
     one line, old files byte-identical, no temporary file left."""

@@ -210,6 +210,7 @@ def _pattern(tmp_path):
     return job, generate(job)
 
 
+@pytest.mark.slow
 def test_graded_caps_survive_every_mask_and_klayout_reads_their_ink(tmp_path):
     import dataclasses
 
@@ -340,6 +341,7 @@ def test_no_dot_of_the_coverage_lands_between_a_cap_s_rings(tmp_path):
     assert abs(coarse.efficiency - fine.efficiency) <= noise + 0.002
 
 
+@pytest.mark.slow
 def test_a_mask_whose_caps_print_different_rings_is_refused(tmp_path):
     import ezdxf
 

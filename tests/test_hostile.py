@@ -137,6 +137,7 @@ def test_path_component_over_255_bytes(tiny):
     one_error(["generate", tiny / "job.toml", "-o", long], 2, "file name is 304 bytes")
 
 
+@pytest.mark.slow
 def test_temporary_beside_a_long_name(tiny):
     """A 254-byte name is legal; its temporary file must be too."""
     long = tiny / ("b" * 250 + ".csv")
@@ -218,6 +219,7 @@ def test_dots_and_outline_on_the_same_layer_are_refused(tmp_path):
     assert not (tmp_path / "a.gds").exists()
 
 
+@pytest.mark.slow
 def test_too_coarse_a_tolerance_is_refused(tmp_path):
     one_error(
         ["export", TINY_DIR / "job.toml", "--gds", tmp_path / "a.gds", "--tolerance", "5"],
@@ -363,6 +365,7 @@ def _spin(seconds: float) -> str:
     return "done"
 
 
+@pytest.mark.slow
 def test_a_reader_that_hangs_is_stopped_and_one_that_works_is_not(monkeypatch):
     """A corrupted heap can deadlock the child (seen in CI): no CPU for STALL_SECONDS and
     it is killed and reported; a child busy for longer than that is left to finish."""
@@ -418,6 +421,7 @@ def test_an_led_profile_of_strings_is_refused(tmp_path):
     [(("check", "{job}"), 0), (("qa", "{p}", "--job", "{job}"), 0), (("qa", "{p}"), 5)],
     ids=["check", "qa", "qa-without-job"],
 )
+@pytest.mark.slow
 def test_stdout_closed_early_keeps_the_command_s_own_code(tiny, tiny_pattern, args, code):
     """``optdot check JOB | true``: exit 1 (the gate's failure code) with nothing said;
     now the command finishes and exits with its own code, saying nothing of the pipe."""

@@ -54,6 +54,7 @@ def test_claimed_units_are_left_to_their_claimer(tmp_path, monkeypatch):
     assert compiled == [[4, 7], [2, 3, 5]]
 
 
+@pytest.mark.slow
 def test_manifest_lists_what_the_code_calls():
     """The recorder's check: each group's work run now lists the same kernels and
     signatures as kernels.json (a stale list fails here: re-record it)."""
@@ -114,6 +115,7 @@ generate_to(load_job(sys.argv[1]), sys.argv[2], tiles="off")
 """
 
 
+@pytest.mark.slow
 def test_a_cold_cache_compiled_by_helpers_gives_the_same_bytes(tmp_path):
     """An empty numba cache: the generate group's kernels compiled by this process and a
     helper, each the units it claimed; the helper's come from the cache it wrote; the

@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
@@ -167,6 +168,7 @@ def test_counting_sort_in_parallel_ranges_is_the_stable_sort():
     skin=st.floats(0.0, 0.5),
     clump=st.booleans(),
 )
+@pytest.mark.slow
 def test_few_dots_far_apart_give_the_dense_grids_pairs_in_its_order(n, seed, spread, skin, clump):
     """A Verlet list's movers: a few dots over a panel of ~10^6 cells. The bisected
     search gives the dense grid's CSR list exactly (the same pairs, the same order)."""

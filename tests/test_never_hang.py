@@ -87,6 +87,7 @@ def _server(banner: bytes):
         server.close()
 
 
+@pytest.mark.slow
 def test_a_silent_scheduler_is_given_up_on_in_bounded_time():
     with _server(b"") as address:
         t0 = time.monotonic()
@@ -298,6 +299,7 @@ def _workers_of(proc: subprocess.Popen, timeout: float = 60) -> list[int]:
 
 
 @pytest.mark.parametrize("cache", ["warm", "cold"])
+@pytest.mark.slow
 def test_ctrl_c_on_a_tiled_run_is_one_line_and_keeps_nothing(tmp_path, cache):
     # cold: the workers compile the kernels first (a minute), the Ctrl-C lands in that wait
     env = {"NUMBA_CACHE_DIR": str(tmp_path / "numba")} if cache == "cold" else None
@@ -399,6 +401,7 @@ def test_a_huge_value_is_not_echoed_whole(tmp_path):
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.slow
 def test_a_long_simulation_stops_at_the_next_batch(tmp_path, sig):
     """``simulate --rays 1e10`` then Ctrl-C or SIGTERM: it kept tracing every ray (days);
     now it stops at the next batch of rays, exit 130, and writes nothing."""

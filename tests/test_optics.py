@@ -85,6 +85,7 @@ def _both_ends_map(x: np.ndarray, e: float) -> np.ndarray:
 
 
 @pytest.mark.parametrize("both_ends", [False, True])
+@pytest.mark.slow
 def test_closed_forms_are_traced_within_one_percent(tmp_path, both_ends):
     job = load_job(_one_d_job(tmp_path, both_ends))
     x = (np.arange(400) + 0.5) * L / 400
@@ -103,6 +104,7 @@ def test_closed_forms_are_traced_within_one_percent(tmp_path, both_ends):
     assert np.abs(prof - 1).max() > 0.04
 
 
+@pytest.mark.slow
 def test_design_recovers_the_one_end_closed_form(tmp_path):
     job = load_job(_one_d_job(tmp_path, False), need_map=False)
     got = design(job, seed=2, rays=2_000_000, iterations=16)
@@ -121,6 +123,7 @@ def test_design_recovers_the_one_end_closed_form(tmp_path):
     assert np.abs(prof / prof.mean() - 1).max() < 0.03, prof  # exitance flat (10 mm bins)
 
 
+@pytest.mark.slow
 def test_design_follows_a_target_map(tmp_path):
     path = _one_d_job(tmp_path, True)
     np.savetxt(tmp_path / "target.csv", [np.linspace(0.5, 1.5, 10)], delimiter=",")
@@ -237,6 +240,7 @@ def test_a_ray_ends_the_same_whatever_call_or_chunk_traced_it(lossy):
     assert len(set(fate.tolist())) > 2  # rays end in several ways
 
 
+@pytest.mark.slow
 def test_real_dots_agree_with_the_coverage_mode_in_5mm_cells(tmp_path):
     from optdot.pipeline import generate
 
@@ -332,6 +336,7 @@ def test_a_job_without_a_map_says_to_design_one(tmp_path):
     )
 
 
+@pytest.mark.slow
 def test_design_generate_simulate_end_to_end(tmp_path):
     rc, err, out = cli(
         "design",

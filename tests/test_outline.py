@@ -66,6 +66,7 @@ def test_signed_distance_matches_shapely():
 
 
 @pytest.mark.parametrize("margin,phantoms", [(0.0, False), (0.05, False), (0.05, True)])
+@pytest.mark.slow
 def test_outline_penalty_matches_reference_and_gradient(margin, phantoms):
     from optdot.relax.circles import circle_radius, container_half_sides
 
@@ -333,6 +334,7 @@ def _cloud_deposit(domain, weight, cw, ch, nx, ny, per_cell=32):
 
 
 @pytest.mark.parametrize("weighted", [False, True])
+@pytest.mark.slow
 def test_deposited_fractions_are_the_clouds_deposit_inside_the_outline(weighted):
     """The share of a cloud-in-cell deposit from inside the outline sample's outline (a
     notch, a cut-out, two holes, a keep-out), unweighted and weighed by its steep map,
@@ -365,6 +367,7 @@ def test_deposited_fractions_are_the_clouds_deposit_inside_the_outline(weighted)
         (".geojson", [(5, 0), (6, 2), (4, 2)]),
     ],
 )
+@pytest.mark.slow
 def test_a_hole_touching_the_outer_ring_at_a_point_exports_and_reads_back(tmp_path, suffix, hole):
     """A hole that meets the outline in one point (valid OGC geometry) went through
     ``export`` and ``qa`` with exit 70 in a hostile round: every mask of it is written and

@@ -436,6 +436,7 @@ def masks(tiny_pattern):
 @example(fmt="gds", flips=[], cut=None)
 @example(fmt="oas", flips=[], cut=None)
 @example(fmt="dxf", flips=[], cut=None)
+@pytest.mark.slow
 def test_any_damaged_mask_reads_or_is_refused(masks, fmt, flips, cut):
     data = bytearray(masks[fmt])
     for pos, val in flips:

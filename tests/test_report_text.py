@@ -59,6 +59,7 @@ def test_a_shaped_report_draws_footprints_and_their_angles(tmp_path):
     assert "<figcaption>angles</figcaption>" in page
 
 
+@pytest.mark.slow
 def test_a_direct_lit_simulation_shows_its_halo_and_its_noise(tmp_path):
     """``simulate`` printed the halo of one LED but drew it nowhere; its luminance PNG
     was mostly noise with nothing saying so. Now the JSON holds the lit-alone map, the

@@ -148,6 +148,7 @@ def tiled_shapes(tmp_path_factory):
     return d, load_job(path), r2
 
 
+@pytest.mark.slow
 def test_shaped_tiles_give_the_same_bytes_on_two_workers_and_one(tiled_shapes):
     d, job, r2 = tiled_shapes
     two, one = d / "two.parquet", d / "one.parquet"
@@ -165,6 +166,7 @@ def test_shaped_tiles_give_the_same_bytes_on_two_workers_and_one(tiled_shapes):
     assert _field_error(p, job) < 1e-5
 
 
+@pytest.mark.slow
 def test_a_shaped_dataset_is_exported_and_checked_part_by_part(tiled_shapes, tmp_path):
     """QA reads the dataset tile by tile (exact gaps, shapely, the field) and agrees with
     QA of the same dots in memory; a GDSII made from it holds the same footprints."""
@@ -246,6 +248,7 @@ def test_a_shaped_dataset_holds_the_patterns_footprints(tmp_path):
         open_dataset(tmp_path / "p.parquet").read_part(0)
 
 
+@pytest.mark.slow
 def test_a_dot_wedged_against_a_wall_by_held_dots_is_moved_where_it_fits(tmp_path):
     """Scaled capsules on an outlined panel with a zero cell, tiled (the hostile tester's
     job): a dot of the last tile stood between the panel's edge (its bounding disc) and

@@ -157,6 +157,7 @@ def _shaped(name: str, size, n: int, seed: int, spread: float = 0.2):
 
 
 @pytest.mark.parametrize(("name", "size"), SHAPED)
+@pytest.mark.slow
 def test_shaped_gaps_match_shapely_and_bound_every_direction(name, size):
     """The exact edge-to-edge distance of oriented shapes against shapely's distance
     between polygons 5e-8 mm from them, its sign against whether they intersect, and

@@ -78,6 +78,7 @@ def test_cell_diameters_are_quantised_and_in_range():
     assert d[0, 0] == 0.030  # an empty cell holds no dots; it gets the low end
 
 
+@pytest.mark.slow
 def test_count_is_each_cells_fill_over_its_own_dot_area(sized):
     job, pattern, _ = sized
     d = job.cell_diameters
@@ -302,6 +303,7 @@ def test_tiled_run_with_varying_sizes_calls_the_same_stages(tmp_path):
 # --- the whole chain --------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_cli_exports_every_format_and_qa_agrees_on_each(sized, tmp_path):
     from optdot.exporters.readback import read_any
 

@@ -95,6 +95,7 @@ def test_a_frozen_partner_leaves_the_whole_push_to_the_other_dot(tiny_job):
     assert np.hypot(*(leg.xy[1] - leg.xy[0])) >= 0.046
 
 
+@pytest.mark.slow
 def test_a_tiled_job_in_process_meets_the_guarantee_with_the_exact_count():
     job = load_job(SAMPLES / "outline" / "job.toml")
     plan = plan_tiles(job, side=8.0)
@@ -117,6 +118,7 @@ def tiled(tmp_path_factory):
     return d, r2
 
 
+@pytest.mark.slow
 def test_two_workers_and_one_give_the_same_bytes(tiled):
     d, r2 = tiled
     two, one = d / "two.parquet", d / "one.parquet"
@@ -140,6 +142,7 @@ def tiled_sizes(tmp_path_factory):
     return d, load_job(job).with_overrides(max_iter=60)
 
 
+@pytest.mark.slow
 def test_varying_sizes_tile_with_the_same_bytes_on_two_workers_and_one(tiled_sizes):
     d, job = tiled_sizes
     two, one = d / "two.parquet", d / "one.parquet"
@@ -164,6 +167,7 @@ def test_varying_sizes_tile_with_the_same_bytes_on_two_workers_and_one(tiled_siz
     assert r.metrics["seams"]["passed"], r.metrics["seams"]
 
 
+@pytest.mark.slow
 def test_the_tiled_pattern_passes_qa_and_its_seams_are_not_found(tiled):
     d, _ = tiled
     job = load_job(LED)
@@ -176,6 +180,7 @@ def test_the_tiled_pattern_passes_qa_and_its_seams_are_not_found(tiled):
     assert seams["band_dots"] > 10_000
 
 
+@pytest.mark.slow
 def test_pandas_and_dask_read_the_dataset_as_it_is(tiled):
     pd = pytest.importorskip("pandas")
     import dask.dataframe as dd
@@ -207,6 +212,7 @@ def _klayout_centres(path, layer=1, datatype=0) -> np.ndarray:
 
 
 @pytest.mark.parametrize("fmt", ["gds", "oas"])
+@pytest.mark.slow
 def test_hierarchical_masks_hold_exactly_the_dots_of_the_flat_export(tiled, tmp_path, fmt):
     from optdot import exporters
 
@@ -230,6 +236,7 @@ def test_hierarchical_masks_hold_exactly_the_dots_of_the_flat_export(tiled, tmp_
 
 
 @pytest.mark.parametrize("fmt", ["gds", "oas"])
+@pytest.mark.slow
 def test_flattened_masks_of_a_dataset_hold_plain_polygons(tiled, tmp_path, fmt):
     """--flatten was ignored for datasets (a hierarchical mask came out): now a dataset
     and the same dots in memory both give one polygon per dot and no dot cell."""
@@ -254,6 +261,7 @@ def test_flattened_masks_of_a_dataset_hold_plain_polygons(tiled, tmp_path, fmt):
     assert np.array_equal(_klayout_centres(mask), _klayout_centres(whole))
 
 
+@pytest.mark.slow
 def test_a_dataset_without_its_manifest_or_with_a_changed_part_is_refused(tiled, tmp_path):
     import shutil
 
@@ -271,6 +279,7 @@ def test_a_dataset_without_its_manifest_or_with_a_changed_part_is_refused(tiled,
         load_dataset(copy)
 
 
+@pytest.mark.slow
 def test_an_interrupted_tiled_run_leaves_the_previous_dataset(tiled, tmp_path):
     import shutil
 
@@ -310,6 +319,7 @@ def _only_the_staging_dir_beside(out, kept: bool | None = True):
     assert all(n.startswith("part-") for n in sorted(inside)[1:]), inside
 
 
+@pytest.mark.slow
 def test_cluster_faults_are_one_line(tmp_path):
     out = tmp_path / "x.parquet"
     r = optdot(
@@ -339,6 +349,7 @@ def test_cluster_faults_are_one_line(tmp_path):
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_a_full_disk_while_writing_the_dataset_keeps_the_old_one(tiled, tmp_path):
     import shutil
 
@@ -430,6 +441,7 @@ def test_qa_part_by_part_with_halos_equals_qa_of_the_whole(seed):
     assert b["protruding"] == a["protruding"]
 
 
+@pytest.mark.slow
 def test_qa_of_the_dataset_tile_by_tile_equals_qa_in_memory(tiled):
     d, _ = tiled
     job = load_job(LED)
@@ -493,6 +505,7 @@ class _Counting(InProcess):
 
 
 @pytest.mark.parametrize("memory", [0, 1], ids=["held", "slim"])
+@pytest.mark.slow
 def test_an_interrupted_tiled_run_resumes_with_the_bytes_of_an_uninterrupted_one(tmp_path, memory):
     """Ctrl-C after 3 of 8 tiles: the target is untouched, the 3 tiles are kept beside it;
     the same run again makes only the 5 others' guarantee passes and writes the bytes of a
@@ -543,6 +556,7 @@ def test_an_interrupted_tiled_run_resumes_with_the_bytes_of_an_uninterrupted_one
     assert other.kinds["legal"] == 8
 
 
+@pytest.mark.slow
 def test_a_damaged_kept_field_is_made_again(tmp_path):
     """A kept field whose bytes no longer match its record is dropped and made again from
     every tile; the result is still the uninterrupted run's."""
@@ -611,6 +625,7 @@ def test_a_foreign_directory_in_the_staging_place_is_never_removed(tmp_path):
     assert (theirs / "notes.txt").read_text() == "mine" and not out.exists()
 
 
+@pytest.mark.slow
 def test_export_takes_a_dataset_as_the_dots(tiled, tmp_path):
     """The library's export() takes an opened dataset where a pattern goes: masks stream
     from it, the CSV reads it whole; KLayout reads the dataset's dots from the GDS."""
@@ -696,6 +711,7 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+@pytest.mark.slow
 def test_a_cluster_started_by_hand_gives_the_local_clusters_bytes(tmp_path):
     """A ``dask scheduler`` without a dashboard and two ``dask worker`` processes started
     by hand on this machine: ``--scheduler tcp://...`` writes the bytes the embedded local
@@ -766,6 +782,7 @@ def _edit_record(staging, edit) -> None:
     (staging / RESUME).write_text(json.dumps(doc))
 
 
+@pytest.mark.slow
 def test_a_tampered_resume_record_remakes_the_parts_it_no_longer_vouches_for(tmp_path):
     """A part entry turned into a string, a part key that is no number, an edited dot
     count: each ended in an internal error (exit 70) or a message with no way forward;

@@ -49,6 +49,7 @@ def led(
     return d
 
 
+@pytest.mark.slow
 def test_a_pattern_a_viewer_sees_passes_with_warnings(led):
     rc, err, out = cli("qa", led / "p.csv", "--job", led / "job.toml", "--json", led / "q.json")
     assert rc == 0, err  # advisory: the gate itself passes
@@ -155,6 +156,7 @@ def test_the_library_refuses_to_overwrite_its_inputs(tmp_path, tiny_pattern):
         export(tiny_pattern, {"gds": tmp_path / "a.gds", "oas": tmp_path / "a.gds"}, job)
 
 
+@pytest.mark.slow
 def test_reports_carry_what_they_judged_and_reruns_give_the_same_bytes(led, monkeypatch):
     import hashlib
 
@@ -201,6 +203,7 @@ def test_check_tells_the_cost_and_refuses_what_generate_refuses(tmp_path):
     assert err_check == err_run and "effective fill" in err_check[0]
 
 
+@pytest.mark.slow
 def test_masks_carry_the_digest_of_their_sign_off_sheet(led, tmp_path):
     import ezdxf
     import klayout.db as kdb

@@ -255,6 +255,7 @@ def test_the_corner_lit_sample_by_its_empty_corner_is_not_seen():
     assert vis["max_jnd"] < 0.7, vis["blobs"][:3]
 
 
+@pytest.mark.slow
 def test_the_outline_sample_is_not_seen_at_its_notch():
     """The outline sample (a notch, a hole, curved edges) in one process: its strongest
     blob under 0.7 JND (0.41). With the wide pass's flow free to cross the notch, which
@@ -302,6 +303,7 @@ def test_view_settings_are_validated():
     assert (p.viewing.distance, p.viewing.luminance) == (2000.0, 270.0)
 
 
+@pytest.mark.slow
 def test_cli_view_options_and_the_jnd_gate(tiny_pattern, tmp_path):
     from optdot.io.patterns import save_pattern
 
