@@ -115,9 +115,12 @@ def _pct(v: float, digits: int = 1) -> str:
 #: name -> (walk-through, the figure's text from its outputs).
 FIGURES: dict[str, tuple[str, Callable[[dict], str]]] = {
     "led.dots": ("led", lambda r: f"{r['qa']['metrics']['dots']:,}"),
-    "led.verdict": ("led", lambda r: r["qa"]["verdict"]),
+    "led.verdict": ("led", lambda r: f"`{r['qa']['verdict']}`"),
     "led.jnd": ("led", _jnd),
-    "five.dots": ("five", lambda r: re.search(r"dots: ([\d,]+)", r["check"]).group(1)),
+    "five.dots": (
+        "five",
+        lambda r: "`" + re.search(r"dots: [\d,]+ of [\d.]+ µm", r["check"])[0] + "`",
+    ),
     "lgp.efficiency": ("lgp", lambda r: _pct(r["sim"]["efficiency"])),
     "lgp.u9": (
         "lgp",
@@ -129,11 +132,11 @@ FIGURES: dict[str, tuple[str, Callable[[dict], str]]] = {
     "lgp.noise": ("lgp", lambda r: _pct(r["sim"]["luminance_rms_noise"], 2)),
     "lgp.outside": ("lgp", lambda r: f"{r['sim']['outside_max']:.2f}"),
     "lgp.dots": ("lgp", lambda r: f"{r['qa']['metrics']['dots']:,}"),
-    "lgp.verdict": ("lgp", lambda r: r["qa"]["verdict"]),
+    "lgp.verdict": ("lgp", lambda r: f"`{r['qa']['verdict']}`"),
     "lgp.jnd": ("lgp", _jnd),
     "lgp.over1": ("lgp", lambda r: str(r["qa"]["metrics"]["visibility"]["blobs_over_1_jnd"])),
     "minled.fill": ("minled", lambda r: f"{r['fill']:.2f}"),
-    "minled.sizes": ("minled", lambda r: r["sizes"]),
+    "minled.sizes": ("minled", lambda r: f"`[dots] diameter = {r['sizes']}`"),
     "minled.dots": ("minled", lambda r: f"{r['sim']['dots']:,}"),
     "minled.efficiency": ("minled", lambda r: _pct(r["sim"]["efficiency"])),
     "minled.range": (
@@ -145,7 +148,7 @@ FIGURES: dict[str, tuple[str, Callable[[dict], str]]] = {
     "minled.halo50": ("minled", lambda r: f"{r['sim']['halo']['width50_mm']:.1f}"),
     "minled.halo10": ("minled", lambda r: f"{r['sim']['halo']['width10_mm']:.1f}"),
     "minled.own": ("minled", lambda r: _pct(r["sim"]["halo"]["share_own_cell"])),
-    "minled.verdict": ("minled", lambda r: r["qa"]["verdict"]),
+    "minled.verdict": ("minled", lambda r: f"`{r['qa']['verdict']}`"),
     "minled.jnd": ("minled", _jnd),
 }
 

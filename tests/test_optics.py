@@ -485,3 +485,27 @@ def test_the_guide_as_a_scene_gives_the_single_slab_kernels_counts():
         "not_coupled": 27229,
         "unfinished": 0,
     }
+
+
+def test_design_stops_when_the_map_no_longer_changes_anything_the_rays_resolve(tmp_path):
+    """``design`` ran its 16 iterations whatever happened (the lgp sample's RMS sat at the
+    rays' noise from its 7th); it stops once a full trace finds no structure beyond the
+    noise, the level at its top, and says why. ``design.tolerance = 0`` runs them all;
+    a tolerance is a share of the mean, 0..1."""
+    from dataclasses import replace
+
+    from optdot.optics.design import SETTLED_SHARE, design
+
+    job = load_job(SAMPLES / "lgp" / "job.toml", need_map=False)
+    got = design(job, seed=1, rays=60_000)
+    n = len(got.history)
+    assert n < job.design.iterations and got.stopped.startswith(f"stopped after {n} of at most 16")
+    judged = got.history[-2]  # the trace that found nothing left to correct
+    rms, noise = judged["luminance_rms"], judged["luminance_rms_noise"]
+    assert (rms**2 - noise**2) ** 0.5 <= SETTLED_SHARE * noise + 1e-12
+    assert got.history[-1]["rays"] == 60_000
+    every = design(replace(job, design=replace(job.design, tolerance=0.0)), seed=1, rays=60_000)
+    assert len(every.history) == 16 and every.stopped == "ran its 16 iterations"
+    text = (SAMPLES / "lgp" / "job.toml").read_text().replace("[design]", "[design]\ntolerance = 2")
+    (tmp_path / "job.toml").write_text(text)
+    one_error(("check", tmp_path / "job.toml"), 2, "design.tolerance = 2.0", "0 <= x <= 1")

@@ -250,6 +250,8 @@ def design(job_file, output, png_path, job_out, rays, iterations, seed, quiet):
             )
 
     got = run(job, seed=seed, rays=rays, iterations=iterations, report=report)
+    if not quiet:
+        click.echo(f"design {got.stopped}", err=True)
     with transaction():
         write_design(got, job, output, png_path, job_out)
     last = got.history[-1]

@@ -97,6 +97,7 @@ DESIGN_KEYS: dict[str, tuple[type, ...]] = {
     "iterations": (int,),
     "rays": (int,),
     "smoothing": (int, float),
+    "tolerance": (int, float),
 }
 
 
@@ -155,6 +156,9 @@ class DesignParams:
         rays: rays of the last iteration, or None for 400 per cell.
         smoothing: Gaussian sigma of the update, cells.
         target_file: the file ``target`` came from.
+        tolerance: the luminance RMS beyond the rays' noise (a share of the mean) at or
+            under which the design stops before ``iterations``; None: 0.3 of the noise
+            (:data:`optdot.optics.design.SETTLED_SHARE`); 0 runs every iteration.
     """
 
     cell: float | None = None
@@ -164,6 +168,7 @@ class DesignParams:
     rays: int | None = None
     smoothing: float = 1.0
     target_file: Path | None = None
+    tolerance: float | None = None
 
 
 def typed_keys(sec: dict[str, Any], keys: dict[str, tuple[type, ...]], label: str, where: str):
@@ -374,6 +379,9 @@ def design_from(sec: dict[str, Any], base: Path, where: str, film: bool = False)
     if rays is not None and not 1000 <= rays <= 10**10:
         raise JobError(f"{where}: design.rays = {rays} must be 1000..1e10")
     smooth = number_in(sec, "smoothing", 1.0, 0, 20, where, "design", "in cells, ")
+    tolerance = None
+    if "tolerance" in sec:
+        tolerance = number_in(sec, "tolerance", 0.0, 0, 1, where, "design", "a share of the mean, ")
     target = None
     if "target" in sec:
         path = base / sec["target"]
@@ -388,4 +396,5 @@ def design_from(sec: dict[str, Any], base: Path, where: str, film: bool = False)
         rays,
         smooth,
         base / sec["target"] if "target" in sec else None,
+        tolerance,
     )
