@@ -351,7 +351,7 @@ def write_dataset(
         nothing_to_resume = not writer.parts and not writer.extras  # e.g. no cluster
         if resume_key is None or (tmp / MANIFEST).exists() or nothing_to_resume:
             shutil.rmtree(tmp, ignore_errors=True)
-        elif isinstance(e, KeyboardInterrupt):
+        elif isinstance(e, KeyboardInterrupt) and writer.parts:
             note_on_stop(
                 f"{len(writer.parts):,} finished tiles are kept in {tmp}: the same command "
                 "resumes from them"
