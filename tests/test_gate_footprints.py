@@ -20,15 +20,8 @@ from optdot.pipeline import generate, qa
 from optdot.quality.conformance import TOLERANCE, DotRule
 
 from .conftest import cli, write_job
+from .test_shaped_dots import ELLIPSE, PRISM
 
-ELLIPSE = {"shape": '"ellipse"', "length": 0.08, "width": 0.04, "diameter": None}
-PRISM = {
-    "shape": '"rounded_rectangle"',
-    "length": 0.12,
-    "width": 0.03,
-    "corner_radius": 0.005,
-    "diameter": None,
-}
 GRID = np.tile(np.linspace(0.05, 0.25, 8), (6, 1))
 
 
