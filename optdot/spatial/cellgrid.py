@@ -354,6 +354,7 @@ def _search(
     sparse: bool = False,
     ws: Workspace | None = None,
     split: bool = False,
+    crowd: bool = True,
 ) -> tuple[np.ndarray, np.ndarray, CellGrid | None, bool, np.ndarray, np.ndarray]:
     """(ptr, nbr, grid, overflow, mid, has_cross) of the cell-grid search (see
     :func:`neighbor_list`). With ``sparse``, a grid of more than :data:`SPARSE_CELLS`
@@ -361,7 +362,10 @@ def _search(
     same order) and no grid is returned. With ``split``, rows are laid out for the block
     kernels (same-block partners first, ``mid`` ``[n]`` int64 their end, ``has_cross``
     ``[n]`` bool: :meth:`~optdot.spatial.blocks.PairList.from_csr`'s layout); else
-    ``mid`` and ``has_cross`` are empty. The arrays returned live in ``ws`` when given."""
+    ``mid`` and ``has_cross`` are empty. A dense search over more than
+    :data:`CELLS_PER_POINT` cells a dot takes larger cells (the same pairs, rows in
+    another order), unless ``crowd`` is off. The arrays returned live in ``ws`` when
+    given."""
     xy = np.ascontiguousarray(xy, dtype=np.float64)
     n = xy.shape[0]
     reff = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, np.float64), (n,)))
@@ -379,7 +383,7 @@ def _search(
     if sparse and nx * ny > SPARSE_CELLS * n:  # a few dots far apart (a Verlet list's movers)
         ptr, nbr = _pairs_sparse(xy, reff, grow, x0, y0, cell, nx, ny)
         return ptr, nbr, None, False, mid, has_cross
-    if nx * ny > CELLS_PER_POINT * n:  # a dense search over far more cells than points
+    if crowd and nx * ny > CELLS_PER_POINT * n:  # a dense search over far more cells than points
         x0, y0, cell, nx, ny = _grid_shape(xy, cell, crowd=True)
     fresh = ws is None
     ws = Workspace(keep=False) if ws is None else ws
