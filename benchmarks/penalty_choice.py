@@ -4,7 +4,7 @@ footprints (issue 37 asks to measure both)?
 
 The exact term (:mod:`optdot.relax.exactgap`) penalises every pair whose exact edge gap
 is under the gap, ``w (gap - g)²``, on the same Verlet list and at the same weight; each
-term is put in for the case's kind for one run (``optdot.relax.optdot.FOOTPRINT_TERMS``);
+term is put in for the case's kind for one run (the kind's ``relaxation``);
 everything else (the spacing circles, containers, walls, the correction, the exact
 guarantee pass) is the job's.
 
@@ -22,6 +22,7 @@ import time
 from shapes import job as write_job  # benchmarks/shapes.py: the same edge-lit jobs
 
 from optdot.config.schema import load_job
+from optdot.geometry.kinds import KINDS
 from optdot.pipeline import generate, qa
 from optdot.relax import optdot as relax_optdot
 from optdot.relax.exactgap import ExactGapTerm
@@ -30,15 +31,16 @@ from optdot.relax.multisphere import MultiSphereTerm
 
 def run(path, kind: str, term) -> dict:
     """Generate the job at ``path`` with ``term`` relaxing dots of ``kind``; QA it."""
-    shipped = dict(relax_optdot.FOOTPRINT_TERMS)
-    relax_optdot.FOOTPRINT_TERMS[kind] = term
+    k = KINDS[kind]
+    name = next(n for n, t in relax_optdot.FOOTPRINT_TERMS.items() if t is term)
+    k.relaxation = name  # on the registry's kind for this run
     try:
         job = load_job(path)
         t0 = time.perf_counter()
         p = generate(job)
         secs = time.perf_counter() - t0
     finally:
-        relax_optdot.FOOTPRINT_TERMS.update(shipped)
+        del k.relaxation  # the kind's own again
     r = qa(p, job)
     m = r.metrics
     return {

@@ -8,7 +8,8 @@ export``); the lgp sample's designed map, its pattern, GDSII, DXF and a simulati
 (JSON, 2·10⁵ rays through the real dots); the led_sizes sample tiled on 2 workers as a
 Parquet dataset, with the masks streamed from it; and two QA reports (JSON). With
 ``--compare REF`` (a folder made the same way by another version) it then lists every
-file that differs (QA reports compared without their ``date_utc``), and exits 1 if any
+file that differs (QA reports compared without their ``date_utc`` and their inputs'
+paths, which name the checkout), and exits 1 if any
 does. Takes about 1.5 minutes on the reference machine.
 """
 
@@ -23,7 +24,32 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-SAMPLES = ("chokka", "led", "led_sizes", "outline", "tiny", "tsuno", "uniform")
+SAMPLES = (
+    "chokka", "ellipses", "led", "led_sizes", "outline", "prisms", "tiny", "tsuno", "uniform",
+)  # fmt: skip
+
+#: A direct-lit film with graded caps of given ink over four LEDs (the rings a kind of
+#: their own in the masks).
+CAPS_JOB = """name = "caps"
+[domain]
+width = 10.0
+height = 10.0
+[density]
+grid = "caps_map.csv"
+[dots]
+diameter = 0.046
+[backlight]
+kind = "direct"
+[backlight.leds]
+pitch = [5.0, 5.0]
+size = 0.2
+cap = 0.8
+cap_ink = [1.0, 0.9, 0.7, 0.5, 0.35, 0.2]
+[backlight.cavity]
+gap = 1.5
+[backlight.film]
+thickness = 0.2
+"""
 
 
 def run(*args, cwd: Path) -> None:
@@ -48,6 +74,12 @@ def make(out: Path) -> None:
         "--force", "-q", cwd=out)  # fmt: skip
     run("simulate", "lgp_map.toml", "lgp.npz", "--rays", "200000", "--json", "lgp_sim.json",
         "-q", cwd=out)  # fmt: skip
+    caps = out / "caps.toml"
+    caps.write_text(CAPS_JOB)
+    (out / "caps_map.csv").write_text("0.3,0.25\n0.2,0.35\n")
+    run("generate", caps, "-o", "caps.npz", "-q", cwd=out)
+    run("export", "caps.npz", "--job", caps, "--gds", "caps.gds", "--dxf", "caps.dxf",
+        "--oas", "caps.oas", "--force", "-q", cwd=out)  # fmt: skip
     sizes = ROOT / "samples" / "led_sizes" / "job.toml"
     run("generate", sizes, "-o", "ls.parquet", "--tiles", "on", "--workers", 2, "-q", cwd=out)
     run("export", "ls.parquet", "--job", sizes, "--gds", "ls_ds.gds", "--oas", "ls_ds.oas",
@@ -63,7 +95,7 @@ def make(out: Path) -> None:
 def _undated(path: Path):
     def strip(o):
         if isinstance(o, dict):
-            return {k: strip(v) for k, v in o.items() if k != "date_utc"}
+            return {k: strip(v) for k, v in o.items() if k not in ("date_utc", "path")}
         return [strip(v) for v in o] if isinstance(o, list) else o
 
     return strip(json.loads(path.read_text()))

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import io
 import logging
-import math
 import re
 from pathlib import Path
 
@@ -94,29 +93,17 @@ def _add_block(doc, kind: Kind, size: np.ndarray, version: str, tolerance: float
     if version == "R12":
         ring = kind.outline(size, 0.0, tolerance)
         blk.add_polyline2d([tuple(map(float, p)) for p in ring], close=True)
-    elif float(size[0]) == float(size[1]) and float(size[-1]) >= 0.5 * float(size[1]):
-        blk.add_circle((0.0, 0.0), 0.5 * float(size[0]))  # a round footprint: a disc
-    elif kind.name == "ellipse":
-        a, b = 0.5 * float(size[0]), 0.5 * float(size[1])
-        blk.add_ellipse((0.0, 0.0), major_axis=(a, 0.0), ratio=b / a)
+        return
+    curve = kind.curve(size)
+    if curve.form == "disc":
+        blk.add_circle((0.0, 0.0), curve.a)
+    elif curve.form == "ellipse":
+        blk.add_ellipse((0.0, 0.0), major_axis=(curve.a, 0.0), ratio=curve.b / curve.a)
+    elif curve.form == "bulged":
+        ring = [(x, y, 0.0, 0.0, bulge) for x, y, bulge in curve.ring]
+        blk.add_lwpolyline(ring, format="xyseb", close=True)
     else:
-        hx, hy, rc = 0.5 * float(size[0]) - size[2], 0.5 * float(size[1]) - size[2], size[2]
-        bulge = math.tan(math.pi / 8) if rc > 0 else 0.0  # a quarter circle
-        pts = []
-        for cx, cy, t in ((hx, hy, 0), (-hx, hy, 1), (-hx, -hy, 2), (hx, -hy, 3)):
-            c0, s0 = math.cos(t * math.pi / 2), math.sin(t * math.pi / 2)
-            c1, s1 = math.cos((t + 1) * math.pi / 2), math.sin((t + 1) * math.pi / 2)
-            pts.append((cx + rc * c0, cy + rc * s0, 0.0, 0.0, bulge))
-            if rc > 0:
-                pts.append((cx + rc * c1, cy + rc * s1, 0.0, 0.0, 0.0))
-        # a side of length 0 (a capsule's ends, a disc): its two ends are one vertex, the
-        # one that starts the next arc
-        keep = [
-            p
-            for p, q in zip(pts, pts[1:] + pts[:1], strict=True)
-            if math.hypot(p[0] - q[0], p[1] - q[1]) > 1e-12 * float(size[0])
-        ]
-        blk.add_lwpolyline([tuple(float(v) for v in p) for p in keep], format="xyseb", close=True)
+        raise ValueError(f"{kind.name}: a curve of form {curve.form!r} has no DXF entity")
 
 
 def _template(

@@ -20,6 +20,7 @@ from optdot.errors import GeometryError, PatternFileError, ResourceError, one_li
 from optdot.files import input_problem
 from optdot.geometry.caps import CAP_APPID, CAP_CELL, rings_problem
 from optdot.geometry.domain import Domain, domain_from_rings
+from optdot.geometry.kinds import drawn_as, kinds_text
 from optdot.geometry.limits import validate_dots
 from optdot.geometry.orientation import degrees
 from optdot.geometry.shapes import CIRCLE, KINDS, Fit, Footprints, Kind
@@ -353,8 +354,8 @@ class Drawn:
 
 def _footprint(path: Path, pts: np.ndarray, what: str, to_mm: float):
     """``(kind, fit)`` of a dot polygon (its centre, size and angle in the file's units):
-    a circle (:meth:`optdot.geometry.shapes.Circle.fit`: vertex radii within 2 nm plus
-    :data:`RADIUS_SPREAD` of the radius), else an ellipse or a rounded rectangle to the
+    a circle (:meth:`optdot.geometry.kinds.circle.Circle.fit`: vertex radii within 2 nm
+    plus :data:`RADIUS_SPREAD` of the radius), else another kind of the registry to the
     same tolerance, or refuse it."""
     slack = 2e-6 / to_mm
     fit = CIRCLE.fit(pts, slack, RADIUS_SPREAD)
@@ -368,8 +369,8 @@ def _footprint(path: Path, pts: np.ndarray, what: str, to_mm: float):
     at = fit.centre * to_mm
     lo, hi = (v * to_mm * 1e3 for v in fit.radii)
     raise PatternFileError(
-        f"{path}: {what} at ({at[0]:.6g}, {at[1]:.6g}) mm on the dot layer is not a circle, "
-        f"an ellipse or a rounded rectangle ({len(pts)} vertices, radii {lo:.4g}..{hi:.4g} "
+        f"{path}: {what} at ({at[0]:.6g}, {at[1]:.6g}) mm on the dot layer is not "
+        f"{kinds_text()} ({len(pts)} vertices, radii {lo:.4g}..{hi:.4g} "
         "µm); qa checks those dots only"
     )
 
@@ -528,7 +529,8 @@ def _dxf_shape(path: Path, e, kind: str, scale: float) -> tuple[Kind, Fit]:
         c = e.dxf.center  # an ELLIPSE's centre and major axis are in world coordinates
         turn = math.atan2(float(major[1]), float(major[0]))
         centre = np.array([float(c[0]), float(c[1])]) * scale
-        return KINDS["ellipse"], Fit(True, centre, np.array([2 * a, 2 * a * ratio]), turn, (a, a))
+        size = np.array([2 * a, 2 * a * ratio])
+        return drawn_as("ellipse"), Fit(True, centre, size, turn, (a, a))
     if kind in ("LWPOLYLINE", "POLYLINE") and e.is_closed:
         from ezdxf import path as dxf_path
 
@@ -536,17 +538,18 @@ def _dxf_shape(path: Path, e, kind: str, scale: float) -> tuple[Kind, Fit]:
         if len(pts) > 1 and np.allclose(pts[0], pts[-1]):
             pts = pts[:-1]
         kind_, fit = _footprint(path, pts * scale, where, 1.0)
-        if kind_.name == "rounded_rectangle" and kind == "LWPOLYLINE":
-            fit = _bulge_radius(e, fit, scale)
+        if kind_.arc_param is not None and kind == "LWPOLYLINE":
+            fit = _bulge_radius(e, kind_, fit, scale)
         return kind_, fit  # a round outline (a disc-shaped block) is read as a disc
     raise PatternFileError(
         f"{path}: {where} on layer DOTS is not a CIRCLE, an ELLIPSE or a closed outline of "
-        "a rounded rectangle; qa checks those dots only"
+        f"{kinds_text()}; qa checks those dots only"
     )
 
 
-def _bulge_radius(e, fit: Fit, scale: float) -> Fit:
-    """``fit`` with the corner radius its LWPOLYLINE's arcs hold exactly (a bulge ``b``
+def _bulge_radius(e, kind: Kind, fit: Fit, scale: float) -> Fit:
+    """``fit`` with the size parameter its LWPOLYLINE's arcs hold exactly (the kind's
+    :attr:`~optdot.geometry.kinds.base.Kind.arc_param`, a corner radius: a bulge ``b``
     over a chord ``c`` is an arc of radius ``c (1 + b²) / (4 |b|)``), when they agree."""
     pts = np.array(e.get_points("xyb"), dtype=np.float64)
     nxt = np.roll(pts[:, :2], -1, axis=0)
@@ -558,7 +561,8 @@ def _bulge_radius(e, fit: Fit, scale: float) -> Fit:
     r = chord * (1 + b[arc] ** 2) / (4 * np.abs(b[arc])) * scale
     if float(np.ptp(r)) > 1e-9 or r[0] > 0.5 * fit.size[1] + 1e-9:
         return fit
-    size = np.array([fit.size[0], fit.size[1], float(r.mean())])
+    size = np.array(fit.size, dtype=np.float64)
+    size[kind.arc_param] = float(r.mean())
     return Fit(fit.ok, fit.centre, size, fit.angle, fit.radii)
 
 

@@ -2,7 +2,7 @@
 
 ``[dots]``::
 
-    shape = "ellipse"            # "circle" (default), "ellipse", "rounded_rectangle"
+    shape = "ellipse"            # "circle" (default), or a kind of optdot.geometry.kinds
     length = 0.080               # mm, the long axis
     width = 0.040                # mm, across it (<= length)
     corner_radius = 0.005        # mm, rounded_rectangle only (0 .. width/2; width/2: capsule)
@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import JobError
+from ..geometry.kinds import shaped_names
 from ..geometry.limits import DIAMETER_RANGE_MM, MAX_SHAPED_FILL
 from ..geometry.orientation import Orientation, led_centres
 from ..geometry.shapes import CIRCLE, KINDS, DotShape
@@ -37,9 +38,7 @@ from .grids import load_grid
 
 DOT_SHAPE_KEYS: dict[str, tuple[type, ...]] = {
     "shape": (str,),
-    "length": (int, float),
-    "width": (int, float),
-    "corner_radius": (int, float),
+    **{p: (int, float) for k in KINDS.values() if k is not CIRCLE for p in k.params},
     "scale": (list,),
 }
 ORIENTATION_KEYS: dict[str, tuple[type, ...]] = {
@@ -67,7 +66,7 @@ def dot_shape(dots: dict[str, Any], where: str) -> DotShape | None:
             over :data:`MAX_ASPECT`).
     """
     name = dots.get("shape", "circle")
-    sized = [k for k in ("length", "width", "corner_radius") if k in dots]
+    sized = [k for k in DOT_SHAPE_KEYS if k not in ("shape", "scale") and k in dots]
     if name not in KINDS:
         raise JobError(f"{where}: dots.shape = {name!r} must be one of {', '.join(KINDS)}")
     if KINDS[name] is CIRCLE:
@@ -79,7 +78,7 @@ def dot_shape(dots: dict[str, Any], where: str) -> DotShape | None:
         if sized:
             raise JobError(
                 f"{where}: dots.{sized[0]} is a shaped dot's size; circles take dots.diameter "
-                '(or set dots.shape = "ellipse" or "rounded_rectangle")'
+                f"(or set dots.shape = {shaped_names()})"
             )
         return None
     kind = KINDS[name]
@@ -94,7 +93,7 @@ def dot_shape(dots: dict[str, Any], where: str) -> DotShape | None:
         if p not in dots:
             raise JobError(f"{where}: dots.shape = {name!r} needs dots.{p} (mm)")
         v = float(dots[p])
-        least = 0.0 if p == "corner_radius" else lo
+        least = 0.0 if p in kind.zero_params else lo
         if not (math.isfinite(v) and least <= v <= hi):
             raise JobError(
                 f"{where}: dots.{p} = {dots[p]!r} must be in mm, {least:g} <= x <= {hi:g}"
@@ -114,11 +113,9 @@ def dot_shape(dots: dict[str, Any], where: str) -> DotShape | None:
             f"{where}: dots.length / dots.width = {length / width:.4g} cannot be drawn "
             f"(at most {MAX_ASPECT:g})"
         )
-    if name == "rounded_rectangle" and size[2] > 0.5 * width:
-        raise JobError(
-            f"{where}: dots.corner_radius = {size[2]:g} cannot be drawn on a dot "
-            f"{width:g} mm wide (at most width / 2 = {0.5 * width:g}: a capsule)"
-        )
+    problem = kind.problem(tuple(size))
+    if problem is not None:
+        raise JobError(f"{where}: {problem}")
     return DotShape(kind, tuple(size))
 
 
@@ -197,7 +194,7 @@ def orientation(
     if shape is None:
         raise JobError(
             f"{where}: [orientation] turns shaped dots; circles have no long axis "
-            '(set dots.shape = "ellipse" or "rounded_rectangle")'
+            f"(set dots.shape = {shaped_names()})"
         )
     ways = [k for k in ("toward", "map", "random") if k in sec and sec[k] is not False]
     if len(ways) > 1:

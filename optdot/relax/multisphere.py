@@ -1,67 +1,27 @@
 """The multi-sphere penalty for shaped dots (Imamichi and Nagamochi 2007, the scheme the
 paper names for non-circular scatterers): each footprint as a row of circles along its
-long axis, and penalty (3) on the circles of different dots.
-
-An ellipse's circles are inscribed: the largest centred on its long axis between the
-centres of curvature of its ends (radius ``b sqrt(1 - t²/(a² - b²))`` at ``t``); their
-union falls short at the flanks. A rounded rectangle's cover it: circles along its
-straight part as wide as its corners need (they reach past its flat sides by up to
-``(√2 - 1)(w/2 - r)``). Measured on 10⁵ prisms of 120 × 30 µm: inscribed circles of
-half the width left 13,722 pairs for the guarantee pass and failed a uniform fill of
-0.5; covering ones 52 pairs, and fill 0.5 in 0.6 s. Either way the penalty is an
-approximation, and the exact guarantee pass (:mod:`optdot.relax.shaped`) fixes the pairs
-it leaves too close. A pair of circles
-``(m, n)`` of dots ``(i, j)`` adds ``w max(r_m + r_n + gap - |c_im - c_jn|, 0)²``; the
-angles are held for the relaxation (the dots move by a fraction of a spacing, and the
-orientation fields change over millimetres).
-
-Rounded rectangles relax with this term; ellipses with their exact edge gap
-(:mod:`.exactgap`, measured against this one on both kinds; the ellipse's circles stay
-for that comparison, ``benchmarks/penalty_choice.py``).
+long axis (:meth:`~optdot.geometry.kinds.base.Kind.spheres`: an ellipse's inscribed, a
+rounded rectangle's covering, which leave the guarantee pass far fewer pairs), and penalty
+(3) on the circles of different dots. A pair of circles ``(m, n)`` of dots ``(i, j)``
+adds ``w max(r_m + r_n + gap - |c_im - c_jn|, 0)²``; the angles are held for the
+relaxation (the dots move by a fraction of a spacing, and the orientation fields change
+over millimetres). The penalty is an approximation: the exact guarantee pass
+(:mod:`optdot.relax.shaped`) fixes the pairs it leaves too close.
 """
 
 from __future__ import annotations
 
-import math
-
 import numba as nb
 import numpy as np
 
-from ..geometry.shapes import DotShape
 from .footprint_term import FootprintTerm, factors
 
-#: Circles per footprint: at most this many along the long axis.
-MAX_SPHERES = 9
 #: Weight ``w`` of the term (the spacing circles' overlap has 1, the hard core 15).
 #: Measured on 10⁵ dots of the edge-lit map (benchmarks/shapes.py): 15 took ellipses
 #: 118 iterations, 3.3 s of relaxation; 5 took 84, 2.4 s; 1 took 57, 1.6 s but left
 #: prisms 427 pairs for the guarantee pass (5: 57) and 0.33 of them in close pairs (5:
 #: 0.31, 15: 0.28). Uniform fills of 0.5 (prisms) and 0.54 (ellipses) hold at each.
 MULTISPHERE_WEIGHT = 5.0
-
-
-def spheres(shape: DotShape) -> tuple[np.ndarray, np.ndarray]:
-    """``(t [k] mm, r [k] mm)``: centres along the long axis and radii of the circles
-    standing for one footprint (see the module doc)."""
-    length, width = shape.size[0], shape.size[1]
-    if shape.kind.name == "ellipse":
-        a, b = 0.5 * length, 0.5 * width
-        reach = (a * a - b * b) / a  # centre of curvature of each end
-        tip = b * b / a
-        k = min(MAX_SPHERES, 1 + 2 * math.ceil(reach / max(tip, 1e-12)))
-        t = np.linspace(-reach, reach, k) if reach > 0 else np.zeros(1)
-        r = b * np.sqrt(np.maximum(1.0 - t * t / max(a * a - b * b, 1e-300), 0.0))
-        return t, np.maximum(r, tip)
-    half = 0.5 * (length - width)
-    k = min(MAX_SPHERES, 1 + math.ceil(2.0 * half / (0.5 * width)))
-    t = np.linspace(-half, half, k) if half > 0 else np.zeros(1)
-    # covering: the end circles reach the rounded corners, each the slab between centres
-    rc = shape.size[2]
-    step = 2.0 * half / (k - 1) if k > 1 else 0.0
-    cover = max(
-        math.hypot(0.5 * width - rc, 0.5 * width - rc) + rc, math.hypot(0.5 * width, 0.5 * step)
-    )
-    return t, np.full(len(t), cover)
 
 
 class MultiSphereTerm(FootprintTerm):
@@ -71,7 +31,7 @@ class MultiSphereTerm(FootprintTerm):
     :class:`~.footprint_term.FootprintTerm`, each dot's circles scaled with it."""
 
     def setup(self, shape, angle, scale, gap) -> float:
-        t, radius = spheres(shape)
+        t, radius = shape.kind.spheres(np.asarray(shape.size, np.float64))
         f = factors(len(angle), scale)
         c, s = np.cos(angle) * f, np.sin(angle) * f
         self.offset = np.stack([c[:, None] * t, s[:, None] * t], axis=2)  # [n, k, 2]

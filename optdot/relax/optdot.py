@@ -16,10 +16,10 @@ from .multisphere import MULTISPHERE_WEIGHT, MultiSphereTerm
 from .penalty import PenaltyTerms, penalty_fast
 from .result import RelaxResult
 
-#: The penalty term each kind of shaped dot relaxes with (``benchmarks/penalty_choice.py``
-#: measured both on both; :mod:`.exactgap`): ellipses by their exact edge gap, rounded
-#: rectangles by the multi-sphere scheme.
-FOOTPRINT_TERMS = {"ellipse": ExactGapTerm, "rounded_rectangle": MultiSphereTerm}
+#: The penalty terms shaped dots relax with, by the name a kind gives as its
+#: :attr:`~optdot.geometry.kinds.base.Kind.relaxation` (``benchmarks/penalty_choice.py``
+#: measures each on each kind): the exact edge gap, or the multi-sphere scheme.
+FOOTPRINT_TERMS = {"exact_gap": ExactGapTerm, "spheres": MultiSphereTerm}
 
 #: ``progress(iteration, value)``; a true return value halts the run.
 Progress = Callable[[int, float], bool | None]
@@ -198,7 +198,7 @@ def relax_staged(
         shape, field, gap = problem.shaped
         active = np.ones(len(xy0), bool) if phantom is None else ~phantom
         scale = None if diameters is None else diameters / shape.equivalent_diameter
-        term = FOOTPRINT_TERMS[shape.kind.name]
+        term = FOOTPRINT_TERMS[shape.kind.relaxation]
         extra = term(shape, field.at(xy0, xy0), active, gap, MULTISPHERE_WEIGHT, scale=scale)
     total = RelaxResult(xy, 0.0, 0, 0, 0, "no stage ran", [])
     done = 0
