@@ -1,24 +1,17 @@
 """Mask and preview writers (installed as ``optdot.exporters``). They read a
-:class:`optdot.pattern.Pattern` and never reach into the optimizer or QA.
-
-=========  ======================================================
-format     writer
-=========  ======================================================
-GDSII      :func:`optdot.exporters.gds.write_gds` (gdstk)
-OASIS      :func:`optdot.exporters.gds.write_oas` (gdstk)
-DXF        :func:`optdot.exporters.dxf.write_dxf` (streamed, ezdxf template)
-CSV        :func:`optdot.io.patterns.write_csv`
-SVG/PNG    :func:`optdot.exporters.preview.write_svg`, :func:`optdot.exporters.preview.write_png`
-Speos      :func:`optdot.exporters.speos.write_speos` (``.OPT3DMapping``, streamed)
-=========  ======================================================
+:class:`optdot.pattern.Pattern` and never reach into the optimizer or QA. Each format's
+record (:data:`optdot.formats.FORMATS`) names its writer and reader; :func:`write` calls
+the writer it names.
 """
 
 from __future__ import annotations
 
+import importlib
+from collections.abc import Callable
 from pathlib import Path
 
 from optdot.formats import EXPORTED
-from optdot.io.patterns import write_csv
+from optdot.formats import FORMATS as ALL
 from optdot.pattern import DotSource
 
 from .options import ExportOptions
@@ -28,7 +21,8 @@ FORMATS = EXPORTED
 
 
 def write(pattern: DotSource, fmt: str, path: str | Path, opts: ExportOptions | None = None) -> str:
-    """Write ``pattern`` as ``fmt`` (one of :data:`FORMATS`) to ``path``, atomically.
+    """Write ``pattern`` as ``fmt`` (one of :data:`FORMATS`) to ``path``, atomically, with
+    the writer its record names.
 
     Masks (GDSII, OASIS, DXF) and Speos files take any :class:`~optdot.pattern.DotSource`
     (a pattern, or a dataset streamed tile by tile); CSV and previews need a
@@ -38,44 +32,16 @@ def write(pattern: DotSource, fmt: str, path: str | Path, opts: ExportOptions | 
         What the file holds, for the user: ``"GDS, 111,215 dots"``, or for a preview of
         a large pattern ``"SVG preview of a 2.00 x 2.00 mm window: 171 of 281,025 dots"``.
     """
-    opts = opts or ExportOptions()
-    whole = f"{fmt.upper()}, {pattern.n:,} dots"
-    if fmt == "gds":
-        from .gds import write_gds
-
-        write_gds(pattern, path, opts)
-    elif fmt == "oas":
-        from .gds import write_oas
-
-        write_oas(pattern, path, opts)
-    elif fmt == "dxf":
-        from .dxf import write_dxf
-
-        write_dxf(pattern, path, opts)
-    elif fmt == "csv":
-        write_csv(pattern, path)
-    elif fmt == "speos":
-        from .speos import write_speos
-
-        write_speos(pattern, path, opts)
-    elif fmt == "svg":
-        from .preview import write_svg
-
-        shown, (x0, y0, x1, y1) = write_svg(pattern, path)
-        if shown < pattern.n:
-            return (
-                f"SVG preview of a {x1 - x0:.2f} x {y1 - y0:.2f} mm window at ({x0:.2f}, "
-                f"{y0:.2f}) mm: {shown:,} of {pattern.n:,} dots"
-            )
-        return whole
-    elif fmt == "png":
-        from .preview import write_png
-
-        write_png(pattern, path)
-        return f"PNG preview: coverage of {pattern.n:,} dots and a zoomed window"
-    else:
+    if fmt not in FORMATS:
         raise ValueError(f"unknown format {fmt!r}")
-    return whole
+    said = named(ALL[fmt].writer)(pattern, path, opts or ExportOptions())
+    return said or f"{fmt.upper()}, {pattern.n:,} dots"
 
 
-__all__ = ["FORMATS", "ExportOptions", "write"]
+def named(ref: str) -> Callable:
+    """The function a format's record names, ``"module:function"`` under ``optdot``."""
+    module, name = ref.split(":")
+    return getattr(importlib.import_module(f"optdot.{module}"), name)
+
+
+__all__ = ["FORMATS", "ExportOptions", "named", "write"]

@@ -32,8 +32,12 @@ def zoom_tile(pattern: Pattern, size: float = TILE_MM) -> tuple[float, float, fl
     return cx - h, cy - h, cx + h, cy + h
 
 
-def write_png(pattern: Pattern, path: str | Path, dpi: int = 110) -> None:
-    """Write the PNG preview atomically."""
+def write_png(pattern: Pattern, path: str | Path, opts=None, dpi: int = 110) -> str:
+    """Write the PNG preview atomically (``opts``: the export's options, none apply).
+
+    Returns:
+        What it shows, in words.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -93,14 +97,16 @@ def write_png(pattern: Pattern, path: str | Path, dpi: int = 110) -> None:
     with atomic_path(path, expect_tail(PNG_END, str(path))) as tmp:
         fig.savefig(tmp, format="png", dpi=dpi, metadata={"Software": None})
     plt.close(fig)
+    return f"PNG preview: coverage of {pattern.n:,} dots and a zoomed window"
 
 
-def write_svg(pattern: Pattern, path: str | Path) -> tuple[int, tuple[float, ...]]:
+def write_svg(pattern: Pattern, path: str | Path, opts=None) -> str | None:
     """Write the SVG preview atomically (units: mm, y up as in the pattern): every dot,
-    or above :data:`SVG_MAX_DOTS` the densest window only.
+    or above :data:`SVG_MAX_DOTS` the densest window only (``opts``: the export's
+    options, none apply).
 
     Returns:
-        ``(dots drawn, window (x0, y0, x1, y1) mm)``.
+        The window and the dots it shows, in words, when it is not every dot (None).
     """
     x0, y0, x1, y1 = pattern.box
     window = (x0, y0, x1, y1) if pattern.n <= SVG_MAX_DOTS else zoom_tile(pattern)
@@ -151,7 +157,13 @@ def write_svg(pattern: Pattern, path: str | Path) -> tuple[int, tuple[float, ...
     out.append("</g>\n</svg>\n")
     with atomic_path(path, expect_tail(b"</svg>\n", str(path))) as tmp:
         tmp.write_text("".join(out), encoding="utf-8")
-    return int(sel.sum()), tuple(float(v) for v in window)
+    shown = int(sel.sum())
+    if shown == pattern.n:
+        return None
+    return (
+        f"SVG preview of a {wx1 - wx0:.2f} x {wy1 - wy0:.2f} mm window at ({wx0:.2f}, "
+        f"{wy0:.2f}) mm: {shown:,} of {pattern.n:,} dots"
+    )
 
 
 def _rings(pattern: Pattern) -> np.ndarray | None:

@@ -18,17 +18,18 @@ import numpy as np
 
 from optdot.errors import GeometryError, PatternFileError, ResourceError, one_line
 from optdot.files import input_problem
+from optdot.formats import FORMATS, READ, format_of
 from optdot.geometry.caps import CAP_APPID, CAP_CELL, rings_problem
 from optdot.geometry.domain import Domain, domain_from_rings
 from optdot.geometry.kinds import drawn_as, kinds_text
 from optdot.geometry.limits import validate_dots
 from optdot.geometry.orientation import degrees
 from optdot.geometry.shapes import CIRCLE, KINDS, Fit, Footprints, Kind
-from optdot.io.patterns import load_pattern
 from optdot.pattern import Pattern
 from optdot.runtime.isolate import ChildCrashed, in_child
 from optdot.runtime.memory import max_dots_read
 
+from . import named
 from .gds import quietly
 from .options import ExportOptions
 
@@ -41,34 +42,42 @@ RADIUS_SPREAD = 1e-3
 
 
 def read_any(path: str | Path, opts: ExportOptions | None = None, box=None) -> Pattern:
-    """Read ``.csv``/``.npz`` (pattern files) or ``.gds``/``.oas``/``.dxf`` (masks)."""
+    """Read a pattern file (``.csv``/``.npz``/``.parquet``) or a mask
+    (``.gds``/``.oas``/``.dxf``) with the reader its format's record names
+    (:data:`optdot.formats.FORMATS`)."""
     path = Path(path)
     opts = opts or ExportOptions()
-    suffix = path.suffix.lower()
-    if suffix in (".csv", ".npz", ".parquet"):
-        return load_pattern(path, box)
+    fmt = format_of(path)
+    if fmt is None or fmt.reader is None:
+        raise PatternFileError(
+            f"{path}: unknown format {path.suffix.lower()!r} ({', '.join(READ)})"
+        )
+    if not fmt.mask:
+        return named(fmt.reader)(path, box)
     problem = input_problem(path)
     if problem is not None:
         raise PatternFileError(f"{path}: {problem}")
     try:
-        if suffix in (".gds", ".gds2", ".oas"):
-            # gdstk's C++ readers can crash on a damaged file: read in a child process
-            return in_child(_read_layout, path, opts)
-        if suffix == ".dxf":
-            return _read_dxf(path)
+        return named(fmt.reader)(path, opts)
     except (PatternFileError, ResourceError):
         raise
     except ChildCrashed as e:
-        raise PatternFileError(f"{path}: damaged {suffix[1:].upper()} file ({e})") from None
+        raise PatternFileError(f"{path}: damaged {fmt.name.upper()} file ({e})") from None
     except Exception as e:  # reader libraries raise many types on corrupt files
         raise PatternFileError(f"{path}: cannot read ({one_line(e, True)})") from None
-    raise PatternFileError(f"{path}: unknown format {suffix!r} (csv, npz, parquet, gds, oas, dxf)")
+
+
+def read_layout(path: Path, opts: ExportOptions) -> Pattern:
+    """A GDSII or OASIS mask's dots, panel and caps, read in a child process: gdstk's C++
+    readers can crash on a damaged file."""
+    return in_child(_read_layout, path, opts)
 
 
 def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
     import gdstk
 
-    reader = gdstk.read_oas if path.suffix.lower() == ".oas" else gdstk.read_gds
+    oas = format_of(path) is FORMATS["oas"]
+    reader = gdstk.read_oas if oas else gdstk.read_gds
     lib, why = quietly(reader, str(path))
     if lib is None:
         raise PatternFileError(f"{path}: not a readable {path.suffix[1:].upper()} file ({why})")
@@ -81,7 +90,7 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
     centres: list[np.ndarray] = []
     diameters: list[Drawn] = []
     budget = [max_dots_read()]
-    gds = path.suffix.lower() != ".oas"
+    gds = not oas
     _collect(path, top, _IDENTITY, opts, to_mm, centres, diameters, 0, budget, gds)
     caps, cap_rings = _layout_caps(path, top, opts, to_mm)
     if not centres:
@@ -375,7 +384,7 @@ def _footprint(path: Path, pts: np.ndarray, what: str, to_mm: float):
     )
 
 
-def _read_dxf(path: Path) -> Pattern:
+def read_dxf(path: Path, opts: ExportOptions | None = None) -> Pattern:
     """Dots are the CIRCLEs on layer ``DOTS``, the panel the closed polylines on
     ``OUTLINE``, everything in the drawing's units converted to mm and block references
     expanded (:mod:`optdot.geometry.dxf_entities`). A circle is placed by its centre in

@@ -76,8 +76,9 @@ def save_pattern(pattern: Pattern, path: str | Path) -> None:
         _write_npz(pattern, tmp)
 
 
-def write_csv(pattern: Pattern, path: str | Path) -> None:
-    """Write the pattern's CSV atomically, its size checked before it replaces anything.
+def write_csv(pattern: Pattern, path: str | Path, opts=None) -> None:
+    """Write the pattern's CSV atomically, its size checked before it replaces anything
+    (``opts``: the export's options, none apply).
 
     Raises:
         ExportError: the pattern prints caps over its LEDs (a CSV holds dots only).

@@ -33,10 +33,6 @@ TILED_BASE_BYTES = 512 * 2**20
 #: Shaped dots against discs of the same count, one process (BENCHMARKS.md session 21,
 #: 10⁶ dots: ellipses 2.5-3.0x the time and 1.4x the memory, prisms 2.8-3.2x and 1.5x).
 SHAPED_TIME, SHAPED_MEMORY = 3.0, 1.5
-#: Bytes per shaped dot of the formats that store one (a reference rotated by its own
-#: angle, a size and an angle per row), measured on samples/prisms (15,946 dots; a
-#: dataset 28.1 B, samples/ellipses 28.2 B).
-SHAPED_BYTES_PER_DOT = {"gds": 64, "oas": 16, "dxf": 150, "csv": 55, "npz": 20, "parquet": 30}
 
 
 @dataclass(frozen=True)
@@ -73,8 +69,10 @@ def estimate_cost(
     else:
         seconds = TILED_START_S + work / (TILED_DOTS_PER_S_PER_WORKER * max(workers, 1))
         peak = TILED_BASE_BYTES + workers * estimate_bytes(tile_dots, lbfgs_memory) * grow
-    per_dot = {f: FORMATS[f].bytes_per_dot for f in formats if f in FORMATS}
-    if shaped:
-        per_dot = {f: SHAPED_BYTES_PER_DOT.get(f) for f in per_dot}
+    per_dot = {
+        f: FORMATS[f].shaped_bytes_per_dot if shaped else FORMATS[f].bytes_per_dot
+        for f in formats
+        if f in FORMATS
+    }
     disk = {f: b * n_dots for f, b in per_dot.items() if b is not None}
     return Cost(seconds, int(peak), disk)

@@ -3,6 +3,10 @@
 drawing and reading, and two compiled kernels (``inside``: whether a point lies on a
 packed footprint; ``support_bound``: its support or a bound from above). A new kind is one
 module and one line in :data:`KINDS` and in each dispatch below (its code is its place).
+
+numba's cache keys a compiled function by its own file only: after editing a kind's
+kernels, clear the cached kernels (``find optdot -name '*.nb[ic]' -delete``) or run with
+a fresh ``NUMBA_CACHE_DIR``, or the dispatch below keeps the old code inlined.
 """
 
 from __future__ import annotations
