@@ -10,9 +10,9 @@ Before numpy loads, the command turns off numpy's request for transparent huge p
 (``NUMPY_MADVISE_HUGEPAGE=0``, for itself and the workers it starts; a value the user set
 is kept). numpy asks for them on every array of 4 MB or more, and where the kernel
 defragments synchronously for such requests (``transparent_hugepage/defrag`` =
-``madvise``, a common default) a first touch can stall on compaction: the 1.2M-dot map in
-one process spent 2.8-3.1 s in the kernel against 1.7-2.0 s without, 19.6 against 18.9 s
-in all (medians of 4, alternated; BENCHMARKS.md, session 29; numpy issue 31590)."""
+``madvise``, a common default) a first touch can stall on compaction: a 1.2M-dot map in one
+process spends over a second more in the kernel with them (BENCHMARKS.md; numpy issue
+31590)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The tracer's direct-lit stacks (issue 38): a Lambertian point source's irradiance on a
+"""The tracer's direct-lit stacks: a Lambertian point source's irradiance on a
 plane, a partially reflecting film over a diffuse reflector, energy conservation ray by
 ray, real dots against the coverage mode, the halo of one LED, the scattering draws, and
 bad input in one line."""

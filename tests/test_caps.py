@@ -1,4 +1,4 @@
-"""Caps (issue 38): discs of solid ink printed over a direct-lit backlight's LEDs. The job's
+"""Caps: discs of solid ink printed over a direct-lit backlight's LEDs. The job's
 key, the keep-out the dots respect, the tracer's exact discs against brute force, the
 design's shares, and every file that carries them (NPZ, dataset manifest, GDSII, OASIS,
 DXF) read back by optdot and by KLayout / ezdxf."""

@@ -1,4 +1,4 @@
-"""The tiles' panel-wide field (issue 24): every tile's throw deposited on one coarse
+"""The tiles' panel-wide field: every tile's throw deposited on one coarse
 lattice, one Neumann solve, each throw moved along it before it relaxes
 (:mod:`optdot.stages.initial`)."""
 

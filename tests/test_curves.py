@@ -1,4 +1,4 @@
-"""The spacing guarantee against the curves the user drew (issue 14, case 7).
+"""The spacing guarantee against the curves the user drew.
 
 Every dot centre must keep ``r0`` (within 1 nm) from the true circles, arcs and bulges of a
 DXF outline, not only from the polygon they were flattened to. Distances here are

@@ -1,4 +1,4 @@
-"""Graded caps (issue 38): caps printed as concentric rings whose ink the design sizes.
+"""Graded caps: caps printed as concentric rings whose ink the design sizes.
 The ring table against the bands' ink and the printable widths, the exact disc-cell
 areas and ring shares against shapely, the tracer's ring test against brute force, the
 job's key and its errors, the design's band step, and every file that carries the rings

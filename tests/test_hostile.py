@@ -1,4 +1,4 @@
-"""Hostile inputs and wrong answers (issue 14, cases 4-6): each ends in one line on stderr,
+"""Hostile inputs and wrong answers: each ends in one line on stderr,
 a documented exit code and no traceback, and writes nothing.
 
 Every case here ended in a traceback, an exit 0 with a wrong or overwritten file, or the

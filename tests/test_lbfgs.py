@@ -64,7 +64,7 @@ def test_status_codes_and_messages():
 
 
 def test_a_rejected_pair_never_overwrites_the_history_in_use(monkeypatch):
-    """Issue 14: with the history full, a pair failing the curvature test was written over
+    """With the history full, a pair failing the curvature test was written over
     the oldest pair, which the next two-loop still used."""
     from optdot.relax import lbfgs
 

@@ -1,4 +1,4 @@
-"""What a drawing says is what optdot reads (issue 26): DXF units, block references with
+"""What a drawing says is what optdot reads: DXF units, block references with
 their transforms, circles seen from below, GDS/OASIS reference magnification, rotation and
 mirroring, overflowed GDSII arrays, and coordinates a GDSII integer cannot hold.
 

@@ -1,4 +1,4 @@
-"""QA's order and spectrum measures on inputs whose answer is known (issue 14, case 8):
+"""QA's order and spectrum measures on inputs whose answer is known:
 a hexagonal lattice (ψ6 = 1, grains everywhere, a Bragg peak at its reciprocal spacing)
 and a Poisson pattern (|ψ6| near the random-phasor mean, no coherence, a flat spectrum)."""
 

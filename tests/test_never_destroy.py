@@ -1,4 +1,4 @@
-"""Outputs never destroy what is not ours (issue 26): only a regular file or a new name is
+"""Outputs never destroy what is not ours: only a regular file or a new name is
 replaced, a dataset directory is recognised by its own manifest and nothing else, and a
 dataset someone added to or changed is refused on reading.
 

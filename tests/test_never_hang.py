@@ -1,4 +1,4 @@
-"""Never hang, never exhaust the machine, one line for every bad input (issue 26).
+"""Never hang, never exhaust the machine, one line for every bad input.
 
 Each case here hung, filled the memory, printed tracebacks or ended in an internal error
 (exit 70) before the fix.

@@ -1,4 +1,4 @@
-"""The light-guide tracer and the designer (issue 27): the 1-D closed forms, energy
+"""The light-guide tracer and the designer: the 1-D closed forms, energy
 conservation, real dots against the coverage mode, reproducibility, bad input, and the
 loop design -> generate -> simulate end to end."""
 

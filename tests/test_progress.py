@@ -1,4 +1,4 @@
-"""What a user sees while a job runs (issue 26): each stage named as it starts, a slow
+"""What a user sees while a job runs: each stage named as it starts, a slow
 first start explained (numba compiles the kernels once), the relaxation's line closed
 with the iteration it stopped at, and nothing at all when stderr is not a terminal."""
 

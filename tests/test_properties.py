@@ -1,4 +1,4 @@
-"""Property-based hostile inputs (issue 14): whatever the job, grid, outline or pattern
+"""Property-based hostile inputs: whatever the job, grid, outline or pattern
 file holds, reading it ends in a value or in an :class:`~optdot.errors.OptdotError` (one
 line and a documented exit code at the command line), never in another exception.
 

@@ -1,4 +1,4 @@
-"""Tiled patterns along their seams (issue 24): the long-wavelength correction blended
+"""Tiled patterns along their seams: the long-wavelength correction blended
 across tile borders leaves the coverage along the seams like the interior's, where a
 correction solved tile by tile piles its error onto them."""
 

@@ -1,4 +1,4 @@
-"""Shaped, oriented dots end to end (issue 37 part 2): the job's keys and their errors,
+"""Shaped, oriented dots end to end: the job's keys and their errors,
 the orientation field, the exact guarantee (checked pair by pair with shapely, not with
 optdot's own distance), pattern files and masks read back by independent readers
 (KLayout, ezdxf), and QA catching what it must."""

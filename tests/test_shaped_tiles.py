@@ -1,4 +1,4 @@
-"""Shaped dots in tiles and datasets (issue 37): the tiled run keeps the exact guarantee
+"""Shaped dots in tiles and datasets: the tiled run keeps the exact guarantee
 across its seams (checked by shapely), turns every dot by the field where it ends (a
 held neighbour keeps the angle it was written with), gives the same bytes on one and
 two workers, resumes to the bytes of an uninterrupted run, and its dataset holds the

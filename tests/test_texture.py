@@ -1,5 +1,5 @@
 """Texture measures (structure factor, blurred coverage, wall profile) on known inputs, and
-the wall profile of generated patterns: flat up to every wall (issue 24)."""
+the wall profile of generated patterns: flat up to every wall."""
 
 from __future__ import annotations
 
@@ -143,7 +143,7 @@ def test_generated_coverage_is_flat_up_to_every_wall(tmp_path, fill):
 
 
 def test_without_phantoms_the_first_band_is_bright(tmp_path):
-    """The same job relaxed as before issue 24 (no phantoms, no long-wavelength pass)
+    """The same job relaxed without phantoms and the long-wavelength pass
     layers against the walls: the measure sees what the fix removes."""
     job = wall_job(tmp_path, 0.2)
     form = dataclasses.replace(PRESETS["optdot"], phantoms=False, lowpass=0, lowpass_core_iter=0)

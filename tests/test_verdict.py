@@ -1,4 +1,4 @@
-"""The truth in the first hour (issue 26): PASS only when nothing is left to say, PASS
+"""The truth in the first hour: PASS only when nothing is left to say, PASS
 WITH WARNINGS when a viewer will see something or checks were skipped, FAIL when the
 gate fails; ``export`` prints the verdict, says what each file holds, keeps the report;
 the library refuses to overwrite its own inputs as the CLI does.

@@ -414,9 +414,9 @@ def _trace_rays(
     ``lo .. hi - 1`` of ``fate``, ``ex``, ``ey``.
 
     A serial loop of its own, which :func:`trace` runs in parallel over chunks: numba's
-    parallel passes analyse the whole body of a ``prange`` loop, and with a ray's life
-    there the tracer took ~55 s to compile on a first run (~20 s this way, at the
-    same speed and with the same results: every ray draws from its own generator)."""
+    parallel passes analyse the whole body of a ``prange`` loop, and a ray's whole life
+    there makes a first run's compile several times longer; split so, it runs at the
+    same speed with the same results (every ray draws from its own generator)."""
     top = layer.shape[0]  # the top face's index
     n_emit = emit.shape[0]
     for j in range(lo, hi):

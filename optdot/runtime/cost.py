@@ -30,7 +30,7 @@ TILED_DOTS_PER_S_PER_WORKER = 45_000
 SINGLE_START_S, TILED_START_S = 1.0, 8.0
 #: Memory of the command, scheduler and tiles held while a tiled run writes, bytes.
 TILED_BASE_BYTES = 512 * 2**20
-#: Shaped dots against discs of the same count, one process (BENCHMARKS.md session 21,
+#: Shaped dots against discs of the same count, one process (BENCHMARKS.md, at
 #: 10⁶ dots: ellipses 2.5-3.0x the time and 1.4x the memory, prisms 2.8-3.2x and 1.5x).
 SHAPED_TIME, SHAPED_MEMORY = 3.0, 1.5
 

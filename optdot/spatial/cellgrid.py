@@ -95,9 +95,8 @@ def _bin_points(
 class Workspace:
     """The arrays of a cell-grid search, kept from one search to the next: a Verlet list
     rebuilt a dozen times over one relaxation writes every rebuild into the same memory.
-    Fresh arrays made every rebuild touch fresh pages (1.2M dots: 83 MB a rebuild, 211k
-    page faults over a run, 10k now); in isolation a rebuild takes 226-286 ms against
-    242-332 ms (BENCHMARKS.md, session 29). What a search returns lives in these arrays
+    Fresh arrays would make every rebuild fault in fresh pages (83 MB a rebuild at 1.2M
+    dots, twenty times the page faults over a run). What a search returns lives in these arrays
     until the next search with the same workspace; ``Workspace(keep=False)`` hands out
     fresh arrays every time.
     """
