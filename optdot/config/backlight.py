@@ -48,7 +48,9 @@ Keys (every length in mm, panel coordinates; reflectances and transmittances 0..
 ``[backlight.cavity]`` (``"direct"``)
 
 - ``gap``: reflector to the printed face of the film, the optical distance (required).
-- ``reflector``: diffuse reflectance of the sheet carrying the LEDs (default 0.95).
+- ``reflector``: reflectance of the sheet carrying the LEDs (default 0.95).
+- ``reflector_finish``: ``"diffuse"`` (default: a white sheet) or ``"specular"`` (a metal
+  or multilayer mirror film: light back at the angle it came).
 
 ``[backlight.film]`` (the film or plate the dots are printed on, on its bottom face)
 
@@ -77,7 +79,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import JobError
-from .light_guide import EDGE_FINISH, led_profile, number_in, typed_keys
+from .light_guide import EDGE_FINISH, led_profile, number_in, reflector_finish, typed_keys
 
 KINDS = ("direct", "edge")
 PRINTS = ("film", "guide")
@@ -106,7 +108,11 @@ GRID_LED_KEYS: dict[str, tuple[type, ...]] = {
     "cap": (int, float),
     "cap_ink": (str, list),
 }
-CAVITY_KEYS: dict[str, tuple[type, ...]] = {"gap": (int, float), "reflector": (int, float)}
+CAVITY_KEYS: dict[str, tuple[type, ...]] = {
+    "gap": (int, float),
+    "reflector": (int, float),
+    "reflector_finish": (str,),
+}
 FILM_KEYS: dict[str, tuple[type, ...]] = {
     "thickness": (int, float),
     "refractive_index": (int, float),
@@ -185,12 +191,14 @@ class Backlight:
         sheets: diffuser sheets above the film, bottom to top.
         leds: the direct-lit LEDs, or None for ``"edge"``.
         gap: reflector to the film's printed face (direct), mm.
-        reflector: the reflector's diffuse reflectance (direct).
+        reflector: the reflector's reflectance (direct).
         frame, frame_finish: the frame around the air layers, film and sheets.
         print: the face the job's pattern is printed on: ``"film"`` or ``"guide"``.
         other_map: the fill of the other printed face (edge): a number or ``[ny, nx]``
             grid over the panel box (row 0 = bottom).
         other_file: the file ``other_map`` came from, or None.
+        reflector_finish: how the reflector returns light (direct): ``"diffuse"`` or
+            ``"specular"``.
     """
 
     kind: str
@@ -204,6 +212,7 @@ class Backlight:
     print: str = "film"
     other_map: float | np.ndarray = field(default=0.0, compare=False)
     other_file: Path | None = None
+    reflector_finish: str = "diffuse"
 
     @property
     def ink_contrast(self) -> float:
@@ -303,8 +312,11 @@ def backlight_from(
         raise JobError(f"{where}: missing required key backlight.cavity.gap (mm)")
     gap = number_in(cav, "gap", 0, 0, 1000, where, "backlight.cavity", "in mm, ", lo_open=True)
     refl = number_in(cav, "reflector", 0.95, 0, 1, where, "backlight.cavity")
+    mirror = reflector_finish(cav, where, "backlight.cavity")
     leds = _grid_leds(sec["leds"], box, where)
-    return Backlight(kind, film, sheets, leds, gap, refl, frame, finish, printed)
+    return Backlight(
+        kind, film, sheets, leds, gap, refl, frame, finish, printed, reflector_finish=mirror
+    )
 
 
 def _film(sec: Any, kind: str, where: str) -> Film:

@@ -16,8 +16,10 @@ dots scatter it. What :mod:`optdot.optics` needs to trace it:
   what falls inside the escape cone leaves the top, the rest is guided on) or ``"extract"``
   (the idealised extractor of the 1-D model of Lee et al. 2005: a dot sends what it reflects
   straight out of the top at the hit point; for validation against the closed forms).
-- ``reflector``: diffuse reflectance of the sheet under the guide, 0..1 (default 0.95;
-  0 for none or black).
+- ``reflector``: reflectance of the sheet under the guide, 0..1 (default 0.95; 0 for none
+  or black).
+- ``reflector_finish``: ``"diffuse"`` (default: a white sheet, light back Lambertian) or
+  ``"specular"`` (a metal or multilayer mirror film: light back at the angle it left).
 - ``edge_reflectance``: reflectance of what covers the edges, 0..1 (default 0.9, white
   tape; 0: nothing comes back). Light that total internal reflection or Fresnel keeps
   inside the slab stays inside.
@@ -70,6 +72,8 @@ from ..geometry.limits import MAX_RANDOM_FILL
 EDGES = ("bottom", "top", "left", "right")
 DOT_SCATTER = ("lambertian", "extract")
 EDGE_FINISH = ("diffuse", "specular", "absorbing")
+#: How a reflector sheet returns light: Lambertian, or mirrored.
+REFLECTOR_FINISH = ("diffuse", "specular")
 
 LIGHT_GUIDE_KEYS: dict[str, tuple[type, ...]] = {
     "thickness": (int, float),
@@ -78,6 +82,7 @@ LIGHT_GUIDE_KEYS: dict[str, tuple[type, ...]] = {
     "dot_albedo": (int, float),
     "dot_scatter": (str,),
     "reflector": (int, float),
+    "reflector_finish": (str,),
     "edge_reflectance": (int, float),
     "edge_finish": (str,),
     "leds": (list,),
@@ -136,6 +141,7 @@ class LightGuide:
     reflector: float = 0.95
     edge_reflectance: float = 0.9
     edge_finish: str = "diffuse"
+    reflector_finish: str = "diffuse"
 
     @property
     def critical_angle(self) -> float:
@@ -228,13 +234,29 @@ def light_guide_from(
         raise JobError(
             f"{where}: light_guide.edge_finish = {finish!r} must be one of {', '.join(EDGE_FINISH)}"
         )
+    mirror = reflector_finish(sec, where, lab)
     rows = sec.get("leds", [])
     if not rows:
         raise JobError(
             f"{where}: light_guide has no LEDs (add [[light_guide.leds]] with edge and positions)"
         )
     leds = tuple(_leds(row, k, box, where) for k, row in enumerate(rows))
-    return LightGuide(t, leds, n, a, albedo, scatter, refl, edge_r, finish)
+    return LightGuide(t, leds, n, a, albedo, scatter, refl, edge_r, finish, mirror)
+
+
+def reflector_finish(sec: dict[str, Any], where: str, lab: str) -> str:
+    """``reflector_finish`` of a section (:data:`REFLECTOR_FINISH`, default diffuse).
+
+    Raises:
+        JobError: another value.
+    """
+    finish = sec.get("reflector_finish", "diffuse")
+    if finish not in REFLECTOR_FINISH:
+        raise JobError(
+            f"{where}: {lab}.reflector_finish = {finish!r} must be one of "
+            f"{', '.join(REFLECTOR_FINISH)}"
+        )
+    return finish
 
 
 def check_leds_on(guide: LightGuide, geometry, box, where: str) -> None:

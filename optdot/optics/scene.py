@@ -21,7 +21,7 @@ import numpy as np
 
 from ..config.backlight import Backlight
 from ..config.job import Job
-from ..config.light_guide import EDGE_FINISH, LightGuide
+from ..config.light_guide import EDGE_FINISH, REFLECTOR_FINISH, LightGuide
 from ..errors import JobError
 from ..geometry.caps import cap_shares, no_caps
 from ..geometry.shapes import packed
@@ -49,6 +49,7 @@ from .trace import (
     F_KIND,
     F_PRINT,
     F_REFL,
+    F_REFL_FINISH,
     F_SHEET_R,
     F_SHEET_T,
     F_SPREAD,
@@ -323,6 +324,7 @@ def _edge_stack(guide: LightGuide, bl: Backlight | None) -> tuple[np.ndarray, np
     face[0, F_DOT_R] = guide.dot_albedo
     face[0, F_EXTRACT] = 1.0 if guide.dot_scatter == "extract" else 0.0
     face[0, F_REFL] = guide.reflector
+    face[0, F_REFL_FINISH] = REFLECTOR_FINISH.index(guide.reflector_finish)
     if bl is not None:
         _dress_film(face, bl, film, 2 if on_guide else 1)
     return layer, face
@@ -335,6 +337,7 @@ def _direct_stack(bl: Backlight) -> tuple[np.ndarray, np.ndarray]:
     layer = np.array(layers)
     face = _faces(layer)
     face[0, F_REFL] = bl.reflector
+    face[0, F_REFL_FINISH] = REFLECTOR_FINISH.index(bl.reflector_finish)
     _dress_film(face, bl, film, 1)
     return layer, face
 

@@ -23,8 +23,10 @@ event by event:
 
   - ``BOTTOM`` (face 0): the reflector sheet under layer 0, in contact (no gap): the dot
     test if the face is printed, then the layer's escape cone and Fresnel lead to the
-    sheet, which returns ``reflector`` of the light Lambertian in air, refracted back in
-    (or absorbs it: *lost at the bottom*).
+    sheet, which returns ``reflector`` of the light (or absorbs it: *lost at the bottom*):
+    a diffuse sheet Lambertian in air, refracted back in; a specular one (a metal or
+    multilayer mirror film) mirrored, so the ray comes back at the angle it left, after as
+    many bounces between the sheet and the face's Fresnel reflection as it takes.
   - ``INTERFACE``: a dielectric face between two layers (Fresnel, total internal
     reflection, Snell). If printed, the dots sit on the bottom of the layer above it: a dot
     met from either side reflects ``dot R`` of the light Lambertian back, transmits ``dot
@@ -86,13 +88,14 @@ E_COLS = 17
 #: finish (0 diffuse, 1 specular, 2 absorbing), the walls' critical cosine (0 when none).
 L_Z0, L_Z1, L_N, L_ABS, L_WALL_R, L_WALL_MODE, L_WALL_COS = range(7)
 L_COLS = 7
-#: Face ``[L + 1, 14]``: kind, printed (0 no, 1 the job's print, 2 the second map), dot
+#: Face ``[L + 1, 15]``: kind, printed (0 no, 1 the job's print, 2 the second map), dot
 #: R, dot T, reflector (BOTTOM), dot extract (0/1), haze (0 none, 1 Lambertian, 2
 #: Gaussian), haze sigma (rad), sheet T, sheet R, sheet spread (0 Lambertian, 1 Gaussian),
-#: its sigma (rad), critical cosine going up, going down (0 when there is none).
+#: its sigma (rad), critical cosine going up, going down (0 when there is none), the
+#: reflector's finish (BOTTOM: 0 diffuse, 1 specular).
 (F_KIND, F_PRINT, F_DOT_R, F_DOT_T, F_REFL, F_EXTRACT, F_HAZE, F_HAZE_SIG, F_SHEET_T) = range(9)
-F_SHEET_R, F_SPREAD, F_SPREAD_SIG, F_COS_UP, F_COS_DOWN = range(9, 14)
-F_COLS = 14
+F_SHEET_R, F_SPREAD, F_SPREAD_SIG, F_COS_UP, F_COS_DOWN, F_REFL_FINISH = range(9, 15)
+F_COLS = 15
 #: Face kinds.
 BOTTOM_FACE, INTERFACE, SHEET_FACE = 0, 1, 2
 
@@ -224,6 +227,21 @@ def _lambert_in(state, n):
         return state, False, 0.0, 0.0, 0.0
     sin_g = sin_a / n
     return state, True, math.sqrt(1.0 - sin_g * sin_g), sin_g, 2.0 * math.pi * v
+
+
+@nb.njit(cache=True, inline="always")
+def _mirrored(state, refl, r_face):
+    """A ray out through a face of Fresnel reflectance ``r_face`` to a mirror of
+    reflectance ``refl`` behind it: bounced between the two until the face lets it back
+    through (its transmission is the same both ways) or the mirror absorbs it:
+    ``(state, back)``."""
+    while True:
+        state, u = _uniform(state)
+        if u >= refl:
+            return state, False
+        state, u = _uniform(state)
+        if u >= r_face:
+            return state, True
 
 
 @nb.njit(cache=True, inline="always")
@@ -591,7 +609,15 @@ def _trace_rays(
                     continue
                 if -dz > face[fi, F_COS_DOWN]:
                     state, u = _uniform(state)
-                    if u >= _fresnel(-dz, n, 1.0):  # out to the reflector sheet
+                    r_face = _fresnel(-dz, n, 1.0)
+                    if u >= r_face and face[fi, F_REFL_FINISH] > 0.5:  # out to a mirror
+                        state, ok = _mirrored(state, face[fi, F_REFL], r_face)
+                        if not ok:
+                            end = BOTTOM
+                            break
+                        dz = -dz  # back in at the angle it left
+                        continue
+                    if u >= r_face:  # out to the reflector sheet
                         ok = False
                         cn = sn = az = 0.0
                         while True:
