@@ -13,9 +13,10 @@ import pytest
 
 from optdot.config.schema import load_job
 from optdot.optics.halo import halo
+from optdot.optics.rays import tilt as _tilt
 from optdot.optics.scene import Coverage, scene_of
 from optdot.optics.simulate import simulate, traced
-from optdot.optics.trace import FATES, _tilt
+from optdot.optics.tables import FATES
 
 from .conftest import cli, one_error
 
@@ -206,7 +207,7 @@ def test_a_ray_out_to_a_mirror_comes_back_as_often_as_the_series_says():
     """Behind a face of Fresnel reflectance r, a mirror of reflectance Rr: a ray returns
     through the face with Rr (1 - r) (1 + r Rr + (r Rr)^2 ...) = Rr (1 - r) / (1 - r Rr),
     within 4 sigma of 200,000 draws (the guide's bottom, where r > 0)."""
-    from optdot.optics.trace import _mirrored
+    from optdot.optics.rays import mirrored as _mirrored
 
     rr, r_face, n = 0.9, 0.6, 200_000
     state = np.uint64(12345)
@@ -222,7 +223,7 @@ def test_a_ray_out_to_a_mirror_comes_back_as_often_as_the_series_says():
 def test_the_reflector_finish_reaches_the_scene_and_bad_ones_get_one_line(tmp_path):
     """``reflector_finish`` of a guide and of a cavity sets the reflector face's finish;
     another word is refused in one line naming the key."""
-    from optdot.optics.trace import F_REFL_FINISH
+    from optdot.optics.tables import F_REFL_FINISH
 
     for finish, code in (("specular", 1.0), ("diffuse", 0.0)):
         path = direct_job(tmp_path, cavity={"gap": 1.5, "reflector_finish": finish})

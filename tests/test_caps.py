@@ -14,9 +14,9 @@ from hypothesis import strategies as st
 
 from optdot.config.schema import load_job
 from optdot.geometry.caps import CAP_APPID, CAP_CELL, cap_array, cap_shares, discs
+from optdot.optics.marks import on_cap as _on_cap
 from optdot.optics.scene import Coverage, cap_grid
 from optdot.optics.simulate import simulate
-from optdot.optics.trace import _on_cap
 
 from .conftest import cli, one_error
 from .test_backlight import direct_job

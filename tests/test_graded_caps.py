@@ -22,8 +22,8 @@ from optdot.geometry.caps import (
     ring_shares,
     ring_table,
 )
+from optdot.optics.marks import on_cap as _on_cap
 from optdot.optics.scene import cap_grid
-from optdot.optics.trace import _on_cap
 
 from .conftest import cli, one_error
 from .test_backlight import direct_job

@@ -15,15 +15,11 @@ import pytest
 
 from optdot.config.schema import load_job
 from optdot.optics.design import design
+from optdot.optics.rays import fresnel as _fresnel
+from optdot.optics.rays import last_at_most
 from optdot.optics.simulate import Coverage, simulate
-from optdot.optics.trace import (
-    FATES,
-    RAY_CHUNK,
-    UNFINISHED,
-    _fresnel,
-    last_at_most,
-    trace,
-)
+from optdot.optics.tables import FATES, UNFINISHED
+from optdot.optics.trace import RAY_CHUNK, trace
 
 from .conftest import SAMPLES, cli, one_error
 

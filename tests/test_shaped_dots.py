@@ -275,8 +275,8 @@ def test_an_angle_map_with_nan_and_a_fill_the_shape_cannot_reach(tmp_path):
 def test_the_tracer_meets_the_true_oriented_footprints(tmp_path, dots):
     """The tracer's test of a point on the bottom face (its dot grid and footprints, as
     ``simulate`` builds them) against shapely's polygons of the pattern."""
+    from optdot.optics.marks import on_dot as _on_dot
     from optdot.optics.scene import dot_grid
-    from optdot.optics.trace import _on_dot
 
     job = load_job(_job(tmp_path, dots, {"random": "true"}))
     p = generate(job)

@@ -30,7 +30,7 @@ from ..errors import JobError
 from ..pattern import DotSource
 from .scene import Coverage, is_direct, scene_of
 from .simulate import traced
-from .trace import FATES, UNCOUPLED
+from .tables import FATES, UNCOUPLED
 
 #: Rings per LED pitch (or per cavity gap without a grid) of the radial profile.
 RINGS_PER_PITCH = 40

@@ -26,7 +26,7 @@ from ..errors import JobError
 from ..geometry.caps import cap_shares, no_caps
 from ..geometry.shapes import packed
 from ..pattern import DotSource, caps_of
-from .trace import (
+from .tables import (
     BOTTOM_FACE,
     E_A,
     E_B,
@@ -54,6 +54,7 @@ from .trace import (
     F_SHEET_T,
     F_SPREAD,
     F_SPREAD_SIG,
+    F_TEST,
     INTERFACE,
     L_ABS,
     L_COLS,
@@ -140,6 +141,7 @@ def scene_of(
         assert bl.leds is not None
         sources = _grid_sources(bl, rays, only_led)
         layer, face = _direct_stack(bl)
+    face[:, F_TEST] = (face[:, F_KIND] == BOTTOM_FACE) | (face[:, F_PRINT] > 0)
     stack = Stack(layer, face, walls, normals, MAX_EVENTS)
     return Scene(sources, stack, _print(job, dots, coverage))
 

@@ -37,7 +37,8 @@ from ..errors import JobError
 from ..pattern import DotSource
 from ..runtime.stop import check_interrupt
 from .scene import Coverage, coverage_of, has_optics, is_direct, probe, scene_of
-from .trace import FATES, MAX_EVENTS, SHEET_FACE, UNCOUPLED, UNFINISHED, Scene, trace
+from .tables import FATES, MAX_EVENTS, SHEET_FACE, UNCOUPLED, UNFINISHED, Scene
+from .trace import trace
 
 __all__ = ["Coverage", "Simulation", "coverage_of", "simulate"]
 

@@ -1,0 +1,78 @@
+"""What is printed where a ray meets a printed face: the job's real dots or its coverage,
+a second coverage map (the other printed face of a stack), and the caps over direct-lit
+LEDs (compiled; the tables: :class:`optdot.optics.tables.Print`)."""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+
+from ..geometry.shapes import on_packed
+
+
+@nb.njit(cache=True, inline="always")
+def on_dot(x, y, explicit, phi, g, start, dx_, dy_, foot, cg, u):
+    """Does the point (x, y) on the bottom face lie on a dot? ``u``: a uniform draw."""
+    if not explicit:
+        ix = int(math.floor((x - g[0]) / g[2]))
+        iy = int(math.floor((y - g[1]) / g[3]))
+        if ix < 0 or iy < 0 or ix >= phi.shape[1] or iy >= phi.shape[0]:
+            return False
+        return u < phi[iy, ix]
+    nx, ny, rmax = int(cg[4]), int(cg[5]), cg[6]
+    # the cells the disc of the largest dot radius around (x, y) overlaps (1 to 4)
+    ax = int(math.floor((x - rmax - cg[0]) / cg[2]))
+    bx = int(math.floor((x + rmax - cg[0]) / cg[2]))
+    ay = int(math.floor((y - rmax - cg[1]) / cg[3]))
+    by = int(math.floor((y + rmax - cg[1]) / cg[3]))
+    for jy in range(max(ay, 0), min(by + 1, ny)):
+        for jx in range(max(ax, 0), min(bx + 1, nx)):
+            c = jy * nx + jx
+            for k in range(start[c], start[c + 1]):
+                ddx = x - dx_[k]
+                ddy = y - dy_[k]
+                if on_packed(foot, k, ddx, ddy):
+                    return True
+    return False
+
+
+@nb.njit(cache=True, inline="always")
+def on_cap(x, y, cap_start, cap, cap_g, cap_ring):
+    """Where the point (x, y) lies among the caps (``cap`` rows ``(x, y, r^2)``, by
+    cell; ``cap_ring`` the rings each prints, squared radii): 1 on a cap's ink, 0 within
+    a cap but between its rings (clear: no dot is there either), -1 outside every cap."""
+    nx, ny = int(cap_g[4]), int(cap_g[5])
+    jx = int(math.floor((x - cap_g[0]) / cap_g[2]))
+    jy = int(math.floor((y - cap_g[1]) / cap_g[3]))
+    # cells are at least a cap's diameter wide: the 2 x 2 cells nearest the point
+    ax = jx - 1 if x - cap_g[0] - jx * cap_g[2] < 0.5 * cap_g[2] else jx
+    ay = jy - 1 if y - cap_g[1] - jy * cap_g[3] < 0.5 * cap_g[3] else jy
+    for iy in range(max(ay, 0), min(ay + 2, ny)):
+        for ix in range(max(ax, 0), min(ax + 2, nx)):
+            c = iy * nx + ix
+            for k in range(cap_start[c], cap_start[c + 1]):
+                ddx = x - cap[k, 0]
+                ddy = y - cap[k, 1]
+                d2 = ddx * ddx + ddy * ddy
+                if d2 <= cap[k, 2]:  # caps do not overlap: this one or none
+                    for i in range(cap_ring.shape[0]):
+                        if cap_ring[i, 0] <= d2 <= cap_ring[i, 1]:
+                            return 1
+                    return 0
+    return -1
+
+
+@nb.njit(cache=True, inline="always")
+def marked(x, y, mark, pr, u):
+    """Is there a dot of print ``mark`` (1 the job's, 2 the second map) at (x, y)? ``pr``:
+    the :class:`Print`'s fields as a tuple; ``u`` a uniform draw (the coverage test). A
+    cap of print 1 is ink whatever ``u``."""
+    explicit, phi, g, phi2, g2, start, dx_, dy_, foot, cg, cap_start, cap, cap_g, ring = pr
+    if mark == 2:
+        return on_dot(x, y, False, phi2, g2, start, dx_, dy_, foot, cg, u)
+    if cap.shape[0] > 0:
+        at = on_cap(x, y, cap_start, cap, cap_g, ring)
+        if at >= 0:  # on a cap's ink, or clear between its rings
+            return at == 1
+    return on_dot(x, y, explicit, phi, g, start, dx_, dy_, foot, cg, u)
