@@ -1,18 +1,48 @@
 from __future__ import annotations
 
+import hashlib
+import os
+import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
 from hypothesis import settings
 
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLES = ROOT / "samples"
+#: Test caches of compiled kernels kept (the newest; older sources' are removed).
+KERNEL_CACHES = 3
+
+
+def _kernel_cache() -> None:
+    """Compile the tests' kernels into a numba cache of their own, named by the sources of
+    every module that holds kernels (unless ``NUMBA_CACHE_DIR`` is set). numba keys a
+    cached kernel by its own file only: a kernel that inlines another module's (the
+    registry's dispatch of a kind's ``inside``, the tracer's of a face's ``meet``) would
+    run the old code after that module is edited, and a broken kernel could pass."""
+    if "NUMBA_CACHE_DIR" in os.environ:
+        return
+    digest = hashlib.sha256()
+    for path in sorted(ROOT.glob("optdot/**/*.py")) + sorted(ROOT.glob("exporters/**/*.py")):
+        text = path.read_bytes()
+        if b"numba" in text:
+            digest.update(path.relative_to(ROOT).as_posix().encode() + b"\0" + text)
+    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "optdot-tests"
+    here = base / digest.hexdigest()[:16]
+    here.mkdir(parents=True, exist_ok=True)
+    here.touch()  # the newest
+    for old in sorted(base.iterdir(), key=lambda p: p.stat().st_mtime)[:-KERNEL_CACHES]:
+        shutil.rmtree(old, ignore_errors=True)
+    os.environ["NUMBA_CACHE_DIR"] = str(here)
+
+
+_kernel_cache()
+
 # the same examples every run (a property test that finds a case one day and not the
 # next is not a gate); tests that set their own settings keep them
 settings.register_profile("optdot", derandomize=True, database=None)
 settings.load_profile("optdot")
-
-ROOT = Path(__file__).resolve().parents[1]
-SAMPLES = ROOT / "samples"
 
 
 def write_job(tmp: Path, grid: np.ndarray | str, **sections) -> Path:

@@ -5,8 +5,9 @@ packed footprint; ``support_bound``: its support or a bound from above). A new k
 module and one line in :data:`KINDS` and in each dispatch below (its code is its place).
 
 numba's cache keys a compiled function by its own file only: after editing a kind's
-kernels, clear the cached kernels (``find optdot -name '*.nb[ic]' -delete``) or run with
-a fresh ``NUMBA_CACHE_DIR``, or the dispatch below keeps the old code inlined.
+kernels, a command run from the checkout keeps the old code inlined in the dispatch
+below until the cached kernels are cleared (``find optdot -name '*.nb[ic]' -delete``);
+the tests compile into a cache named by the kernels' sources (``tests/conftest.py``).
 """
 
 from __future__ import annotations

@@ -7,8 +7,9 @@ dx, dy, dz)``: a fate (``>= 0``) that ends the ray, or what it goes on with
 one module, one code in the tables and one line here.
 
 numba's cache keys a compiled function by its own file: after editing a face's kernel,
-clear the cached kernels (``find optdot -name '*.nb[ic]' -delete``) or run with a fresh
-``NUMBA_CACHE_DIR``, or the tracer keeps the old code inlined.
+a command run from the checkout keeps the old code inlined in the tracer until the cached
+kernels are cleared (``find optdot -name '*.nb[ic]' -delete``); the tests compile into a
+cache named by the kernels' sources (``tests/conftest.py``).
 """
 
 from __future__ import annotations
