@@ -135,6 +135,38 @@ def _fresnel(c: np.ndarray, n1: float, n2: float) -> np.ndarray:
     return np.where(s >= 1, 1.0, 0.5 * (rs * rs + rp * rp))
 
 
+#: Angles in air, rad, for the closed forms' averages over a Lambertian source.
+THETA = np.linspace(0, math.pi / 2, 200_001)
+
+
+def _through_the_film(n: float) -> np.ndarray:
+    """``[THETA]`` the share a clear film of index ``n`` passes of a ray at each angle in
+    air: ``(1 - R) / (1 + R)``, R its faces' Fresnel reflectance."""
+    r = _fresnel(np.cos(THETA), 1.0, n)
+    return (1 - r) / (1 + r)
+
+
+def _lambertian_mean(f: np.ndarray) -> float:
+    """``f`` (``[THETA]``) averaged over a Lambertian source's ``sin(2 theta) d theta``."""
+    g = f * np.sin(2 * THETA)
+    return float(np.sum(0.5 * (g[1:] + g[:-1]) * np.diff(THETA)))
+
+
+def _film_over_a_point(tmp: Path, cavity: dict, top: dict) -> Path:
+    """One 10 µm LED at the centre of a 200 mm square under a clear 0.2 mm film of index
+    1.59, ``cavity`` and ``top`` as given."""
+    return direct_job(
+        tmp,
+        200.0,
+        200.0,
+        None,
+        leds={"positions": [[100.0, 100.0]], "size": 0.01},
+        cavity=cavity,
+        film={"thickness": 0.2, "refractive_index": 1.59},
+        top=top,
+    )
+
+
 def test_a_clear_film_passes_1_minus_r_over_1_plus_r_of_a_lambertian_source(tmp_path):
     """A clear slab of index 1.59 over the point source, nothing sent back: a ray at theta
     in air crosses with (1 - R)^2 (1 + R^2 + R^4 ...) = (1 - R) / (1 + R) (R at the air
@@ -142,22 +174,11 @@ def test_a_clear_film_passes_1_minus_r_over_1_plus_r_of_a_lambertian_source(tmp_
     never stays trapped), so the share out of the top is that averaged over
     sin(2 theta) d theta, within 1 % and 4 sigma. Refraction, Fresnel at both faces and
     multiple reflection in the film are all in it."""
-    path = direct_job(
-        tmp_path,
-        200.0,
-        200.0,
-        None,
-        leds={"positions": [[100.0, 100.0]], "size": 0.01},
-        cavity={"gap": 0.5, "reflector": 0.0},
-        film={"thickness": 0.2, "refractive_index": 1.59},
-        top={"frame": 0.0},
-    )
+    path = _film_over_a_point(tmp_path, {"gap": 0.5, "reflector": 0.0}, {"frame": 0.0})
     rays = 400_000
     sim = simulate(load_job(path, need_map=False), rays, seed=8, coverage=BARE)
-    theta = np.linspace(0, math.pi / 2, 200_001)
-    r = _fresnel(np.cos(theta), 1.0, 1.59)
-    f = (1 - r) / (1 + r) * np.sin(2 * theta)
-    want = float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(theta)))
+    t = _through_the_film(1.59)
+    want = _lambertian_mean(t)
     got = sim.fates["extracted"] / rays
     sigma = math.sqrt(want * (1 - want) / rays)
     assert abs(got - want) <= max(0.01 * want, 4 * sigma), (got, want)
@@ -174,27 +195,12 @@ def test_a_mirror_returns_each_ray_at_its_angle(tmp_path, finish):
     Lambertian again, so it is <T> / (1 - Rr (1 - <T>)). The two differ by 0.0075 (16
     sigma at these rays); each finish is within 4 sigma of its own."""
     rr, rays = 0.5, 400_000
-    path = direct_job(
-        tmp_path,
-        200.0,
-        200.0,
-        None,
-        leds={"positions": [[100.0, 100.0]], "size": 0.01},
-        cavity={"gap": 0.5, "reflector": rr, "reflector_finish": finish},
-        film={"thickness": 0.2, "refractive_index": 1.59},
-        top={"frame": 1.0, "frame_finish": "specular"},
-    )
+    cavity = {"gap": 0.5, "reflector": rr, "reflector_finish": finish}
+    path = _film_over_a_point(tmp_path, cavity, {"frame": 1.0, "frame_finish": "specular"})
     sim = simulate(load_job(path, need_map=False), rays, seed=4, coverage=BARE)
-    theta = np.linspace(0, math.pi / 2, 200_001)
-    r = _fresnel(np.cos(theta), 1.0, 1.59)
-    t = (1 - r) / (1 + r)
-    w = np.sin(2 * theta)
-
-    def mean(f):
-        return float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(theta)))
-
-    mirror = mean(t / (1 - rr * (1 - t)) * w)
-    lambert = mean(t * w) / (1 - rr * (1 - mean(t * w)))
+    t = _through_the_film(1.59)
+    mirror = _lambertian_mean(t / (1 - rr * (1 - t)))
+    lambert = _lambertian_mean(t) / (1 - rr * (1 - _lambertian_mean(t)))
     want = mirror if finish == "specular" else lambert
     got = sim.fates["extracted"] / rays
     sigma = math.sqrt(want * (1 - want) / rays)
