@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import os
 import shutil
 from pathlib import Path
@@ -17,11 +18,15 @@ KERNEL_CACHES = 3
 
 def _kernel_cache() -> None:
     """Compile the tests' kernels into a numba cache of their own, named by the sources of
-    every module that holds kernels (unless ``NUMBA_CACHE_DIR`` is set). numba keys a
+    every module that holds kernels, when optdot runs from this checkout (an editable
+    install, where sources change) and ``NUMBA_CACHE_DIR`` is not set. numba keys a
     cached kernel by its own file only: a kernel that inlines another module's (the
     registry's dispatch of a kind's ``inside``, the tracer's of a face's ``meet``) would
-    run the old code after that module is edited, and a broken kernel could pass."""
-    if "NUMBA_CACHE_DIR" in os.environ:
+    run the old code after that module is edited, and a broken kernel could pass. An
+    installed copy does not change, so its tests use the kernels it has compiled."""
+    spec = importlib.util.find_spec("optdot")
+    here_ = spec is not None and spec.origin is not None and Path(spec.origin).is_relative_to(ROOT)
+    if "NUMBA_CACHE_DIR" in os.environ or not here_:
         return
     digest = hashlib.sha256()
     for path in sorted(ROOT.glob("optdot/**/*.py")) + sorted(ROOT.glob("exporters/**/*.py")):
