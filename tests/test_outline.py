@@ -402,3 +402,26 @@ def test_a_hole_touching_the_outer_ring_at_a_point_exports_and_reads_back(tmp_pa
         for judged in (["--job", job], ["--no-job"]):
             rc, err, _ = cli("qa", mask, *judged, "-q")
             assert rc == 0, (mask.name, judged, err)
+
+
+def test_a_domain_hands_out_each_grid_s_own_fractions_read_only_and_pickles_without_them():
+    """The fractions a domain keeps are each grid's own (asked in turn and again, more
+    grids than it keeps: every answer the direct computation's), read-only, and left out
+    of a pickle (a worker computes its own)."""
+    import pickle
+
+    from optdot.geometry.domain import FRACTION_GRIDS, polygon_cell_fractions
+
+    dom = Domain(
+        shapely.Point(5.0, 5.0).buffer(3.0, quad_segs=16).difference(shapely.box(4, 4, 6, 6))
+    )
+    sizes = [(7, m) for m in range(7, 7 + FRACTION_GRIDS)] + [(9, 7), (11, 8)]
+    grids = [(0.0, 0.0, 10.0 / nx, 10.0 / ny, nx, ny) for nx, ny in sizes]
+    for g in grids + grids[::-1] + grids:
+        got = dom.cell_fractions(*g)
+        np.testing.assert_array_equal(got, polygon_cell_fractions(dom.geometry, *g))
+        assert not got.flags.writeable
+    assert len(dom._fractions) == FRACTION_GRIDS
+    back = pickle.loads(pickle.dumps(dom))
+    assert back._fractions == {} and back.geometry.equals(dom.geometry)
+    np.testing.assert_array_equal(back.cell_fractions(*grids[0]), dom.cell_fractions(*grids[0]))
