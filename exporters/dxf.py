@@ -30,10 +30,12 @@ import numpy as np
 
 from optdot.errors import ExportError
 from optdot.geometry.caps import CAP_APPID
+from optdot.geometry.kinds import Curve
 from optdot.geometry.orientation import degrees
-from optdot.geometry.shapes import CIRCLE, Kind
+from optdot.geometry.shapes import CIRCLE, Footprints, Kind
 from optdot.io.atomic import atomic_path, expect_tail
 from optdot.pattern import DotSource, Pattern, caps_of
+from optdot.printing.mask import mask_cap_rings, mask_ring, mask_rings
 
 from .options import ExportOptions
 
@@ -85,16 +87,22 @@ def _graded_caps(msp, caps: np.ndarray, rings: np.ndarray) -> None:
             hatch.set_xdata(CAP_APPID, [(1000, "cap ring")])
 
 
-def _add_block(doc, kind: Kind, size: np.ndarray, version: str, tolerance: float) -> None:
+def _add_block(
+    doc, kind: Kind, size: np.ndarray, version: str, tolerance: float, process=None
+) -> None:
     """A block of one footprint (``size`` mm) at angle 0 about the origin, on layer 0
-    (it takes the layer of the INSERT placing it)."""
+    (it takes the layer of the INSERT placing it); with a ``process``, what the mask
+    draws for it (:func:`_mask_curve`)."""
     key = tuple(int(v) for v in np.round(size * 1e6))
     blk = doc.blocks.new(_block_name(key))
     if version == "R12":
-        ring = kind.outline(size, 0.0, tolerance)
+        if process is None:
+            ring = kind.outline(size, 0.0, tolerance)
+        else:
+            ring = mask_ring(process, kind, size, tolerance)
         blk.add_polyline2d([tuple(map(float, p)) for p in ring], close=True)
         return
-    curve = kind.curve(size)
+    curve = kind.curve(size) if process is None else _mask_curve(process, kind, size, tolerance)
     if curve.form == "disc":
         blk.add_circle((0.0, 0.0), curve.a)
     elif curve.form == "ellipse":
@@ -106,12 +114,28 @@ def _add_block(doc, kind: Kind, size: np.ndarray, version: str, tolerance: float
         raise ValueError(f"{kind.name}: a curve of form {curve.form!r} has no DXF entity")
 
 
+def _mask_curve(process, kind: Kind, size: np.ndarray, tolerance: float) -> Curve:
+    """What a mask draws for a printed footprint of ``size`` (``[k]`` mm): the kind's own
+    curves at the size the gain shrinks it to, scaled for the shrink, where that is a
+    footprint of the kind; else (an ellipse's parallel curve) its polygon within
+    ``tolerance`` mm, each vertex on the grid."""
+    mask = process.mask_size(kind, np.asarray(size, float)[None, :])
+    if mask is None:
+        ring = mask_ring(process, kind, size, tolerance)
+        return Curve("bulged", ring=tuple((float(x), float(y), 0.0) for x, y in ring))
+    curve = kind.curve(mask[0])
+    k = float(process.scale[0])
+    ring = tuple((x * k, y * k, b) for x, y, b in curve.ring)
+    return Curve(curve.form, curve.a * k, curve.b * k, ring)
+
+
 def _template(
     pattern: Pattern,
     version: str,
     provenance: tuple[str, ...] = (),
     sizes: list[np.ndarray] = (),
     tolerance: float = 1e-4,
+    pattern_process=None,
 ) -> tuple[str, str, str, int]:
     """(head, dot format, tail, first free handle) of a document for ``pattern``.
 
@@ -119,9 +143,10 @@ def _template(
     when the dots' sizes vary; with one size the radius is part of the template.
     Shaped dots: an INSERT of the block of each of ``sizes`` (``[k]`` mm each), its
     format ``(handle, [block name,] x, y, rotation in degrees)`` (the name when there
-    are several blocks; ``tolerance``, mm, draws R12's polygons)."""
+    are several blocks; ``tolerance``, mm, draws R12's polygons). With a
+    ``pattern_process``, the outline, caps, circles and blocks are the mask's."""
     uniform = pattern.uniform_diameter
-    radius = _MARK_R if uniform is None else 0.5 * uniform
+    radius = _MARK_R if uniform is None else _mask_radius(pattern_process, 0.5 * uniform)
     shaped = pattern.kind is not CIRCLE
     doc = _new_document(version)
     if version != "R12":  # R12 has no $INSUNITS: drawing units are mm by convention
@@ -133,25 +158,35 @@ def _template(
     doc.layers.add("DOTS", color=7)
     doc.layers.add("OUTLINE", color=1)
     msp = doc.modelspace()
-    for ring in pattern.outline_rings():  # outline and holes, one closed polyline each
+    process = pattern_process
+    rings = pattern.outline_rings()
+    if process is not None:
+        rings = mask_rings(process, rings, pattern.box)
+    for ring in rings:  # outline and holes, one closed polyline each
         pts = [(float(x), float(y)) for x, y in ring]
         if version == "R12":
             msp.add_polyline2d(pts, close=True, dxfattribs={"layer": "OUTLINE"})
         else:
             msp.add_lwpolyline(pts, close=True, dxfattribs={"layer": "OUTLINE"})
     caps = caps_of(pattern)
+    graded = pattern.outline is not None and pattern.outline.cap_rings is not None
+    cap_rings = pattern.outline.cap_rings if graded else None
+    if len(caps) and process is not None:  # what prints as the caps
+        k = float(process.scale[0])
+        at = process.place(caps[:, :2], pattern.box)
+        caps = np.column_stack([at, k * (caps[:, 2] - 2.0 * process.dot_gain)])
+        cap_rings = mask_cap_rings(process, cap_rings) if graded else None
     if len(caps):
         doc.appids.add(CAP_APPID)
-    graded = pattern.outline is not None and pattern.outline.cap_rings is not None
     if graded and len(caps):
-        _graded_caps(msp, caps, pattern.outline.cap_rings)
+        _graded_caps(msp, caps, cap_rings)
     for x, y, d in caps.tolist() if not graded else []:  # a circle marked by its XDATA
         cap = msp.add_circle((x, y), 0.5 * d, dxfattribs={"layer": "DOTS"})
         cap.set_xdata(CAP_APPID, [(1000, "cap")])
     names = []
     if shaped:
         for size in sizes:
-            _add_block(doc, pattern.kind, size, version, tolerance)
+            _add_block(doc, pattern.kind, size, version, tolerance, process)
             names.append(_block_name(tuple(int(v) for v in np.round(size * 1e6))))
         msp.add_blockref(
             names[0], (_MARK_X, _MARK_Y), dxfattribs={"layer": "DOTS", "rotation": _MARK_A}
@@ -231,6 +266,12 @@ def _find_float(lines: list[str], value: float) -> int:
     raise RuntimeError("template circle not found in ezdxf output")  # pragma: no cover
 
 
+def _mask_radius(process, r):
+    """A circle's radius (mm; a number or ``[n]``) on the mask: shrunk by the gain,
+    scaled (unchanged without a process)."""
+    return r if process is None else float(process.scale[0]) * (r - process.dot_gain)
+
+
 def write_dxf(pattern: DotSource, path: str | Path, opts: ExportOptions) -> None:
     """Write the DXF atomically (R2010 by default, ``opts.dxf_version`` otherwise); a
     dataset is streamed part by part (memory: one part).
@@ -243,6 +284,13 @@ def write_dxf(pattern: DotSource, path: str | Path, opts: ExportOptions) -> None
             f"{path}: DXF R12 has no HATCH to fill the rings of graded caps over the LEDs; "
             "write R2000 or later (--dxf-version)"
         )
+    process = opts.process
+    if process is not None and not process.isotropic:
+        raise ExportError(
+            f"{path}: process.shrink = [{process.shrink[0]:g}, {process.shrink[1]:g}] scales x "
+            "and y apart; DXF draws circles and arcs, which such a scale makes ellipses: "
+            "write GDSII or OASIS"
+        )
     shaped = pattern.kind is not CIRCLE
     sizes, names = [], {}
     if shaped:  # every size the dots have: a block each
@@ -252,7 +300,9 @@ def write_dxf(pattern: DotSource, path: str | Path, opts: ExportOptions) -> None
         sizes = [np.array(k) * 1e-6 for k in sorted(keys)]
         names = {k: _block_name(k) for k in sorted(keys)}
     tol = opts.tolerance_um * 1e-3
-    head, fmt, tail, seed = _template(pattern, opts.dxf_version, opts.provenance, sizes, tol)
+    head, fmt, tail, seed = _template(
+        pattern, opts.dxf_version, opts.provenance, sizes, tol, process
+    )
     has_handle = "%X" in fmt
     varying = pattern.uniform_diameter is None and not shaped
     named = shaped and len(names) > 1
@@ -265,6 +315,13 @@ def write_dxf(pattern: DotSource, path: str | Path, opts: ExportOptions) -> None
         done = 0
         for _, part_xy, footprints in pattern.chunks():  # one part, or one per tile
             part_d = footprints.diameter
+            if process is not None:  # places and angles on the mask
+                part_xy = process.place(part_xy, pattern.box)
+                part_d = 2.0 * _mask_radius(process, 0.5 * part_d)
+                if footprints.angle is not None:
+                    footprints = Footprints(
+                        footprints.kind, footprints.size, process.turn(footprints.angle)
+                    )
             for a in range(0, len(part_xy), chunk):
                 xy = part_xy[a : a + chunk]
                 cols = [xy[:, 0].tolist(), xy[:, 1].tolist()]

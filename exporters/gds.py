@@ -35,6 +35,13 @@ from optdot.geometry.morton import spatial_order
 from optdot.geometry.shapes import CIRCLE, MIN_VERTICES, Footprints, Kind, polygon_vertices
 from optdot.io.atomic import atomic_path, expect_tail
 from optdot.pattern import DotSource, caps_of
+from optdot.printing.mask import (
+    mask_cap_rings,
+    mask_polygons,
+    mask_ring,
+    mask_rings,
+    placed_whole,
+)
 
 from .options import ExportOptions
 
@@ -94,14 +101,19 @@ def _placed(dot: gdstk.Cell | str, xy_um: np.ndarray) -> gdstk.Reference:
 
 def dot_cell(name: str, kind: Kind, size_um: np.ndarray, opts: ExportOptions) -> gdstk.Cell:
     """The cell of one dot: its footprint (``kind`` of ``size_um``, µm, at angle 0)
-    centred on the origin, a polygon within the tolerance.
+    centred on the origin, a polygon within the tolerance; with a process, the mask's
+    polygon that prints as that footprint (:func:`optdot.printing.mask.mask_ring`).
 
     Raises:
         ExportError: the tolerance needs too many vertices, or too few to read as round.
     """
-    if kind is not CIRCLE:
+    if kind is not CIRCLE or opts.process is not None:
         dot = gdstk.Cell(name)
-        ring = kind.outline(np.asarray(size_um) * 1e-3, 0.0, opts.tolerance_um * 1e-3) * 1e3
+        size, tol = np.asarray(size_um) * 1e-3, opts.tolerance_um * 1e-3
+        if opts.process is None:
+            ring = kind.outline(size, 0.0, tol) * 1e3
+        else:  # what prints as the footprint: shrunk by the gain, scaled, on the grid
+            ring = mask_ring(opts.process, kind, size, tol) * 1e3
         if len(ring) > MAX_POINTS:
             raise ExportError(
                 f"--tolerance {opts.tolerance_um} µm needs {len(ring)} vertices per dot "
@@ -159,6 +171,7 @@ class _Cells:
 
     def __init__(self, src: DotSource, opts: ExportOptions) -> None:
         self.kind = src.kind
+        self.box = src.box
         self.uniform = src.uniform_diameter
         self.opts = opts
         self.dots: dict[tuple[int, ...], gdstk.Cell] = {}
@@ -176,9 +189,18 @@ class _Cells:
             self.dots[key] = dot_cell(name, self.kind, size_um, self.opts)
         return self.dots[key]
 
-    def fill(self, cell: gdstk.Cell, xy: np.ndarray, dots: Footprints) -> int:
+    def fill(self, cell: gdstk.Cell, xy: np.ndarray, dots: Footprints) -> tuple[int, int]:
         """Put the dots ``xy`` (``[n, 2]`` mm, their footprints) into ``cell``;
-        returns the number of elements a GDSII file holds for them."""
+        returns the references and the polygons a GDSII file holds for them. With a process,
+        their places and angles on the mask; dots a reference cannot place on the grid
+        (:func:`~optdot.printing.mask.placed_whole`) are polygons of their own."""
+        process = self.opts.process
+        if process is not None and not placed_whole(process, dots.kind, dots.angle):
+            return 0, self._polygons(cell, xy, dots)
+        if process is not None:
+            xy = process.place(xy, self.box)
+            if dots.angle is not None:
+                dots = Footprints(dots.kind, dots.size, process.turn(dots.angle))
         for key, index in dots.groups(1e6):  # sizes in nm
             sel = xy[index] * 1e3
             order = spatial_order(sel)
@@ -196,6 +218,20 @@ class _Cells:
                 cell.add(gdstk.Reference(dot, origin=(x, y), rotation=t))
         if self.opts.flatten:
             cell.flatten()
+            return 0, len(xy)
+        return len(xy), 0
+
+    def _polygons(self, cell: gdstk.Cell, xy: np.ndarray, dots: Footprints) -> int:
+        """The dots as the mask's polygons, one each (Morton order per size)."""
+        lay = {"layer": self.opts.layer, "datatype": self.opts.datatype}
+        tol = self.opts.tolerance_um * 1e-3
+        for _, index in dots.groups(1e6):
+            order = index[spatial_order(xy[index])]
+            size = dots.size[order[0]]
+            rings = mask_polygons(
+                self.opts.process, dots.kind, size, xy[order], dots.angles[order], self.box, tol
+            )
+            cell.add(*(gdstk.Polygon(r * 1e3, **lay) for r in rings))
         return len(xy)
 
     def tile(self, label: tuple[int, int]) -> gdstk.Cell:
@@ -227,8 +263,14 @@ def _chunks(src: DotSource):
 
 def _top(src: DotSource, opts: ExportOptions, oasis: bool) -> gdstk.Cell:
     top = gdstk.Cell(opts.top_cell)
-    top.add(*_outline_polygons(src.outline_rings(), opts, oasis))
+    top.add(*_outline_polygons(_rings(src, opts), opts, oasis))
     return top
+
+
+def _rings(src: DotSource, opts: ExportOptions) -> list[np.ndarray]:
+    """The panel's loops (mm) as the mask draws them."""
+    rings = src.outline_rings()
+    return rings if opts.process is None else mask_rings(opts.process, rings, src.box)
 
 
 def _cap_cells(src: DotSource, opts: ExportOptions, names: dict[str, str]):
@@ -243,11 +285,17 @@ def _cap_cells(src: DotSource, opts: ExportOptions, names: dict[str, str]):
     for nm in sizes:
         name = CAP_CELL if len(sizes) == 1 and not graded else f"{CAP_CELL}_{nm}"
         name = _unique(name, f"the {nm} nm cap", names)
+        rings = src.outline.cap_rings if graded else None
+        if graded and opts.process is not None:
+            rings = mask_cap_rings(opts.process, rings)
         if graded:
-            cell = _ring_cell(name, src.outline.cap_rings * 1e3, opts)
+            cell = _ring_cell(name, rings * 1e3, opts)
         else:
             cell = dot_cell(name, CIRCLE, np.array([nm * 1e-3]), opts)
-        at = caps[np.round(caps[:, 2] * 1e6).astype(np.int64) == nm, :2] * 1e3
+        at = caps[np.round(caps[:, 2] * 1e6).astype(np.int64) == nm, :2]
+        if opts.process is not None:
+            at = opts.process.place(at, src.box)
+        at = at * 1e3
         at = at[spatial_order(at)]
         cells.append(cell)
         refs.extend(gdstk.Reference(cell, origin=(float(x), float(y))) for x, y in at.tolist())
@@ -304,7 +352,9 @@ def write_gds(src: DotSource, path: str | Path, opts: ExportOptions) -> None:
         try:
             for label, xy, d, alone in _chunks(src):
                 cell = top if alone else cells.tile(label)
-                counts["polys" if opts.flatten else "refs"] += cells.fill(cell, xy, d)
+                refs, polys = cells.fill(cell, xy, d)
+                counts["refs"] += refs
+                counts["polys"] += polys
                 if not alone:
                     writer.write(cell)
                     top.add(gdstk.Reference(cell))
@@ -314,7 +364,7 @@ def write_gds(src: DotSource, path: str | Path, opts: ExportOptions) -> None:
             writer.write(*dots, *cap_cells, top)
         finally:
             writer.close()
-        counts["polys"] += len(dots) + len(_outline_polygons(src.outline_rings(), opts))
+        counts["polys"] += len(dots) + len(_outline_polygons(_rings(src, opts), opts))
 
 
 def write_oas(src: DotSource, path: str | Path, opts: ExportOptions) -> None:

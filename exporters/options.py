@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from optdot.errors import ExportError
+from optdot.printing.process import Process
 
 DXF_VERSIONS = ("R12", "R2000", "R2004", "R2007", "R2010", "R2013", "R2018")
 
@@ -26,6 +27,10 @@ class ExportOptions:
         provenance: ``"key: value"`` lines a mask carries where its format has a place
             for them (GDSII/OASIS: properties 1, 2, ... of the outline's first polygon;
             DXF R2000+: custom header properties), each at most 126 bytes.
+        process: how the mask prints (the job's ``[process]``), or None: a mask draws
+            the pattern's footprints as they are. With one, a mask draws each footprint
+            shrunk by the dot gain, scaled for the shrink, mirrored and on the grid
+            (:mod:`optdot.printing.mask`), and a mask read back is the print it makes.
     """
 
     tolerance_um: float = 0.01
@@ -39,6 +44,7 @@ class ExportOptions:
     dxf_version: str = "R2010"
     speos_reference_mm: float | None = None
     provenance: tuple[str, ...] = ()
+    process: Process | None = None
 
     def __post_init__(self) -> None:
         if not 1e-4 <= self.tolerance_um <= 10:

@@ -26,6 +26,7 @@ from optdot.geometry.limits import validate_dots
 from optdot.geometry.orientation import degrees
 from optdot.geometry.shapes import CIRCLE, KINDS, Fit, Footprints, Kind
 from optdot.pattern import Pattern
+from optdot.printing.mask import printed_box, printed_cap_rings, unscaled
 from optdot.runtime.isolate import ChildCrashed, in_child
 from optdot.runtime.memory import max_dots_read
 
@@ -39,6 +40,10 @@ RING_AREA_SHARE = 0.01
 #: Largest spread of a dot polygon's vertex radii: 2 nm plus this share of the radius
 #: (vertices are snapped to the 1 nm grid).
 RADIUS_SPREAD = 1e-3
+#: How far a vertex on a process's address grid may lie off its footprint, in grid steps
+#: (rounding to the nearest grid point moves it by at most half a step's diagonal, and
+#: the spread of radii is the difference of two such moves).
+GRID_SLACK = 1.5
 
 
 def read_any(path: str | Path, opts: ExportOptions | None = None, box=None) -> Pattern:
@@ -102,7 +107,10 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
     ]
     rings = [p.points * to_mm for p in outline]
     seed = _seed_of([str(p.get_gds_property(1) or "") for p in outline[:1]])
-    xy = np.round(np.concatenate(centres), 6)
+    xy = np.concatenate(centres)
+    if opts.process is not None:  # the print the mask makes, on the print's panel
+        xy, rings, caps, diameters = _printed(opts.process, xy, rings, caps, diameters)
+    xy = np.round(xy, 6)
     kinds = {d.kind for d in diameters}
     if kinds == {CIRCLE}:
         d = np.concatenate([d.size[:, 0] for d in diameters])
@@ -118,6 +126,27 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
         np.radians(degrees(np.concatenate([d.angle for d in diameters]))),
     )
     return _seeded(_pattern(path, xy, dots.diameter, rings, True, dots, caps, cap_rings), seed)
+
+
+def _printed(process, xy, rings, caps, drawn):
+    """``(xy, rings, caps, drawn)`` of a mask read back (mm, the mask's places) as the
+    print makes them: on the print's panel, unmirrored (footprints were already fitted
+    as printed, at the print's scale)."""
+    if not rings:
+        raise PatternFileError("a mask with a process needs its panel outline to be read")
+    box = printed_box(process, rings)
+    xy = process.unplace(xy, box)
+    out = [process.unplace(r, box) for r in rings]
+    rings = [r[::-1] for r in out] if process.reflects else out
+    if len(caps):
+        caps = np.column_stack([np.round(process.unplace(caps[:, :2], box), 6), caps[:, 2]])
+    drawn = [Drawn(d.kind, d.size, process.turn(d.angle)) for d in drawn]
+    return xy, rings, caps, drawn
+
+
+def _scale_of(process) -> np.ndarray | float:
+    """The mask's scale (per axis when it differs)."""
+    return process.scale if not process.isotropic else float(process.scale[0])
 
 
 def _seed_of(lines: list[str]) -> int | None:
@@ -159,14 +188,24 @@ def _layout_caps(
         if isinstance(sub, str) or not _is_cap_cell(sub.name):
             continue
         pts = [p for p in sub.polygons if (p.layer, p.datatype) == (opts.layer, opts.datatype)]
-        fit = CIRCLE.fit(pts[0].points, 2e-6 / to_mm, RADIUS_SPREAD) if len(pts) == 1 else None
+        fit = None
+        if len(pts) == 1 and opts.process is None:
+            fit = CIRCLE.fit(pts[0].points, 2e-6 / to_mm, RADIUS_SPREAD)
+        elif len(pts) == 1:  # the cap it prints
+            at = unscaled(opts.process, pts[0].points, to_mm)
+            g = opts.process.dot_gain / to_mm
+            slack = (2e-6 + GRID_SLACK * opts.process.grid) / to_mm
+            fit = CIRCLE.fit_grown(at, g, slack, RADIUS_SPREAD)
         plain = ref.magnification == 1 and ref.repetition.size <= 1 and not ref.x_reflection
         solid = fit is not None and fit.ok and np.hypot(*fit.centre) * to_mm <= 1e-6
         named = re.fullmatch(f"{CAP_CELL}_([0-9]+)", sub.name)
         d = None if fit is None else round(float(fit.size[0]) * to_mm, 6)
         if named and not (solid and abs(d - int(named.group(1)) * 1e-6) <= 1e-6):
             d = int(named.group(1)) * 1e-6  # graded: the cell's name holds the diameter
-            tables.append(_cell_rings(path, sub.name, pts, to_mm, 0.5 * d))
+            rings = _cell_rings(path, sub.name, pts, to_mm, 0.5 * d)
+            if opts.process is not None:
+                rings = np.round(printed_cap_rings(opts.process, rings), 6)
+            tables.append(rings)
         elif not solid:
             d = None
         if d is None or not plain:
@@ -285,7 +324,7 @@ def _collect(path, cell, place, opts, to_mm, centres, diameters, depth, budget, 
         for poly in cell.polygons:
             if (poly.layer, poly.datatype) != on_layer:
                 continue
-            fit = _footprint(path, poly.points, "a polygon", to_mm)
+            fit = _footprint(path, poly.points, "a polygon", to_mm, opts.process)
             at = _origins(path, poly.repetition, fit[1].centre, budget, gds)
             centres.append((at @ a.T + b) * to_mm)
             diameters.append(Drawn.of(fit, a, len(at), scale * to_mm))
@@ -328,8 +367,9 @@ def _collect(path, cell, place, opts, to_mm, centres, diameters, depth, budget, 
                 f"{path}: cell {sub.name} holds {len(pts)} shapes on layer "
                 f"{opts.layer}/{opts.datatype}; a dot cell holds one circle"
             )
-        fit = _footprint(path, pts[0].points, f"cell {sub.name}", to_mm)
-        if np.hypot(*fit[1].centre) * to_mm > 1e-6:
+        fit = _footprint(path, pts[0].points, f"cell {sub.name}", to_mm, opts.process)
+        off = 1e-6 + (0.0 if opts.process is None else GRID_SLACK * opts.process.grid)
+        if np.hypot(*fit[1].centre) * to_mm > off:
             raise PatternFileError(
                 f"{path}: the dot of cell {sub.name} is not centred on the cell origin"
             )
@@ -361,20 +401,26 @@ class Drawn:
         return cls(kind, np.tile(size, (k, 1)), np.full(k, turn))
 
 
-def _footprint(path: Path, pts: np.ndarray, what: str, to_mm: float):
+def _footprint(path: Path, pts: np.ndarray, what: str, to_mm: float, process=None):
     """``(kind, fit)`` of a dot polygon (its centre, size and angle in the file's units):
     a circle (:meth:`optdot.geometry.kinds.circle.Circle.fit`: vertex radii within 2 nm
     plus :data:`RADIUS_SPREAD` of the radius), else another kind of the registry to the
-    same tolerance, or refuse it."""
-    slack = 2e-6 / to_mm
-    fit = CIRCLE.fit(pts, slack, RADIUS_SPREAD)
-    if fit.ok:
-        return CIRCLE, fit
-    for kind in KINDS.values():
-        if kind is not CIRCLE:
-            other = kind.fit(pts, slack, RADIUS_SPREAD)
-            if other.ok:
-                return kind, other
+    same tolerance, or refuse it. With a ``process``, the footprint the polygon prints:
+    fitted at the print's scale as the dot it grows to (its centre kept on the mask)."""
+    slack = (2e-6 + (0.0 if process is None else GRID_SLACK * process.grid)) / to_mm
+    if process is None:
+        fits = ((k, k.fit(pts, slack, RADIUS_SPREAD)) for k in KINDS.values())
+    else:
+        at = unscaled(process, pts, to_mm)
+        g = process.dot_gain / to_mm
+        fits = ((k, k.fit_grown(at, g, slack, RADIUS_SPREAD)) for k in KINDS.values())
+    fit = None
+    for kind, other in fits:  # the circle first: a disc of any kind reads as one
+        fit = fit or other
+        if other.ok:
+            if process is not None:
+                other = replace(other, centre=other.centre * _scale_of(process))
+            return kind, other
     at = fit.centre * to_mm
     lo, hi = (v * to_mm * 1e3 for v in fit.radii)
     raise PatternFileError(
@@ -395,6 +441,7 @@ def read_dxf(path: Path, opts: ExportOptions | None = None) -> Pattern:
 
     from optdot.geometry.dxf_entities import drawn_entities, mm_per_unit
 
+    opts = opts or ExportOptions()
     doc = ezdxf.readfile(str(path))
     try:
         scale = mm_per_unit(doc, path)
@@ -408,7 +455,7 @@ def read_dxf(path: Path, opts: ExportOptions | None = None) -> Pattern:
                 x, y = (v * scale for v in _dxf_dot(path, e, kind))
                 caps.append((round(x, 6), round(y, 6), round(2 * float(e.dxf.radius) * scale, 6)))
             elif layer == "DOTS" and kind != "CIRCLE":
-                shaped.append(_dxf_shape(path, e, kind, scale))
+                shaped.append(_dxf_shape(path, e, kind, scale, opts.process))
             elif layer == "DOTS":
                 xy_l.append(_dxf_dot(path, e, kind))
                 r_l.append(float(e.dxf.radius))
@@ -437,14 +484,20 @@ def read_dxf(path: Path, opts: ExportOptions | None = None) -> Pattern:
                 f"{path}: layer DOTS holds {' and '.join(what)} dots; qa measures one kind"
             )
         fits = [f for _, f in shaped]
-        dots = Footprints(
+        drawn = Drawn(
             shaped[0][0],
             np.round(np.array([f.size for f in fits]), 6),
-            np.radians(degrees(np.array([f.angle for f in fits]))),
+            np.array([f.angle for f in fits]),
         )
-        xy = np.round(np.array([f.centre for f in fits]), 6)
-        cap_rings = _dxf_rings(path, _rows(caps), graded)
-        made = _pattern(path, xy, dots.diameter, rings, False, dots, _rows(caps), cap_rings)
+        xy = np.array([f.centre for f in fits])
+        caps, cap_rings = _rows(caps), _dxf_rings(path, _rows(caps), graded)
+        if opts.process is not None:
+            xy, rings, caps, cap_rings, drawn = _dxf_printed(
+                path, opts.process, xy, rings, caps, cap_rings, [drawn]
+            )
+            drawn = drawn[0]
+        dots = Footprints(drawn.kind, drawn.size, np.radians(degrees(drawn.angle)))
+        made = _pattern(path, np.round(xy, 6), dots.diameter, rings, False, dots, caps, cap_rings)
         return _seeded(made, _dxf_seed(doc))
     if not xy_l:
         raise PatternFileError(f"{path}: no CIRCLE entities on layer DOTS")
@@ -457,9 +510,34 @@ def read_dxf(path: Path, opts: ExportOptions | None = None) -> Pattern:
             f"{path}: CIRCLE {i + 1} on layer DOTS has radius {float(radii[i])!r}; "
             "dots need a radius > 0"
         )
-    cap_rings = _dxf_rings(path, _rows(caps), graded)
-    made = _pattern(path, np.round(xy, 6), 2 * radii, rings, caps=_rows(caps), cap_rings=cap_rings)
+    caps, cap_rings = _rows(caps), _dxf_rings(path, _rows(caps), graded)
+    if opts.process is not None:
+        drawn = [Drawn(CIRCLE, (2 * radii)[:, None], np.zeros(len(radii)))]
+        xy, rings, caps, cap_rings, drawn = _dxf_printed(
+            path, opts.process, xy, rings, caps, cap_rings, drawn, grow=True
+        )
+        radii = 0.5 * drawn[0].size[:, 0]
+    made = _pattern(path, np.round(xy, 6), 2 * radii, rings, caps=caps, cap_rings=cap_rings)
     return _seeded(made, _dxf_seed(doc))
+
+
+def _dxf_printed(path, process, xy, rings, caps, cap_rings, drawn, grow=False):
+    """A drawing's dots, panel and caps (mm, on the mask) as they print (see
+    :func:`_printed`); circles read as drawn are grown here (``grow``), shaped dots were
+    fitted as printed; caps and their rings are grown too."""
+    if grow:
+        g, k = process.dot_gain, float(process.scale[0])
+        drawn = [Drawn(d.kind, np.round(d.size / k + 2.0 * g, 6), d.angle) for d in drawn]
+    if len(caps):
+        caps = caps.copy()
+        caps[:, 2] = np.round(caps[:, 2] / float(process.scale[0]) + 2.0 * process.dot_gain, 6)
+    if cap_rings is not None:
+        cap_rings = np.round(printed_cap_rings(process, cap_rings), 6)
+    try:
+        xy, rings, caps, drawn = _printed(process, xy, rings, caps, drawn)
+    except PatternFileError as e:
+        raise PatternFileError(f"{path}: {e}") from None
+    return xy, rings, caps, cap_rings, drawn
 
 
 def _dxf_graded(path: Path, e, kind: str, scale: float, caps: list, graded: list) -> None:
@@ -521,7 +599,7 @@ def _rows(caps: list) -> np.ndarray:
 DXF_FLATTEN_MM = 1e-5
 
 
-def _dxf_shape(path: Path, e, kind: str, scale: float) -> tuple[Kind, Fit]:
+def _dxf_shape(path: Path, e, kind: str, scale: float, process=None) -> tuple[Kind, Fit]:
     """``(kind, fit)`` (mm) of a shaped dot drawn in world coordinates: an ELLIPSE read
     from its axes, a closed polyline fitted (:func:`_footprint`) from its outline
     flattened to :data:`DXF_FLATTEN_MM`; anything else on ``DOTS`` is refused."""
@@ -546,9 +624,9 @@ def _dxf_shape(path: Path, e, kind: str, scale: float) -> tuple[Kind, Fit]:
         pts = np.array([(v.x, v.y) for v in dxf_path.make_path(e).flattening(1e-5 / scale)])
         if len(pts) > 1 and np.allclose(pts[0], pts[-1]):
             pts = pts[:-1]
-        kind_, fit = _footprint(path, pts * scale, where, 1.0)
+        kind_, fit = _footprint(path, pts * scale, where, 1.0, process)
         if kind_.arc_param is not None and kind == "LWPOLYLINE":
-            fit = _bulge_radius(e, kind_, fit, scale)
+            fit = _bulge_radius(e, kind_, fit, scale, process)
         return kind_, fit  # a round outline (a disc-shaped block) is read as a disc
     raise PatternFileError(
         f"{path}: {where} on layer DOTS is not a CIRCLE, an ELLIPSE or a closed outline of "
@@ -556,7 +634,7 @@ def _dxf_shape(path: Path, e, kind: str, scale: float) -> tuple[Kind, Fit]:
     )
 
 
-def _bulge_radius(e, kind: Kind, fit: Fit, scale: float) -> Fit:
+def _bulge_radius(e, kind: Kind, fit: Fit, scale: float, process=None) -> Fit:
     """``fit`` with the size parameter its LWPOLYLINE's arcs hold exactly (the kind's
     :attr:`~optdot.geometry.kinds.base.Kind.arc_param`, a corner radius: a bulge ``b``
     over a chord ``c`` is an arc of radius ``c (1 + b²) / (4 |b|)``), when they agree."""
@@ -568,6 +646,8 @@ def _bulge_radius(e, kind: Kind, fit: Fit, scale: float) -> Fit:
         return fit
     chord = np.hypot(*(nxt - pts[:, :2])[arc].T)
     r = chord * (1 + b[arc] ** 2) / (4 * np.abs(b[arc])) * scale
+    if process is not None:  # the arcs the print's corners grow from
+        r = r / float(process.scale[0]) + process.dot_gain
     if float(np.ptp(r)) > 1e-9 or r[0] > 0.5 * fit.size[1] + 1e-9:
         return fit
     size = np.array(fit.size, dtype=np.float64)

@@ -304,7 +304,7 @@ def own_collision(dots: DotSource, job: Job | None) -> float:
         return job.qa.collision_distance
     own = dots.uniform_diameter
     own = dots.nominal_diameter if own is None else own
-    return own + (job.optimize.gap if job is not None else 0.0)
+    return own + (job.judged_gap if job is not None else 0.0)
 
 
 def qa(
@@ -356,7 +356,7 @@ def qa(
         result = run_qa(dots, None, params, collision)
     else:
         outline = None if job.domain.rectangle else job.domain
-        gap = job.optimize.gap  # dots of varying size collide below it
+        gap = job.judged_gap  # dots of varying size collide below it
         if dots.uniform_diameter is None and job.shape is None and job.sizes is None:
             # a one-size job's centre distances, as edge gaps: a file whose sizes differ
             # (by a nudge the footprint check lets through) is held to the same limits
@@ -507,7 +507,11 @@ def export(
     from .exporters import ExportOptions
     from .quality.provenance import mask_lines
 
-    options = replace(options or ExportOptions(), provenance=mask_lines(result.provenance))
+    options = replace(
+        options or ExportOptions(),
+        provenance=mask_lines(result.provenance),
+        process=job.process if job is not None else None,
+    )
     done: list[tuple[str, Path, str]] = []
     stage("writing")
     keep = () if overwrite else [p for f, p in outputs.items() if FORMATS[f].mask]

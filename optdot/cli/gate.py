@@ -394,7 +394,6 @@ def qa(
         raise click.BadParameter("must be an edge gap in mm, 0 <= x < 10", param_hint="--close-gap")
     from ..exporters.options import ExportOptions
 
-    opts = ExportOptions(layer=layer, datatype=datatype, outline_layer=outline_layer)
     outs = {k: v for k, v in (("html", html_path), ("json", json_path)) if v is not None}
     looks = {
         k: v
@@ -408,6 +407,10 @@ def qa(
         if v is not None
     }
     job, inputs = _inputs(pattern_file, job_path)
+    process = job.process if job is not None else None  # a mask is read as what it prints
+    opts = ExportOptions(
+        layer=layer, datatype=datatype, outline_layer=outline_layer, process=process
+    )
     check_outputs(outs, (*inputs, *((simulation_path,) if simulation_path else ())))
     simulation = None
     if simulation_path is not None:

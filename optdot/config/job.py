@@ -22,6 +22,7 @@ from ..geometry.limits import DIAMETER_RANGE_MM, MAX_EXTENT_MM
 from ..geometry.orientation import Orientation
 from ..geometry.shapes import DotShape
 from ..geometry.sizes import DotSizes, dots_per_cell
+from ..printing.process import Process
 from .backlight import Backlight
 from .grids import validate_grid
 from .light_guide import DesignParams, LightGuide
@@ -231,6 +232,9 @@ class Job:
         shape: the dot's kind and size when it is not a circle (``[dots] shape``), or
             None; :attr:`diameter` is then the disc of the same area's.
         orientation: where shaped dots' long axes point (``[orientation]``).
+        process: how the masks print (``[process]``), or None: masks are the pattern.
+            The pattern is then the print, relaxed to the process's gaps
+            (``optimize.gap`` already raised to :meth:`Process.relaxation_gap`).
     """
 
     width: float
@@ -251,6 +255,7 @@ class Job:
     viewing_area: tuple[float, float, float, float] | None = None
     shape: DotShape | None = None
     orientation: Orientation = field(default_factory=Orientation)
+    process: Process | None = None
 
     @property
     def ink(self) -> float | None:
@@ -352,9 +357,21 @@ class Job:
 
     @property
     def collision_distance(self) -> float:
-        """QA collision threshold, mm."""
+        """QA collision threshold, mm (the smallest centre distance, less the grid's
+        snapping margin the relaxation keeps on top: :attr:`judged_gap`)."""
         c = self.qa.collision_distance
-        return self.min_distance if c is None else c
+        return self.min_distance - self._snap_margin if c is None else c
+
+    @property
+    def judged_gap(self) -> float:
+        """The edge gap QA holds the dots to, mm: ``optimize.gap``, less the margin a
+        process's address grid may take from it when the mask is snapped (the relaxation
+        keeps that margin on top, :meth:`Process.relaxation_gap`)."""
+        return self.optimize.gap - self._snap_margin
+
+    @property
+    def _snap_margin(self) -> float:
+        return 0.0 if self.process is None else self.process.snap_margin
 
     @property
     def close_target(self) -> float:

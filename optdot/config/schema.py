@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +20,7 @@ from ..files import input_problem
 from ..geometry.density import INTERPOLATIONS, DensityMap
 from ..geometry.domain import DEFAULT_TOLERANCE, Domain, orient_all
 from ..geometry.outline_io import keep_out_is_wkt, load_outline, parse_keep_out
+from ..geometry.shapes import CIRCLE
 from ..geometry.sizes import DEFAULT_STEP, DotSizes
 from .backlight import BACKLIGHT_KEYS, backlight_from, check_leds_inside, led_caps
 from .grids import load_grid, validate_grid
@@ -31,6 +33,7 @@ from .light_guide import (
     design_from,
     light_guide_from,
 )
+from .process import PROCESS_KEYS, check_printable, process_from
 from .shaping import DOT_SHAPE_KEYS, ORIENTATION_KEYS, dot_shape, orientation, shape_sizes
 
 SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
@@ -98,6 +101,7 @@ SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
     "light_guide": LIGHT_GUIDE_KEYS,
     "backlight": BACKLIGHT_KEYS,
     "design": DESIGN_KEYS,
+    "process": PROCESS_KEYS,
 }
 _REQUIRED: dict[str, tuple[str, ...]] = {"dots": ()}
 
@@ -267,6 +271,23 @@ def job_from_dict(
         sizes = shape_sizes(dots, shape, sections.get("qa", {}), qa, where)
         diameter = shape.equivalent_diameter if sizes is None else sizes.low
         size_file = None
+    process = None
+    if "process" in sections:
+        process = process_from(sections["process"], where)
+        kind = CIRCLE if shape is None else shape.kind
+        low = (
+            np.array([diameter])
+            if shape is None
+            else np.asarray(shape.size) * (diameter / shape.equivalent_diameter)
+        )
+        check_printable(process, kind, low, where)
+        try:
+            opt = replace(opt, gap=process.relaxation_gap(opt.gap))
+        except JobError as e:
+            raise JobError(f"{where}: {e}") from None
+        if process.grid > 0:  # dots kept off the walls by what the grid may move them
+            panel = domain or Domain.rect(x0, y0, x0 + width, y0 + height)
+            domain = replace(panel, edge_margin=panel.edge_margin + process.snap_margin)
     turn = orientation(
         sections.get("orientation", {}),
         shape,
@@ -306,6 +327,7 @@ def job_from_dict(
         viewing_area=area,
         shape=shape,
         orientation=turn,
+        process=process,
     )
 
 

@@ -230,13 +230,26 @@ def _first_pass(
     return f
 
 
+#: How far from a dot a jump of the orientation field is looked for, mm, and the turn
+#: that makes one, degrees: a dot this near a line where the field jumps (between two
+#: LEDs it turns toward) may take either side's angle, as a mask's grid may move it
+#: across; a smooth field turns by far less over this reach.
+FIELD_REACH_MM, FIELD_JUMP_DEG = 1e-3, 5.0
+
+
 def _add_angles(f: FirstSums, xy: np.ndarray, angle: np.ndarray, field: Orientation | None):
     """Shaped dots' axes per 5° (-90..90°) and, with the field, their difference from it."""
     deg = np.degrees(axis(angle))
     h, _ = np.histogram(deg, bins=36, range=(-90.0, 90.0))
     f.angle_hist = h if f.angle_hist is None else f.angle_hist + h
-    if field is not None:
-        err = np.abs(np.degrees(axis(angle - field.at(xy))))
+    if field is not None:  # the field where the dot stands, or across a jump next to it
+        here = field.at(xy)
+        err = np.abs(np.degrees(axis(angle - here)))
+        for step in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+            there = field.at(xy + FIELD_REACH_MM * np.array(step))
+            jump = np.abs(np.degrees(axis(there - here))) > FIELD_JUMP_DEG
+            near = np.abs(np.degrees(axis(angle - there)))
+            err = np.where(jump, np.minimum(err, near), err)
         f.field_error_max = max(f.field_error_max, float(err.max()))
         f.field_error_sum += float(err.sum())
 

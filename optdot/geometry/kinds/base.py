@@ -143,6 +143,42 @@ class Kind:
         ``slack`` (same unit: the file's grid) plus ``share`` of the footprint's size."""
         raise NotImplementedError
 
+    # the parallel bodies a printing process makes of a footprint (optdot.printing):
+    # grown by a signed distance g (a print's dot gain; negative: shrunk, an etch's bias)
+
+    def perimeter(self, size: np.ndarray) -> np.ndarray:
+        """``[n]`` perimeters, mm (Steiner's formula: a convex footprint grown by ``g``
+        covers ``area + perimeter g + π g²``)."""
+        raise NotImplementedError
+
+    def curvature_floor(self, size: np.ndarray) -> np.ndarray:
+        """``[n]`` the smallest radius of curvature of the outline, mm (0 at a sharp
+        corner): the largest distance it can be shrunk by and grown back exactly."""
+        raise NotImplementedError
+
+    def parallel(self, size: np.ndarray, g: float) -> np.ndarray | None:
+        """``[n, k]`` the sizes of the footprints (``size [n, k]`` mm) grown by ``g`` mm
+        (shrunk when negative: the inner parallel body) when that is a footprint of this
+        kind, else None (an ellipse's parallel curve is not an ellipse)."""
+        return None
+
+    def parallel_outline(self, size: np.ndarray, g: float, tolerance: float) -> np.ndarray:
+        """``[v, 2]`` vertices (counter-clockwise, mm, about the centre, angle 0) of a
+        polygon inscribed within ``tolerance`` mm in one footprint of ``size`` (``[k]``)
+        grown by ``g`` mm (shrunk when negative)."""
+        grown = self.parallel(np.asarray(size, float)[None, :], g)
+        return self.outline(grown[0], 0.0, tolerance)
+
+    def fit_grown(self, points: np.ndarray, g: float, slack: float, share: float = 0.0) -> Fit:
+        """The footprint that a polygon (``[v, 2]``, any unit) draws shrunk by ``g``
+        (same unit; grown when negative): :meth:`fit` of the polygon, grown back by
+        ``g``. What a mask reader recognises a compensated dot's print by."""
+        f = self.fit(points, slack, share)
+        grown = self.parallel(f.size[None, :], g) if f.ok else None
+        if grown is None:
+            return f
+        return Fit(f.ok, f.centre, grown[0], f.angle, (f.radii[0] + g, f.radii[1] + g))
+
 
 def rotate(p: np.ndarray, angle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(x, y)`` of points ``p`` (``[m, 2]``) in frames turned by ``angle`` (``[m]`` rad):

@@ -54,6 +54,15 @@ class Circle(Kind):
         u = np.where(n[:, None] > 0, d / np.where(n > 0, n, 1.0)[:, None], [1.0, 0.0])
         return n - 0.5 * (size_i[:, 0] + size_j[:, 0]), u
 
+    def perimeter(self, size: np.ndarray) -> np.ndarray:
+        return np.pi * size[:, 0]
+
+    def curvature_floor(self, size: np.ndarray) -> np.ndarray:
+        return 0.5 * size[:, 0]
+
+    def parallel(self, size: np.ndarray, g: float) -> np.ndarray | None:
+        return size + 2.0 * g
+
     def outline(self, size, angle, tolerance) -> np.ndarray:
         r = 0.5 * float(size[0])
         n = polygon_vertices(r, tolerance)

@@ -99,6 +99,62 @@ class Ellipse(Kind):
         t = 2.0 * np.pi * np.arange(n) / n
         return turned(np.column_stack([a * np.cos(t), b * np.sin(t)]), angle)
 
+    def perimeter(self, size: np.ndarray) -> np.ndarray:
+        """``4 a E(1 - b²/a²)``, the complete elliptic integral of the second kind."""
+        from scipy.special import ellipe
+
+        a, b = 0.5 * size[:, 0], 0.5 * size[:, 1]
+        return 4.0 * a * ellipe(1.0 - (b / a) ** 2)
+
+    def curvature_floor(self, size: np.ndarray) -> np.ndarray:
+        """``b²/a``, at the ends of the long axis."""
+        return 0.5 * size[:, 1] ** 2 / size[:, 0]
+
+    def parallel_outline(self, size, g, tolerance) -> np.ndarray:
+        """The parallel curve ``p(t) + g n(t)`` (``n`` the outward unit normal) at
+        parameters evenly spaced as in :meth:`outline`: not an ellipse. Shrunk (``g <
+        0``) by at most ``b²/a`` it is convex and its chords err no more than the
+        ellipse's; grown, its ends are flatter by ``1 + g a/b²``, so it takes that many
+        more vertices."""
+        a, b = 0.5 * float(size[0]), 0.5 * float(size[1])
+        n = polygon_vertices(a + max(g, 0.0) * (a / b) ** 2, tolerance)
+        t = 2.0 * np.pi * np.arange(n) / n
+        c, s = np.cos(t), np.sin(t)
+        norm = np.hypot(b * c, a * s)
+        return np.column_stack([(a + g * b / norm) * c, (b + g * a / norm) * s])
+
+    def fit_grown(self, points: np.ndarray, g: float, slack: float, share: float = 0.0) -> Fit:
+        """Each vertex moved out by ``g`` along the normal there: a parallel curve's
+        normals are the ellipse's, so the vertices return onto it; then :meth:`fit`.
+        The normals: first the ring's (central differences turned a quarter), then
+        twice the fitted ellipse's at each vertex's foot on it (the nearest point, by
+        Newton steps in the parameter), which recovers the axes to the vertices' grid."""
+        t = np.roll(points, -1, axis=0) - np.roll(points, 1, axis=0)
+        xs, ys = points[:, 0], points[:, 1]
+        ccw = float(np.dot(xs, np.roll(ys, -1)) - np.dot(ys, np.roll(xs, -1))) > 0
+        n = np.column_stack([t[:, 1], -t[:, 0]]) * (1.0 if ccw else -1.0)
+        n /= np.maximum(np.hypot(n[:, 0], n[:, 1]), 1e-300)[:, None]
+        f = self.fit(points + g * n, slack, share)
+        for _ in range(FIT_REFINE):
+            if not f.ok:
+                return f
+            a, b = 0.5 * float(f.size[0]), 0.5 * float(f.size[1])
+            x, y = rotate(points + g * n - f.centre, np.full(len(points), f.angle))
+            u = np.arctan2(a * y, b * x)  # the foot's parameter: Newton from the normal's
+            for _ in range(FOOT_NEWTON):
+                c, s = np.cos(u), np.sin(u)
+                dx, dy = x - a * c, y - b * s
+                d1 = dx * a * s - dy * b * c  # half the derivative of the squared distance
+                d2 = a * a * s * s + b * b * c * c + dx * a * c + dy * b * s
+                u = u - d1 / np.where(d2 > 0, d2, 1.0)
+            c, s = np.cos(u), np.sin(u)
+            m = np.column_stack([b * c, a * s])
+            m /= np.hypot(m[:, 0], m[:, 1])[:, None]
+            ca, sa = math.cos(f.angle), math.sin(f.angle)
+            n = np.column_stack([ca * m[:, 0] - sa * m[:, 1], sa * m[:, 0] + ca * m[:, 1]])
+            f = self.fit(points + g * n, slack, share)
+        return f
+
     def fit(self, points: np.ndarray, slack: float, share: float = 0.0) -> Fit:
         """Centre: the vertices' mean; axes: the vertices' second moments (vertices evenly
         spaced in the parameter have covariance ``diag(a², b²) / 2``); a fit when every
@@ -120,6 +176,9 @@ class Ellipse(Kind):
         return Fit(ok, c, size, ang, (float(rad.min()), float(rad.max())))
 
 
+#: Passes of :meth:`Ellipse.fit_grown` with the fitted ellipse's normals, and Newton
+#: steps to each vertex's foot on it.
+FIT_REFINE, FOOT_NEWTON = 2, 6
 #: Fewest directions :meth:`Ellipse.gap` tries before its Newton steps.
 GAP_SAMPLES = 16
 

@@ -113,6 +113,20 @@ class RoundedRect(Kind):
     def area(self, size: np.ndarray) -> np.ndarray:
         return size[:, 0] * size[:, 1] - (4.0 - np.pi) * size[:, 2] ** 2
 
+    def perimeter(self, size: np.ndarray) -> np.ndarray:
+        return 2.0 * (size[:, 0] + size[:, 1]) - (8.0 - 2.0 * np.pi) * size[:, 2]
+
+    def curvature_floor(self, size: np.ndarray) -> np.ndarray:
+        return size[:, 2].astype(np.float64, copy=True)
+
+    def parallel(self, size: np.ndarray, g: float) -> np.ndarray | None:
+        """Exact both ways: the sides grow by ``2 g`` and the corners by ``g``; shrunk
+        by more than its corner radius, the corners come out sharp (0), and grown back
+        they are of radius ``g``, not the radius they had."""
+        out = size + np.array([2.0 * g, 2.0 * g, g])
+        out[:, 2] = np.maximum(out[:, 2], 0.0)
+        return out
+
     def extent(self, size: np.ndarray) -> np.ndarray:
         hx, hy, rc = self._core(size)
         return np.hypot(hx, hy) + rc
@@ -191,7 +205,7 @@ class RoundedRect(Kind):
         # rhombus's vertices also lie on some rectangle, but enclose less of it
         xs, ys = points[:, 0], points[:, 1]
         area = 0.5 * abs(float(np.dot(xs, np.roll(ys, -1)) - np.dot(ys, np.roll(xs, -1))))
-        perimeter = 2.0 * (length + width) - (8.0 - 2.0 * math.pi) * float(rc)
+        perimeter = float(self.perimeter(size[None])[0])
         short = float(self.area(size[None])[0]) - area
         ok = (
             len(points) >= 4
