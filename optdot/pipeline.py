@@ -44,7 +44,7 @@ from .preflight import (
     check_job,
     use_tiles,
 )
-from .quality.conformance import DotRule, SizeBand
+from .quality.conformance import TOLERANCE, DotRule, SizeBand
 from .relax.formulation import Formulation
 from .relax.optdot import Progress
 from .runtime.kernels import warm
@@ -265,7 +265,8 @@ def dot_rule(job: Job) -> DotRule:
     """The footprints ``job`` draws, as QA holds a file's dots to them; with sizes, the
     band of diameters each place may have (:func:`size_band`)."""
     shape = job.shape if job.shape is not None else DotShape(CIRCLE, (job.diameter,))
-    return DotRule(shape, job.sizes, size_band(job))
+    grid = job.process.grid if job.process is not None else 0.0  # what snapping moved
+    return DotRule(shape, job.sizes, size_band(job), TOLERANCE + grid)
 
 
 #: How far a dot may have moved from the cell whose rule diameter it was given, mm (at

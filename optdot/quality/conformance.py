@@ -71,11 +71,14 @@ class DotRule:
         band: with ``sizes``, the diameters the rule gives each place (a dot of the
             range's smallest size where the rule asks for its largest is not the job's),
             or None (any diameter of the range anywhere).
+        tolerance: how far a size parameter may be off the job's, mm (:data:`TOLERANCE`;
+            more for a mask on a process's address grid, whose vertices the grid moved).
     """
 
     shape: DotShape
     sizes: DotSizes | None = None
     band: SizeBand | None = None
+    tolerance: float = TOLERANCE
 
     def describe(self) -> str:
         """The job's dot in words, sizes in µm: ``circle 46 µm``, ``ellipse 80 × 40 µm``,
@@ -111,14 +114,14 @@ class DotRule:
             return np.zeros(0, bool)
         want = self.expected(dots)
         if dots.kind is self.shape.kind:
-            bad = ~np.all(np.abs(dots.size - want) <= TOLERANCE, axis=1)
+            bad = ~np.all(np.abs(dots.size - want) <= self.tolerance, axis=1)
         else:
             off = np.abs(dots.kind.disc(dots.size) - self.shape.kind.disc(want))
-            bad = ~(off <= TOLERANCE)
+            bad = ~(off <= self.tolerance)
         if self.band is not None and xy is not None and self.sizes is not None:
             lo, hi = self.band.at(xy)
             d = dots.equivalent_diameter()
-            slack = self.sizes.step + TOLERANCE  # the fit's quantisation, the scale's rounding
+            slack = self.sizes.step + self.tolerance  # the fit's quantisation, the rounding
             bad |= (d < lo - slack) | (d > hi + slack)
         return bad
 

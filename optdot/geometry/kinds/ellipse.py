@@ -128,7 +128,10 @@ class Ellipse(Kind):
         normals are the ellipse's, so the vertices return onto it; then :meth:`fit`.
         The normals: first the ring's (central differences turned a quarter), then
         twice the fitted ellipse's at each vertex's foot on it (the nearest point, by
-        Newton steps in the parameter), which recovers the axes to the vertices' grid."""
+        Newton steps in the parameter: a point of a parallel curve is nearest the point
+        of the ellipse it was drawn from), each pass fitted by :func:`conic_fit` (a grid
+        merges vertices: they need not be evenly spaced); this recovers the axes to the
+        vertices' grid."""
         t = np.roll(points, -1, axis=0) - np.roll(points, 1, axis=0)
         xs, ys = points[:, 0], points[:, 1]
         ccw = float(np.dot(xs, np.roll(ys, -1)) - np.dot(ys, np.roll(xs, -1))) > 0
@@ -136,10 +139,10 @@ class Ellipse(Kind):
         n /= np.maximum(np.hypot(n[:, 0], n[:, 1]), 1e-300)[:, None]
         f = self.fit(points + g * n, slack, share)
         for _ in range(FIT_REFINE):
-            if not f.ok:
+            if not (len(points) >= MIN_VERTICES and f.size[1] > 0):
                 return f
             a, b = 0.5 * float(f.size[0]), 0.5 * float(f.size[1])
-            x, y = rotate(points + g * n - f.centre, np.full(len(points), f.angle))
+            x, y = rotate(points - f.centre, np.full(len(points), f.angle))
             u = np.arctan2(a * y, b * x)  # the foot's parameter: Newton from the normal's
             for _ in range(FOOT_NEWTON):
                 c, s = np.cos(u), np.sin(u)
@@ -152,7 +155,11 @@ class Ellipse(Kind):
             m /= np.hypot(m[:, 0], m[:, 1])[:, None]
             ca, sa = math.cos(f.angle), math.sin(f.angle)
             n = np.column_stack([ca * m[:, 0] - sa * m[:, 1], sa * m[:, 0] + ca * m[:, 1]])
-            f = self.fit(points + g * n, slack, share)
+            # the points a grid merged are unevenly spaced: the moments would be biased
+            conic = conic_fit(points + g * n)
+            if conic is None or not conic[1][1] > 0:
+                return self.fit(points + g * n, slack, share)
+            f = _judged(points + g * n, *conic, slack, share)
         return f
 
     def fit(self, points: np.ndarray, slack: float, share: float = 0.0) -> Fit:
@@ -167,13 +174,67 @@ class Ellipse(Kind):
         size = np.array([2.0 * a, 2.0 * b])
         if not (len(points) >= MIN_VERTICES and b > 0):
             return Fit(False, c, size, ang, (0.0, 0.0))
-        x, y = rotate(q, np.full(len(q), ang))
-        # distance to the ellipse, to first order: the level's excess over its gradient
-        lev = np.hypot(x / a, y / b)
-        err = np.abs(lev - 1.0) / np.hypot(x / a**2, y / b**2) * lev
-        ok = float(err.max()) <= slack + share * a
-        rad = np.hypot(*q.T)
-        return Fit(ok, c, size, ang, (float(rad.min()), float(rad.max())))
+        return _judged(points, c, size, ang, slack, share)
+
+
+def _judged(points, c, size, ang, slack, share) -> Fit:
+    """The ellipse ``(c, size, ang)`` as a :class:`Fit` of ``points``: one when every
+    point lies within ``slack + share a`` of it."""
+    a, b = 0.5 * float(size[0]), 0.5 * float(size[1])
+    q = points - c
+    x, y = rotate(q, np.full(len(q), ang))
+    # distance to the ellipse, to first order: the level's excess over its gradient
+    lev = np.hypot(x / a, y / b)
+    err = np.abs(lev - 1.0) / np.hypot(x / a**2, y / b**2) * lev
+    ok = float(err.max()) <= slack + share * a
+    rad = np.hypot(*q.T)
+    return Fit(ok, c, size, ang, (float(rad.min()), float(rad.max())))
+
+
+def conic_fit(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """``(centre [2], size [2], angle)`` of the ellipse nearest ``points`` (``[v, 2]``)
+    in the algebraic sense (Fitzgibbon's direct fit, in Halíř and Flusser's stable
+    form): unlike the moments of :meth:`Ellipse.fit`, it does not need the points evenly
+    spaced. None when the points lie on no ellipse."""
+    c0 = points.mean(axis=0)
+    k = float(np.abs(points - c0).max()) or 1.0
+    x, y = ((points - c0) / k).T
+    d1 = np.column_stack([x * x, x * y, y * y])
+    d2 = np.column_stack([x, y, np.ones_like(x)])
+    s1, s2, s3 = d1.T @ d1, d1.T @ d2, d2.T @ d2
+    try:
+        t = -np.linalg.solve(s3, s2.T)
+    except np.linalg.LinAlgError:
+        return None
+    m = s1 + s2 @ t
+    m = np.array([m[2] / 2.0, -m[1], m[0] / 2.0])
+    w, v = np.linalg.eig(m)
+    v = np.real(v)
+    cond = 4.0 * v[0] * v[2] - v[1] ** 2
+    if not np.any(cond > 0):
+        return None
+    a1 = v[:, int(np.argmax(cond))]
+    A, B, C = a1
+    D, E, F = t @ a1
+    den = B * B - 4.0 * A * C
+    if den >= 0:
+        return None
+    cx = (2.0 * C * D - B * E) / den
+    cy = (2.0 * A * E - B * D) / den
+    f0 = A * cx * cx + B * cx * cy + C * cy * cy + D * cx + E * cy + F
+    lam = np.linalg.eigvalsh(np.array([[A, B / 2.0], [B / 2.0, C]]))
+    if not (np.all(-f0 / lam > 0)):
+        return None
+    semi = np.sqrt(-f0 / lam)  # along the eigenvectors of the smaller, then larger, eigenvalue
+    ang = 0.5 * math.atan2(B, A - C) + (0.5 * math.pi if abs(lam[0]) < abs(lam[1]) else 0.0)
+    u = np.array([math.cos(ang), math.sin(ang)])
+    q = np.array([[A, B / 2.0], [B / 2.0, C]])
+    along = math.sqrt(-f0 / float(u @ q @ u))
+    long_first = along >= float(semi.min()) * (1 + 1e-12)
+    if not long_first:
+        ang += 0.5 * math.pi
+    size = 2.0 * k * np.array([float(semi.max()), float(semi.min())])
+    return c0 + k * np.array([cx, cy]), size, axis_angle(np.array([math.cos(ang), math.sin(ang)]))
 
 
 #: Passes of :meth:`Ellipse.fit_grown` with the fitted ellipse's normals, and Newton
