@@ -260,10 +260,13 @@ def test_shaped_dots_print_exactly_after_the_grid(tmp_path):
         assert rc == 0, (fmt, err)
 
 
+ELLIPSE_DOTS = {"shape": '"ellipse"', "length": 0.08, "width": 0.04, "diameter": None}
+
+
 @pytest.mark.parametrize(
     ("process", "dots", "words"),
     [
-        ({"dot_gain": 0.012}, {"shape": '"ellipse"', "length": 0.08, "width": 0.04, "diameter": None},
+        ({"dot_gain": 0.012}, ELLIPSE_DOTS,
          ("ellipse's smallest radius of curvature (10 µm)", "largest gain it allows is 10 µm")),
         ({"dot_gain": 0.006}, {"shape": '"rounded_rectangle"', "length": 0.12, "width": 0.03,
                                "corner_radius": 0.005, "diameter": None},
@@ -276,7 +279,8 @@ def test_shaped_dots_print_exactly_after_the_grid(tmp_path):
         ({"dot_gain": -0.004, "min_space": 0.005}, None, ("closes the mask's gap", "over 8 µm")),
         ({"dot_gain": 0.005, "gain_tolerance": 0.003, "min_space": 0.005}, None,
          ("gain_tolerance = ±3 µm", "raise min_space")),
-        ({"grid": 0.006, "min_space": 0.005}, None, ("process.grid = 6 µm", "coarser than the 5 µm gap")),
+        ({"grid": 0.006, "min_space": 0.005}, None,
+         ("process.grid = 6 µm", "coarser than the 5 µm gap")),
         ({"dot_gain": 1.5}, None, ("process.dot_gain = 1.5", "per edge")),
     ],
 )  # fmt: skip
