@@ -389,6 +389,14 @@ def qa(
                 job.domain.cap_rings,
             )
         )
+    if job is not None and job.process is not None:  # the print across the gain's tolerance
+        from .quality.printed import band_check, tolerance_band
+
+        outline = None if job.domain.rectangle else job.domain
+        band = tolerance_band(dots, job.process, job.density, outline, params.smoothing)
+        result.metrics["tolerance_band"] = band
+        if job.process.gain_tolerance > 0:
+            result.checks.append(band_check(band, params.max_coverage_rms))
     result.provenance = provenance_of(dots, job)
     return result
 

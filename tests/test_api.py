@@ -42,6 +42,7 @@ ALLOWED = {
         "files",
         "geometry",
         "pattern",
+        "printing",
         "io",
         "runtime",
         "spatial",

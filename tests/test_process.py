@@ -302,3 +302,66 @@ def test_anisotropic_shrink_in_gds_not_dxf(tmp_path):
     np.testing.assert_allclose(np.sort(q.xy[:, 0]), np.sort(p.xy[:, 0]), atol=1e-6)
     np.testing.assert_allclose(q.diameter, 0.046, atol=2e-6)
     one_error(["export", path, "--dxf", tmp_path / "m.dxf"], 2, "scales x and y apart", "GDSII")
+
+
+def test_the_tolerance_band_is_steiner_on_every_dot(circles, tmp_path):
+    """The band's printed coverage at gain ± tolerance: each dot's disc grown by the
+    offset, summed, over the map's coverage (shapely's buffer on a sample of dots agrees
+    with Steiner's sum); the nominal print is the map's within 0.2 %."""
+    tmp, path, job, p = circles
+    text = path.read_text().replace("[process]", "[process]\ngain_tolerance = 0.002")
+    banded = tmp_path / "job.toml"
+    banded.write_text(text.replace('grid = "density.csv"', f'grid = "{tmp / "density.csv"}"'))
+    rc, err, out = cli("qa", tmp / "m.gds", "--job", banded, "--json", tmp_path / "q.json")
+    assert rc == 0, err  # advisory: a warning, not a failure
+    assert "WARN  coverage error RMS across the gain's tolerance (6–10 µm per edge" in out
+    import json
+
+    band = json.loads((tmp_path / "q.json").read_text())["metrics"]["tolerance_band"]
+    assert band["gain_mm"] == pytest.approx([0.006, 0.008, 0.010])
+    wanted = float(job.density.grid.mean()) * 1.6 * 1.2
+    q = read_any(tmp / "m.gds", ExportOptions(process=job.process))  # the print read back
+    for got, delta in zip(band["coverage_ratio"], (-0.002, 0.0, 0.002), strict=True):
+        want = float(np.sum(np.pi * (0.5 * q.diameter + delta) ** 2)) / wanted
+        assert got == pytest.approx(want, rel=2e-4)
+        sample = [
+            shapely.Point(x, y).buffer(0.023, quad_segs=512).buffer(delta, quad_segs=512)
+            for x, y in p.xy[:20]
+        ]
+        assert sum(s.area for s in sample) == pytest.approx(
+            20 * np.pi * (0.023 + delta) ** 2, rel=1e-5
+        )
+    assert band["coverage_ratio"][1] == pytest.approx(1.0, abs=2e-3)
+    assert band["coverage_rel_rms_smoothed"][0] > 3 * band["coverage_rel_rms_smoothed"][1]
+
+
+@pytest.mark.parametrize("ink", [None, [1.0, 1.0, 0.8, 0.5, 0.3, 0.0, 0.2, 0.9]])
+def test_caps_print_as_the_job_s_caps(tmp_path, ink):
+    """Caps over LEDs are printed too: a solid cap's disc and a graded cap's rings shrink
+    by the gain on the mask (each ring's edges move in) and read back as the job's."""
+    from .test_backlight import _toml, direct_job
+
+    leds = {"pitch": [5.0, 5.0], "size": 0.2, "cap": 0.8, **({"cap_ink": ink} if ink else {})}
+    path = direct_job(tmp_path, 10.0, 10.0, 0.3, leds=leds)
+    proc = {"process": {"dot_gain": 0.005, "grid": 0.0001, "shrink": 0.004, "mirror": "x"}}
+    path.write_text(path.read_text() + _toml(proc))
+    job = load_job(path)
+    rc, err, _ = cli("export", path, "--gds", tmp_path / "m.gds", "--dxf", tmp_path / "m.dxf", "-q")
+    assert rc == 0, err
+    for fmt in ("gds", "dxf"):
+        drawn = read_any(tmp_path / f"m.{fmt}", ExportOptions(process=Process(grid=1e-4)))
+        q = read_any(tmp_path / f"m.{fmt}", ExportOptions(process=job.process))
+        if ink is None:
+            np.testing.assert_allclose(drawn.outline.caps[:, 2], (0.8 - 0.01) / 0.996, atol=2e-4)
+        else:
+            rings = job.domain.cap_rings
+            inner = np.where(rings[:, 0] > 0, rings[:, 0] + 0.005, 0.0)
+            want = np.column_stack([inner, rings[:, 1] - 0.005]) / 0.996
+            np.testing.assert_allclose(drawn.outline.cap_rings, want, atol=2e-4)
+            np.testing.assert_allclose(q.outline.cap_rings, rings, atol=2e-4)
+        np.testing.assert_allclose(
+            np.sort(q.outline.caps[:, 0]), np.sort(job.domain.caps[:, 0]), atol=2e-4
+        )
+        np.testing.assert_allclose(q.outline.caps[:, 2], 0.8, atol=2e-4)
+        rc, err, _ = cli("qa", tmp_path / f"m.{fmt}", "--job", path, "-q")
+        assert rc == 0, (fmt, err)
