@@ -52,6 +52,18 @@ thickness = 0.2
 """
 
 
+#: A process for the ellipses sample (screen printing on a moulded guide's stamper).
+PROCESS = """
+[process]
+dot_gain = 0.006
+gain_tolerance = 0.001
+min_space = 0.004
+grid = 0.00005
+shrink = 0.004
+mirror = "x"
+"""
+
+
 def run(*args, cwd: Path) -> None:
     """``optdot *args`` in ``cwd``; a failed gate (exit 1) still writes with --force."""
     subprocess.run([sys.executable, "-P", "-m", "optdot", *map(str, args)], cwd=cwd, check=True)
@@ -80,6 +92,15 @@ def make(out: Path) -> None:
     run("generate", caps, "-o", "caps.npz", "-q", cwd=out)
     run("export", "caps.npz", "--job", caps, "--gds", "caps.gds", "--dxf", "caps.dxf",
         "--oas", "caps.oas", "--force", "-q", cwd=out)  # fmt: skip
+    # the ellipses printed: masks compensated for a gain, a shrink, a mirror and a grid
+    shutil.copy(ROOT / "samples" / "ellipses" / "density.csv", out / "density.csv")
+    printed = out / "printed.toml"
+    printed.write_text((ROOT / "samples" / "ellipses" / "job.toml").read_text() + PROCESS)
+    run("export", printed, "--gds", "printed.gds", "--oas", "printed.oas",
+        "--dxf", "printed.dxf", "--csv", "printed.csv", "--json", "printed_qa.json",
+        "-q", cwd=out)  # fmt: skip
+    for mask in ("printed.gds", "printed.dxf"):
+        run("qa", mask, "--job", printed, "--json", f"{mask}.qa.json", "-q", cwd=out)
     sizes = ROOT / "samples" / "led_sizes" / "job.toml"
     run("generate", sizes, "-o", "ls.parquet", "--tiles", "on", "--workers", 2, "-q", cwd=out)
     run("export", "ls.parquet", "--job", sizes, "--gds", "ls_ds.gds", "--oas", "ls_ds.oas",
