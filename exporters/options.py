@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from optdot.errors import ExportError
+from optdot.printing.laser import Laser
 from optdot.printing.process import Process
 
 DXF_VERSIONS = ("R12", "R2000", "R2004", "R2007", "R2010", "R2013", "R2018")
@@ -31,6 +32,8 @@ class ExportOptions:
             the pattern's footprints as they are. With one, a mask draws each footprint
             shrunk by the dot gain, scaled for the shrink, mirrored and on the grid
             (:mod:`optdot.printing.mask`), and a mask read back is the print it makes.
+        laser: the laser dotting machine a laser path is written for (the job's
+            ``[laser]``: its sizes, speed, acceleration, dwell), or None.
     """
 
     tolerance_um: float = 0.01
@@ -45,6 +48,7 @@ class ExportOptions:
     speos_reference_mm: float | None = None
     provenance: tuple[str, ...] = ()
     process: Process | None = None
+    laser: Laser | None = None
 
     def __post_init__(self) -> None:
         if not 1e-4 <= self.tolerance_um <= 10:

@@ -87,6 +87,12 @@ FORMATS: dict[str, Format] = {
             (".opt3dmapping",), 110, None, "exporters.speos:write_speos", streamed=True,
         ),
         Format(
+            "laser",
+            "Laser dotting path to write: G-code (.nc, .gcode), HPGL/2 (.plt) or a CSV point "
+            "list (.csv), one point per dot with its pulse set, along a short path.",
+            (".nc", ".gcode", ".ngc", ".plt", ".hpgl"), 24, None, "exporters.laser:write_laser",
+        ),
+        Format(
             "parquet", "Parquet dataset (a directory of parts).", (".parquet",), 19, 30,
             reader="io.patterns:load_pattern", exported=False,
         ),

@@ -520,6 +520,7 @@ def export(
         options or ExportOptions(),
         provenance=mask_lines(result.provenance),
         process=job.process if job is not None else None,
+        laser=job.laser if job is not None else None,
     )
     done: list[tuple[str, Path, str]] = []
     stage("writing")

@@ -22,6 +22,7 @@ from ..geometry.limits import DIAMETER_RANGE_MM, MAX_EXTENT_MM
 from ..geometry.orientation import Orientation
 from ..geometry.shapes import DotShape
 from ..geometry.sizes import DotSizes, dots_per_cell
+from ..printing.laser import Laser
 from ..printing.process import Process
 from .backlight import Backlight
 from .grids import validate_grid
@@ -235,6 +236,8 @@ class Job:
         process: how the masks print (``[process]``), or None: masks are the pattern.
             The pattern is then the print, relaxed to the process's gaps
             (``optimize.gap`` already raised to :meth:`Process.relaxation_gap`).
+        laser: the laser dotting machine of ``export --laser`` (``[laser]``), or None;
+            with sizes, :attr:`diameter` and :attr:`sizes` are already the laser's.
     """
 
     width: float
@@ -256,6 +259,7 @@ class Job:
     shape: DotShape | None = None
     orientation: Orientation = field(default_factory=Orientation)
     process: Process | None = None
+    laser: Laser | None = None
 
     @property
     def ink(self) -> float | None:

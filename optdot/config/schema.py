@@ -26,6 +26,7 @@ from .backlight import BACKLIGHT_KEYS, backlight_from, check_leds_inside, led_ca
 from .grids import load_grid, validate_grid
 from .images import IMAGE_SUFFIXES, check_ranges, load_image
 from .job import Job, OptimizeParams, QAParams
+from .laser import LASER_KEYS, laser_from, laser_sizes
 from .light_guide import (
     DESIGN_KEYS,
     LIGHT_GUIDE_KEYS,
@@ -102,6 +103,7 @@ SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
     "backlight": BACKLIGHT_KEYS,
     "design": DESIGN_KEYS,
     "process": PROCESS_KEYS,
+    "laser": LASER_KEYS,
 }
 _REQUIRED: dict[str, tuple[str, ...]] = {"dots": ()}
 
@@ -271,6 +273,10 @@ def job_from_dict(
         sizes = shape_sizes(dots, shape, sections.get("qa", {}), qa, where)
         diameter = shape.equivalent_diameter if sizes is None else sizes.low
         size_file = None
+    laser = None
+    if "laser" in sections:
+        laser = laser_from(sections["laser"], where)
+        diameter, sizes = laser_sizes(laser, diameter, sizes, shape is not None, where)
     process = None
     if "process" in sections:
         process = process_from(sections["process"], where)
@@ -328,6 +334,7 @@ def job_from_dict(
         shape=shape,
         orientation=turn,
         process=process,
+        laser=laser,
     )
 
 

@@ -63,6 +63,8 @@ class DotSizes:
         gap: the edge gap the claim rule keeps in mind, mm (``qa.close_gap``).
         grid: ``[my, mx]`` explicit diameters, mm, over the map's box (row 0 at the
             bottom), or None.
+        levels: the only diameters dots may take, mm, ascending from ``low`` to ``high``
+            (a laser's sizes), or None (every step of the range).
     """
 
     low: float
@@ -71,6 +73,7 @@ class DotSizes:
     spacing: float | None = None
     gap: float = 0.014
     grid: np.ndarray | None = None
+    levels: tuple[float, ...] | None = None
 
     @property
     def rule(self) -> str:
@@ -89,7 +92,13 @@ class DotSizes:
             return np.where(room > 0, self.gap / room, np.inf)
 
     def quantise(self, d: np.ndarray) -> np.ndarray:
-        """``d`` (mm) rounded to the step and kept in the range, to 1 nm."""
+        """``d`` (mm) rounded to the step (with :attr:`levels`, the nearest level) and
+        kept in the range, to 1 nm."""
+        if self.levels is not None:
+            lv = np.asarray(self.levels)
+            d = np.asarray(d, np.float64)
+            near = np.argmin(np.abs(d[..., None] - lv), axis=-1)
+            return np.round(lv[near], 6)
         q = np.round(np.clip(d, self.low, self.high) / self.step) * self.step
         q = np.clip(q, self.low, self.high)
         return np.round(q, 6)
