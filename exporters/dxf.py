@@ -36,6 +36,7 @@ from optdot.geometry.shapes import CIRCLE, Footprints, Kind
 from optdot.io.atomic import atomic_path, expect_tail
 from optdot.pattern import DotSource, Pattern, caps_of
 from optdot.printing.mask import mask_cap_rings, mask_ring, mask_rings
+from optdot.printing.sheet import CUT_LAYER, FIDUCIAL_LAYER, LABEL_LAYER, PANEL_BLOCK
 
 from .options import ExportOptions
 
@@ -136,6 +137,8 @@ def _template(
     sizes: list[np.ndarray] = (),
     tolerance: float = 1e-4,
     pattern_process=None,
+    sheet=None,
+    labels: tuple[str, ...] = (),
 ) -> tuple[str, str, str, int]:
     """(head, dot format, tail, first free handle) of a document for ``pattern``.
 
@@ -144,7 +147,8 @@ def _template(
     Shaped dots: an INSERT of the block of each of ``sizes`` (``[k]`` mm each), its
     format ``(handle, [block name,] x, y, rotation in degrees)`` (the name when there
     are several blocks; ``tolerance``, mm, draws R12's polygons). With a
-    ``pattern_process``, the outline, caps, circles and blocks are the mask's."""
+    ``pattern_process``, the outline, caps, circles and blocks are the mask's. On a
+    ``sheet``, the panel is the block :data:`PANEL_BLOCK`, arrayed by one INSERT."""
     uniform = pattern.uniform_diameter
     radius = _MARK_R if uniform is None else _mask_radius(pattern_process, 0.5 * uniform)
     shaped = pattern.kind is not CIRCLE
@@ -158,6 +162,8 @@ def _template(
     doc.layers.add("DOTS", color=7)
     doc.layers.add("OUTLINE", color=1)
     msp = doc.modelspace()
+    # the panel: the modelspace, or on a production sheet a block the sheet arrays
+    panel = msp if sheet is None else doc.blocks.new(PANEL_BLOCK)
     process = pattern_process
     rings = pattern.outline_rings()
     if process is not None:
@@ -165,9 +171,9 @@ def _template(
     for ring in rings:  # outline and holes, one closed polyline each
         pts = [(float(x), float(y)) for x, y in ring]
         if version == "R12":
-            msp.add_polyline2d(pts, close=True, dxfattribs={"layer": "OUTLINE"})
+            panel.add_polyline2d(pts, close=True, dxfattribs={"layer": "OUTLINE"})
         else:
-            msp.add_lwpolyline(pts, close=True, dxfattribs={"layer": "OUTLINE"})
+            panel.add_lwpolyline(pts, close=True, dxfattribs={"layer": "OUTLINE"})
     caps = caps_of(pattern)
     graded = pattern.outline is not None and pattern.outline.cap_rings is not None
     cap_rings = pattern.outline.cap_rings if graded else None
@@ -179,20 +185,22 @@ def _template(
     if len(caps):
         doc.appids.add(CAP_APPID)
     if graded and len(caps):
-        _graded_caps(msp, caps, cap_rings)
+        _graded_caps(panel, caps, cap_rings)
     for x, y, d in caps.tolist() if not graded else []:  # a circle marked by its XDATA
-        cap = msp.add_circle((x, y), 0.5 * d, dxfattribs={"layer": "DOTS"})
+        cap = panel.add_circle((x, y), 0.5 * d, dxfattribs={"layer": "DOTS"})
         cap.set_xdata(CAP_APPID, [(1000, "cap")])
     names = []
     if shaped:
         for size in sizes:
             _add_block(doc, pattern.kind, size, version, tolerance, process)
             names.append(_block_name(tuple(int(v) for v in np.round(size * 1e6))))
-        msp.add_blockref(
+        panel.add_blockref(
             names[0], (_MARK_X, _MARK_Y), dxfattribs={"layer": "DOTS", "rotation": _MARK_A}
         )
     else:
-        msp.add_circle((_MARK_X, _MARK_Y), radius, dxfattribs={"layer": "DOTS"})
+        panel.add_circle((_MARK_X, _MARK_Y), radius, dxfattribs={"layer": "DOTS"})
+    if sheet is not None:
+        _sheet(doc, msp, sheet, labels, rings, version)
     buf = io.StringIO()
     doc.write(buf)
     text = buf.getvalue()
@@ -266,6 +274,42 @@ def _find_float(lines: list[str], value: float) -> int:
     raise RuntimeError("template circle not found in ezdxf output")  # pragma: no cover
 
 
+def _sheet(doc, msp, sheet, labels: tuple[str, ...], rings, version: str) -> None:
+    """The production sheet into ``msp``: one INSERT of the panel's block with its rows
+    and columns (no dot written twice), the fiducials, a label per panel (the text's
+    outlines, closed polylines) and the cut lines, each on its layer."""
+    import gdstk
+
+    for _, name in (FIDUCIAL_LAYER, LABEL_LAYER, CUT_LAYER):
+        doc.layers.add(name)
+    msp.add_blockref(
+        PANEL_BLOCK,
+        (0.0, 0.0),
+        dxfattribs={
+            "column_count": sheet.columns,
+            "row_count": sheet.rows,
+            "column_spacing": sheet.pitch[0],
+            "row_spacing": sheet.pitch[1],
+        },
+    )
+    pts = np.concatenate(rings)
+    box = (*pts.min(axis=0), *pts.max(axis=0))
+    shapes = [(FIDUCIAL_LAYER[1], r) for r in sheet.fiducial_polygons()]
+    shapes += [(CUT_LAYER[1], r) for r in sheet.cut_lines(box)]
+    if sheet.label_height > 0:
+        at = np.asarray(sheet.label_at(box))
+        for off, text in zip(sheet.offsets(), labels, strict=True):
+            x, y = at + off
+            for poly in gdstk.text(text, sheet.label_height, (float(x), float(y))):
+                shapes.append((LABEL_LAYER[1], poly.points))
+    for layer, ring in shapes:
+        pts = [(float(x), float(y)) for x, y in ring]
+        if version == "R12":
+            msp.add_polyline2d(pts, close=True, dxfattribs={"layer": layer})
+        else:
+            msp.add_lwpolyline(pts, close=True, dxfattribs={"layer": layer})
+
+
 def _mask_radius(process, r):
     """A circle's radius (mm; a number or ``[n]``) on the mask: shrunk by the gain,
     scaled (unchanged without a process)."""
@@ -301,7 +345,7 @@ def write_dxf(pattern: DotSource, path: str | Path, opts: ExportOptions) -> None
         names = {k: _block_name(k) for k in sorted(keys)}
     tol = opts.tolerance_um * 1e-3
     head, fmt, tail, seed = _template(
-        pattern, opts.dxf_version, opts.provenance, sizes, tol, process
+        pattern, opts.dxf_version, opts.provenance, sizes, tol, process, opts.sheet, opts.labels
     )
     has_handle = "%X" in fmt
     varying = pattern.uniform_diameter is None and not shaped

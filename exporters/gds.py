@@ -42,6 +42,7 @@ from optdot.printing.mask import (
     mask_rings,
     placed_whole,
 )
+from optdot.printing.sheet import CUT_LAYER, FIDUCIAL_LAYER, LABEL_LAYER, SHEET_CELL
 
 from .options import ExportOptions
 
@@ -362,6 +363,11 @@ def write_gds(src: DotSource, path: str | Path, opts: ExportOptions) -> None:
             dots = cells.library_cells()
             top.add(*cap_refs)  # after the dots: a flattened top keeps its caps placed
             writer.write(*dots, *cap_cells, top)
+            if opts.sheet is not None:
+                sheet = _sheet_cell(top, src, opts, cells.names)
+                writer.write(sheet)
+                counts["refs"] += 1
+                counts["polys"] += len(sheet.polygons)
         finally:
             writer.close()
         counts["polys"] += len(dots) + len(_outline_polygons(_rings(src, opts), opts))
@@ -387,6 +393,8 @@ def write_oas(src: DotSource, path: str | Path, opts: ExportOptions) -> None:
             top.add(gdstk.Reference(cell))
     top.add(*cap_refs)  # after the dots: a flattened top keeps its caps placed
     lib.add(*cells.library_cells(), *cap_cells, top)
+    if opts.sheet is not None:
+        lib.add(_sheet_cell(top, src, opts, cells.names))
     _write_oas_lib(lib, path, opts)
 
 
@@ -402,6 +410,27 @@ def _check_counts(path, tmp: Path, refs: int, polys: int) -> None:
             f"{path}: the written file holds {info['num_references']} references and "
             f"{info['num_polygons']} polygons, not {refs} and {polys}"
         )
+
+
+def _sheet_cell(top: gdstk.Cell, src: DotSource, opts: ExportOptions, names) -> gdstk.Cell:
+    """The production sheet (:mod:`optdot.printing.sheet`): the panel's cell ``top``
+    arrayed once (an AREF), the fiducials, a label per panel (text as polygons) and the
+    cut lines, each on its layer; µm."""
+    sheet = opts.sheet
+    cell = gdstk.Cell(_unique(SHEET_CELL, "the sheet", names))
+    px, py = (v * 1e3 for v in sheet.pitch)
+    cell.add(gdstk.Reference(top, (0, 0), columns=sheet.columns, rows=sheet.rows, spacing=(px, py)))
+    box = opts.process.mask_box(src.box) if opts.process is not None else src.box
+    for ring in sheet.fiducial_polygons():
+        cell.add(gdstk.Polygon(ring * 1e3, layer=FIDUCIAL_LAYER[0]))
+    for ring in sheet.cut_lines(box):
+        cell.add(gdstk.Polygon(ring * 1e3, layer=CUT_LAYER[0]))
+    if sheet.label_height > 0:
+        at = np.asarray(sheet.label_at(box))
+        for off, text in zip(sheet.offsets(), opts.labels, strict=True):
+            x, y = (at + off) * 1e3
+            cell.add(*gdstk.text(text, sheet.label_height * 1e3, (x, y), layer=LABEL_LAYER[0]))
+    return cell
 
 
 def _write_oas_lib(lib: gdstk.Library, path: str | Path, opts: ExportOptions) -> None:

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from optdot.errors import ExportError
 from optdot.printing.laser import Laser
 from optdot.printing.process import Process
+from optdot.printing.sheet import Sheet
 
 DXF_VERSIONS = ("R12", "R2000", "R2004", "R2007", "R2010", "R2013", "R2018")
 
@@ -34,6 +35,10 @@ class ExportOptions:
             (:mod:`optdot.printing.mask`), and a mask read back is the print it makes.
         laser: the laser dotting machine a laser path is written for (the job's
             ``[laser]``: its sizes, speed, acceleration, dwell), or None.
+        sheet: the production sheet a mask repeats the panel on (the job's ``[sheet]``),
+            or None: the mask is one panel.
+        labels: each panel's label on the sheet, row by row
+            (:func:`optdot.printing.sheet.label_text`).
     """
 
     tolerance_um: float = 0.01
@@ -49,6 +54,8 @@ class ExportOptions:
     provenance: tuple[str, ...] = ()
     process: Process | None = None
     laser: Laser | None = None
+    sheet: Sheet | None = None
+    labels: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if not 1e-4 <= self.tolerance_um <= 10:

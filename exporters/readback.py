@@ -27,6 +27,7 @@ from optdot.geometry.orientation import degrees
 from optdot.geometry.shapes import CIRCLE, KINDS, Fit, Footprints, Kind
 from optdot.pattern import Pattern
 from optdot.printing.mask import printed_box, printed_cap_rings, unscaled
+from optdot.printing.sheet import PANEL_BLOCK, SHEET_CELL
 from optdot.runtime.isolate import ChildCrashed, in_child
 from optdot.runtime.memory import max_dots_read
 
@@ -91,7 +92,7 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
     tops = lib.top_level()
     if len(tops) != 1:
         raise PatternFileError(f"{path}: expected one top cell, found {len(tops)}")
-    top = tops[0]
+    top = _panel_of(path, tops[0])
     centres: list[np.ndarray] = []
     diameters: list[Drawn] = []
     budget = [max_dots_read()]
@@ -126,6 +127,20 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
         np.radians(degrees(np.concatenate([d.angle for d in diameters]))),
     )
     return _seeded(_pattern(path, xy, dots.diameter, rings, True, dots, caps, cap_rings), seed)
+
+
+def _panel_of(path: Path, top):
+    """The panel's cell of a mask: the top cell, or on a production sheet
+    (:data:`SHEET_CELL`) the one cell it arrays (every panel is that cell: QA judges it
+    once)."""
+    if top.name != SHEET_CELL:
+        return top
+    panels = {r.cell.name: r.cell for r in top.references if not isinstance(r.cell, str)}
+    if len(panels) != 1:
+        raise PatternFileError(
+            f"{path}: the sheet places {len(panels)} cells; a production sheet arrays one panel"
+        )
+    return next(iter(panels.values()))
 
 
 def _printed(process, xy, rings, caps, drawn):
@@ -446,7 +461,7 @@ def read_dxf(path: Path, opts: ExportOptions | None = None) -> Pattern:
     try:
         scale = mm_per_unit(doc, path)
         xy_l, r_l, rings, shaped, caps, graded = [], [], [], [], [], []
-        for e in drawn_entities(doc.modelspace(), path):
+        for e in drawn_entities(_dxf_panel(doc), path):
             # DXF layer names are case-insensitive: "dots" is the layer DOTS
             layer, kind = str(e.dxf.get("layer", "0")).upper(), e.dxftype()
             if layer == "DOTS" and kind in ("POINT", "HATCH") and e.has_xdata(CAP_APPID):
@@ -519,6 +534,18 @@ def read_dxf(path: Path, opts: ExportOptions | None = None) -> Pattern:
         radii = 0.5 * drawn[0].size[:, 0]
     made = _pattern(path, np.round(xy, 6), 2 * radii, rings, caps=caps, cap_rings=cap_rings)
     return _seeded(made, _dxf_seed(doc))
+
+
+def _dxf_panel(doc):
+    """The layout holding a drawing's panel: the modelspace, or on a production sheet
+    the block :data:`PANEL_BLOCK` it inserts (every panel is that block: QA judges it
+    once)."""
+    msp = doc.modelspace()
+    if PANEL_BLOCK in doc.blocks and any(
+        e.dxftype() == "INSERT" and e.dxf.name == PANEL_BLOCK for e in msp
+    ):
+        return doc.blocks.get(PANEL_BLOCK)
+    return msp
 
 
 def _dxf_printed(path, process, xy, rings, caps, cap_rings, drawn, grow=False):

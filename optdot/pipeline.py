@@ -522,6 +522,8 @@ def export(
         process=job.process if job is not None else None,
         laser=job.laser if job is not None else None,
     )
+    if job is not None and job.sheet is not None:
+        options = replace(options, sheet=job.sheet, labels=sheet_labels(job, result.provenance))
     done: list[tuple[str, Path, str]] = []
     stage("writing")
     keep = () if overwrite else [p for f, p in outputs.items() if FORMATS[f].mask]
@@ -539,6 +541,22 @@ def export(
         if written is not None:
             written(*item)
     return result
+
+
+def sheet_labels(job: Job, prov: dict) -> tuple[str, ...]:
+    """Each panel's label on the job's sheet, row by row: the job, optdot, the seed, the
+    job file's SHA-256 prefix, the sheet's date, the process, the panel's place."""
+    from .printing.sheet import label_text
+
+    sheet = job.sheet
+    sha = (prov.get("job") or {}).get("sha256") or ""
+    return tuple(
+        label_text(
+            job.name, str(prov.get("optdot")), prov.get("seed"), sha, sheet.date, job.process, r, c
+        )  # fmt: skip
+        for r in range(sheet.rows)
+        for c in range(sheet.columns)
+    )
 
 
 def dataset_pattern(ds, job: Job | None) -> Pattern:

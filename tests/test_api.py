@@ -79,6 +79,7 @@ ALLOWED = {
         "errors",
         "geometry",
         "pattern",
+        "printing",
         "quality",
         "relax",
         "runtime",

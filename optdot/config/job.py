@@ -24,6 +24,7 @@ from ..geometry.shapes import DotShape
 from ..geometry.sizes import DotSizes, dots_per_cell
 from ..printing.laser import Laser
 from ..printing.process import Process
+from ..printing.sheet import Sheet
 from .backlight import Backlight
 from .grids import validate_grid
 from .light_guide import DesignParams, LightGuide
@@ -238,6 +239,7 @@ class Job:
             (``optimize.gap`` already raised to :meth:`Process.relaxation_gap`).
         laser: the laser dotting machine of ``export --laser`` (``[laser]``), or None;
             with sizes, :attr:`diameter` and :attr:`sizes` are already the laser's.
+        sheet: the production sheet the masks repeat the panel on (``[sheet]``), or None.
     """
 
     width: float
@@ -260,6 +262,7 @@ class Job:
     orientation: Orientation = field(default_factory=Orientation)
     process: Process | None = None
     laser: Laser | None = None
+    sheet: Sheet | None = None
 
     @property
     def ink(self) -> float | None:

@@ -36,6 +36,7 @@ from .light_guide import (
 )
 from .process import PROCESS_KEYS, check_printable, process_from
 from .shaping import DOT_SHAPE_KEYS, ORIENTATION_KEYS, dot_shape, orientation, shape_sizes
+from .sheet import SHEET_KEYS, sheet_from
 
 SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
     "": {"name": (str,)},
@@ -104,6 +105,7 @@ SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
     "design": DESIGN_KEYS,
     "process": PROCESS_KEYS,
     "laser": LASER_KEYS,
+    "sheet": SHEET_KEYS,
 }
 _REQUIRED: dict[str, tuple[str, ...]] = {"dots": ()}
 
@@ -294,6 +296,10 @@ def job_from_dict(
         if process.grid > 0:  # dots kept off the walls by what the grid may move them
             panel = domain or Domain.rect(x0, y0, x0 + width, y0 + height)
             domain = replace(panel, edge_margin=panel.edge_margin + process.snap_margin)
+    sheet = None
+    if "sheet" in sections:
+        scale = process.scale if process is not None else np.ones(2)
+        sheet = sheet_from(sections["sheet"], (x0, y0, x0 + width, y0 + height), scale, where)
     turn = orientation(
         sections.get("orientation", {}),
         shape,
@@ -335,6 +341,7 @@ def job_from_dict(
         orientation=turn,
         process=process,
         laser=laser,
+        sheet=sheet,
     )
 
 
