@@ -87,7 +87,17 @@ ALLOWED = {
         "stages",
         "tiling",
     },
-    "optics": {"config", "errors", "figures", "files", "geometry", "io", "pattern", "runtime"},
+    "optics": {
+        "config",
+        "errors",
+        "figures",
+        "files",
+        "geometry",
+        "io",
+        "pattern",
+        "printing",
+        "runtime",
+    },
     "cli": {
         "config",
         "errors",

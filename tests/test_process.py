@@ -365,3 +365,65 @@ def test_caps_print_as_the_job_s_caps(tmp_path, ink):
         np.testing.assert_allclose(q.outline.caps[:, 2], 0.8, atol=2e-4)
         rc, err, _ = cli("qa", tmp_path / f"m.{fmt}", "--job", path, "-q")
         assert rc == 0, (fmt, err)
+
+
+@pytest.mark.slow
+def test_the_luminance_band_traces_the_real_dots_grown(tmp_path):
+    """``simulate`` with a pattern under a process with a tolerance traces the real dots
+    grown to each end of the gain: the upper end is exactly the trace of a pattern whose
+    dots are 2 tol wider (same rays, same seed) under no process; more ink extracts more;
+    ``qa --simulation`` reports the band."""
+    import json
+
+    from optdot.io.patterns import save_pattern
+
+    guide = {"thickness": 0.4, "reflector": 0.95, "edge_reflectance": 0.9}
+    grid = np.tile(np.linspace(0.05, 0.3, 8)[:, None], (1, 8))
+    plain = write_job(tmp_path, grid, domain={"width": 8.0, "height": 8.0}, light_guide=guide)
+    plain.write_text(
+        plain.read_text()
+        + '[[light_guide.leds]]\nedge = "bottom"\npositions = [4.0]\nwidth = 1.0\n'
+    )
+    banded = tmp_path / "banded.toml"
+    banded.write_text(plain.read_text() + "[process]\ndot_gain = 0.004\ngain_tolerance = 0.003\n")
+    p = generate(load_job(banded))
+    save_pattern(p, tmp_path / "p.npz")
+    rc, err, out = cli(
+        "simulate", banded, tmp_path / "p.npz", "--rays", 60000, "--json", tmp_path / "s.json"
+    )
+    assert rc == 0, err
+    band = json.loads((tmp_path / "s.json").read_text())["tolerance_band"]
+    assert band["gain_mm"] == pytest.approx([0.001, 0.004, 0.007])
+    assert band["efficiency"][0] < band["efficiency"][1] < band["efficiency"][2]
+    assert "at a gain of 7 µm: efficiency" in out
+    wide = type(p)(p.xy, p.diameter + 0.006, p.box, meta=p.meta, outline=p.outline)
+    save_pattern(wide, tmp_path / "wide.npz")
+    wider = tmp_path / "wider.toml"  # the same guide, its dots 52 µm
+    wider.write_text(plain.read_text().replace("diameter = 0.046", "diameter = 0.052"))
+    rc, err, _ = cli(
+        "simulate", wider, tmp_path / "wide.npz", "--rays", 60000, "--json", tmp_path / "w.json"
+    )
+    assert rc == 0, err
+    w = json.loads((tmp_path / "w.json").read_text())
+    assert w["efficiency"] == band["efficiency"][2]
+    assert w["uniformity_9point"] == band["uniformity_9point"][2]
+    rc, err, _ = cli("qa", tmp_path / "p.npz", "--job", banded, "--simulation", tmp_path / "s.json",
+                     "--html", tmp_path / "r.html", "-q")  # fmt: skip
+    assert rc in (0,), err
+    assert "Across the process's gain tolerance" in (tmp_path / "r.html").read_text()
+
+
+def test_grown_footprints_for_the_tracer():
+    """The tracer's grown dots: circles and rounded rectangles exactly their parallel
+    bodies; an ellipse one of the same area as its parallel body (shapely's buffer)."""
+    from optdot.printing.process import grown_sizes
+
+    for kind, size in ((CIRCLE, [0.046]), (RECT, [0.12, 0.03, 0.005]), (ELLIPSE, [0.08, 0.04])):
+        s = np.array([size])
+        for delta in (0.003, -0.003):
+            got = grown_sizes(kind, s, delta)
+            want = _exact(kind, size, 1e-8).buffer(delta, quad_segs=256).area
+            change = want - kind.area(s)[0]
+            tol = 1e-5 * want  # shapely's inward buffer errs by ~1e-6
+            assert abs(change) > 100 * tol
+            assert abs(kind.area(got)[0] - want) <= tol, (kind.name, delta)

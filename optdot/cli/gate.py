@@ -44,9 +44,14 @@ def _inputs(source: Path, job_path) -> tuple:
 
 
 def _read_with_job(path: Path, job, opts=None):
-    """The pattern read from ``path``, on the job's panel when there is a job."""
+    """The pattern read from ``path``, on the job's panel when there is a job (a mask
+    read as the print it makes under the job's ``[process]``, unless ``opts`` say how)."""
+    from ..exporters.options import ExportOptions
     from ..exporters.readback import read_any
     from ..pipeline import with_job_panel
+
+    if opts is None and job is not None and job.process is not None:
+        opts = ExportOptions(process=job.process)
 
     stored = path.suffix.lower() in (".npz", ".parquet")  # these keep their panel's box
     pattern = read_any(path, opts, box=job.box if job and not stored else None)

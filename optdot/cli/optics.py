@@ -97,8 +97,22 @@ def simulate(
         from ..optics.halo import halo as one_led
 
         sim.extra["halo"] = one_led(job, max(rays // 4, 1000), seed, dots=dots)
+    if dots is not None and job.process is not None and job.process.gain_tolerance > 0:
+        from ..optics.band import tolerance_band
+
+        sim.extra["tolerance_band"] = tolerance_band(
+            job, dots, sim, rays, seed, bin_mm=bin_mm, spot_mm=spot_mm, border_mm=border_mm
+        )
     seconds = time.perf_counter() - t0  # printed, not written: same seed, same bytes
     _print_simulation(sim, seconds)
+    band = sim.extra.get("tolerance_band")
+    for k, g in enumerate(band["gain_mm"] if band else []):
+        click.echo(
+            f"at a gain of {g * 1e3:.4g} µm: efficiency {band['efficiency'][k]:.2%}, 9-point "
+            f"uniformity {band['uniformity_9point'][k]:.3f}, luminance RMS "
+            f"{band['luminance_rms'][k]:.2%}, min {band['luminance_min'][k]:.3f}, max "
+            f"{band['luminance_max'][k]:.3f} of the mean"
+        )
     for warning in sim.summary().get("warnings", []):
         click.echo(f"optdot: warning: {warning}", err=True)
     with transaction():

@@ -116,7 +116,30 @@ class Process:
         """Whether the mask is the print mirrored (its rings run the other way round)."""
         return self.mirror != "none"
 
+    def gain_ends(self) -> tuple[float, float, float]:
+        """The offsets of the tolerance band from the nominal print, mm: ``(-tol, 0,
+        +tol)``."""
+        t = self.gain_tolerance
+        return (-t, 0.0, t)
+
     def steiner_area(self, kind, size: np.ndarray, g: float) -> np.ndarray:
         """``[n]`` the area of footprints (``size [n, k]`` mm) grown by ``g`` mm (Steiner:
         ``A + P g + π g²``; shrunk, exact while ``-g`` is within their curvature)."""
         return kind.area(size) + kind.perimeter(size) * g + math.pi * g * g
+
+
+def grown_sizes(kind, size: np.ndarray, delta: float) -> np.ndarray:
+    """``[n, k]`` footprints of ``size`` (``[n, k]`` mm) grown by ``delta`` mm: exact where
+    the kind's parallel body is one of its own (circles, rounded rectangles); otherwise
+    (an ellipse) the footprint whose two lengths grow alike by ``2 u``, ``u`` chosen so
+    that its area is the parallel body's (Steiner's ``A + P δ + π δ²``) exactly: the
+    shape within ``u - δ`` (a few percent of δ) of it everywhere."""
+    out = kind.parallel(size, delta)
+    if out is not None:
+        return out
+    out = np.array(size, float, copy=True)
+    a, b = 0.5 * out[:, 0], 0.5 * out[:, 1]
+    target = (kind.area(out) + kind.perimeter(out) * delta) / np.pi + delta * delta
+    u = 0.5 * (-(a + b) + np.sqrt((a + b) ** 2 - 4.0 * (a * b - target)))
+    out[:, :2] += 2.0 * u[:, None]
+    return out

@@ -344,11 +344,28 @@ def _simulation_section(result: QAResult) -> str:
 9-point uniformity <b>{_n(sim.get("uniformity_9point"), ".3f")}</b> ± {_n(sim.get("uniformity_9point_sigma"), ".3f")};
 luminance RMS {_n(sim.get("luminance_rms"), ".2%")} over {region}
 (Monte Carlo noise alone {_n(sim.get("luminance_rms_noise"), ".2%")}: {html.escape(structure_text(sim))}), min {_n(sim.get("luminance_min"), ".3f")},
-max {_n(sim.get("luminance_max"), ".3f")} of the mean.{outside}{halo_text} The bins as traced carry the rays' noise; the smoothed view beside them
+max {_n(sim.get("luminance_max"), ".3f")} of the mean.{outside}{halo_text}{_band_text(sim)} The bins as traced carry the rays' noise; the smoothed view beside them
 shows what is structure. Compare it with the JND map above: the JND map
 judges the dots against the map, this one the map and the dots against the LEDs.</p>
 <figure><img style="max-width:100%" alt="simulated luminance" src="data:image/png;base64,{png}"></figure>
 """
+
+
+def _band_text(sim: dict) -> str:
+    """The process's tolerance band as traced (the real dots grown to each end of the
+    gain), in words; empty without one."""
+    band = sim.get("tolerance_band")
+    if not band:
+        return ""
+    ends = "; ".join(
+        f"at {g * 1e3:.4g} µm per edge 9-point {_n(u, '.3f')}, RMS {_n(r, '.2%')}, "
+        f"min/max {_n(lo, '.3f')}/{_n(hi, '.3f')}"
+        for g, u, r, lo, hi in zip(
+            band["gain_mm"], band["uniformity_9point"], band["luminance_rms"],
+            band["luminance_min"], band["luminance_max"], strict=True,
+        )
+    )  # fmt: skip
+    return f" Across the process's gain tolerance (the real dots grown each way): {ends}."
 
 
 def _jnd_figure(result: QAResult) -> str:

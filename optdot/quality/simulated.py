@@ -33,6 +33,7 @@ FIGURES = (
     "viewing_area_mm",
     "outside_max",
     "outside_max_at_mm",
+    "tolerance_band",
 )
 
 
