@@ -280,6 +280,9 @@ def _cell_rings(path: Path, name: str, pts: list, to_mm: float, reach: float) ->
     return rings
 
 
+#: A tile's cell (``T<i>_<j>``, :func:`exporters.gds.write_gds`): its dots may be polygons
+#: of their own (turned shaped dots on a process's grid).
+_TILE = re.compile(r"T[0-9]+_[0-9]+")
 #: Deepest hierarchy read: top -> tile cells -> dot cells is 2.
 MAX_DEPTH = 4
 #: Most columns or rows of a GDSII array reference (COLROW holds signed 16-bit numbers).
@@ -325,7 +328,9 @@ def _origins(path, rep, origin: np.ndarray, budget: list[int], gds: bool) -> np.
     return rep.get_offsets() + origin
 
 
-def _collect(path, cell, place, opts, to_mm, centres, diameters, depth, budget, gds) -> None:
+def _collect(
+    path, cell, place, opts, to_mm, centres, diameters, depth, budget, gds, flat=False
+) -> None:
     """Dots drawn by ``cell`` placed by ``place`` (``(A, b)`` in file units; see
     :data:`_IDENTITY`): its polygons on the dots' layer, and its references: a referenced
     cell with one circle on the dots' layer is a dot cell (the reference's origin is the
@@ -335,7 +340,7 @@ def _collect(path, cell, place, opts, to_mm, centres, diameters, depth, budget, 
     a, b = place
     on_layer = (opts.layer, opts.datatype)
     scale = math.sqrt(abs(np.linalg.det(a)))
-    if depth == 0:  # deeper, a dot cell's circle is read by the reference placing it
+    if depth == 0 or flat:  # deeper, a dot cell's circle is read by the reference placing it
         for poly in cell.polygons:
             if (poly.layer, poly.datatype) != on_layer:
                 continue
@@ -358,7 +363,8 @@ def _collect(path, cell, place, opts, to_mm, centres, diameters, depth, budget, 
         origins = _origins(path, ref.repetition, np.asarray(ref.origin, float), budget, gds)
         inner = a @ _placement(ref)
         pts = [p for p in sub.polygons if (p.layer, p.datatype) == on_layer]
-        if sub.references and not pts:
+        tile = _TILE.fullmatch(sub.name) is not None and ref.repetition.size <= 1
+        if (sub.references and not pts) or (tile and len(pts) > 1):  # a tile's dots
             if depth >= MAX_DEPTH:
                 raise PatternFileError(f"{path}: cells nested deeper than {MAX_DEPTH}")
             for o in origins:
@@ -373,6 +379,7 @@ def _collect(path, cell, place, opts, to_mm, centres, diameters, depth, budget, 
                     depth + 1,
                     budget,
                     gds,
+                    flat=tile,
                 )
             continue
         if not pts:
@@ -436,12 +443,17 @@ def _footprint(path: Path, pts: np.ndarray, what: str, to_mm: float, process=Non
             if process is not None:
                 other = replace(other, centre=other.centre * _scale_of(process))
             return kind, other
-    at = fit.centre * to_mm
+    at = np.round(fit.centre * to_mm, 9) + 0.0  # no -0 or 1e-20 noise in the message
     lo, hi = (v * to_mm * 1e3 for v in fit.radii)
+    hint = (
+        " (a mask drawn for a [process] on a coarser grid reads with its job)"
+        if process is None
+        else ""
+    )
     raise PatternFileError(
         f"{path}: {what} at ({at[0]:.6g}, {at[1]:.6g}) mm on the dot layer is not "
         f"{kinds_text()} ({len(pts)} vertices, radii {lo:.4g}..{hi:.4g} "
-        "µm); qa checks those dots only"
+        f"µm); qa checks those dots only{hint}"
     )
 
 

@@ -265,8 +265,14 @@ def dot_rule(job: Job) -> DotRule:
     """The footprints ``job`` draws, as QA holds a file's dots to them; with sizes, the
     band of diameters each place may have (:func:`size_band`)."""
     shape = job.shape if job.shape is not None else DotShape(CIRCLE, (job.diameter,))
-    grid = job.process.grid if job.process is not None else 0.0  # what snapping moved
-    return DotRule(shape, job.sizes, size_band(job), TOLERANCE + grid)
+    grid = job.process.grid if job.process is not None else 0.0
+    return DotRule(shape, job.sizes, size_band(job), TOLERANCE + GRID_SIZE_SLACK * grid)
+
+
+#: How far a footprint's size read off a mask on a process's grid may be off, in grid
+#: steps: each vertex moved by up to half a step's diagonal, an extent by up to √2 steps,
+#: a corner's radius (fitted over the few vertices of a short arc) by up to about 3.
+GRID_SIZE_SLACK = 3.0
 
 
 #: How far a dot may have moved from the cell whose rule diameter it was given, mm (at

@@ -38,8 +38,21 @@ def _check_fill(job: Job, where: str) -> None:
             f"{job.min_distance * 1e3:.4g} µm apart for {job.diameter * 1e3:.4g} µm dots "
             f"is an effective fill of {eff:.4g}; a random non-overlapping pattern reaches "
             f"at most {MAX_RANDOM_FILL:g} (the fill can be at most "
-            f"{MAX_RANDOM_FILL / spread:.4g} here)"
+            f"{MAX_RANDOM_FILL / spread:.4g} here){_gap_source(job)}"
         )
+
+
+def _gap_source(job: Job) -> str:
+    """Where the job's gap comes from, when its ``[process]`` set it: ``; the gap is
+    process.min_space ...``; else nothing."""
+    p = job.process
+    if p is None:
+        return ""
+    return (
+        f"; the gap of {job.optimize.gap * 1e3:.4g} µm is [process]'s: min_space "
+        f"{p.min_space * 1e3:g} µm (or min_feature less twice the gain) plus "
+        f"{p.snap_margin * 1e3:.3g} µm for the grid"
+    )
 
 
 def _cell(job: Job, iy: int, ix: int) -> str:

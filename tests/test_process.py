@@ -267,7 +267,7 @@ ELLIPSE_DOTS = {"shape": '"ellipse"', "length": 0.08, "width": 0.04, "diameter":
     ("process", "dots", "words"),
     [
         ({"dot_gain": 0.012}, ELLIPSE_DOTS,
-         ("ellipse's smallest radius of curvature (10 µm)", "largest gain it allows is 10 µm")),
+         ("ellipse's smallest radius of curvature (10 µm)", "largest gain it allows is 9 µm")),
         ({"dot_gain": 0.006}, {"shape": '"rounded_rectangle"', "length": 0.12, "width": 0.03,
                                "corner_radius": 0.005, "diameter": None},
          ("corners of 6 µm", "9.442 µm²", "at least 6 µm")),
@@ -282,6 +282,8 @@ ELLIPSE_DOTS = {"shape": '"ellipse"', "length": 0.08, "width": 0.04, "diameter":
         ({"grid": 0.006, "min_space": 0.005}, None,
          ("process.grid = 6 µm", "coarser than the 5 µm gap")),
         ({"dot_gain": 1.5}, None, ("process.dot_gain = 1.5", "per edge")),
+        ({"grid": 1e-9}, None, ("process.grid = 1e-09", "finer than the masks' 1 nm")),
+        ({"min_feature": 0.05}, None, ("process.min_feature:", "46 µm wide")),
     ],
 )  # fmt: skip
 def test_a_job_that_cannot_print_is_refused(tmp_path, process, dots, words):
@@ -427,3 +429,56 @@ def test_grown_footprints_for_the_tracer():
             tol = 1e-5 * want  # shapely's inward buffer errs by ~1e-6
             assert abs(change) > 100 * tol
             assert abs(kind.area(got)[0] - want) <= tol, (kind.name, delta)
+
+
+def test_oasis_and_gds_agree_without_a_grid(tmp_path):
+    """A shrink without a grid: the scaled centres are put on the files' 1 nm, so an
+    OASIS repetition's offsets add up to the GDSII's places exactly."""
+    path = _job(tmp_path, {"dot_gain": 0.005, "shrink": 0.005})
+    rc, err, _ = cli("export", path, "--gds", tmp_path / "m.gds", "--oas", tmp_path / "m.oas", "-q")
+    assert rc == 0, err
+    job = load_job(path)
+    a, b = (
+        read_any(tmp_path / f"m.{f}", ExportOptions(process=job.process)) for f in ("gds", "oas")
+    )
+    ia, ib = np.lexsort(a.xy.T), np.lexsort(b.xy.T)
+    np.testing.assert_allclose(a.xy[ia], b.xy[ib], atol=1.01e-6)
+    rc, err, _ = cli("qa", tmp_path / "m.oas", "--job", path, "-q")
+    assert rc == 0, err
+
+
+@pytest.mark.parametrize(
+    ("dots", "orientation", "grid"),
+    [
+        ({"diameter": 0.046}, None, 0.001),  # circles of 26 µm on a 1 µm grid: a staircase
+        ({"shape": '"rounded_rectangle"', "length": 0.12, "width": 0.03, "corner_radius": 0.005,
+          "diameter": None}, {"random": "true"}, 0.0001),
+        (ELLIPSE_DOTS, {"random": "true"}, 0.001),
+    ],
+)  # fmt: skip
+def test_masks_on_a_coarse_grid_pass_their_own_qa(tmp_path, dots, orientation, grid):
+    """Whatever the grid the job accepts, the masks it writes pass ``qa`` with the job:
+    read as the print within the grid's slack (sizes 3 steps, angles their share)."""
+    gain = 0.01 if "shape" not in dots else 0.004
+    proc = {"dot_gain": gain, "min_space": 0.006, "grid": grid, "min_feature": 0.01}
+    more = {"orientation": orientation} if orientation else {}
+    path = _job(tmp_path, proc, dots, **more)
+    outs = [tmp_path / f"m.{f}" for f in ("gds", "dxf")]
+    rc, err, _ = cli("export", path, "--gds", outs[0], "--dxf", outs[1], "-q")
+    assert rc == 0, err
+    for mask in outs:
+        rc, err, out = cli("qa", mask, "--job", path)
+        assert rc == 0, (mask.name, err, [x for x in out.splitlines() if x.startswith("FAIL")])
+
+
+def test_caps_that_cannot_print_are_refused(tmp_path):
+    from .test_backlight import _toml, direct_job
+
+    ink = [1.0, 1.0, 0.8, 0.5, 0.3, 0.0, 0.2, 0.9]
+    leds = {"pitch": [5.0, 5.0], "size": 0.2, "cap": 0.8, "cap_ink": ink}
+    path = direct_job(tmp_path, 10.0, 10.0, 0.3, leds=leds)
+    base = path.read_text()
+    path.write_text(base + _toml({"process": {"dot_gain": 0.02}}))
+    one_error(["generate", path, "-o", tmp_path / "p.csv"], 2, "caps' ring", "wide on the mask")
+    path.write_text(base + _toml({"process": {"shrink": [0.002, 0.006]}}))
+    one_error(["generate", path, "-o", tmp_path / "p.csv"], 2, "scales x and y apart", "ellipses")

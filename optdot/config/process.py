@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import JobError
-from ..printing.process import MAX_SHRINK, MIRRORS, Process
+from ..printing.process import DATABASE_UNIT_MM, MAX_SHRINK, MIRRORS, Process
 
 PROCESS_KEYS: dict[str, tuple[type, ...]] = {
     "dot_gain": (int, float),
@@ -32,6 +32,9 @@ PROCESS_KEYS: dict[str, tuple[type, ...]] = {
     "shrink": (int, float, list),
     "mirror": (str,),
 }
+#: The share of a curved footprint's smallest radius of curvature a gain may take: nearer
+#: the radius, the mask's ends sharpen to a point no writer draws and no reader fits.
+CURVATURE_SHARE = 0.9
 #: Largest dot gain per edge taken, mm.
 MAX_GAIN_MM = 1.0
 
@@ -72,12 +75,18 @@ def process_from(sec: dict[str, Any], where: str) -> Process:
     mirror = sec.get("mirror", "none")
     if mirror not in MIRRORS:
         raise JobError(f"{where}: process.mirror = {mirror!r} must be one of {', '.join(MIRRORS)}")
+    grid = number("grid", 0.0, 1.0)
+    if 0 < grid < DATABASE_UNIT_MM:
+        raise JobError(
+            f"{where}: process.grid = {sec['grid']!r} is finer than the masks' 1 nm "
+            "database unit: give 0 (the 1 nm) or at least 0.000001 mm"
+        )
     return Process(
         dot_gain=gain,
         gain_tolerance=number("gain_tolerance", 0.0, MAX_GAIN_MM),
         min_feature=number("min_feature", 0.0, 10.0),
         min_space=number("min_space", 0.0, 10.0),
-        grid=number("grid", 0.0, 1.0),
+        grid=grid,
         shrink=(float(pair[0]), float(pair[1])),
         mirror=mirror,
     )
@@ -100,20 +109,23 @@ def check_printable(process: Process, kind, smallest: np.ndarray, where: str) ->
     mask_width = width - 2.0 * g
     if mask_width <= max(process.min_feature, 0.0) or mask_width <= 0:
         least = max(process.min_feature, 0.0) + 2.0 * g
+        key = "min_feature" if process.min_feature > 0 else "dot_gain"
         raise JobError(
-            f"{where}: process.dot_gain = {g * um:g} µm leaves the smallest dot "
-            f"({width * um:.4g} µm wide) {mask_width * um:.4g} µm wide on the mask, under "
-            f"min_feature = {process.min_feature * um:g} µm; the narrowest dot that prints "
-            f"is over {least * um:.4g} µm wide"
+            f"{where}: process.{key}: the smallest dot ({width * um:.4g} µm wide) less "
+            f"twice the dot_gain ({g * um:g} µm) is {mask_width * um:.4g} µm wide on the "
+            f"mask, under min_feature = {process.min_feature * um:g} µm; the narrowest dot "
+            f"that prints is over {least * um:.4g} µm wide"
         )
     floor = float(kind.curvature_floor(size)[0])
+    closed = kind.parallel(size, -g) is not None
+    if g > 0 and not closed and g > CURVATURE_SHARE * floor:
+        raise JobError(
+            f"{where}: process.dot_gain = {g * um:g} µm is over {CURVATURE_SHARE:.0%} of the "
+            f"{kind.name}'s smallest radius of curvature ({floor * um:.4g} µm): its mask "
+            "would come to a point at each end (none at all past it); the largest gain it "
+            f"allows is {CURVATURE_SHARE * floor * um:.4g} µm"
+        )
     if g > 0 and floor < g:
-        if kind.parallel(size, -g) is None:
-            raise JobError(
-                f"{where}: process.dot_gain = {g * um:g} µm is over the {kind.name}'s "
-                f"smallest radius of curvature ({floor * um:.4g} µm): no mask prints it; "
-                f"the largest gain it allows is {floor * um:.4g} µm"
-            )
         grown = kind.parallel(kind.parallel(size, -g), g)
         lost = float(kind.area(size)[0] - kind.area(grown)[0])
         share = lost / float(kind.area(size)[0])
@@ -124,10 +136,11 @@ def check_printable(process: Process, kind, smallest: np.ndarray, where: str) ->
             f"give a corner radius of at least {g * um:g} µm"
         )
     gap = process.relaxation_gap(0.0)  # the process's own need, whatever optimize.gap
-    if g < 0 and gap + 2.0 * g <= 0:
+    need = gap - process.snap_margin  # what the grid may leave of the printed gap
+    if g < 0 and need + 2.0 * g <= 0:
         raise JobError(
             f"{where}: process.dot_gain = {g * um:g} µm closes the mask's gap between "
-            f"dots {gap * um:.4g} µm apart when printed; give min_space or min_feature "
+            f"dots {need * um:.4g} µm apart when printed; give min_space or min_feature "
             f"over {-2.0 * g * um:.4g} µm"
         )
     if tol > 0 and process.min_space > 0 and 2.0 * tol >= gap - process.snap_margin:
@@ -136,7 +149,6 @@ def check_printable(process: Process, kind, smallest: np.ndarray, where: str) ->
             f"{(gap - process.snap_margin) * um:.4g} µm gap at its upper end; the printed "
             "gap must outlast the tolerance (raise min_space)"
         )
-    need = gap - process.snap_margin
     if process.grid > 0 and (
         process.grid >= 0.1 * mask_width or (need > 0 and process.grid >= need)
     ):
@@ -149,3 +161,43 @@ def check_printable(process: Process, kind, smallest: np.ndarray, where: str) ->
             f"{where}: process.grid = {process.grid * um:g} µm is coarser than {what}; "
             "a writer's address grid is a fraction of its smallest feature"
         )
+
+
+def check_caps(process: Process, rings, where: str) -> None:
+    """Refuse caps whose printed rings (``[k, 2]`` ``(r_in, r_out)`` mm, or None) the
+    process cannot draw: a ring narrower on the mask than ``min_feature`` (its edges
+    each move in by the gain: a ring under twice the gain turns inside out), a clear
+    space between rings that a negative gain closes, or a scale per axis (the rings
+    would be ellipses).
+
+    Raises:
+        JobError: one line naming the ring and the width it needs.
+    """
+    if rings is None or not len(rings):
+        return
+    um, g = 1e3, process.dot_gain
+    if not process.isotropic:
+        raise JobError(
+            f"{where}: process.shrink = [{process.shrink[0]:g}, {process.shrink[1]:g}] "
+            "scales x and y apart, which would turn the graded caps' rings into ellipses; "
+            "give one shrink"
+        )
+    least = max(process.min_feature, 0.0)
+    for k, (r_in, r_out) in enumerate(rings):
+        width = (r_out - r_in) if r_in > 0 else 2.0 * r_out  # a disc: its diameter
+        on_mask = width - 2.0 * g
+        if on_mask <= least or on_mask <= 0:
+            raise JobError(
+                f"{where}: process.dot_gain = {g * um:g} µm: the caps' ring {k + 1} "
+                f"({r_in * um:.4g}-{r_out * um:.4g} µm) is {on_mask * um:.4g} µm wide on the "
+                f"mask, not over min_feature = {least * um:g} µm; rings must be over "
+                f"{(least + 2.0 * g) * um:.4g} µm wide"
+            )
+    if g < 0:
+        for k in range(1, len(rings)):
+            clear = rings[k][0] - rings[k - 1][1] + 2.0 * g
+            if rings[k][0] > rings[k - 1][1] and clear <= least:
+                raise JobError(
+                    f"{where}: process.dot_gain = {g * um:g} µm closes the clear space "
+                    f"between the caps' rings {k} and {k + 1} on the mask"
+                )

@@ -34,7 +34,7 @@ from .light_guide import (
     design_from,
     light_guide_from,
 )
-from .process import PROCESS_KEYS, check_printable, process_from
+from .process import PROCESS_KEYS, check_caps, check_printable, process_from
 from .shaping import DOT_SHAPE_KEYS, ORIENTATION_KEYS, dot_shape, orientation, shape_sizes
 from .sheet import SHEET_KEYS, sheet_from
 
@@ -293,6 +293,7 @@ def job_from_dict(
             opt = replace(opt, gap=process.relaxation_gap(opt.gap))
         except JobError as e:
             raise JobError(f"{where}: {e}") from None
+        check_caps(process, None if domain is None else domain.cap_rings, where)
         if process.grid > 0:  # dots kept off the walls by what the grid may move them
             panel = domain or Domain.rect(x0, y0, x0 + width, y0 + height)
             domain = replace(panel, edge_margin=panel.edge_margin + process.snap_margin)

@@ -86,7 +86,7 @@ def printed_box(process: Process, rings: list[np.ndarray]) -> tuple[float, float
 
 def _on_grid(process: Process, ring: np.ndarray) -> np.ndarray:
     """``ring`` (mm) on the grid, repeated vertices dropped (a grid as coarse as the
-    tolerance merges neighbours)."""
+    tolerance merges neighbours); without a grid, as drawn (the writer rounds it)."""
     if process.grid <= 0:
         return ring
     ring = process.snap(ring)

@@ -17,6 +17,8 @@ import numpy as np
 
 #: Largest moulding shrink taken, as a share (resins shrink 0.2-0.8 %).
 MAX_SHRINK = 0.1
+#: The masks' database unit, mm (GDSII/OASIS 1 nm): the finest grid there is.
+DATABASE_UNIT_MM = 1e-6
 #: What ``mirror`` may be.
 MIRRORS = ("none", "x", "y")
 
@@ -77,10 +79,10 @@ class Process:
         return kind.parallel(size, -self.dot_gain)
 
     def snap(self, v: np.ndarray) -> np.ndarray:
-        """``v`` (mask mm) on the address grid (unchanged without one)."""
-        if self.grid <= 0:
-            return v
-        return np.round(v / self.grid) * self.grid
+        """``v`` (mask mm) on the address grid, or without one on the files' 1 nm (a
+        scaled centre off it would drift in an OASIS repetition's rounded offsets)."""
+        step = self.grid if self.grid > 0 else DATABASE_UNIT_MM
+        return np.round(np.asarray(v) / step) * step
 
     def place(self, xy: np.ndarray, box) -> np.ndarray:
         """``[n, 2]`` mask positions (mm, on the grid) of printed positions ``xy``:

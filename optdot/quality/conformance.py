@@ -22,6 +22,7 @@ a function of position; random angles have nothing to hold them to).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -79,6 +80,17 @@ class DotRule:
     sizes: DotSizes | None = None
     band: SizeBand | None = None
     tolerance: float = TOLERANCE
+
+    def angle_slack_deg(self) -> float:
+        """How far, degrees, a footprint's angle read off a mask on a process's grid may
+        be off: its size's slack over the footprint's length less its width (the
+        difference of axes the angle is read from); 0 on the files' own 1 nm grid, and
+        for round footprints."""
+        extra = self.tolerance - TOLERANCE
+        size = self.shape.size
+        if extra <= 0 or self.shape.kind.round or len(size) < 2 or size[0] <= size[1]:
+            return 0.0
+        return math.degrees(math.atan(extra / (size[0] - size[1])))
 
     def describe(self) -> str:
         """The job's dot in words, sizes in µm: ``circle 46 µm``, ``ellipse 80 × 40 µm``,

@@ -237,13 +237,14 @@ def judge(
             )
         )
     turned = m.get("orientation") or {}
+    field_limit = MAX_FIELD_ERROR_DEG + (rule.angle_slack_deg() if rule is not None else 0.0)
     if "field_error_max_deg" in turned:
         checks.append(
             Check(
                 "largest angle of a dot off the orientation field where it stands, degrees",
                 turned["field_error_max_deg"],
-                MAX_FIELD_ERROR_DEG,
-                turned["field_error_max_deg"] <= MAX_FIELD_ERROR_DEG,
+                field_limit,
+                turned["field_error_max_deg"] <= field_limit,
             )
         )
     if density is not None:

@@ -81,6 +81,20 @@ class Circle(Kind):
         ok = len(points) >= MIN_VERTICES and spread <= slack + share * r
         return Fit(ok, c, np.array([2.0 * r]), 0.0, (float(rad.min()), float(rad.max())))
 
+    def fit_grown(self, points: np.ndarray, g: float, slack: float, share: float = 0.0) -> Fit:
+        """The circle through the vertices by least squares (a grid's snapping can merge
+        or crowd them, which pulls their mean off the centre), grown by ``g``; a fit when
+        their distances from its centre spread by at most ``slack + share r``."""
+        x, y = points[:, 0], points[:, 1]
+        m = np.column_stack([x, y, np.ones_like(x)])
+        sol, *_ = np.linalg.lstsq(m, x * x + y * y, rcond=None)
+        c = 0.5 * sol[:2]
+        rad = np.hypot(*(points - c).T)
+        r = float(np.sqrt(max(sol[2] + c @ c, 0.0)))
+        ok = len(points) >= MIN_VERTICES and float(np.ptp(rad)) <= slack + share * r
+        size = np.array([2.0 * (r + g)])
+        return Fit(ok, c, size, 0.0, (float(rad.min()) + g, float(rad.max()) + g))
+
 
 @nb.njit(cache=True, inline="always")
 def inside(f, k, dx, dy):  # pragma: no cover - compiled

@@ -160,6 +160,15 @@ class Ellipse(Kind):
             if conic is None or not conic[1][1] > 0:
                 return self.fit(points + g * n, slack, share)
             f = _judged(points + g * n, *conic, slack, share)
+        # the vertices alone can sit on an ellipse that is not the outline (a rectangle's
+        # corners): the polygon grown by g (Steiner) must cover the ellipse's area too
+        xs, ys = points[:, 0], points[:, 1]
+        area = 0.5 * abs(float(np.dot(xs, np.roll(ys, -1)) - np.dot(ys, np.roll(xs, -1))))
+        rim = float(np.hypot(*(np.roll(points, -1, axis=0) - points).T).sum())
+        grown = area + rim * g + math.pi * g * g
+        want, per = float(self.area(f.size[None])[0]), float(self.perimeter(f.size[None])[0])
+        if abs(grown - want) > per * (slack + share * 0.5 * float(f.size[0])):
+            return Fit(False, f.centre, f.size, f.angle, f.radii)
         return f
 
     def fit(self, points: np.ndarray, slack: float, share: float = 0.0) -> Fit:
