@@ -469,6 +469,15 @@ def test_masks_on_a_coarse_grid_pass_their_own_qa(tmp_path, dots, orientation, g
     for mask in outs:
         rc, err, out = cli("qa", mask, "--job", path)
         assert rc == 0, (mask.name, err, [x for x in out.splitlines() if x.startswith("FAIL")])
+    import gdstk
+
+    top = gdstk.read_gds(str(outs[0])).top_level()[0].copy("FLAT", deep_copy=True)
+    top.flatten()
+    rings = [q.points for q in top.polygons if q.layer == 1]
+    assert len(rings) > 100
+    for ring in rings:  # snapped vertices neither repeat nor cross: a writer takes them
+        assert np.all(np.any(ring != np.roll(ring, 1, axis=0), axis=1))
+        assert shapely.Polygon(ring).is_valid
 
 
 def test_caps_that_cannot_print_are_refused(tmp_path):

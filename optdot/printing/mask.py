@@ -21,7 +21,7 @@ def mask_ring(process: Process, kind, size: np.ndarray, tolerance: float) -> np.
     one printed footprint of ``size`` (``[k]`` mm): its parallel body at ``-g`` within
     ``tolerance`` mm, scaled, each vertex on the grid."""
     ring = kind.parallel_outline(np.asarray(size, float), -process.dot_gain, tolerance)
-    return _on_grid(process, ring * process.scale)
+    return _on_grid(process, _thinned(ring * process.scale, process.grid))
 
 
 def mask_polygons(
@@ -32,6 +32,7 @@ def mask_polygons(
     (``[n]`` rad), one each: what a writer draws when a reference cannot place the cell of
     :func:`mask_ring` exactly (a turned dot off the grid, a scale per axis)."""
     ring = kind.parallel_outline(np.asarray(size, float), -process.dot_gain, tolerance)
+    ring = _thinned(ring, process.grid / float(np.min(process.scale)))
     out = []
     for (x, y), t in zip(np.asarray(xy, float).tolist(), np.asarray(angle).tolist(), strict=True):
         pts = process.place(turned(ring, float(t)) + (x, y), box)
@@ -82,6 +83,29 @@ def printed_box(process: Process, rings: list[np.ndarray]) -> tuple[float, float
     pts = np.concatenate(rings) / process.scale
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     return (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+
+
+#: Nearest two vertices of a ring may lie before it is put on a grid, in grid steps: each
+#: moves by at most half a step's diagonal (0.71), so vertices further apart than √2 steps
+#: keep their order and never fall on one grid point (no repeated vertex, no ring that
+#: crosses itself).
+GRID_SPACING = 1.5
+
+
+def _thinned(ring: np.ndarray, grid: float) -> np.ndarray:
+    """``ring`` (``[v, 2]``, a convex outline's inscribed polygon) keeping only vertices
+    :data:`GRID_SPACING` grid steps or more from the last kept (and from the first): still
+    inscribed, each chord a little longer. Unchanged without a grid."""
+    if grid <= 0 or len(ring) < 4:
+        return ring
+    step = GRID_SPACING * grid
+    keep = [0]
+    for k in range(1, len(ring)):
+        if np.hypot(*(ring[k] - ring[keep[-1]])) >= step:
+            keep.append(k)
+    while len(keep) > 3 and np.hypot(*(ring[keep[-1]] - ring[0])) < step:
+        keep.pop()
+    return ring[keep]
 
 
 def _on_grid(process: Process, ring: np.ndarray) -> np.ndarray:
