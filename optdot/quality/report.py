@@ -351,6 +351,12 @@ judges the dots against the map, this one the map and the dots against the LEDs.
 """
 
 
+def _turn(angle: float) -> np.ndarray:
+    """``[2, 2]`` the matrix turning row vectors counter-clockwise by ``angle`` rad."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, s], [-s, c]])
+
+
 def _band_text(sim: dict) -> str:
     """The process's tolerance band as traced (the real dots grown to each end of the
     gain), in words; empty without one."""
@@ -490,15 +496,25 @@ def _figures(result: QAResult) -> list[tuple[str, str]]:
         ax.add_collection(
             PolyCollection([feet.outline(k, tol) + zxy[k] for k in range(feet.n)], fc="k")
         )
+    band = m.get("tolerance_band")
+    if band and feet.n:  # the mask each dot prints from, at the print's scale
+        g = band["gain_mm"][1]
+        tol = 0.002 * float(np.median(feet.extent()))
+        rings = [
+            feet.kind.parallel_outline(feet.size[k], -g, tol) @ _turn(feet.angles[k]) + zxy[k]
+            for k in range(feet.n)
+        ]
+        ax.add_collection(PolyCollection(rings, fc="none", ec="deepskyblue", lw=0.6))
     if len(seg):
         ax.add_collection(LineCollection(seg, colors="orange", linewidths=1))
+    masked = "; the mask it prints from in blue" if band else ""
     ax.set(
         xlim=(tx0, tx0 + s),
         ylim=(ty0, ty0 + s),
         aspect="equal",
         xlabel="x (mm)",
         ylabel="y (mm)",
-        title=_wrap("True-scale zoom of the densest region (close pairs in orange)"),
+        title=_wrap(f"True-scale zoom of the densest region (close pairs in orange{masked})"),
     )
     save(fig, "densest region")
 
