@@ -36,7 +36,8 @@ def write_laser(pattern: Pattern, path: str | Path, opts: ExportOptions) -> str:
     against the pattern's own order, and the machining time estimated.
 
     Raises:
-        ExportError: a suffix of no dialect, shaped dots (a laser's dots are round).
+        ExportError: a suffix of no dialect, shaped dots (a laser's dots are round), a
+            process's mirror (a laser path is the print; it has none).
     """
     path = Path(path)
     suffix = path.suffix.lower()
@@ -44,6 +45,13 @@ def write_laser(pattern: Pattern, path: str | Path, opts: ExportOptions) -> str:
         raise ExportError(
             f"{path}: a laser path is G-code ({', '.join(GCODE)}), HPGL/2 "
             f"({', '.join(HPGL)}) or a CSV point list (.csv)"
+        )
+    process = opts.process
+    if process is not None and process.mirror != "none":
+        raise ExportError(
+            f"{path}: process.mirror = {process.mirror!r} mirrors a mask printed emulsion side "
+            "down; a laser path dots the part itself and has no mirror: leave mirror out of a "
+            "laser-dotted job"
         )
     if not pattern.kind.round:
         raise ExportError(

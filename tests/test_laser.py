@@ -183,3 +183,11 @@ def test_shaped_dots_and_unknown_suffixes_are_refused(tmp_path):
     path = write_job(tmp_path, np.full((2, 2), 0.2))
     one_error(["export", path, "--laser", tmp_path / "l.txt"], 2, "G-code", "HPGL/2", ".csv")
     assert not (tmp_path / "l.txt").exists()
+
+
+def test_a_mirror_on_a_laser_path_is_refused(tmp_path):
+    """A laser dots the part itself: a process's mirror (for masks printed emulsion side
+    down) has no meaning in its path, and is refused rather than silently dropped."""
+    path = write_job(tmp_path, np.full((2, 2), 0.2), process={"mirror": '"x"'})
+    one_error(["export", path, "--laser", tmp_path / "l.nc"], 2, "process.mirror = 'x'", "laser")
+    assert not (tmp_path / "l.nc").exists()
