@@ -95,9 +95,9 @@ def process_from(sec: dict[str, Any], where: str) -> Process:
 def check_printable(process: Process, kind, smallest: np.ndarray, where: str) -> None:
     """Refuse, before any work, dots that cannot print: ``smallest`` (``[k]`` mm, the
     job's smallest footprint of ``kind``, as printed) shrunk by the gain must keep a
-    width of ``min_feature`` and be exact (the gain within its smallest radius of
-    curvature), the gain and its tolerance must not close the gap, and the grid must be
-    finer than the gap it keeps.
+    width of ``min_feature`` after the grid (``√2 grid`` less at most) and be exact (the
+    gain within its smallest radius of curvature), the gain and its tolerance must not
+    close the gap, and the grid must be finer than the gap it keeps.
 
     Raises:
         JobError: one line naming the key, the figure and what would print.
@@ -107,8 +107,9 @@ def check_printable(process: Process, kind, smallest: np.ndarray, where: str) ->
     width = float(size[0, 1] if len(size[0]) > 1 else size[0, 0])
     um = 1e3
     mask_width = width - 2.0 * g
-    if mask_width <= max(process.min_feature, 0.0) or mask_width <= 0:
-        least = max(process.min_feature, 0.0) + 2.0 * g
+    snapped = math.sqrt(2.0) * process.grid  # what the grid may take from a width
+    if mask_width - snapped <= max(process.min_feature, 0.0) or mask_width <= 0:
+        least = max(process.min_feature, 0.0) + 2.0 * g + snapped
         key = "min_feature" if process.min_feature > 0 else "dot_gain"
         raise JobError(
             f"{where}: process.{key}: the smallest dot ({width * um:.4g} µm wide) less "
