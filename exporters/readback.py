@@ -207,7 +207,7 @@ def _layout_caps(
         if len(pts) == 1 and opts.process is None:
             fit = CIRCLE.fit(pts[0].points, 2e-6 / to_mm, RADIUS_SPREAD)
         elif len(pts) == 1:  # the cap it prints
-            at = unscaled(opts.process, pts[0].points, to_mm)
+            at = unscaled(opts.process, pts[0].points)
             g = opts.process.dot_gain / to_mm
             slack = (2e-6 + GRID_SLACK * opts.process.grid) / to_mm
             fit = CIRCLE.fit_grown(at, g, slack, RADIUS_SPREAD)
@@ -433,7 +433,7 @@ def _footprint(path: Path, pts: np.ndarray, what: str, to_mm: float, process=Non
     if process is None:
         fits = ((k, k.fit(pts, slack, RADIUS_SPREAD)) for k in KINDS.values())
     else:
-        at = unscaled(process, pts, to_mm)
+        at = unscaled(process, pts)
         g = process.dot_gain / to_mm
         fits = ((k, k.fit_grown(at, g, slack, RADIUS_SPREAD)) for k in KINDS.values())
     fit = None

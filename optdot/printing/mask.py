@@ -71,9 +71,9 @@ def printed_cap_rings(process: Process, rings: np.ndarray) -> np.ndarray:
     return np.column_stack([np.where(r[:, 0] > 0, r[:, 0] - g, 0.0), r[:, 1] + g])
 
 
-def unscaled(process: Process, pts: np.ndarray, to_mm: float) -> np.ndarray:
-    """Points of a mask (``[v, 2]``, file units of ``to_mm`` mm) at the print's scale,
-    same units: what a footprint is fitted on."""
+def unscaled(process: Process, pts: np.ndarray) -> np.ndarray:
+    """Points of a mask (``[v, 2]``, any unit) at the print's scale, same unit: what a
+    footprint is fitted on."""
     return pts / (process.scale if not process.isotropic else float(process.scale[0]))
 
 
