@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from optdot.errors import ExportError
+from optdot.geometry.kinds import Kind
 from optdot.printing.laser import Laser
 from optdot.printing.process import Process
 from optdot.printing.sheet import Sheet
@@ -37,6 +38,8 @@ class ExportOptions:
             ``[laser]``: its sizes, speed, acceleration, dwell), or None.
         sheet: the production sheet a mask repeats the panel on (the job's ``[sheet]``),
             or None: the mask is one panel.
+        kind: the job's dot kind: a mask's dots are recognised as it where it is made
+            per job (a polygon, whose vertices only the job knows), or None.
         labels: each panel's label on the sheet, row by row
             (:func:`optdot.printing.sheet.label_text`).
     """
@@ -55,6 +58,7 @@ class ExportOptions:
     process: Process | None = None
     laser: Laser | None = None
     sheet: Sheet | None = None
+    kind: Kind | None = None
     labels: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:

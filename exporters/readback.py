@@ -344,7 +344,7 @@ def _collect(
         for poly in cell.polygons:
             if (poly.layer, poly.datatype) != on_layer:
                 continue
-            fit = _footprint(path, poly.points, "a polygon", to_mm, opts.process)
+            fit = _footprint(path, poly.points, "a polygon", to_mm, opts.process, opts.kind)
             at = _origins(path, poly.repetition, fit[1].centre, budget, gds)
             centres.append((at @ a.T + b) * to_mm)
             diameters.append(Drawn.of(fit, a, len(at), scale * to_mm))
@@ -389,7 +389,7 @@ def _collect(
                 f"{path}: cell {sub.name} holds {len(pts)} shapes on layer "
                 f"{opts.layer}/{opts.datatype}; a dot cell holds one circle"
             )
-        fit = _footprint(path, pts[0].points, f"cell {sub.name}", to_mm, opts.process)
+        fit = _footprint(path, pts[0].points, f"cell {sub.name}", to_mm, opts.process, opts.kind)
         off = 1e-6 + (0.0 if opts.process is None else GRID_SLACK * opts.process.grid)
         if np.hypot(*fit[1].centre) * to_mm > off:
             raise PatternFileError(
@@ -423,19 +423,32 @@ class Drawn:
         return cls(kind, np.tile(size, (k, 1)), np.full(k, turn))
 
 
-def _footprint(path: Path, pts: np.ndarray, what: str, to_mm: float, process=None):
+def _kinds(job_kind: Kind | None) -> list[Kind]:
+    """The kinds a dot polygon is tried as: the registry's in order, where a kind made
+    per job (:attr:`~optdot.geometry.kinds.base.Kind.derived`, a polygon) recognises
+    nothing; the job's own such kind right after the circle (a square polygon is the
+    job's, not a rectangle)."""
+    kinds = [k for k in KINDS.values() if not k.derived]
+    if job_kind is not None and job_kind.derived:
+        kinds.insert(1, job_kind)
+    return kinds
+
+
+def _footprint(path: Path, pts: np.ndarray, what: str, to_mm: float, process=None, job_kind=None):
     """``(kind, fit)`` of a dot polygon (its centre, size and angle in the file's units):
     a circle (:meth:`optdot.geometry.kinds.circle.Circle.fit`: vertex radii within 2 nm
     plus :data:`RADIUS_SPREAD` of the radius), else another kind of the registry to the
-    same tolerance, or refuse it. With a ``process``, the footprint the polygon prints:
-    fitted at the print's scale as the dot it grows to (its centre kept on the mask)."""
+    same tolerance (a polygon: the job's, ``job_kind``), or refuse it. With a
+    ``process``, the footprint the polygon prints: fitted at the print's scale as the
+    dot it grows to (its centre kept on the mask)."""
     slack = (2e-6 + (0.0 if process is None else GRID_SLACK * process.grid)) / to_mm
+    kinds = _kinds(job_kind)
     if process is None:
-        fits = ((k, k.fit(pts, slack, RADIUS_SPREAD)) for k in KINDS.values())
+        fits = ((k, k.fit(pts, slack, RADIUS_SPREAD)) for k in kinds)
     else:
         at = unscaled(process, pts)
         g = process.dot_gain / to_mm
-        fits = ((k, k.fit_grown(at, g, slack, RADIUS_SPREAD)) for k in KINDS.values())
+        fits = ((k, k.fit_grown(at, g, slack, RADIUS_SPREAD)) for k in kinds)
     fit = None
     for kind, other in fits:  # the circle first: a disc of any kind reads as one
         fit = fit or other
@@ -446,13 +459,14 @@ def _footprint(path: Path, pts: np.ndarray, what: str, to_mm: float, process=Non
     at = np.round(fit.centre * to_mm, 9) + 0.0  # no -0 or 1e-20 noise in the message
     lo, hi = (v * to_mm * 1e3 for v in fit.radii)
     hint = (
-        " (a mask drawn for a [process] on a coarser grid reads with its job)"
-        if process is None
+        " (a mask drawn for a [process] on a coarser grid, or of polygon dots, reads with its job)"
+        if process is None or job_kind is None
         else ""
     )
+    tried = kinds_text(kinds) + ("" if job_kind in kinds else ", nor a job's polygon")
     raise PatternFileError(
         f"{path}: {what} at ({at[0]:.6g}, {at[1]:.6g}) mm on the dot layer is not "
-        f"{kinds_text()} ({len(pts)} vertices, radii {lo:.4g}..{hi:.4g} "
+        f"{tried} ({len(pts)} vertices, radii {lo:.4g}..{hi:.4g} "
         f"µm); qa checks those dots only{hint}"
     )
 
@@ -482,7 +496,7 @@ def read_dxf(path: Path, opts: ExportOptions | None = None) -> Pattern:
                 x, y = (v * scale for v in _dxf_dot(path, e, kind))
                 caps.append((round(x, 6), round(y, 6), round(2 * float(e.dxf.radius) * scale, 6)))
             elif layer == "DOTS" and kind != "CIRCLE":
-                shaped.append(_dxf_shape(path, e, kind, scale, opts.process))
+                shaped.append(_dxf_shape(path, e, kind, scale, opts.process, opts.kind))
             elif layer == "DOTS":
                 xy_l.append(_dxf_dot(path, e, kind))
                 r_l.append(float(e.dxf.radius))
@@ -638,7 +652,9 @@ def _rows(caps: list) -> np.ndarray:
 DXF_FLATTEN_MM = 1e-5
 
 
-def _dxf_shape(path: Path, e, kind: str, scale: float, process=None) -> tuple[Kind, Fit]:
+def _dxf_shape(
+    path: Path, e, kind: str, scale: float, process=None, job_kind: Kind | None = None
+) -> tuple[Kind, Fit]:
     """``(kind, fit)`` (mm) of a shaped dot drawn in world coordinates: an ELLIPSE read
     from its axes, a closed polyline fitted (:func:`_footprint`) from its outline
     flattened to :data:`DXF_FLATTEN_MM`; anything else on ``DOTS`` is refused."""
@@ -663,7 +679,7 @@ def _dxf_shape(path: Path, e, kind: str, scale: float, process=None) -> tuple[Ki
         pts = np.array([(v.x, v.y) for v in dxf_path.make_path(e).flattening(1e-5 / scale)])
         if len(pts) > 1 and np.allclose(pts[0], pts[-1]):
             pts = pts[:-1]
-        kind_, fit = _footprint(path, pts * scale, where, 1.0, process)
+        kind_, fit = _footprint(path, pts * scale, where, 1.0, process, job_kind)
         if kind_.arc_param is not None and kind == "LWPOLYLINE":
             fit = _bulge_radius(e, kind_, fit, scale, process)
         return kind_, fit  # a round outline (a disc-shaped block) is read as a disc

@@ -12,6 +12,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from optdot.config.schema import load_job
+from optdot.geometry.kinds.polygon import Polygon, canonical
 from optdot.geometry.shapes import CIRCLE, KINDS, DotShape, Footprints
 from optdot.geometry.sizes import DotSizes
 from optdot.io.patterns import load_pattern, save_pattern
@@ -212,9 +213,15 @@ def test_the_rule_takes_every_size_it_makes_and_no_other(name, steps, which, sig
 
 def test_a_kind_pickles_to_the_registry_s_own():
     """A shaped pattern read back in a child process (masks are) keeps the registry's
-    kind, so it is compared by identity with the job's."""
+    kind, so it is compared by identity with the job's; a polygon made for a job comes
+    back with its vertices, equal to the job's and to no other."""
     for kind in KINDS.values():
         assert pickle.loads(pickle.dumps(kind)) is kind
+    hexagon = Polygon(canonical([[0.03, 0], [0.015, 0.026], [-0.015, 0.026], [-0.03, 0],
+                                 [-0.015, -0.026], [0.015, -0.026]]))  # fmt: skip
+    back = pickle.loads(pickle.dumps(hexagon))
+    assert back == hexagon and back is not hexagon and hash(back) == hash(hexagon)
+    assert back != Polygon(hexagon.base * 1.001) and back != KINDS["polygon"]
 
 
 def test_the_file_s_own_collision_distance_without_a_job(tmp_path):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import click
@@ -50,8 +51,12 @@ def _read_with_job(path: Path, job, opts=None):
     from ..exporters.readback import read_any
     from ..pipeline import with_job_panel
 
-    if opts is None and job is not None and job.process is not None:
-        opts = ExportOptions(process=job.process)
+    if job is not None:  # a mask read as the job's dots, printed by its process
+        made = job.shape.kind if job.shape is not None and job.shape.kind.derived else None
+        if opts is None and (job.process is not None or made is not None):
+            opts = ExportOptions(process=job.process, kind=made)
+        elif opts is not None and made is not None and opts.kind is None:
+            opts = replace(opts, kind=made)
 
     stored = path.suffix.lower() in (".npz", ".parquet")  # these keep their panel's box
     pattern = read_any(path, opts, box=job.box if job and not stored else None)

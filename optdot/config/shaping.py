@@ -39,6 +39,7 @@ from .grids import load_grid
 DOT_SHAPE_KEYS: dict[str, tuple[type, ...]] = {
     "shape": (str,),
     **{p: (int, float) for k in KINDS.values() if k is not CIRCLE for p in k.params},
+    **{key: t for k in KINDS.values() for key, t in k.keys.items()},
     "scale": (list,),
 }
 ORIENTATION_KEYS: dict[str, tuple[type, ...]] = {
@@ -88,6 +89,8 @@ def dot_shape(dots: dict[str, Any], where: str) -> DotShape | None:
             + ", ".join(f"dots.{p}" for p in kind.params)
         )
     lo, hi = DIAMETER_RANGE_MM
+    if kind.derived:
+        return _derived_shape(kind, dots, sized, where)
     size = []
     for p in kind.params:
         if p not in dots:
@@ -100,7 +103,7 @@ def dot_shape(dots: dict[str, Any], where: str) -> DotShape | None:
             )
         size.append(v)
     for p in sized:
-        if p not in kind.params:
+        if p not in kind.params and p not in kind.keys:
             raise JobError(f"{where}: dots.{p} does not apply to {_a(name)}")
     length, width = size[0], size[1]
     if width > length:
@@ -116,6 +119,42 @@ def dot_shape(dots: dict[str, Any], where: str) -> DotShape | None:
     problem = kind.problem(tuple(size))
     if problem is not None:
         raise JobError(f"{where}: {problem}")
+    return DotShape(kind, tuple(size))
+
+
+def _derived_shape(kind, dots: dict[str, Any], sized: list[str], where: str) -> DotShape:
+    """The ``[dots]`` shape of a kind whose sizes its own keys give (a polygon's
+    vertices): refuse the size keys, then its sizes as every shape's.
+
+    Raises:
+        JobError: a size key given, the kind's keys wrong, a size out of range, an
+            aspect over :data:`MAX_ASPECT`.
+    """
+    for p in sized:
+        if p in kind.params:
+            raise JobError(
+                f"{where}: dots.{p} is not given for {_a(kind.name)}: its "
+                f"{' and '.join(kind.params)} come from dots.{', dots.'.join(kind.keys)}"
+            )
+        if p not in kind.keys:
+            raise JobError(f"{where}: dots.{p} does not apply to {_a(kind.name)}")
+    try:
+        kind, size = kind.from_job(dots, where)
+    except ValueError as e:
+        raise JobError(f"{where}: {e}") from None
+    lo, hi = DIAMETER_RANGE_MM
+    for p, v in zip(kind.params, size, strict=True):
+        if not lo <= v <= hi:
+            raise JobError(
+                f"{where}: dots.{next(iter(kind.keys))} make a dot {v:g} mm in {p}; "
+                f"it must be {lo:g} <= {p} <= {hi:g} mm"
+            )
+    aspect = float(kind.aspect(np.array([size]))[0])
+    if aspect > MAX_ASPECT:
+        raise JobError(
+            f"{where}: dots.{next(iter(kind.keys))} make a dot {aspect:.4g} times longer than "
+            f"wide, which cannot be drawn (at most {MAX_ASPECT:g})"
+        )
     return DotShape(kind, tuple(size))
 
 
@@ -150,10 +189,11 @@ def shape_sizes(dots: dict[str, Any], shape: DotShape, qa_sec: dict[str, Any], q
     if not (math.isfinite(low) and math.isfinite(high) and 0 < low < high):
         raise JobError(f"{where}: dots.scale = {value!r} must be [low, high] with 0 < low < high")
     lo, hi = DIAMETER_RANGE_MM
-    if low * shape.size[1] < lo or high * shape.size[0] > hi:
+    least, most = min(shape.size[:2]), max(shape.size[:2])
+    if low * least < lo or high * most > hi:
         raise JobError(
-            f"{where}: dots.scale = {value!r} makes dots {low * shape.size[1]:g} to "
-            f"{high * shape.size[0]:g} mm; sizes must stay within {lo:g}..{hi:g} mm"
+            f"{where}: dots.scale = {value!r} makes dots {low * least:g} to "
+            f"{high * most:g} mm; sizes must stay within {lo:g}..{hi:g} mm"
         )
     for key in ("close_distance", "collision_distance"):
         if key in qa_sec:
@@ -254,7 +294,7 @@ def check_shaped_fill(job, fill: float, where: str, at: str = "") -> None:
     ring = shape.kind.outline(np.asarray(shape.size), 0.0, 1e-4 * shape.extent)
     grown = shapely.Polygon(ring).buffer(0.5 * job.optimize.gap, quad_segs=32).area
     spread = grown / shape.area
-    limit = shaped_fill_limit(shape.size[0] / shape.size[1])
+    limit = shaped_fill_limit(float(shape.kind.aspect(np.array([shape.size]))[0]))
     if fill * spread >= limit:
         sizes = " × ".join(f"{v * 1e3:.4g}" for v in shape.size[:2])
         most = limit / spread

@@ -92,10 +92,11 @@ class Orientation:
         return 0.5 * np.arctan2(parts[1], parts[0])
 
 
-def axis(angle: np.ndarray) -> np.ndarray:
-    """Angles (rad) as axes: the same direction modulo π, in ``(-π/2, π/2]``."""
-    a = np.mod(angle + 0.5 * np.pi, np.pi) - 0.5 * np.pi
-    return np.where(a <= -0.5 * np.pi, a + np.pi, a)
+def axis(angle: np.ndarray, period: float = np.pi) -> np.ndarray:
+    """Angles (rad) as axes: the same turn modulo ``period`` (π: an axis; a footprint's
+    :attr:`~optdot.geometry.kinds.base.Kind.period`), in ``(-period/2, period/2]``."""
+    a = np.mod(angle + 0.5 * period, period) - 0.5 * period
+    return np.where(a <= -0.5 * period, a + period, a)
 
 
 def _unit_hash(xy: np.ndarray, seed: int) -> np.ndarray:

@@ -70,7 +70,7 @@ class DotShape:
         """The radius of the largest disc about its centre inside it (half the width),
         mm: two footprints whose centres are nearer than twice it (plus the gap) are
         too close at any angles."""
-        return 0.5 * float(self.size[1])
+        return float(self.kind.inradius(np.array([self.size]))[0])
 
     @property
     def equivalent_diameter(self) -> float:

@@ -33,6 +33,7 @@ import numpy as np
 
 from ..errors import PatternFileError, one_line
 from ..geometry.caps import caps_problem, rings_problem
+from ..geometry.kinds import kind_of
 from ..geometry.shapes import CIRCLE, KINDS, Kind
 
 MANIFEST = "_manifest.json"
@@ -52,8 +53,9 @@ def columns(kind: Kind) -> tuple[str, ...]:
 
 
 def manifest_kind(doc: dict[str, Any]) -> Kind:
-    """The footprint kind of a (checked) manifest's dots: its ``shape``, or the circle."""
-    return KINDS[doc.get("shape", CIRCLE.name)]
+    """The footprint kind of a (checked) manifest's dots: its ``shape`` (with its
+    ``shape_spec``), or the circle."""
+    return kind_of(doc.get("shape", CIRCLE.name), doc.get("shape_spec"))
 
 
 def part_name(k: int) -> str:
@@ -119,6 +121,11 @@ def manifest_problem(doc: dict[str, Any]) -> str | None:
         return "meta must be an object"
     if "shape" in doc and (doc["shape"] not in KINDS or doc["shape"] == CIRCLE.name):
         return f"shape must be one of {', '.join(k for k in KINDS if k != CIRCLE.name)}"
+    if "shape" in doc:
+        try:
+            kind_of(doc["shape"], doc.get("shape_spec"))
+        except ValueError as e:
+            return f"shape_spec: {e}"
     if "shape" in doc and u is not None:
         return "uniform_diameter_mm must be null for shaped dots"
     if "outline_wkb_hex" in doc and not isinstance(doc["outline_wkb_hex"], str):
@@ -223,6 +230,8 @@ def manifest_of(
     they are written (:class:`DatasetWriter`). ``kind``: the dots' footprint kind
     (named only when not the circle: a disc dataset's manifest is as it always was)."""
     shaped = {} if kind is CIRCLE else {"shape": kind.name}
+    if kind.spec():
+        shaped["shape_spec"] = kind.spec()
     return {
         **shaped,
         "job": job,

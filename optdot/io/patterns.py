@@ -3,14 +3,17 @@
 * CSV: header ``x_mm,y_mm,diameter_mm``, one dot a row, 6 decimals (1 nm). Shaped dots:
   ``x_mm,y_mm``, the kind's sizes (``length_mm,width_mm`` for an ellipse, then
   ``corner_radius_mm`` for a rounded rectangle) and ``angle_deg`` (the long axis from +x,
-  counter-clockwise, 1e-6°); the header names the kind.
+  counter-clockwise, 1e-6°); the header names the kind. A kind made per job (a
+  polygon) is named on a line before the header, ``# {"shape": "polygon",
+  "vertices_mm": [[x, y], ...]}`` (JSON after ``# ``).
 * NPZ: arrays ``xy`` ``[n, 2]`` (mm), ``diameter`` (mm: a 0-d array when every dot has
   the same size, else ``[n]``), ``box`` ``[4]`` (mm) and ``meta`` (JSON text), plus
   ``outline_wkb``/``edge_margin`` for outlines (and ``caps`` ``[m, 3]``, ``x, y,
   diameter`` mm, when the outline has caps: :mod:`optdot.geometry.caps`, with
   ``cap_rings`` ``[k, 2]`` ``r_in, r_out`` mm when they are graded); shaped dots
   hold ``shape`` (the kind's name), ``size`` (mm, ``[k]`` or ``[n, k]``) and
-  ``angle_deg`` ``[n]`` instead of ``diameter``. A zip with fixed timestamps so equal
+  ``angle_deg`` ``[n]`` instead of ``diameter`` (and ``shape_spec``, JSON text, for a kind
+  made per job). A zip with fixed timestamps so equal
   patterns give equal bytes.
 """
 
@@ -31,6 +34,7 @@ from ..errors import ExportError, PatternFileError, one_line
 from ..files import input_problem
 from ..geometry.caps import caps_problem, rings_problem
 from ..geometry.domain import Domain, orient_all
+from ..geometry.kinds import kind_of
 from ..geometry.limits import validate_dots
 from ..geometry.orientation import degrees
 from ..geometry.shapes import CIRCLE, KINDS, Footprints, Kind
@@ -50,8 +54,21 @@ def csv_header(kind: Kind) -> str:
     return ",".join(["x_mm", "y_mm", *(f"{p}_mm" for p in kind.params), "angle_deg"])
 
 
-#: Each header a pattern CSV may have, and its kind.
-CSV_KINDS = {csv_header(k): k for k in KINDS.values()}
+#: Each header a pattern CSV may have, and its kind (a kind made per job is named on
+#: the line before, :func:`csv_preamble`).
+CSV_KINDS = {csv_header(k): k for k in KINDS.values() if not k.derived}
+#: What starts the line naming a kind made per job before a CSV's header.
+CSV_SPEC = "# "
+
+
+def csv_preamble(kind: Kind) -> str:
+    """The line before a CSV's header naming ``kind`` when the header cannot (a kind
+    made per job: its name and :meth:`~optdot.geometry.kinds.base.Kind.spec` as JSON),
+    else nothing."""
+    spec = kind.spec()
+    if not spec:
+        return ""
+    return CSV_SPEC + json.dumps({"shape": kind.name, **spec}, separators=(", ", ": ")) + "\n"
 
 
 def save_pattern(pattern: Pattern, path: str | Path) -> None:
@@ -116,7 +133,8 @@ def pattern_csv_bytes(pattern: Pattern) -> bytes:
         data = np.column_stack([pattern.xy, pattern.diameter])
     else:
         data = np.column_stack([pattern.xy, dots.size, degrees(dots.angles)])
-    return (csv_header(pattern.kind) + "\n").encode("ascii") + format_fixed6(data)
+    head = csv_preamble(pattern.kind) + csv_header(pattern.kind) + "\n"
+    return head.encode("ascii") + format_fixed6(data)
 
 
 def format_fixed6(values: np.ndarray) -> bytes:
@@ -179,6 +197,8 @@ def _write_npz(pattern: Pattern, path: Path) -> None:
     else:
         one = bool(np.all(dots.size == dots.size[:1]))
         arrays["shape"] = np.array(dots.kind.name)
+        if dots.kind.spec():
+            arrays["shape_spec"] = np.array(json.dumps(dots.kind.spec()))
         arrays["size"] = dots.size[0] if one else dots.size
         arrays["angle_deg"] = degrees(dots.angles)
     arrays["box"] = np.array(pattern.box)
@@ -236,7 +256,16 @@ def _load_csv(path: Path, box: tuple[float, float, float, float] | None) -> Patt
         # utf-8-sig: a byte-order mark (spreadsheets write one) is read over
         with open(path, encoding="utf-8-sig") as fh:
             header = fh.readline().strip()
-            if header not in CSV_KINDS:
+            kind = None
+            if header.startswith(CSV_SPEC.strip()):
+                kind = _csv_kind(path, header)
+                header = fh.readline().strip()
+                if header != csv_header(kind):
+                    raise PatternFileError(
+                        f"{path}: line 2: header must be {csv_header(kind)!r} for "
+                        f"{kind.name} dots, got {header[:60]!r}"
+                    )
+            elif header not in CSV_KINDS:
                 raise PatternFileError(
                     f"{path}: line 1: header must be {CSV_HEADER!r} (or a shaped dot's, "
                     f"{', '.join(repr(h) for h in CSV_KINDS if h != CSV_HEADER)}), "
@@ -251,7 +280,7 @@ def _load_csv(path: Path, box: tuple[float, float, float, float] | None) -> Patt
         raise PatternFileError(f"{path}: cannot read ({e.strerror})") from None
     if data.size == 0:
         raise PatternFileError(f"{path}: no dots in the file")
-    kind = CSV_KINDS[header]
+    kind = kind or CSV_KINDS[header]
     if data.shape[1] != header.count(",") + 1:
         raise PatternFileError(
             f"{path}: expected {header.count(',') + 1} columns ({header}), got {data.shape[1]}"
@@ -260,6 +289,21 @@ def _load_csv(path: Path, box: tuple[float, float, float, float] | None) -> Patt
         return _validated(path, data[:, :2], data[:, 2], box, {})
     dots = file_footprints(path, kind, data[:, 2:-1], data[:, -1])
     return _validated(path, data[:, :2], dots.diameter, box, {}, dots)
+
+
+def _csv_kind(path: Path, line: str) -> Kind:
+    """The kind a CSV's first line names (:func:`csv_preamble`).
+
+    Raises:
+        PatternFileError: not JSON, or not a kind.
+    """
+    try:
+        doc = json.loads(line[len(CSV_SPEC.strip()) :])
+        if not isinstance(doc, dict) or not isinstance(doc.get("shape"), str):
+            raise ValueError('must be a JSON object with "shape"')
+        return kind_of(doc["shape"], {k: v for k, v in doc.items() if k != "shape"})
+    except (ValueError, RecursionError) as e:
+        raise PatternFileError(f"{path}: line 1: not the dots' kind ({one_line(e)})") from None
 
 
 def _check_npz_sizes(path: Path, z) -> None:
@@ -299,16 +343,19 @@ def _load_npz(path: Path, box: tuple[float, float, float, float] | None) -> Patt
                         f"{path}: shape = {name[:40]!r} is not a shaped dot's kind "
                         f"({', '.join(k for k in KINDS if k != 'circle')})"
                     )
+                try:
+                    spec = json.loads(str(z["shape_spec"])) if "shape_spec" in z else None
+                    kind = kind_of(name, spec)
+                except (ValueError, RecursionError) as e:
+                    raise PatternFileError(f"{path}: shape_spec: {one_line(e)}") from None
                 size, angle = _real(path, z, "size"), _real(path, z, "angle_deg")
-                k = len(KINDS[name].params)
+                k = len(kind.params)
                 if size.shape not in ((k,), (len(xy), k)) or angle.shape != (len(xy),):
                     raise PatternFileError(
                         f"{path}: size must be [{k}] or [{len(xy)}, {k}] and angle_deg "
                         f"[{len(xy)}], got {size.shape} and {angle.shape}"
                     )
-                dots = file_footprints(
-                    path, KINDS[name], np.broadcast_to(size, (len(xy), k)), angle
-                )
+                dots = file_footprints(path, kind, np.broadcast_to(size, (len(xy), k)), angle)
                 diameter = dots.diameter
             else:
                 diameter = _real(path, z, "diameter")

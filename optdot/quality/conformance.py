@@ -87,10 +87,10 @@ class DotRule:
         difference of axes the angle is read from); 0 on the files' own 1 nm grid, and
         for round footprints."""
         extra = self.tolerance - TOLERANCE
-        size = self.shape.size
-        if extra <= 0 or self.shape.kind.round or len(size) < 2 or size[0] <= size[1]:
+        lever = self.shape.kind.angle_lever(np.asarray(self.shape.size, np.float64))
+        if extra <= 0 or self.shape.kind.round or lever <= 0:
             return 0.0
-        return math.degrees(math.atan(extra / (size[0] - size[1])))
+        return math.degrees(math.atan(extra / lever))
 
     def describe(self) -> str:
         """The job's dot in words, sizes in µm: ``circle 46 µm``, ``ellipse 80 × 40 µm``,
@@ -125,7 +125,7 @@ class DotRule:
         if not dots.n:
             return np.zeros(0, bool)
         want = self.expected(dots)
-        if dots.kind is self.shape.kind:
+        if dots.kind == self.shape.kind:  # a kind made per job: by its vertices
             bad = ~np.all(np.abs(dots.size - want) <= self.tolerance, axis=1)
         else:
             off = np.abs(dots.kind.disc(dots.size) - self.shape.kind.disc(want))

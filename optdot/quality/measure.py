@@ -183,7 +183,7 @@ def _first_pass(
         d = dots.diameter
         f.boxes[k] = bounds(xy)
         if dots.angle is not None:
-            _add_angles(f, xy, dots.angle, field)
+            _add_angles(f, xy, dots.angle, field, dots.kind.period)
         if rule is not None:
             _add_strays(f, xy, dots, rule)
         if dots.kind is not CIRCLE:  # each size parameter's range, for the report
@@ -237,18 +237,21 @@ def _first_pass(
 FIELD_REACH_MM, FIELD_JUMP_DEG = 1e-3, 5.0
 
 
-def _add_angles(f: FirstSums, xy: np.ndarray, angle: np.ndarray, field: Orientation | None):
-    """Shaped dots' axes per 5° (-90..90°) and, with the field, their difference from it."""
+def _add_angles(
+    f: FirstSums, xy: np.ndarray, angle: np.ndarray, field: Orientation | None, period: float
+):
+    """Shaped dots' axes per 5° (-90..90°) and, with the field, their difference from it
+    (modulo the footprint's ``period``, rad: turns that map it onto itself)."""
     deg = np.degrees(axis(angle))
     h, _ = np.histogram(deg, bins=36, range=(-90.0, 90.0))
     f.angle_hist = h if f.angle_hist is None else f.angle_hist + h
     if field is not None:  # the field where the dot stands, or across a jump next to it
         here = field.at(xy)
-        err = np.abs(np.degrees(axis(angle - here)))
+        err = np.abs(np.degrees(axis(angle - here, period)))
         for step in ((1, 0), (-1, 0), (0, 1), (0, -1)):
             there = field.at(xy + FIELD_REACH_MM * np.array(step))
             jump = np.abs(np.degrees(axis(there - here))) > FIELD_JUMP_DEG
-            near = np.abs(np.degrees(axis(angle - there)))
+            near = np.abs(np.degrees(axis(angle - there, period)))
             err = np.where(jump, np.minimum(err, near), err)
         f.field_error_max = max(f.field_error_max, float(err.max()))
         f.field_error_sum += float(err.sum())

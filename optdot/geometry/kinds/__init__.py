@@ -1,5 +1,6 @@
 """The registry of dot kinds: each kind one module (:mod:`.circle`, :mod:`.ellipse`,
-:mod:`.rounded_rectangle`), a :class:`~.base.Kind` with its size parameters, numerics,
+:mod:`.rounded_rectangle`, :mod:`.polygon`), a :class:`~.base.Kind` with its size
+parameters, numerics,
 drawing and reading, and two compiled kernels (``inside``: whether a point lies on a
 packed footprint; ``support_bound``: its support or a bound from above). A new kind is one
 module and one line in :data:`KINDS` and in each dispatch below (its code is its place).
@@ -15,7 +16,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from . import circle, ellipse, rounded_rectangle
+from . import circle, ellipse, polygon, rounded_rectangle
 from .base import (
     DISC_SLACK,
     MIN_VERTICES,
@@ -31,11 +32,12 @@ from .base import (
 )
 from .circle import Circle
 from .ellipse import GAP_NEWTON, GAP_SAMPLES, Ellipse, gap_samples
+from .polygon import MAX_POLYGON_VERTICES, Polygon
 from .rounded_rectangle import RoundedRect
 
 #: Every kind, by name; a kind's code is its place here.
 KINDS: dict[str, Kind] = REGISTRY
-for _code, _kind in enumerate((Circle(), Ellipse(), RoundedRect())):
+for _code, _kind in enumerate((Circle(), Ellipse(), RoundedRect(), Polygon())):
     assert _kind.code == _code, f"{_kind.name}: code {_kind.code} is not its place {_code}"
     KINDS[_kind.name] = _kind
 #: The circle, the kind of every pattern that does not name one.
@@ -48,12 +50,26 @@ def shaped_names() -> str:
     return ", ".join(names[:-1]) + " or " + names[-1] if len(names) > 1 else names[0]
 
 
-def kinds_text() -> str:
-    """Every kind with its article and spaces, for messages (``a circle, an ellipse or
-    a rounded rectangle``)."""
-    words = [k.name.replace("_", " ") for k in KINDS.values()]
+def kinds_text(kinds=None) -> str:
+    """Every kind (of ``kinds``, default the registry's) with its article and spaces,
+    for messages (``a circle, an ellipse or a rounded rectangle``)."""
+    words = [k.name.replace("_", " ") for k in (KINDS.values() if kinds is None else kinds)]
     named = [("an " if w[0] in "aeiou" else "a ") + w for w in words]
     return ", ".join(named[:-1]) + " or " + named[-1]
+
+
+def kind_of(name: str, spec: dict | None = None) -> Kind:
+    """The kind a file names by ``name`` and ``spec`` (:meth:`Kind.spec`): the
+    registry's, or for a kind made per job (:attr:`Kind.derived`), the one the spec
+    gives.
+
+    Raises:
+        ValueError: an unknown name, or a spec that does not make the kind.
+    """
+    if name not in KINDS:
+        raise ValueError(f"shape {name[:40]!r} is not one of {', '.join(KINDS)}")
+    kind = KINDS[name]
+    return kind.from_spec(spec or {}) if kind.derived else kind
 
 
 def drawn_as(form: str) -> Kind:
@@ -64,14 +80,18 @@ def drawn_as(form: str) -> Kind:
 
 
 def packed(kind: Kind, size: np.ndarray, angle: np.ndarray | None) -> np.ndarray:
-    """``[n, 6]`` footprints as the compiled kernels take them: kind code, the kind's
-    three :meth:`Kind.shape_params`, and the cosine and sine of the angle."""
+    """``[n, 6 + e]`` footprints as the compiled kernels take them: kind code, the kind's
+    three :meth:`Kind.shape_params`, the cosine and sine of the angle, then the kind's
+    :meth:`Kind.packed_extra` (none: ``e = 0``)."""
     n = len(size)
     a = np.zeros(n) if angle is None else np.broadcast_to(angle, (n,))
-    out = np.empty((n, 6))
+    extra = kind.packed_extra(size)
+    out = np.empty((n, 6 + (0 if extra is None else extra.shape[1])))
     out[:, 0] = kind.code
     out[:, 1:4] = kind.shape_params(size)
     out[:, 4], out[:, 5] = np.cos(a), np.sin(a)
+    if extra is not None:
+        out[:, 6:] = extra
     return out
 
 
@@ -84,7 +104,9 @@ def on_packed(f, k, dx, dy):  # pragma: no cover - compiled
         return circle.inside(f, k, dx, dy)
     if code == 1.0:
         return ellipse.inside(f, k, dx, dy)
-    return rounded_rectangle.inside(f, k, dx, dy)
+    if code == 2.0:
+        return rounded_rectangle.inside(f, k, dx, dy)
+    return polygon.inside(f, k, dx, dy)
 
 
 @nb.njit(cache=True)
@@ -106,7 +128,9 @@ def support_bound(code, c, s, a, b, cp, sp):  # pragma: no cover - compiled
         return circle.support_bound(c, s, a, b, cp, sp)
     if code == 1:
         return ellipse.support_bound(c, s, a, b, cp, sp)
-    return rounded_rectangle.support_bound(c, s, a, b, cp, sp)
+    if code == 2:
+        return rounded_rectangle.support_bound(c, s, a, b, cp, sp)
+    return polygon.support_bound(c, s, a, b, cp, sp)
 
 
 __all__ = [
@@ -115,18 +139,21 @@ __all__ = [
     "GAP_NEWTON",
     "GAP_SAMPLES",
     "KINDS",
+    "MAX_POLYGON_VERTICES",
     "MIN_VERTICES",
     "Circle",
     "Curve",
     "Ellipse",
     "Fit",
     "Kind",
+    "Polygon",
     "RoundedRect",
     "axis_angle",
     "contains_packed",
     "drawn_as",
     "gap_samples",
     "kind_named",
+    "kind_of",
     "kinds_text",
     "on_packed",
     "packed",

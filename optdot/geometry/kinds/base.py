@@ -46,11 +46,61 @@ class Kind:
     #: The size parameter (index) a CAD file's arcs give exactly (a corner radius drawn
     #: as bulges), or None.
     arc_param: int | None = None
+    #: ``[dots]`` keys the kind reads besides its size parameters (name: types).
+    keys: dict[str, tuple[type, ...]] = {}
+    #: Whether the size parameters come from those keys (:meth:`from_job`), not the job.
+    derived: bool = False
+    #: The least turn that maps a footprint onto itself, rad (its angles are equal
+    #: modulo it).
+    period: float = math.pi
 
     def __reduce__(self):
         """Pickled by name, so a kind sent to a worker or read in a child process comes
         back as the registry's own (kinds are compared by identity)."""
         return (kind_named, (self.name,))
+
+    def from_job(self, dots: dict, where: str) -> tuple[Kind, tuple[float, ...]]:
+        """The job's kind and size when :attr:`derived` (the kind's own keys of
+        ``dots``, a job's ``[dots]``).
+
+        Raises:
+            ValueError: the keys do not make a footprint (the message names the key).
+        """
+        raise NotImplementedError
+
+    def from_spec(self, spec: dict) -> Kind:
+        """The kind a file's :meth:`spec` gives, when :attr:`derived`.
+
+        Raises:
+            ValueError: the spec does not make the kind (the message names the field).
+        """
+        raise NotImplementedError
+
+    def spec(self) -> dict:
+        """What a file holds to name this kind besides its name (a JSON object; empty
+        for the registry's kinds, which the name alone gives)."""
+        return {}
+
+    def packed_extra(self, size: np.ndarray) -> np.ndarray | None:
+        """``[n, e]`` numbers the compiled ``inside`` reads after the packed row's six
+        (:func:`~optdot.geometry.kinds.packed`), or None."""
+        return None
+
+    def inradius(self, size: np.ndarray) -> np.ndarray:
+        """``[n]`` the radius of the largest disc about the centre inside each footprint
+        (half the width), mm: two footprints whose centres are nearer than twice it
+        (plus the gap) are too close at any angles."""
+        return 0.5 * size[:, 1]
+
+    def aspect(self, size: np.ndarray) -> np.ndarray:
+        """``[n]`` how elongated each footprint is: length over width."""
+        return size[:, 0] / size[:, 1]
+
+    def angle_lever(self, size: np.ndarray) -> float:
+        """How far a footprint of ``size`` (``[k]`` mm) reaches to show its angle, mm: a
+        size off by ``e`` reads as an angle off by about ``e`` over it (the length less
+        the width; 0: its angle cannot be read)."""
+        return float(size[0] - size[1]) if len(size) > 1 else 0.0
 
     def shape_params(self, size: np.ndarray) -> np.ndarray:
         """``[n, 3]`` the numbers the kind's compiled ``inside`` tests a point against, mm
