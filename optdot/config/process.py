@@ -119,6 +119,13 @@ def check_printable(process: Process, kind, smallest: np.ndarray, where: str) ->
         )
     floor = float(kind.curvature_floor(size)[0])
     closed = kind.parallel(size, -g) is not None
+    if g > 0 and not closed and floor == 0:
+        raise JobError(
+            f"{where}: process.dot_gain = {g * um:g} µm rounds every corner of the "
+            f"{kind.name} on the print (to {g * um:g} µm): sharp corners print exactly "
+            "only with a gain of 0 or less (an etch's bias); round them in the job "
+            "(a rounded_rectangle) or give dot_gain <= 0"
+        )
     if g > 0 and not closed and g > CURVATURE_SHARE * floor:
         raise JobError(
             f"{where}: process.dot_gain = {g * um:g} µm is over {CURVATURE_SHARE:.0%} of the "
