@@ -31,16 +31,20 @@ from optdot.relax.multisphere import MultiSphereTerm
 
 def run(path, kind: str, term) -> dict:
     """Generate the job at ``path`` with ``term`` relaxing dots of ``kind``; QA it."""
-    k = KINDS[kind]
+    cls = type(KINDS[kind])  # on the kind's class (a polygon is made per job) for this run
     name = next(n for n, t in relax_optdot.FOOTPRINT_TERMS.items() if t is term)
-    k.relaxation = name  # on the registry's kind for this run
+    own = cls.__dict__.get("relaxation")
+    cls.relaxation = name
     try:
         job = load_job(path)
         t0 = time.perf_counter()
         p = generate(job)
         secs = time.perf_counter() - t0
-    finally:
-        del k.relaxation  # the kind's own again
+    finally:  # the kind's own again
+        if own is None:
+            del cls.relaxation
+        else:
+            cls.relaxation = own
     r = qa(p, job)
     m = r.metrics
     return {
@@ -57,11 +61,11 @@ def run(path, kind: str, term) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--dots", type=float, default=1e5)
-    ap.add_argument("--case", action="append", choices=["ellipse", "prism"])
+    ap.add_argument("--case", action="append", choices=["ellipse", "prism", "hexagon", "triangle"])
     a = ap.parse_args()
     for case in a.case or ["ellipse", "prism"]:
         path = write_job(case, a.dots)
-        kind = "ellipse" if case == "ellipse" else "rounded_rectangle"
+        kind = {"ellipse": "ellipse", "prism": "rounded_rectangle"}.get(case, "polygon")
         run(path, kind, MultiSphereTerm)  # compile both once
         run(path, kind, ExactGapTerm)
         for name, term in (("multi-sphere", MultiSphereTerm), ("exact gap", ExactGapTerm)):

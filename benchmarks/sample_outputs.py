@@ -25,7 +25,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLES = (
-    "chokka", "ellipses", "led", "led_sizes", "outline", "prisms", "tiny", "tsuno", "uniform",
+    "chokka", "ellipses", "hexagons", "led", "led_sizes", "outline", "prisms", "tiny", "tsuno",
+    "uniform",
 )  # fmt: skip
 
 #: A direct-lit film with graded caps of given ink over four LEDs (the rings a kind of

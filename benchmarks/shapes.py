@@ -50,9 +50,22 @@ CASES = {
         8,
     ),
     "circle": ("diameter = 0.056569", "", 4),  # the 80 x 40 µm ellipse's area
+    "hexagon": (  # 60 µm corner to corner
+        'shape = "polygon"\nvertices = [[0.03, 0.0], [0.015, 0.025981], [-0.015, 0.025981], '
+        "[-0.03, 0.0], [-0.015, -0.025981], [0.015, -0.025981]]",
+        "random = true",
+        4,
+    ),
+    "triangle": (  # a prism's base, 60 µm long, its point toward the nearest LED
+        'shape = "polygon"\nvertices = [[-0.02, -0.03], [0.04, 0.0], [-0.02, 0.03]]',
+        'toward = "leds"\nrelative = "parallel"',
+        8,
+    ),
 }
 AREA = {"ellipse": math.pi * 0.04 * 0.02, "prism": 0.12 * 0.03 - (4 - math.pi) * 0.005**2}
 AREA["circle"] = math.pi * (0.056569 / 2) ** 2
+AREA["hexagon"] = 1.5 * math.sqrt(3) * 0.03**2
+AREA["triangle"] = 0.5 * 0.06 * 0.06
 
 
 def edge_lit(width: float, height: float, cell: float = 0.5) -> np.ndarray:

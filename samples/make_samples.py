@@ -150,6 +150,18 @@ SHAPED = {
         [1.5, 4.5, 7.5, 10.5, 13.5, 16.5, 19.5, 22.5],
         (0.05, 0.30),
     ),
+    "hexagons": (
+        "Hexagonal dots (60 µm corner to corner) at random angles on a guide lit from its "
+        "bottom edge by four LEDs (24,500 dots)",
+        'shape = "polygon"\n'
+        "# mm about the dot's centre (their area centroid), in order around it\n"
+        "vertices = [[0.030, 0.0], [0.015, 0.025981], [-0.015, 0.025981], [-0.030, 0.0], "
+        "[-0.015, -0.025981], [0.015, -0.025981]]\n\n"
+        "[orientation]\nrandom = true           # uniform, seeded by optimize.seed\n",
+        (24.0, 12.0),
+        [3.0, 9.0, 15.0, 21.0],
+        (0.05, 0.30),
+    ),
 }
 
 

@@ -199,8 +199,12 @@ class Polygon(Kind):
         return ((sx * sy)[:, None] * cross[None, :] / length).min(axis=1)
 
     def spheres(self, size: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The inscribed circle about the centre (the polygon relaxes by its exact gap)."""
-        return np.zeros(1), self.inradius(np.asarray(size, np.float64)[None, :2])
+        """One circle about the centre: inscribed while the polygon relaxes by its exact
+        gap, through the farthest vertex (covering) when it relaxes by circles."""
+        size = np.asarray(size, np.float64)[None, :2]
+        if self.relaxation == "spheres":
+            return np.zeros(1), self.extent(size)
+        return np.zeros(1), self.inradius(size)
 
     def curve(self, size: np.ndarray) -> Curve:
         ring = tuple((float(x), float(y), 0.0) for x, y in self.vertices(size))
