@@ -302,3 +302,21 @@ def test_a_positive_gain_is_refused_and_an_etch_prints_the_polygon(tmp_path):
     assert drawn == pytest.approx(grown, rel=1e-3)
     rc, err, out = cli("qa", tmp_path / "p.gds", "--job", path)
     assert rc == 0, err + [out]
+
+
+def test_sharp_corners_lower_the_fill_that_runs(tmp_path):
+    """A triangle's corners lower the fill the preflight deals at (it failed at an
+    effective fill of 0.62 where hexagons hold at 0.66): refused in one line naming the
+    largest fill, which a hexagon of the same map is not."""
+    path = write_job(
+        tmp_path,
+        np.full((3, 3), 0.48),
+        dots={"diameter": None, "shape": '"polygon"', "vertices": _vertices(TRIANGLE_MM)},
+        optimize={"seed": 3, "gap": 0.005},
+    )
+    rc, err, _ = cli("check", path)
+    assert rc == 2 and len(err) == 1 and "reach at most 0.58" in err[0], err
+    assert "the fill can be at most 0.44" in err[0]
+    path.write_text(path.read_text().replace(_vertices(TRIANGLE_MM), _vertices(HEXAGON_MM)))
+    rc, err, _ = cli("check", path)
+    assert rc == 0, err

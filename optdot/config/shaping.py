@@ -294,7 +294,10 @@ def check_shaped_fill(job, fill: float, where: str, at: str = "") -> None:
     ring = shape.kind.outline(np.asarray(shape.size), 0.0, 1e-4 * shape.extent)
     grown = shapely.Polygon(ring).buffer(0.5 * job.optimize.gap, quad_segs=32).area
     spread = grown / shape.area
-    limit = shaped_fill_limit(float(shape.kind.aspect(np.array([shape.size]))[0]))
+    size = np.array([shape.size])
+    limit = shaped_fill_limit(float(shape.kind.aspect(size)[0])) * float(
+        shape.kind.fill_share(size)[0]
+    )
     if fill * spread >= limit:
         sizes = " × ".join(f"{v * 1e3:.4g}" for v in shape.size[:2])
         most = limit / spread
@@ -303,7 +306,7 @@ def check_shaped_fill(job, fill: float, where: str, at: str = "") -> None:
         raise JobError(
             f"{where}: fill {fill:.4g}{at} of {sizes} µm "
             f"{shape.kind.name} dots {job.optimize.gap * 1e3:.4g} µm apart is an effective "
-            f"fill of {fill * spread:.4g}; dots this long reach at most {limit:.3g} "
+            f"fill of {fill * spread:.4g}; dots of this shape reach at most {limit:.3g} "
             f"without collisions (the fill can be at most {most:.4g} here)"
         )
 

@@ -96,6 +96,11 @@ class Kind:
         """``[n]`` how elongated each footprint is: length over width."""
         return size[:, 0] / size[:, 1]
 
+    def fill_share(self, size: np.ndarray) -> np.ndarray:
+        """``[n]`` the share of the fill limit of dots of its aspect that footprints of
+        ``size`` are dealt at (1: their curved or blunt corners do not lower it)."""
+        return np.ones(len(size))
+
     def angle_lever(self, size: np.ndarray) -> float:
         """How far a footprint of ``size`` (``[k]`` mm) reaches to show its angle, mm: a
         size off by ``e`` reads as an angle off by about ``e`` over it (the length less

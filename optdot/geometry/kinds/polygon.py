@@ -219,6 +219,16 @@ class Polygon(Kind):
         e = np.roll(self.base, -1, axis=0) - self.base
         return np.hypot(sx[:, None] * e[None, :, 0], sy[:, None] * e[None, :, 1]).sum(axis=1)
 
+    def fill_share(self, size: np.ndarray) -> np.ndarray:
+        """Sharp corners lower the fill polygons are dealt at, by their roundness ``q =
+        4π area / perimeter²`` (1 for a disc): 1 from a square's 0.785 up, 0.88 at a
+        triangle's 0.6, on a line between and beyond. Measured (uniform 3 × 3 mm maps, 5
+        µm gap, random angles, effective fill): hexagons and squares hold at 0.66; an
+        equilateral triangle at 0.58; a scalene triangle (q 0.598) holds at 0.58 and
+        fails at 0.62."""
+        q = 4.0 * np.pi * self.area(size) / self.perimeter(size) ** 2
+        return np.clip(0.88 + (q - 0.6) * (0.12 / 0.185), 0.1, 1.0)
+
     def curvature_floor(self, size: np.ndarray) -> np.ndarray:
         """0: every vertex is a sharp corner."""
         return np.zeros(len(size))
