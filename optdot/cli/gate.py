@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import sys
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import click
@@ -15,9 +15,12 @@ from .app import main, user_errors
 from .options import (
     POSITIVE,
     Finite,
+    JobChoice,
+    Reports,
     job_options,
     layer_options,
     load_job_with,
+    record,
     run_job,
 )
 
@@ -187,9 +190,34 @@ def made_for(path: Path, box, job) -> None:
     )
 
 
+@dataclass(frozen=True)
+class MaskStyle:
+    """How ``export`` draws its masks: ``--speos-reference-diameter`` (mm), ``--tolerance``
+    (µm), ``--flatten``, ``--top-cell``, ``--dxf-version``."""
+
+    speos_reference_diameter: float | None = None
+    tolerance: float = 0.01
+    flatten: bool = False
+    top_cell: str = "TOP"
+    dxf_version: str = "R2010"
+
+
+@dataclass(frozen=True)
+class Keep:
+    """What ``export`` may replace: ``--force`` (write though the gate fails),
+    ``--overwrite`` (replace a mask that differs)."""
+
+    force: bool = False
+    overwrite: bool = False
+
+
 @main.command()
 @click.argument("source", type=click.Path(path_type=Path))
 @format_options
+@record(MaskStyle, "style")
+@record(JobChoice, "choice")
+@record(Keep, "keep")
+@record(Reports, "reports")
 @click.option(
     "--speos-reference-diameter",
     type=POSITIVE,
@@ -235,29 +263,7 @@ def made_for(path: Path, box, job) -> None:
 )
 @job_options
 @user_errors
-def export(
-    source,
-    speos_reference_diameter,
-    job_path,
-    tolerance,
-    flatten,
-    layer,
-    datatype,
-    outline_layer,
-    top_cell,
-    dxf_version,
-    force,
-    no_job,
-    overwrite,
-    html_path,
-    json_path,
-    seed,
-    max_iter,
-    method,
-    formulation,
-    quiet,
-    **paths,
-):
+def export(source, style, choice, keep, layers, reports, run, **paths):
     """Write masks and previews of SOURCE (a job file, or a pattern .csv/.npz/.parquet).
 
     An existing mask (GDS/OAS/DXF) is kept unless the new one has the same bytes (a
@@ -273,21 +279,22 @@ def export(
     if not outputs:
         raise click.UsageError("give at least one of " + " ".join(f"--{k}" for k in paths))
     opts = ExportOptions(
-        tolerance_um=tolerance,
-        flatten=flatten,
-        layer=layer,
-        datatype=datatype,
-        outline_layer=outline_layer,
-        top_cell=top_cell,
-        dxf_version=dxf_version,
-        speos_reference_mm=speos_reference_diameter,
+        tolerance_um=style.tolerance,
+        flatten=style.flatten,
+        layer=layers.layer,
+        datatype=layers.datatype,
+        outline_layer=layers.outline_layer,
+        top_cell=style.top_cell,
+        dxf_version=style.dxf_version,
+        speos_reference_mm=style.speos_reference_diameter,
     )
+    quiet = run.quiet
     if source.suffix.lower() == ".toml":
-        job = load_job_with(source, seed, max_iter, method, formulation)
+        job = load_job_with(source, run)
         inputs = (source, *job.inputs)
     else:
-        job, inputs = _inputs(source, job_path)
-    reports = {k: v for k, v in (("html", html_path), ("json", json_path)) if v is not None}
+        job, inputs = _inputs(source, choice.job_path)
+    reports = reports.paths()
     check_outputs({**outputs, **reports}, inputs)
     stream = pattern = None
     if source.suffix.lower() == ".toml":
@@ -299,7 +306,7 @@ def export(
         made_for(source, stream.box, job)
     else:
         pattern = _read_with_job(source, job)
-    if job is None and not no_job:  # --force overrides a failed gate, not a missing job
+    if job is None and not choice.no_job:  # --force overrides a failed gate, not a missing job
         _incomplete_export(pattern if pattern is not None else stream, reports, quiet)
     lines: list[str] = []
     from .progress import ProgressBar
@@ -311,8 +318,8 @@ def export(
             outputs,
             job,
             opts,
-            force=force,
-            overwrite=overwrite,
+            force=keep.force,
+            overwrite=keep.overwrite,
             stream=stream,
             reports=reports,
             written=lambda fmt, path, what: lines.append(f"{path}: {what}"),
@@ -331,8 +338,35 @@ def export(
             click.echo(line, err=True)
 
 
+@dataclass(frozen=True)
+class Limits:
+    """The thresholds ``qa`` may be given: ``--collision``, ``--close`` (centre distances,
+    mm), ``--close-gap`` (edge gap, mm), ``--max-jnd`` (None: the job's or the
+    defaults)."""
+
+    collision: float | None = None
+    close: float | None = None
+    close_gap: float | None = None
+    max_jnd: float | None = None
+
+
+@dataclass(frozen=True)
+class Looks:
+    """How ``qa``'s viewer looks: ``--view`` (a preset), ``--distance`` (mm),
+    ``--luminance`` (cd/m²), ``--psf`` (mm; None: the job's or the preset's)."""
+
+    view: str | None = None
+    distance: float | None = None
+    luminance: float | None = None
+    psf: float | None = None
+
+
 @main.command()
 @click.argument("pattern_file", type=click.Path(path_type=Path))
+@record(JobChoice, "choice")
+@record(Reports, "reports")
+@record(Limits, "limits")
+@record(Looks, "looks")
 @click.option(
     "--job",
     "job_path",
@@ -374,52 +408,37 @@ def export(
 @layer_options
 @click.option("--quiet", "-q", is_flag=True, help="Only the exit code.")
 @user_errors
-def qa(
-    pattern_file,
-    job_path,
-    no_job,
-    html_path,
-    json_path,
-    simulation_path,
-    collision,
-    close,
-    close_gap,
-    view,
-    distance,
-    luminance,
-    psf,
-    max_jnd,
-    layer,
-    datatype,
-    outline_layer,
-    quiet,
-):
+def qa(pattern_file, choice, reports, simulation_path, limits, looks, layers, quiet):
     """Check PATTERN_FILE (csv, npz, a .parquet dataset, gds, oas, dxf) before tooling:
     exit 0 pass, 1 fail, 5 passed but incomplete (no --job: the map was not checked)."""
     from ..io.atomic import transaction
     from ..pipeline import qa as run_gate
     from ..quality.report import write_reports
 
+    close_gap = limits.close_gap
     if close_gap is not None and not 0 <= close_gap < 10:
         raise click.BadParameter("must be an edge gap in mm, 0 <= x < 10", param_hint="--close-gap")
     from ..exporters.options import ExportOptions
 
-    outs = {k: v for k, v in (("html", html_path), ("json", json_path)) if v is not None}
-    looks = {
+    outs = reports.paths()
+    view = {
         k: v
         for k, v in (
-            ("view", view),
-            ("view_distance", distance),
-            ("view_luminance", luminance),
-            ("psf", psf),
-            ("max_jnd", max_jnd),
+            ("view", looks.view),
+            ("view_distance", looks.distance),
+            ("view_luminance", looks.luminance),
+            ("psf", looks.psf),
+            ("max_jnd", limits.max_jnd),
         )
         if v is not None
     }
-    job, inputs = _inputs(pattern_file, job_path)
+    job, inputs = _inputs(pattern_file, choice.job_path)
     process = job.process if job is not None else None  # a mask is read as what it prints
     opts = ExportOptions(
-        layer=layer, datatype=datatype, outline_layer=outline_layer, process=process
+        layer=layers.layer,
+        datatype=layers.datatype,
+        outline_layer=layers.outline_layer,
+        process=process,
     )
     check_outputs(outs, (*inputs, *((simulation_path,) if simulation_path else ())))
     simulation = None
@@ -434,11 +453,14 @@ def qa(
         dataset = open_dataset(pattern_file)
         made_for(pattern_file, dataset.box, job)
         result = run_gate(
-            None, job, collision, close, dataset=dataset, close_gap=close_gap, view=looks
-        )
+            None, job, limits.collision, limits.close, dataset=dataset, close_gap=close_gap,
+            view=view,
+        )  # fmt: skip
     else:
         pattern = _read_with_job(pattern_file, job, opts)
-        result = run_gate(pattern, job, collision, close, close_gap=close_gap, view=looks)
+        result = run_gate(
+            pattern, job, limits.collision, limits.close, close_gap=close_gap, view=view
+        )
     if simulation is not None:
         from ..quality.simulated import attach_simulation
 
@@ -449,7 +471,7 @@ def qa(
         _print_checks(result)
     if not result.passed:
         sys.exit(1)
-    if job is None and not no_job:
+    if job is None and not choice.no_job:
         click.echo(INCOMPLETE_TEXT.format(""), err=True)
         sys.exit(INCOMPLETE)
     sys.exit(0)

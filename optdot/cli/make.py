@@ -21,27 +21,15 @@ from .options import (
 @job_options
 @tile_options
 @user_errors
-def check(
-    job_file,
-    seed,
-    max_iter,
-    method,
-    formulation,
-    quiet,
-    tiles,
-    tile_size,
-    scheduler,
-    workers,
-    worker_memory,
-):
+def check(job_file, run, tiling):
     """Check JOB_FILE without running it: is it valid, how many dots, one process or
     tiles, and about how long, how much memory and disk it will take (exit 0: it would
     run; otherwise the one-line reason the run itself would give)."""
     from ..pipeline import check_job
 
-    job = load_job_with(job_file, seed, max_iter, method, formulation)
-    got = check_job(job, tiles, tile_size, workers)
-    if quiet:
+    job = load_job_with(job_file, run)
+    got = check_job(job, tiling.tiles, tiling.tile_size, tiling.workers)
+    if run.quiet:
         return
     d = job.density.grid
     x0, y0, x1, y1 = job.box
@@ -116,20 +104,7 @@ def _duration(seconds: float) -> str:
 @job_options
 @tile_options
 @user_errors
-def generate(
-    job_file,
-    output,
-    seed,
-    max_iter,
-    method,
-    formulation,
-    quiet,
-    tiles,
-    tile_size,
-    scheduler,
-    workers,
-    worker_memory,
-):
+def generate(job_file, output, run, tiling):
     """Generate the dot pattern of JOB_FILE and write it to OUTPUT."""
     from ..pipeline import PATTERN_SUFFIXES, generate_to
 
@@ -137,22 +112,24 @@ def generate(
         raise click.BadParameter(
             "must end in .csv, .npz or .parquet", param_hint="'-o' / '--output'"
         )
-    job = load_job_with(job_file, seed, max_iter, method, formulation)
+    job = load_job_with(job_file, run)
+    quiet = run.quiet
     bar, progress, tile_progress = progress_bar(job, quiet)
 
     def announce(line: str) -> None:
         if not quiet:
             click.echo(line, err=True)
 
+    memory = tiling.worker_memory
     try:
         done = generate_to(
             job,
             output,
-            tiles=tiles,
-            tile_size=tile_size,
-            scheduler=scheduler,
-            workers=workers,
-            worker_memory=None if worker_memory is None else int(worker_memory * 2**30),
+            tiles=tiling.tiles,
+            tile_size=tiling.tile_size,
+            scheduler=tiling.scheduler,
+            workers=tiling.workers,
+            worker_memory=None if memory is None else int(memory * 2**30),
             progress=progress,
             tile_progress=tile_progress,
             stage=bar.stage,

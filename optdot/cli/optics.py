@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import click
 
 from .app import main, user_errors
-from .options import Count, Finite
+from .options import Count, Finite, record
 
 RAYS = Count(1000, 10**10)
 #: ``--seed`` of ``simulate`` and ``design``.
@@ -23,9 +24,40 @@ SEED = click.option(
 )
 
 
+@dataclass(frozen=True)
+class Trace:
+    """What ``simulate`` traces: ``--rays``, ``--seed``, ``--halo`` (a direct-lit stack's
+    one LED alone too)."""
+
+    rays: int = 2_000_000
+    seed: int = 0
+    halo: bool = True
+
+
+@dataclass(frozen=True)
+class Bins:
+    """How ``simulate`` bins the luminance, mm: ``--bin``, ``--spot`` (the 9-point
+    spots' diameter), ``--border`` (left out of RMS and min/max); None: its defaults."""
+
+    bin_mm: float | None = None
+    spot_mm: float | None = None
+    border_mm: float | None = None
+
+
+@dataclass(frozen=True)
+class Figures:
+    """The files ``simulate`` writes: ``--json`` (figures and map), ``--png`` (the map)."""
+
+    json_path: Path | None = None
+    png_path: Path | None = None
+
+
 @main.command()
 @click.argument("job_file", type=click.Path(path_type=Path))
 @click.argument("pattern", type=click.Path(path_type=Path), required=False)
+@record(Trace, "trace")
+@record(Bins, "bins")
+@record(Figures, "files")
 @click.option("--rays", type=RAYS, default=2_000_000, show_default=True, help="Rays to trace.")
 @SEED
 @click.option(
@@ -66,9 +98,7 @@ SEED = click.option(
 )
 @click.option("--quiet", "-q", is_flag=True, help="Print the figures only.")
 @user_errors
-def simulate(
-    job_file, pattern, rays, seed, bin_mm, spot_mm, border_mm, json_path, png_path, halo, quiet
-):
+def simulate(job_file, pattern, trace, bins, files, quiet):
     """Trace JOB_FILE's backlight (its light guide, or the direct-lit stack of
     [backlight]) and report its luminance: with PATTERN (a pattern file, dataset or mask)
     through the real dots, without it through the map's coverage. Prints efficiency, where
@@ -81,6 +111,9 @@ def simulate(
     from ..optics.scene import is_direct
     from ..optics.simulate import simulate as run
 
+    rays, seed = trace.rays, trace.seed
+    bin_mm, spot_mm, border_mm = bins.bin_mm, bins.spot_mm, bins.border_mm
+    json_path, png_path = files.json_path, files.png_path
     job = load_job(job_file, need_map=pattern is None)  # real dots need no map
     outs = {k: v for k, v in (("json", json_path), ("png", png_path)) if v is not None}
     inputs = (*job.inputs, *((pattern,) if pattern else ()))
@@ -93,7 +126,7 @@ def simulate(
         traced_as_made(pattern, dots, job)
     t0 = time.perf_counter()
     sim = run(job, rays, seed, dots=dots, bin_mm=bin_mm, spot_mm=spot_mm, border_mm=border_mm)
-    if halo and is_direct(job):
+    if trace.halo and is_direct(job):
         from ..optics.halo import halo as one_led
 
         sim.extra["halo"] = one_led(job, max(rays // 4, 1000), seed, dots=dots)

@@ -1,12 +1,88 @@
 """Options shared by the commands (job overrides, layers, tiles), the number types they
-parse with, and the progress bar a run draws."""
+parse with, the records a command's options reach it as, and the progress bar a run
+draws."""
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import math
 from pathlib import Path
 
 import click
+
+
+def record(cls: type, name: str):
+    """Decorate a command so that its options named as the fields of the frozen
+    dataclass ``cls`` reach it as one argument ``name``, a ``cls``: a command takes a
+    few records, not a parameter per option."""
+    fields = [f.name for f in dataclasses.fields(cls)]
+
+    def wrap(fn):
+        @functools.wraps(fn)
+        def command(*args, **kwargs):
+            kwargs[name] = cls(**{k: kwargs.pop(k) for k in fields})
+            return fn(*args, **kwargs)
+
+        return command
+
+    return wrap
+
+
+@dataclasses.dataclass(frozen=True)
+class RunOptions:
+    """How a job runs: ``--seed``, ``--max-iter``, ``--method``, ``--formulation``
+    overriding its ``[optimize]`` (None: the job's), and ``--quiet`` (no progress bar)."""
+
+    seed: int | None = None
+    max_iter: int | None = None
+    method: str | None = None
+    formulation: str | None = None
+    quiet: bool = False
+
+
+@dataclasses.dataclass(frozen=True)
+class Tiling:
+    """``--tiles`` (auto, on, off), ``--tile-size`` (mm), ``--scheduler`` (a Dask
+    address), ``--workers`` and ``--worker-memory`` (GiB per local worker)."""
+
+    tiles: str = "auto"
+    tile_size: float | None = None
+    scheduler: str | None = None
+    workers: int | None = None
+    worker_memory: float | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class Layers:
+    """Where dots and outline are in a GDSII/OASIS file: ``--layer``, ``--datatype``,
+    ``--outline-layer``."""
+
+    layer: int = 1
+    datatype: int = 0
+    outline_layer: int = 2
+
+
+@dataclasses.dataclass(frozen=True)
+class Reports:
+    """The QA report files to write: ``--html``, ``--json`` (None: not written)."""
+
+    html_path: Path | None = None
+    json_path: Path | None = None
+
+    def paths(self) -> dict[str, Path]:
+        """``{"html": path, "json": path}`` of those given."""
+        pairs = (("html", self.html_path), ("json", self.json_path))
+        return {k: v for k, v in pairs if v is not None}
+
+
+@dataclasses.dataclass(frozen=True)
+class JobChoice:
+    """``--job`` (the job the pattern is judged against, or None) and ``--no-job``
+    (judge without one, knowingly)."""
+
+    job_path: Path | None = None
+    no_job: bool = False
 
 
 class Finite(click.FloatRange):
@@ -46,6 +122,9 @@ LAYER = click.IntRange(0, 65535)
 
 
 def job_options(fn):
+    """``--seed``, ``--max-iter``, ``--method``, ``--formulation``, ``--quiet``: reach the
+    command as ``run``, a :class:`RunOptions`."""
+    fn = record(RunOptions, "run")(fn)
     fn = click.option("--seed", type=click.IntRange(0, 2**63 - 1), help="Override optimize.seed.")(
         fn
     )
@@ -64,18 +143,20 @@ def job_options(fn):
     return fn
 
 
-def load_job_with(job_path: Path, seed, max_iter, method, formulation):
+def load_job_with(job_path: Path, run: RunOptions):
     """The job with the command line's optimizer overrides."""
     from ..config.schema import load_job
 
     return load_job(job_path).with_overrides(
-        seed=seed, max_iter=max_iter, method=method, formulation=formulation
+        seed=run.seed, max_iter=run.max_iter, method=run.method, formulation=run.formulation
     )
 
 
 def layer_options(fn):
     """``--layer``, ``--datatype``, ``--outline-layer``: where dots and outline are in a
-    GDSII/OASIS file (written by ``export``, read by ``qa``)."""
+    GDSII/OASIS file (written by ``export``, read by ``qa``); they reach the command as
+    ``layers``, a :class:`Layers`."""
+    fn = record(Layers, "layers")(fn)
     fn = click.option(
         "--outline-layer",
         type=LAYER,
@@ -128,7 +209,9 @@ def run_job(job, quiet: bool):
 
 
 def tile_options(fn):
-    """``--tiles``, ``--tile-size``, ``--scheduler``, ``--workers``: tiled runs on Dask."""
+    """``--tiles``, ``--tile-size``, ``--scheduler``, ``--workers``, ``--worker-memory``:
+    tiled runs on Dask; they reach the command as ``tiling``, a :class:`Tiling`."""
+    fn = record(Tiling, "tiling")(fn)
     fn = click.option(
         "--worker-memory",
         type=Finite(0.01, 4096),
