@@ -344,10 +344,10 @@ def _collect(
         for poly in cell.polygons:
             if (poly.layer, poly.datatype) != on_layer:
                 continue
-            fit = _footprint(path, poly.points, "a polygon", to_mm, opts.process, opts.kind)
-            at = _origins(path, poly.repetition, fit[1].centre, budget, gds)
+            fit, seen = _placed_fit(path, poly.points, "a polygon", to_mm, opts, a)
+            at = _origins(path, poly.repetition, (seen @ fit[1].centre), budget, gds)
             centres.append((at @ a.T + b) * to_mm)
-            diameters.append(Drawn.of(fit, a, len(at), scale * to_mm))
+            diameters.append(Drawn.of(fit, a @ seen, len(at), scale * to_mm))
     for ref in cell.references:
         sub = ref.cell
         if isinstance(sub, str):
@@ -389,7 +389,8 @@ def _collect(
                 f"{path}: cell {sub.name} holds {len(pts)} shapes on layer "
                 f"{opts.layer}/{opts.datatype}; a dot cell holds one circle"
             )
-        fit = _footprint(path, pts[0].points, f"cell {sub.name}", to_mm, opts.process, opts.kind)
+        what = f"cell {sub.name}"
+        fit, seen = _placed_fit(path, pts[0].points, what, to_mm, opts, inner)
         off = 1e-6 + (0.0 if opts.process is None else GRID_SLACK * opts.process.grid)
         if np.hypot(*fit[1].centre) * to_mm > off:
             raise PatternFileError(
@@ -399,7 +400,34 @@ def _collect(
         # the size to well under 1 nm
         centres.append((origins @ a.T + b) * to_mm)
         scale = math.sqrt(abs(np.linalg.det(inner)))
-        diameters.append(Drawn.of(fit, inner, len(origins), scale * to_mm))
+        diameters.append(Drawn.of(fit, inner @ seen, len(origins), scale * to_mm))
+
+
+#: A mirror about the x axis.
+_MIRROR = np.diag([1.0, -1.0])
+
+
+def _placed_fit(path, points, what: str, to_mm: float, opts, place: np.ndarray):
+    """``((kind, fit), seen)``: the footprint a dot polygon (``points`` in its cell's
+    units) draws where ``place`` (``[2, 2]``) puts it, fitted as drawn in the cell and
+    ``seen`` (``[2, 2]``) the map from the fit's frame to the cell's: the identity, or a
+    mirror where ``place`` mirrors a polygon of the job's made kind (a polygon symmetric
+    about no axis is another polygon in a mirror: it is fitted as the mirror shows it).
+
+    Raises:
+        PatternFileError: the polygon is none of the kinds, or the mirror image of the
+            job's polygon."""
+    kind = opts.kind
+    if np.linalg.det(place) >= 0 or kind is None or not kind.derived:
+        return _footprint(path, points, what, to_mm, opts.process, kind), np.eye(2)
+    try:
+        fit = _footprint(path, points @ _MIRROR, what, to_mm, opts.process, kind)
+    except PatternFileError:
+        raise PatternFileError(
+            f"{path}: {what} is placed mirrored: it draws the mirror image of the job's "
+            f"{kind.name}, not its dots"
+        ) from None
+    return fit, _MIRROR
 
 
 @dataclass(frozen=True)
@@ -426,11 +454,11 @@ class Drawn:
 def _kinds(job_kind: Kind | None) -> list[Kind]:
     """The kinds a dot polygon is tried as: the registry's in order, where a kind made
     per job (:attr:`~optdot.geometry.kinds.base.Kind.derived`, a polygon) recognises
-    nothing; the job's own such kind right after the circle (a square polygon is the
-    job's, not a rectangle)."""
+    nothing; the job's own such kind first (a square polygon is the job's, not a
+    rectangle; a regular 12-gon the job's, not a circle)."""
     kinds = [k for k in KINDS.values() if not k.derived]
     if job_kind is not None and job_kind.derived:
-        kinds.insert(1, job_kind)
+        kinds.insert(0, job_kind)
     return kinds
 
 
@@ -450,7 +478,8 @@ def _footprint(path: Path, pts: np.ndarray, what: str, to_mm: float, process=Non
         g = process.dot_gain / to_mm
         fits = ((k, k.fit_grown(at, g, slack, RADIUS_SPREAD)) for k in kinds)
     fit = None
-    for kind, other in fits:  # the circle first: a disc of any kind reads as one
+    for kind, other in fits:  # the circle first: a disc of any kind reads as one (but
+        # the job's polygon before it)
         fit = fit or other
         if other.ok:
             if process is not None:

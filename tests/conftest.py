@@ -1,9 +1,5 @@
 from __future__ import annotations
 
-import hashlib
-import importlib.util
-import os
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -12,37 +8,8 @@ from hypothesis import settings
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLES = ROOT / "samples"
-#: Test caches of compiled kernels kept (the newest; older sources' are removed).
-KERNEL_CACHES = 3
-
-
-def _kernel_cache() -> None:
-    """Compile the tests' kernels into a numba cache of their own, named by the sources of
-    every module that holds kernels, when optdot runs from this checkout (an editable
-    install, where sources change) and ``NUMBA_CACHE_DIR`` is not set. numba keys a
-    cached kernel by its own file only: a kernel that inlines another module's (the
-    registry's dispatch of a kind's ``inside``, the tracer's of a face's ``meet``) would
-    run the old code after that module is edited, and a broken kernel could pass. An
-    installed copy does not change, so its tests use the kernels it has compiled."""
-    spec = importlib.util.find_spec("optdot")
-    here_ = spec is not None and spec.origin is not None and Path(spec.origin).is_relative_to(ROOT)
-    if "NUMBA_CACHE_DIR" in os.environ or not here_:
-        return
-    digest = hashlib.sha256()
-    for path in sorted(ROOT.glob("optdot/**/*.py")) + sorted(ROOT.glob("exporters/**/*.py")):
-        text = path.read_bytes()
-        if b"numba" in text:
-            digest.update(path.relative_to(ROOT).as_posix().encode() + b"\0" + text)
-    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "optdot-tests"
-    here = base / digest.hexdigest()[:16]
-    here.mkdir(parents=True, exist_ok=True)
-    here.touch()  # the newest
-    for old in sorted(base.iterdir(), key=lambda p: p.stat().st_mtime)[:-KERNEL_CACHES]:
-        shutil.rmtree(old, ignore_errors=True)
-    os.environ["NUMBA_CACHE_DIR"] = str(here)
-
-
-_kernel_cache()
+# a checkout's kernels compile into a cache named by their sources (optdot/__init__.py:
+# numba keys a cached kernel by its own file only, and a broken kernel could pass)
 
 # the same examples every run (a property test that finds a case one day and not the
 # next is not a gate); tests that set their own settings keep them

@@ -11,8 +11,9 @@ import shapely
 
 from optdot.config.schema import load_job
 from optdot.errors import JobError
-from optdot.geometry.kinds import KINDS, contains_packed, packed
+from optdot.geometry.kinds import KINDS, contains_packed, packed, turned
 from optdot.geometry.kinds.polygon import Polygon, canonical
+from optdot.geometry.orientation import axis
 from optdot.io.patterns import load_pattern, save_pattern
 from optdot.pipeline import generate
 
@@ -67,7 +68,23 @@ def test_vertices_are_the_dot_about_its_centroid(tmp_path):
         ({"vertices": "[[0, 0], [20.0, 0], [0, 20.0]]"}, "must be"),
         ({"vertices": "[[0, 0], [0.001, 0], [0, 0.001]]"}, "must be"),
         ({"vertices": "[[0, 0], [3.0, 0], [3.0, 0.05], [0, 0.05]]"}, "longer than"),
+        (
+            {"vertices": "[[0, 0], [0.07, 0.07], [0.0695, 0.0705], [-0.0005, 0.0005]]"},
+            "wide at its narrowest",
+        ),  # 0.7 µm thin, turned: its box is 70 µm
+        (
+            {"vertices": "[[0.0, 0.0], [0.03, 0.0], [0.0300004, 0.0000002], [0.0, 0.03]]"},
+            "under 0.1 µm apart",
+        ),
+        (
+            {
+                "vertices": "[[0.0117684, 0.0155245], [0.0, 0.0], [0.0300004, 0.0000006], "
+                "[0.0300008, 0.0000001]]"
+            },
+            "vertices",
+        ),
         ({"length": 0.06}, "come from dots.vertices"),
+        ({"diameter": 0.06}, "takes dots.vertices"),
         ({"vertices": None}, "needs dots.vertices"),
     ],
 )
@@ -87,6 +104,29 @@ def test_bad_vertices_are_refused_in_one_line(tmp_path, dots, words):
     with pytest.raises(JobError, match="dots") as e:
         load_job(path)
     assert words in str(e.value) and "\n" not in str(e.value)
+
+
+def test_vertices_rounded_to_1_nm_are_checked_again(tmp_path):
+    """A polygon whose 1 nm rounding brings two vertices together or straightens a
+    corner is refused before any work, so no file is written that its own reader
+    refuses."""
+    v = [[0.011768396, 0.015524524], [0.009149581, 0.017418295], [-0.012279743, 0.016098479],
+         [-0.017719849, 0.009307777], [-0.010386175, -0.015059665],
+         [-0.009866908, -0.015361471], [-0.007658416, -0.016417454],
+         [-0.000610357, -0.01777899], [-0.000609268, -0.017778368]]  # fmt: skip
+    with pytest.raises(JobError, match="dots.vertices") as e:
+        load_job(_job(tmp_path, v))
+    assert "\n" not in str(e.value)
+
+
+def test_the_same_polygon_however_written_is_one_kind():
+    """Another start vertex, the other way round, moved: the same kind (a file's
+    vertices written from another corner are the job's)."""
+    rolled = TRIANGLE_MM[1:] + TRIANGLE_MM[:1]
+    assert Polygon(canonical(rolled)) == TRIANGLE
+    assert Polygon(canonical([[x + 5, y] for x, y in rolled[::-1]])) == TRIANGLE
+    spec = {"vertices_mm": np.roll(TRIANGLE.base, 1, axis=0).tolist()}
+    assert KINDS["polygon"].from_spec(spec) == TRIANGLE
 
 
 def test_vertices_on_another_kind_are_refused(tmp_path):
@@ -320,3 +360,84 @@ def test_sharp_corners_lower_the_fill_that_runs(tmp_path):
     path.write_text(path.read_text().replace(_vertices(TRIANGLE_MM), _vertices(HEXAGON_MM)))
     rc, err, _ = cli("check", path)
     assert rc == 0, err
+
+
+def _snapped(ring: np.ndarray) -> np.ndarray:
+    """``ring`` (mm) on a mask's 1 nm grid."""
+    return np.round(ring * 1e6) / 1e6
+
+
+def test_an_etch_mask_of_a_needle_reads_back_its_print():
+    """A needle's mask (a 7.6° tip, sides moved out 2 µm, corners arcs) on the 1 nm grid:
+    its print read back to 0.1 nm, where the sides' meeting would place the tip ~15 times
+    less well."""
+    needle = Polygon(canonical([[0.0, -0.004], [0.06, 0.0], [0.0, 0.004]]))
+    size = np.array([needle.l0, needle.w0])
+    mask = _snapped(turned(needle.parallel_outline(size, 0.002, 1e-5), 0.4) + [2.0, 1.0])
+    f = needle.fit_grown(mask, -0.002, 2e-6)
+    assert f.ok and f.centre == pytest.approx([2.0, 1.0], abs=1e-7)
+    assert f.size == pytest.approx(size, abs=2e-7) and f.angle == pytest.approx(0.4, abs=1e-6)
+
+
+def test_a_mirrored_reference_is_read_as_its_mirror_image(triangles, tmp_path):
+    """GDSII references mirrored (x_reflection) draw the triangle's mirror image, not the
+    job's dots: refused in one line. A hexagon mirrored is a hexagon, read at the angle
+    the mirror turns it to."""
+    import gdstk
+
+    path, p = triangles
+    save_pattern(p, tmp_path / "p.npz")
+    rc, err, _ = cli("export", tmp_path / "p.npz", "--job", path, "--gds", tmp_path / "p.gds")
+    assert rc == 0, err
+    lib = gdstk.read_gds(str(tmp_path / "p.gds"))
+    for ref in next(c for c in lib.cells if c.name == "TOP").references:
+        ref.x_reflection = True
+    lib.write_gds(str(tmp_path / "m.gds"))
+    rc, err, _ = cli("qa", tmp_path / "m.gds", "--job", path)
+    assert rc == 2 and len(err) == 1 and "placed mirrored" in err[0], err
+    from optdot.exporters.options import ExportOptions
+    from optdot.exporters.readback import read_any
+
+    hexes = tmp_path / "hex"
+    hexes.mkdir()  # a hexagon turned 10°: its mirror axes are at 10° + k 30°
+    turned10 = [
+        [0.03 * math.cos(a), 0.03 * math.sin(a)] for a in np.radians(10 + 60 * np.arange(6))
+    ]
+    hex_job = _job(hexes, turned10, orientation={"random": "true"})
+    h = generate(load_job(hex_job))
+    save_pattern(h, hexes / "h.npz")
+    rc, err, _ = cli("export", hexes / "h.npz", "--job", hex_job, "--gds", hexes / "h.gds")
+    assert rc == 0, err
+    lib = gdstk.read_gds(str(hexes / "h.gds"))
+    for ref in next(c for c in lib.cells if c.name == "TOP").references:
+        ref.x_reflection = True
+        ref.origin = (ref.origin[0], -ref.origin[1])
+    lib.write_gds(str(hexes / "m.gds"))
+    back = read_any(hexes / "m.gds", ExportOptions(kind=h.dots.kind))
+    order, got = np.lexsort((h.xy * [1, -1]).T), np.lexsort(back.xy.T)
+    np.testing.assert_allclose(back.xy[got], h.xy[order] * [1, -1], atol=1e-9)
+    # placed at a turn of a after a mirror about x, the hexagon at 0 is the one at -20°
+    want = h.dots.angles[order] - math.radians(20)
+    off = np.degrees(axis(back.dots.angles[got] - want, math.pi / 3))
+    assert np.abs(off).max() < 1e-3  # its vertices rounded to 1 nm: 2.5e-4° off that turn
+
+
+def test_a_regular_12_gon_is_the_job_s_not_a_circle(tmp_path):
+    """Twelve vertices on a circle are a round enough polygon for the circle's fit; a
+    mask of the job's 12-gon still reads back as the job's dots."""
+    twelve = [[0.03 * math.cos(a), 0.03 * math.sin(a)] for a in np.arange(12) * math.pi / 6]
+    path = _job(tmp_path, twelve)
+    save_pattern(generate(load_job(path)), tmp_path / "p.npz")
+    rc, err, _ = cli("export", tmp_path / "p.npz", "--job", path, "--gds", tmp_path / "p.gds")
+    assert rc == 0, err
+    rc, err, out = cli("qa", tmp_path / "p.gds", "--job", path)
+    assert rc == 0, err + [out]
+
+
+def test_a_huge_number_in_a_csv_s_first_line_is_one_line(tmp_path):
+    bad = tmp_path / "p.csv"
+    bad.write_text('# {"shape": "polygon", "vertices_mm": [[0, 0], [' + "9" * 400
+                   + ', 0], [0, 0.05]]}\nx_mm,y_mm,length_mm,width_mm,angle_deg\n'
+                   "1.0,1.0,0.05,0.05,0.0\n")  # fmt: skip
+    rc, err, _ = cli("qa", bad, "--no-job")
+    assert rc == 2 and len(err) == 1 and "not finite" in err[0], err

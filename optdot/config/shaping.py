@@ -84,9 +84,10 @@ def dot_shape(dots: dict[str, Any], where: str) -> DotShape | None:
         return None
     kind = KINDS[name]
     if "diameter" in dots:
+        keys = kind.keys if kind.derived else kind.params
         raise JobError(
             f"{where}: dots.diameter is a circle's; {_a(name)} takes "
-            + ", ".join(f"dots.{p}" for p in kind.params)
+            + ", ".join(f"dots.{p}" for p in keys)
         )
     lo, hi = DIAMETER_RANGE_MM
     if kind.derived:
@@ -149,6 +150,12 @@ def _derived_shape(kind, dots: dict[str, Any], sized: list[str], where: str) -> 
                 f"{where}: dots.{next(iter(kind.keys))} make a dot {v:g} mm in {p}; "
                 f"it must be {lo:g} <= {p} <= {hi:g} mm"
             )
+    narrow = float(kind.narrowest(np.array([size]))[0])
+    if narrow < lo:
+        raise JobError(
+            f"{where}: dots.{next(iter(kind.keys))} make a dot {narrow:g} mm wide at its "
+            f"narrowest; it must be at least {lo:g} mm"
+        )
     aspect = float(kind.aspect(np.array([size]))[0])
     if aspect > MAX_ASPECT:
         raise JobError(

@@ -302,7 +302,7 @@ def _csv_kind(path: Path, line: str) -> Kind:
         if not isinstance(doc, dict) or not isinstance(doc.get("shape"), str):
             raise ValueError('must be a JSON object with "shape"')
         return kind_of(doc["shape"], {k: v for k, v in doc.items() if k != "shape"})
-    except (ValueError, RecursionError) as e:
+    except (ValueError, RecursionError, OverflowError) as e:
         raise PatternFileError(f"{path}: line 1: not the dots' kind ({one_line(e)})") from None
 
 

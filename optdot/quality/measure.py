@@ -269,7 +269,10 @@ def _add_strays(f: FirstSums, xy: np.ndarray, dots: Footprints, rule: DotRule) -
     if f.stray_example is None:
         i = int(np.flatnonzero(bad)[0])
         x, y = xy[i]
-        f.stray_example = f"{footprint_text(dots.kind, dots.size[i])} at ({x:.3f}, {y:.3f}) mm"
+        text = footprint_text(dots.kind, dots.size[i])
+        if dots.kind != rule.shape.kind and dots.kind.name == rule.shape.kind.name:
+            text += " of other vertices"  # a polygon: the kind is made per job
+        f.stray_example = f"{text} at ({x:.3f}, {y:.3f}) mm"
 
 
 def grain_window(densest, box) -> tuple[float, float, float, float]:

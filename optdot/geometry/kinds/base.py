@@ -96,6 +96,10 @@ class Kind:
         """``[n]`` how elongated each footprint is: length over width."""
         return size[:, 0] / size[:, 1]
 
+    def narrowest(self, size: np.ndarray) -> np.ndarray:
+        """``[n]`` each footprint's least width, mm (its width)."""
+        return size[:, 1].astype(np.float64, copy=True)
+
     def fill_share(self, size: np.ndarray) -> np.ndarray:
         """``[n]`` the share of the fill limit of dots of its aspect that footprints of
         ``size`` are dealt at (1: their curved or blunt corners do not lower it)."""

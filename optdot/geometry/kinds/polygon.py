@@ -25,6 +25,8 @@ MAX_POLYGON_VERTICES = 12
 #: Sine of the smallest turn between two edges a polygon's vertex may have (a vertex on a
 #: straight side is no corner: drawn, it would read back as a side).
 MIN_TURN = 1e-3
+#: Shortest side of a polygon dot, mm (a mask's grid draws none shorter).
+MIN_SIDE = 1e-4
 
 
 def polygon_problem(vertices) -> str | None:
@@ -38,15 +40,22 @@ def polygon_problem(vertices) -> str | None:
     )
     if not ok:
         return "must be a list of [x, y] pairs in mm"
-    v = np.asarray(vertices, np.float64).reshape(-1, 2)
+    try:
+        v = np.asarray(vertices, np.float64).reshape(-1, 2)
+    except OverflowError:
+        return "holds a number that is not finite"
     if not np.isfinite(v).all():
         return "holds a number that is not finite"
     if not 3 <= len(v) <= MAX_POLYGON_VERTICES:
         return f"has {len(v)} vertices; a polygon dot has 3 to {MAX_POLYGON_VERTICES}"
     e = np.roll(v, -1, axis=0) - v
-    size = float(np.ptp(v, axis=0).max())
-    if size <= 0 or (np.hypot(*e.T) <= 1e-6).any():
-        return "repeats a vertex"
+    short = np.hypot(*e.T) < MIN_SIDE
+    if short.any():
+        k = int(np.argmax(short))
+        return (
+            f"repeats a vertex (vertices {k + 1} and {(k + 1) % len(v) + 1} are under "
+            f"{MIN_SIDE * 1e3:g} µm apart)"
+        )
     turn = e[:, 0] * np.roll(e, -1, axis=0)[:, 1] - e[:, 1] * np.roll(e, -1, axis=0)[:, 0]
     turn /= np.hypot(*e.T) * np.hypot(*np.roll(e, -1, axis=0).T)
     if not ((turn > MIN_TURN).all() or (turn < -MIN_TURN).all()):
@@ -63,13 +72,33 @@ def polygon_problem(vertices) -> str | None:
 
 
 def canonical(vertices) -> np.ndarray:
-    """``[v, 2]`` the checked ``vertices`` (:func:`polygon_problem` None) counter-clockwise,
-    about their area centroid, rounded to 1 nm (mm)."""
+    """``[v, 2]`` the checked ``vertices`` (:func:`polygon_problem` None) counter-clockwise
+    from the lowest-leftmost, about their area centroid, rounded to 1 nm (mm): the same
+    polygon however it was written down."""
     v = np.asarray(vertices, np.float64).reshape(-1, 2)
+    c = _centroid(v if _signed_area(v) > 0 else v[::-1])
+    return _in_order(np.round(v - c, 6) + 0.0)
+
+
+def _in_order(v: np.ndarray) -> np.ndarray:
+    """``v`` (``[m, 2]``) counter-clockwise, from its lowest-leftmost vertex."""
     if _signed_area(v) < 0:
         v = v[::-1]
-    c = _centroid(v)
-    return np.round(v - c, 6) + 0.0
+    first = int(np.lexsort((v[:, 1], v[:, 0]))[0])
+    return np.roll(v, -first, axis=0)
+
+
+def narrowest(v: np.ndarray) -> tuple[float, float]:
+    """``(width, diameter)`` of the convex polygon ``v`` (``[m, 2]``): its least width
+    between two parallel lines (attained across one of its sides) and its largest,
+    between its two farthest vertices."""
+    e = np.roll(v, -1, axis=0) - v
+    cross = e[:, None, 0] * (v[None, :, 1] - v[:, None, 1]) - e[:, None, 1] * (
+        v[None, :, 0] - v[:, None, 0]
+    )
+    width = float((np.abs(cross).max(axis=1) / np.hypot(*e.T)).min())
+    diameter = float(np.hypot(*(v[:, None, :] - v[None, :, :]).transpose(2, 0, 1)).max())
+    return width, diameter
 
 
 def _signed_area(v: np.ndarray) -> float:
@@ -139,7 +168,11 @@ class Polygon(Kind):
         problem = polygon_problem(dots["vertices"])
         if problem is not None:
             raise ValueError(f"dots.vertices {problem}")
-        kind = Polygon(canonical(dots["vertices"]))
+        v = canonical(dots["vertices"])
+        problem = polygon_problem(v.tolist())  # a side or a corner the 1 nm rounding took
+        if problem is not None:
+            raise ValueError(f"dots.vertices, rounded to 1 nm, {problem}")
+        kind = Polygon(v)
         return kind, (kind.l0, kind.w0)
 
     def from_spec(self, spec: dict) -> Polygon:
@@ -154,8 +187,7 @@ class Polygon(Kind):
         problem = polygon_problem(spec["vertices_mm"])
         if problem is not None:
             raise ValueError(f"vertices_mm {problem}")
-        v = np.asarray(spec["vertices_mm"], np.float64)
-        return Polygon(v[::-1] if _signed_area(v) < 0 else v)
+        return Polygon(_in_order(np.asarray(spec["vertices_mm"], np.float64)))
 
     def spec(self) -> dict:
         """What a file holds to name this kind besides its name: the vertices, mm."""
@@ -187,7 +219,13 @@ class Polygon(Kind):
         return ~(size[:, 0] > 0) | ~(size[:, 1] > 0)
 
     def aspect(self, size: np.ndarray) -> np.ndarray:
-        return np.maximum(size[:, 0], size[:, 1]) / np.minimum(size[:, 0], size[:, 1])
+        """Its largest width over its least (across a side), whichever way it is turned."""
+        out = [narrowest(self.vertices(row)) for row in np.asarray(size, np.float64)]
+        return np.array([d / w for w, d in out])
+
+    def narrowest(self, size: np.ndarray) -> np.ndarray:
+        """``[n]`` its least width between two parallel lines, mm."""
+        return np.array([narrowest(self.vertices(row))[0] for row in np.asarray(size)])
 
     def inradius(self, size: np.ndarray) -> np.ndarray:
         """``[n]`` the distance from the centre to the nearest side, mm."""
@@ -287,10 +325,33 @@ class Polygon(Kind):
 
     def fit_grown(self, points: np.ndarray, g: float, slack: float, share: float = 0.0) -> Fit:
         """:meth:`fit` of the polygon grown by ``g`` (its sides moved out; shrunk when
-        negative): a mask drawn for a print that moves every side by ``g``."""
+        negative): a mask drawn for a print that moves every side by ``g``. Shrunk, the
+        mask's sides are its longest edges and its corners arcs of radius ``-g`` about the
+        print's corners: each corner is the centre of its arc's vertices (two nearly
+        parallel sides would place a sharp tip many times less well)."""
         import shapely
 
-        poly = shapely.Polygon(points)
+        pts = np.asarray(points, np.float64)
+        v = len(self.base) if self.base is not None else 0
+        if g < 0 and v and len(pts) > v:
+            ring = pts if _signed_area(pts) > 0 else pts[::-1]
+            e = np.roll(ring, -1, axis=0) - ring
+            length = np.hypot(*e.T)
+            order = np.argsort(length)[::-1]
+            if length[order[v - 1]] > 2.0 * length[order[v]]:  # the sides stand out
+                k = np.sort(order[:v])
+                n = np.column_stack([e[k, 1], -e[k, 0]]) / length[k, None]  # outward
+                p = ring[k] + g * n
+                d = e[k]
+                corners = np.empty((v, 2))
+                for i in range(v):  # the arc from side i's end to side i + 1's start
+                    j = (i + 1) % v
+                    arc = ring[np.arange(k[i] + 1, k[j] + 1 + (len(ring) if j == 0 else 0))
+                               % len(ring)]  # fmt: skip
+                    guess = _meet(p[i], d[i], p[j], d[j])
+                    corners[i] = _arc_centre(arc, -g, guess)
+                return self.fit(corners, slack, share)
+        poly = shapely.Polygon(pts)
         grown = poly.buffer(g, join_style="round", quad_segs=16) if g else poly
         if grown.is_empty or grown.geom_type != "Polygon":
             return self.fit(points, slack, share)
@@ -339,6 +400,32 @@ class Polygon(Kind):
         return Fit(ok, centre, size, theta, (float(rad.min()), float(rad.max())))
 
 
+def _arc_centre(arc: np.ndarray, r: float, guess: np.ndarray) -> np.ndarray:
+    """``[2]`` the centre of the circle of radius ``r`` nearest the points ``arc`` (``[m,
+    2]``) in least squares, by Gauss-Newton steps from ``guess`` (the guess itself for
+    fewer than 3 points)."""
+    c = np.asarray(guess, np.float64).copy()
+    if len(arc) < 3:
+        return c
+    for _ in range(8):
+        w = c - arc
+        dist = np.hypot(*w.T)
+        jac = w / dist[:, None]
+        step, *_ = np.linalg.lstsq(jac, r - dist, rcond=None)
+        c += step
+        if np.hypot(*step) <= 1e-12 * abs(r):
+            break
+    return c
+
+
+def _meet(p: np.ndarray, d: np.ndarray, q: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """``[2]`` where the line through ``p`` along ``d`` meets the one through ``q`` along
+    ``e``."""
+    den = d[0] * e[1] - d[1] * e[0]
+    t = ((q[0] - p[0]) * e[1] - (q[1] - p[1]) * e[0]) / den
+    return p + t * d
+
+
 def _period(base: np.ndarray) -> float:
     """The least turn (rad) that maps the polygon ``base`` (about its centroid) onto
     itself: 2π/k for a k-fold symmetric one, 2π for none."""
@@ -355,12 +442,13 @@ def _period(base: np.ndarray) -> float:
     return 2.0 * math.pi
 
 
-#: Directions the fit's coarse angle compares support functions in (0.25°).
-FIT_DIRECTIONS = 1440
+#: Directions the fit's coarse angle compares support functions in (0.5°: the vertices'
+#: matching needs it within half the least turn between two of them).
+FIT_DIRECTIONS = 720
 
 
 def _coarse_turn(q: np.ndarray, base: np.ndarray) -> float:
-    """The turn (rad, to 0.25°) that best lays ``base``'s support function on ``q``'s
+    """The turn (rad, to 0.5°) that best lays ``base``'s support function on ``q``'s
     (both ``[m, 2]`` about their centroids): their circular correlation's peak."""
     phi = 2.0 * np.pi * np.arange(FIT_DIRECTIONS) / FIT_DIRECTIONS
     u = np.column_stack([np.cos(phi), np.sin(phi)])
