@@ -337,6 +337,7 @@ def test_the_tolerance_band_is_steiner_on_every_dot(circles, tmp_path):
     assert band["coverage_rel_rms_smoothed"][0] > 3 * band["coverage_rel_rms_smoothed"][1]
 
 
+@pytest.mark.slow  # over 10 s
 @pytest.mark.parametrize("ink", [None, [1.0, 1.0, 0.8, 0.5, 0.3, 0.0, 0.2, 0.9]])
 def test_caps_print_as_the_job_s_caps(tmp_path, ink):
     """Caps over LEDs are printed too: a solid cap's disc and a graded cap's rings shrink
