@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba as nb
 import numpy as np
 
 #: Sizes of a footprint within this of each other make a disc (:meth:`Kind.disc`), mm:
@@ -237,6 +238,16 @@ class Kind:
         if grown is None:
             return f
         return Fit(f.ok, f.centre, grown[0], f.angle, (f.radii[0] + g, f.radii[1] + g))
+
+
+@nb.njit(cache=True, inline="always")
+def unit_toward(wx, wy):  # pragma: no cover - compiled
+    """``(ux, uy)``: the unit vector along ``(wx, wy)``, or ``(1, 0)`` for the zero vector
+    (the direction from a point of a Minkowski sum to a centres' difference that is it)."""
+    n = math.sqrt(wx * wx + wy * wy)
+    if n == 0.0:
+        return 1.0, 0.0
+    return wx / n, wy / n
 
 
 def rotate(p: np.ndarray, angle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

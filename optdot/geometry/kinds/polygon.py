@@ -17,7 +17,7 @@ import math
 import numba as nb
 import numpy as np
 
-from .base import Curve, Fit, Kind, turned
+from .base import Curve, Fit, Kind, turned, unit_toward
 
 #: Most vertices a polygon dot may have (each is two numbers of every packed footprint
 #: the tracer tests, and a term of every pair's exact gap).
@@ -495,11 +495,8 @@ def _polygon_gaps(d, base, sxi, syi, pi, sxj, syj, pj, gap, u):  # pragma: no co
         dx, dy = d[m, 0], d[m, 1]
         for k in range(v):  # from each vertex difference to d
             for q in range(v):
-                wx, wy = dx - (a[k, 0] - b[q, 0]), dy - (a[k, 1] - b[q, 1])
-                le = math.sqrt(wx * wx + wy * wy)
-                if le == 0.0:
-                    wx, wy, le = 1.0, 0.0, 1.0
-                cand[n, 0], cand[n, 1] = wx / le, wy / le
+                w = unit_toward(dx - (a[k, 0] - b[q, 0]), dy - (a[k, 1] - b[q, 1]))
+                cand[n, 0], cand[n, 1] = w
                 n += 1
         best, bx, by = -1e300, 1.0, 0.0
         for c in range(n):

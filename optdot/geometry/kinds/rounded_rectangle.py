@@ -19,6 +19,7 @@ from .base import (
     polygon_vertices,
     rotate,
     turned,
+    unit_toward,
 )
 
 
@@ -240,11 +241,7 @@ def _rect_gaps(d, hxi, hyi, rci, pi, hxj, hyj, rcj, pj, gap, u):  # pragma: no c
                         vy = si * hxi[m] * e1y + ti * hyi[m] * e1x
                         vx += sj * hxj[m] * e2x - tj * hyj[m] * e2y
                         vy += sj * hxj[m] * e2y + tj * hyj[m] * e2x
-                        wx, wy = dx - vx, dy - vy
-                        n = math.sqrt(wx * wx + wy * wy)
-                        if n == 0.0:
-                            wx, wy, n = 1.0, 0.0, 1.0
-                        cand[k, 0], cand[k, 1] = wx / n, wy / n
+                        cand[k, 0], cand[k, 1] = unit_toward(dx - vx, dy - vy)
                         k += 1
         best, bx, by = -1e300, 1.0, 0.0
         for k in range(24):
