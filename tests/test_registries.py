@@ -70,7 +70,7 @@ def test_a_kind_s_cad_curve_encloses_its_area(name):
     kind = _kind(name)
     size = np.array(SIZES[name])
     curve = kind.curve(size)
-    assert curve.form == kind.curve_form or kind.derived
+    assert curve.form == kind.curve_form
     assert _curve_area(curve) == pytest.approx(float(kind.area(size[None])[0]), rel=1e-12)
     assert drawn_as("ellipse") is KINDS["ellipse"]
 

@@ -124,7 +124,6 @@ class Polygon(Kind):
     name = "polygon"
     params = ("length", "width")
     code = 3
-    curve_form = "polygon"
     #: ``[dots]`` keys the kind reads besides its size parameters, which it derives.
     keys = {"vertices": (list,)}
     derived = True
