@@ -463,7 +463,7 @@ def test_period_classes_group_cells_alike_within_their_pitch_cells_and_towards_t
     assert period_classes(job, 30, 15, 20 / 30, 1.0) is None
 
 
-@pytest.mark.slow  # over 2 s
+@pytest.mark.slow  # over 1.5 s
 def test_designing_a_film_evens_a_direct_lit_backlight_and_puts_ink_over_the_leds(tmp_path):
     """The film rule on a 20 x 20 mm mini-LED cell array: the designed map's luminance
     RMS (coverage mode, the panel less 5 mm) is under a quarter of the bare film's, the ink

@@ -265,7 +265,7 @@ def test_bad_option_writes_nothing(tmp_path, exported):
     assert r.exit_code == 2 and out.read_bytes() == b"old"
 
 
-@pytest.mark.slow  # over 2 s
+@pytest.mark.slow  # over 1.5 s
 def test_shaped_dots_end_to_end(tmp_path):
     """Every command and format with shaped dots: an ellipse job turned toward its LEDs
     generated, exported to every format, each mask read back by qa, and simulated."""

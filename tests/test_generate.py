@@ -73,7 +73,7 @@ def test_npy_grid_equals_csv(tmp_path):
     assert a.n_dots == b.n_dots
 
 
-@pytest.mark.parametrize("method", ["optdot", "md"])
+@pytest.mark.parametrize("method", ["optdot", pytest.param("md", marks=pytest.mark.slow)])
 def test_same_bytes_on_one_and_two_threads(method):
     """Parallel kernels sum in fixed blocks, not per thread: 12k dots span several penalty
     (4,096-dot) and L-BFGS (16,384-entry) blocks, and the pattern is bit-identical."""

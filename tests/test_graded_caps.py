@@ -364,7 +364,7 @@ def test_a_mask_whose_caps_print_different_rings_is_refused(tmp_path):
         read_any(tmp_path / "odd.dxf")
 
 
-@pytest.mark.slow  # over 2 s
+@pytest.mark.slow  # over 1.5 s
 def test_a_graded_cap_drawn_as_triangles_is_refused(tmp_path):
     """A GDSII whose graded cap cell holds triangles reaching the rings' radii: the
     reader took each polygon's nearest and farthest vertex for a ring and QA passed."""

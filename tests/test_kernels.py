@@ -257,7 +257,7 @@ print(second(np.ones(8)), numba.get_num_threads())
 """
 
 
-@pytest.mark.slow  # over 2 s
+@pytest.mark.slow  # over 1.5 s
 def test_a_compile_after_the_pool_started_survives_a_changed_thread_variable(tmp_path):
     """The README's tiled example after a plain ``generate`` in one interpreter crashed a
     worker's first compile ("Cannot set NUMBA_NUM_THREADS to a different value once the

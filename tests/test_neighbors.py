@@ -133,7 +133,7 @@ def test_verlet_update_never_changes_a_list_it_handed_out():
     assert want <= found
 
 
-@pytest.mark.slow  # over 2 s
+@pytest.mark.slow  # over 1.5 s
 def test_counting_sort_in_parallel_ranges_is_the_stable_sort():
     """The cell sort split over index ranges gives what one serial stable sort gives:
     every cell's dots in index order, whatever the number of ranges."""

@@ -472,7 +472,7 @@ run()
 """
 
 
-@pytest.mark.slow  # over 2 s
+@pytest.mark.slow  # over 1.5 s
 def test_a_sigterm_while_the_interpreter_shuts_down_keeps_the_command_s_code(tmp_path):
     """A SIGTERM as the interpreter shuts down (after Python reset its handlers) killed
     the process by the default action, exit 143 (design after writing its outputs,

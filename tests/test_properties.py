@@ -338,7 +338,7 @@ def _dxf_bytes(entities, extrusion_flip: bool) -> bytes:
     return buf.getvalue().encode()
 
 
-@pytest.mark.slow  # over 2 s
+@pytest.mark.slow  # over 1.5 s
 @SETTINGS
 @given(st.lists(entity, max_size=5), st.booleans(), st.integers(0, 3), st.integers(0, 10**6))
 def test_any_dxf_outline_loads_or_is_refused(entities, flip, damage, cut):

@@ -17,7 +17,7 @@ from .conftest import SAMPLES
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
 
-@pytest.mark.slow  # over 2 s
+@pytest.mark.slow  # over 1.5 s
 @pytest.mark.skipif(CHROMIUM is None, reason="chromium not installed (apt install chromium)")
 def test_html_report_screenshot(tmp_path):
     job = SAMPLES / "tiny" / "job.toml"

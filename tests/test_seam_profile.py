@@ -50,6 +50,7 @@ def led():
     return job, plan_tiles(job, 10.0)
 
 
+@pytest.mark.slow  # over 1.5 s
 def test_seams_carry_the_interiors_coverage(led):
     job, plan = led
     got = _profile(job, plan, _tiled(job, plan))
@@ -94,6 +95,7 @@ def test_a_correction_solved_tile_by_tile_is_seen_on_the_seams(led, monkeypatch)
     assert got["seam_rms"] > 1.6 * got["inner_rms"], got
 
 
+@pytest.mark.slow  # over 1.5 s
 def test_the_wide_pass_removes_what_the_tiles_first_pass_leaves_on_seams(led, monkeypatch):
     """The same tile-by-tile first pass, then the wide pass over the panel: one field for
     every tile, so it has no seams to leave, and it takes the first pass's away."""

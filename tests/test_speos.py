@@ -56,7 +56,7 @@ def test_varying_sizes_scale_by_the_reference_diameter(tmp_path, tiny_pattern):
     np.testing.assert_allclose(scale, np.repeat((d / 0.05)[:, None], 3, axis=1), atol=5e-7)
 
 
-@pytest.mark.slow  # over 2 s
+@pytest.mark.slow  # over 1.5 s
 def test_a_dataset_streams_the_same_file(tmp_path, tiny_pattern):
     save_pattern(tiny_pattern, tmp_path / "p.npz")
     save_dataset(tiny_pattern, tmp_path / "p.parquet")

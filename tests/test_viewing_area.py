@@ -91,7 +91,7 @@ def test_visibility_is_judged_in_the_viewing_area_and_the_panels_largest_stated(
     assert inside["max_jnd"] == pytest.approx(whole["max_jnd"])
 
 
-@pytest.mark.slow  # over 2 s
+@pytest.mark.slow  # over 1.5 s
 def test_qa_judges_visibility_in_the_viewing_area_and_everything_else_on_the_panel(tmp_path):
     """The tiny sample with a bezel: the QA line says "in the viewing
     area", the JSON carries the area and the panel's largest, the report draws the frame;
@@ -223,7 +223,7 @@ def test_design_levels_the_luminance_over_the_viewing_area():
     assert judged_all[:2].mean() / judged_all[2:].mean() == pytest.approx(0.25**0.8)
 
 
-@pytest.mark.slow  # over 2 s
+@pytest.mark.slow  # over 1.5 s
 def test_the_report_judges_the_simulation_in_the_viewing_area(tmp_path):
     """``qa --simulation`` of a job with a bezel: the report's luminance section says its
     figures are the viewing area's and names the brightest bin outside it."""

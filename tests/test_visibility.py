@@ -241,7 +241,7 @@ def test_the_clean_led_sample_reports_its_own_largest_jnd(led, tmp_path):
         assert top["kind"] == ("bright" if vis["max_jnd_signed"] > 0 else "dark")
 
 
-@pytest.mark.slow  # over 2 s
+@pytest.mark.slow  # over 1.5 s
 def test_the_corner_lit_sample_by_its_empty_corner_is_not_seen():
     """The tsuno sample (an empty corner: a zero-fill border inside the panel) in one
     process: its strongest blob under 0.7 JND. The wide correction pass solved on the
