@@ -43,9 +43,9 @@ from optdot.config.schema import load_job  # noqa: E402
 from optdot.exporters.readback import read_any  # noqa: E402
 from optdot.optics.design import design  # noqa: E402
 from optdot.optics.halo import halo  # noqa: E402
-from optdot.optics.outputs import write_design  # noqa: E402
 from optdot.optics.scene import Coverage  # noqa: E402
 from optdot.optics.simulate import simulate  # noqa: E402
+from optdot.optics.writing import write_design  # noqa: E402
 
 #: The white ink and the diffuser of both stacks (the end of each job's text).
 INK_AND_DIFFUSER = """dot_reflectance = 0.85

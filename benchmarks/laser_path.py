@@ -45,7 +45,7 @@ def main() -> None:
         for name in ("p.nc", "p.plt", "p.csv"):
             path = Path(d) / name
             t = time.perf_counter()
-            exporters.named("exporters.laser:write_laser")(p, path, opts)
+            exporters.named("exporters.laser_path:write_laser")(p, path, opts)
             s = time.perf_counter() - t
             back = _read(path)
             ours = path_length(back)

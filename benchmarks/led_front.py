@@ -39,8 +39,8 @@ from _common import machine, peak_rss_mb  # noqa: E402
 import optdot.relax.formulation as formulation  # noqa: E402
 from optdot.config.schema import load_job  # noqa: E402
 from optdot.optics.design import design  # noqa: E402
-from optdot.optics.outputs import write_design  # noqa: E402
 from optdot.optics.simulate import simulate  # noqa: E402
+from optdot.optics.writing import write_design  # noqa: E402
 from optdot.pipeline import generate, qa  # noqa: E402
 
 RASTER = 0.025  # mm

@@ -55,7 +55,7 @@ from optdot.quality.texture import (  # noqa: E402
     blurred_coverage_rms,
     structure_factor,
 )
-from optdot.quality.walls import wall_profile  # noqa: E402
+from optdot.quality.wall_profile import wall_profile  # noqa: E402
 from optdot.relax.formulation import PRESETS  # noqa: E402
 
 

@@ -90,7 +90,8 @@ FORMATS: dict[str, Format] = {
             "laser",
             "Laser dotting path to write: G-code (.nc, .gcode), HPGL/2 (.plt) or a CSV point "
             "list (.csv), one point per dot with its pulse set, along a short path.",
-            (".nc", ".gcode", ".ngc", ".plt", ".hpgl"), 24, None, "exporters.laser:write_laser",
+            (".nc", ".gcode", ".ngc", ".plt", ".hpgl"), 24, None,
+            "exporters.laser_path:write_laser",
         ),
         Format(
             "parquet", "Parquet dataset (a directory of parts).", (".parquet",), 19, 30,

@@ -185,7 +185,7 @@ def lgp_film_guide_map() -> None:
     ``optdot design samples/lgp/job.toml -o map.csv`` writes, seed 0)."""
     from optdot.config.schema import load_job
     from optdot.optics.design import design
-    from optdot.optics.outputs import map_csv
+    from optdot.optics.writing import map_csv
 
     got = design(load_job(HERE / "lgp" / "job.toml", need_map=False))
     (HERE / "lgp_film" / "guide_map.csv").write_text(map_csv(got.fill))

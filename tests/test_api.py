@@ -266,3 +266,12 @@ def test_pattern_diameter_is_per_dot():
     assert q.uniform_diameter is None and q.nominal_diameter == 0.04
     with pytest.raises(ValueError):
         Pattern(p.xy, [0.03, 0.05], p.box)
+
+
+def test_no_module_name_twice():
+    """Each module's file name says which one it is: none repeats in another folder."""
+    names: dict[str, list[str]] = {}
+    for f in sorted(ROOT.glob("optdot/**/*.py")) + sorted(ROOT.glob("exporters/**/*.py")):
+        if f.name != "__init__.py" and "__pycache__" not in f.parts:
+            names.setdefault(f.name, []).append(str(f.relative_to(ROOT)))
+    assert not {k: v for k, v in names.items() if len(v) > 1}

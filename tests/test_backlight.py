@@ -470,7 +470,7 @@ def test_designing_a_film_evens_a_direct_lit_backlight_and_puts_ink_over_the_led
     is densest over the LEDs and sparsest between them, its emptiest judged cell is at
     the range's floor, and the job written with it loads and traces."""
     from optdot.optics.design import design
-    from optdot.optics.outputs import write_design
+    from optdot.optics.writing import write_design
 
     path = direct_job(
         tmp_path,

@@ -1,6 +1,6 @@
 """The tiles' panel-wide field: every tile's throw deposited on one coarse
 lattice, one Neumann solve, each throw moved along it before it relaxes
-(:mod:`optdot.stages.initial`)."""
+(:mod:`optdot.stages.throw`)."""
 
 from __future__ import annotations
 

@@ -216,8 +216,8 @@ def test_a_simulation_with_no_light_measured_writes_valid_json(tmp_path):
     import numpy as np
 
     from optdot.config.schema import load_job
-    from optdot.optics.outputs import simulation_json
     from optdot.optics.simulate import simulate
+    from optdot.optics.writing import simulation_json
 
     np_map = "\n".join(",".join(["0.2"] * 30) for _ in range(20))
     (tmp_path / "m.csv").write_text(np_map + "\n")

@@ -19,7 +19,7 @@ from optdot.quality.texture import (
     blurred_coverage_rms,
     structure_factor,
 )
-from optdot.quality.walls import wall_profile
+from optdot.quality.wall_profile import wall_profile
 from optdot.relax.formulation import PRESETS
 from tests.conftest import SAMPLES, write_job
 

@@ -289,8 +289,8 @@ def test_the_jnd_figure_draws_the_viewing_area(monkeypatch):
 
 
 def test_the_luminance_plot_draws_the_measured_region(tmp_path, monkeypatch):
-    from optdot.optics.outputs import luminance_png
     from optdot.optics.simulate import simulate
+    from optdot.optics.writing import luminance_png
 
     job = load_job(_lgp_with(tmp_path, "bezel = [0, 3, 0, 0]"))
     sim = simulate(job, 20_000, seed=1, bin_mm=0.5)

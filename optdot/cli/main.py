@@ -1,10 +1,10 @@
 """The ``optdot`` command: the group (:mod:`optdot.cli.app`) with its commands registered
-(:mod:`optdot.cli.make`: check, generate; :mod:`optdot.cli.gate`: export, qa;
+(:mod:`optdot.cli.make`: check, generate; :mod:`optdot.cli.tooling`: export, qa;
 :mod:`optdot.cli.optics`: simulate, design)."""
 
 from __future__ import annotations
 
-from . import gate, make, optics
+from . import make, optics, tooling
 from .app import EXIT_INTERNAL, main
 
-__all__ = ["EXIT_INTERNAL", "gate", "main", "make", "optics"]
+__all__ = ["EXIT_INTERNAL", "main", "make", "optics", "tooling"]

@@ -8,7 +8,7 @@ import click
 import numpy as np
 
 from .app import main, user_errors
-from .options import (
+from .records import (
     job_options,
     load_job_with,
     progress_bar,

@@ -11,7 +11,7 @@ from pathlib import Path
 import click
 
 from .app import main, user_errors
-from .options import Count, Finite, record
+from .records import Count, Finite, record
 
 RAYS = Count(1000, 10**10)
 #: ``--seed`` of ``simulate`` and ``design``.
@@ -107,9 +107,9 @@ def simulate(job_file, pattern, trace, bins, files, quiet):
     from ..config.schema import load_job
     from ..io.atomic import transaction
     from ..io.outputs import check_outputs
-    from ..optics.outputs import luminance_png, simulation_json, write_text
     from ..optics.scene import is_direct
     from ..optics.simulate import simulate as run
+    from ..optics.writing import luminance_png, simulation_json, write_text
 
     rays, seed = trace.rays, trace.seed
     bin_mm, spot_mm, border_mm = bins.bin_mm, bins.spot_mm, bins.border_mm
@@ -120,7 +120,7 @@ def simulate(job_file, pattern, trace, bins, files, quiet):
     check_outputs(outs, inputs)
     dots = None
     if pattern is not None:
-        from .gate import _read_with_job, traced_as_made
+        from .tooling import _read_with_job, traced_as_made
 
         dots = _read_with_job(pattern, job)
         traced_as_made(pattern, dots, job)
@@ -259,7 +259,7 @@ def design(job_file, output, png_path, job_out, rays, iterations, seed, quiet):
     from ..io.outputs import check_outputs
     from ..optics.design import check_iterations, design_grid
     from ..optics.design import design as run
-    from ..optics.outputs import write_design
+    from ..optics.writing import write_design
 
     if output.suffix.lower() != ".csv":
         raise click.BadParameter("must end in .csv", param_hint="'-o' / '--output'")

@@ -26,7 +26,7 @@ from .backlight import BACKLIGHT_KEYS, backlight_from, check_leds_inside, led_ca
 from .grids import load_grid, validate_grid
 from .images import IMAGE_SUFFIXES, check_ranges, load_image
 from .job import Job, OptimizeParams, QAParams
-from .laser import LASER_KEYS, laser_from, laser_sizes
+from .laser_section import LASER_KEYS, laser_from, laser_sizes
 from .light_guide import (
     DESIGN_KEYS,
     LIGHT_GUIDE_KEYS,
@@ -34,9 +34,9 @@ from .light_guide import (
     design_from,
     light_guide_from,
 )
-from .process import PROCESS_KEYS, check_caps, check_printable, process_from
+from .process_section import PROCESS_KEYS, check_caps, check_printable, process_from
 from .shaping import DOT_SHAPE_KEYS, ORIENTATION_KEYS, dot_shape, orientation, shape_sizes
-from .sheet import SHEET_KEYS, sheet_from
+from .sheet_section import SHEET_KEYS, sheet_from
 
 SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
     "": {"name": (str,)},

@@ -38,7 +38,7 @@ event by event:
     *absorbed in sheets*.
   - the top face (index ``L``, any kind): what crosses it is *extracted*, binned where it
     leaves.
-- **Walls** (:mod:`optdot.optics.faces.walls`): a slab's walls reflect totally outside its
+- **Walls** (:mod:`optdot.optics.faces.slab_walls`): a slab's walls reflect totally outside its
   escape cone and by Fresnel inside it; what leaves meets the cover, which returns
   ``edge_reflectance`` of it (``specular`` mirrored, ``diffuse`` Lambertian refracted back
   in) and the rest is *lost at the edges*; an ``absorbing`` edge takes everything. In air

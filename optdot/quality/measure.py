@@ -10,7 +10,7 @@ sums into numbers and plot data. Two passes:
 1. **Each part alone** (:func:`_first_pass`): its bounding box, the dot area per map cell
    (coverage), dot counts per 2 mm square (densest region), the overview image, dots
    protruding from the panel or in zero-density cells, dot area in the edge bands and in
-   bands of distance from the walls (:mod:`optdot.quality.walls`). These
+   bands of distance from the walls (:mod:`optdot.quality.wall_profile`). These
    are sums over dots, so parts add up exactly (counts are integers; float sums differ
    from one pass over all dots only in the order of addition).
 2. **Each part with a halo** (:func:`_second_pass`): the dots of the other parts within
@@ -64,7 +64,7 @@ from .source import Source, gather
 from .summary import Measured, summarize
 from .sums import FirstSums, SecondSums, add_nested, cat, keep
 from .visibility import LuminanceGrid, visibility
-from .walls import WallProfiler
+from .wall_profile import WallProfiler
 
 #: Smallest halo around a part, mm: covers the 6 nearest neighbours at any fill > ~0.01
 #: of 46 µm dots (beyond, the exact re-query takes over).

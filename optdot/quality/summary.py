@@ -17,7 +17,7 @@ from .seams import seam_finish
 from .source import Source
 from .sums import FirstSums, SecondSums, cat
 from .texture import band_mean, structure_factor
-from .walls import WallProfile
+from .wall_profile import WallProfile
 
 
 @dataclass

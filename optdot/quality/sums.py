@@ -11,7 +11,7 @@ import numpy as np
 from ..geometry.shapes import Footprints
 from .metrics import SquareGrid
 from .visibility import LuminanceGrid
-from .walls import WallProfiler
+from .wall_profile import WallProfiler
 
 
 @dataclass

@@ -12,7 +12,7 @@ misses (``../shared/quality.md``):
   ``k a = 3`` the raster changes S by less than 1 %.
 * :func:`blurred_coverage_rms`: the dot area on a fine raster seen through a Gaussian
   of ``sigma`` mm, RMS relative to its mean over the window shrunk by ``3 sigma``.
-* the wall profile (:mod:`optdot.quality.walls`): coverage over the map's fill in bands
+* the wall profile (:mod:`optdot.quality.wall_profile`): coverage over the map's fill in bands
   of distance from the nearest wall.
 
 All lengths in mm.

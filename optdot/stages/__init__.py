@@ -4,12 +4,12 @@
 :mod:`optdot.tiling.tasks` run the same functions over a tile, with the neighbouring
 tiles' dots held still around it. Nothing here knows whether it sees a panel or a tile:
 
-* :func:`throw` (:mod:`.initial`): the initial dots of a window (the panel, or a tile),
+* :func:`throw` (:mod:`.throw`): the initial dots of a window (the panel, or a tile),
   §2.1; for tiles, their long-wavelength grain removed across the panel before they
   relax (:func:`coarse_shift` along the field :func:`coarse_solve` makes from every
   tile's :func:`coarse_part`).
 * :func:`relax` (:mod:`.relaxation`): circles and containers on the initial dots, phantom
-  dots beyond the walls (:mod:`.walls`), then OptDot (L-BFGS through the formulation's
+  dots beyond the walls (:mod:`.beyond_walls`), then OptDot (L-BFGS through the formulation's
   stages, then the long-wavelength correction and the hard core, :mod:`.correction`) or
   the MD baseline of §2.2. A tile relaxes without the correction; it gets
   :func:`correction_region` over windows that span its seams, the wide last pass over
@@ -23,6 +23,7 @@ What a job asks of each stage (its problem, formulation, settings, sizes, halo, 
 is :mod:`.settings`.
 """
 
+from .beyond_walls import job_phantoms, phantom_reach, phantoms_near
 from .correction import (
     TILE_GRID,
     correction_pad,
@@ -35,7 +36,6 @@ from .correction import (
 )
 from .finishing import Finished, finish
 from .held import Held
-from .initial import coarse_part, coarse_shift, coarse_solve, throw
 from .relaxation import relax
 from .settings import (
     FIT_SHARE,
@@ -50,7 +50,7 @@ from .settings import (
     stage_settings,
     thrown_areas,
 )
-from .walls import job_phantoms, phantom_reach, phantoms_near
+from .throw import coarse_part, coarse_shift, coarse_solve, throw
 
 __all__ = [
     "FIT_SHARE",

@@ -40,8 +40,8 @@ from ..relax.optdot import relax_staged
 from ..relax.result import RelaxResult
 from ..sampling.initial import Rect
 from ..spatial.window import bounds, grown
+from .beyond_walls import with_phantoms
 from .settings import areas, rule_diameters, stage_settings
-from .walls import with_phantoms
 
 
 def corrected(job: Job, form: Formulation) -> bool:

@@ -11,9 +11,9 @@ from ..relax.formulation import Formulation
 from ..relax.md import MDForce, md_relax
 from ..relax.optdot import Progress, relax_staged
 from ..relax.result import RelaxResult
+from .beyond_walls import with_phantoms
 from .correction import long_wavelength
 from .settings import rule_diameters, stage_settings
-from .walls import with_phantoms
 
 
 def relax(

@@ -17,10 +17,10 @@ from __future__ import annotations
 import numba as nb
 
 from ..tables import BOTTOM_FACE, F_KIND, SHEET_FACE
+from .diffuser_sheet import meet_sheet
 from .interface import meet_interface
 from .reflector import meet_reflector
-from .sheet import meet_sheet
-from .walls import meet_wall, wall_distance
+from .slab_walls import meet_wall, wall_distance
 
 
 @nb.njit(cache=True, inline="always")

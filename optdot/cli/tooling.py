@@ -12,7 +12,7 @@ import numpy as np
 from ..config.viewing import VIEW_PRESETS
 from ..io.outputs import check_outputs
 from .app import main, user_errors
-from .options import (
+from .records import (
     POSITIVE,
     Finite,
     JobChoice,
@@ -443,7 +443,7 @@ def qa(pattern_file, choice, reports, simulation_path, limits, looks, layers, qu
     check_outputs(outs, (*inputs, *((simulation_path,) if simulation_path else ())))
     simulation = None
     if simulation_path is not None:
-        from ..optics.outputs import read_simulation
+        from ..optics.writing import read_simulation
 
         simulation = read_simulation(simulation_path)
     if pattern_file.suffix.lower() == ".parquet":
