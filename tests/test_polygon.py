@@ -40,6 +40,16 @@ def _job(tmp_path, vertices=TRIANGLE_MM, orientation=None, **more):
     return write_job(tmp_path, np.full((3, 4), 0.3), **sections)
 
 
+def _mask(pattern, job, folder, fmt: str, name: str = "p"):
+    """The path of ``pattern``'s mask of ``fmt`` that ``optdot export`` writes with
+    ``job`` into ``folder`` (the pattern saved there as ``name.npz`` first)."""
+    save_pattern(pattern, folder / f"{name}.npz")
+    mask = folder / f"{name}.{fmt}"
+    rc, err, _ = cli("export", folder / f"{name}.npz", "--job", job, f"--{fmt}", mask)
+    assert rc == 0, err
+    return mask
+
+
 def test_vertices_are_the_dot_about_its_centroid(tmp_path):
     """Clockwise vertices anywhere: counter-clockwise about their area centroid, rounded to
     1 nm; length and width their extents; the same polygon however it was given."""
@@ -271,10 +281,7 @@ def test_masks_read_back_as_the_job_s_polygons(triangles, tmp_path, fmt):
     refused in one line naming the polygon; a hexagon mask under the triangle job
     fails."""
     path, p = triangles
-    save_pattern(p, tmp_path / "p.npz")
-    mask = tmp_path / f"p.{fmt}"
-    rc, err, _ = cli("export", tmp_path / "p.npz", "--job", path, f"--{fmt}", mask)
-    assert rc == 0, err
+    mask = _mask(p, path, tmp_path, fmt)
     rc, err, out = cli("qa", mask, "--job", path)
     assert rc == 0, err + [out]
     rc, err, _ = cli("qa", mask, "--no-job")
@@ -282,9 +289,7 @@ def test_masks_read_back_as_the_job_s_polygons(triangles, tmp_path, fmt):
     hexes = tmp_path / "hex"
     hexes.mkdir()
     hex_job = _job(hexes, HEXAGON_MM, orientation={"angle": 45})
-    save_pattern(generate(load_job(hex_job)), hexes / "h.npz")
-    rc, err, _ = cli("export", hexes / "h.npz", "--job", hex_job, f"--{fmt}", hexes / f"h.{fmt}")
-    assert rc == 0, err
+    _mask(generate(load_job(hex_job)), hex_job, hexes, fmt, "h")
     # read back at -15°, a hexagon at 45° is on its field (modulo its 60° symmetry)
     rc, err, out = cli("qa", hexes / f"h.{fmt}", "--job", hex_job)
     assert rc == 0, err + [out]
@@ -297,9 +302,7 @@ def test_klayout_reads_the_polygon_and_its_turns(triangles, tmp_path):
     dot's centre turned by its angle (the mask draws what the pattern holds)."""
     kdb = pytest.importorskip("klayout.db")
     path, p = triangles
-    save_pattern(p, tmp_path / "p.npz")
-    rc, err, _ = cli("export", tmp_path / "p.npz", "--job", path, "--gds", tmp_path / "p.gds")
-    assert rc == 0, err
+    _mask(p, path, tmp_path, "gds")
     ly = kdb.Layout()
     ly.read(str(tmp_path / "p.gds"))
     it = ly.top_cell().begin_shapes_rec(ly.layer(1, 0))
@@ -329,9 +332,7 @@ def test_a_positive_gain_is_refused_and_an_etch_prints_the_polygon(tmp_path):
         load_job(path)
     path = _job(tmp_path, process={"dot_gain": -0.002, "min_space": 0.006})
     p = generate(load_job(path))
-    save_pattern(p, tmp_path / "p.npz")
-    rc, err, _ = cli("export", tmp_path / "p.npz", "--job", path, "--gds", tmp_path / "p.gds")
-    assert rc == 0, err
+    _mask(p, path, tmp_path, "gds")
     import gdstk
 
     lib = gdstk.read_gds(str(tmp_path / "p.gds"))
@@ -386,9 +387,7 @@ def test_a_mirrored_reference_is_read_as_its_mirror_image(triangles, tmp_path):
     import gdstk
 
     path, p = triangles
-    save_pattern(p, tmp_path / "p.npz")
-    rc, err, _ = cli("export", tmp_path / "p.npz", "--job", path, "--gds", tmp_path / "p.gds")
-    assert rc == 0, err
+    _mask(p, path, tmp_path, "gds")
     lib = gdstk.read_gds(str(tmp_path / "p.gds"))
     for ref in next(c for c in lib.cells if c.name == "TOP").references:
         ref.x_reflection = True
@@ -405,9 +404,7 @@ def test_a_mirrored_reference_is_read_as_its_mirror_image(triangles, tmp_path):
     ]
     hex_job = _job(hexes, turned10, orientation={"random": "true"})
     h = generate(load_job(hex_job))
-    save_pattern(h, hexes / "h.npz")
-    rc, err, _ = cli("export", hexes / "h.npz", "--job", hex_job, "--gds", hexes / "h.gds")
-    assert rc == 0, err
+    _mask(h, hex_job, hexes, "gds", "h")
     lib = gdstk.read_gds(str(hexes / "h.gds"))
     for ref in next(c for c in lib.cells if c.name == "TOP").references:
         ref.x_reflection = True
@@ -427,9 +424,7 @@ def test_a_regular_12_gon_is_the_job_s_not_a_circle(tmp_path):
     mask of the job's 12-gon still reads back as the job's dots."""
     twelve = [[0.03 * math.cos(a), 0.03 * math.sin(a)] for a in np.arange(12) * math.pi / 6]
     path = _job(tmp_path, twelve)
-    save_pattern(generate(load_job(path)), tmp_path / "p.npz")
-    rc, err, _ = cli("export", tmp_path / "p.npz", "--job", path, "--gds", tmp_path / "p.gds")
-    assert rc == 0, err
+    _mask(generate(load_job(path)), path, tmp_path, "gds")
     rc, err, out = cli("qa", tmp_path / "p.gds", "--job", path)
     assert rc == 0, err + [out]
 

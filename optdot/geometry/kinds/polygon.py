@@ -56,8 +56,8 @@ def polygon_problem(vertices) -> str | None:
             f"repeats a vertex (vertices {k + 1} and {(k + 1) % len(v) + 1} are under "
             f"{MIN_SIDE * 1e3:g} µm apart)"
         )
-    turn = e[:, 0] * np.roll(e, -1, axis=0)[:, 1] - e[:, 1] * np.roll(e, -1, axis=0)[:, 0]
-    turn /= np.hypot(*e.T) * np.hypot(*np.roll(e, -1, axis=0).T)
+    f = np.roll(e, -1, axis=0)  # the side after each
+    turn = (e[:, 0] * f[:, 1] - e[:, 1] * f[:, 0]) / (np.hypot(*e.T) * np.hypot(*f.T))
     if not ((turn > MIN_TURN).all() or (turn < -MIN_TURN).all()):
         k = int(np.argmin(np.abs(turn)) if (np.abs(turn) <= MIN_TURN).any() else 0)
         return (
