@@ -123,6 +123,10 @@ def test_the_design_s_shares_add_up_and_cap_shares_match_the_discs(tmp_path):
     caps = cap_array([[1.0, 1.0]], 1.0)
     share = cap_shares(caps, 0.0, 0.0, 0.5, 0.5, 4, 4)
     assert share.sum() * 0.25 == pytest.approx(discs(caps).area)
+    share[:] = 7.0  # the shares are kept for the next call on the grid: a copy is handed out
+    again = cap_shares(caps.copy(), 0.0, 0.0, 0.5, 0.5, 4, 4)
+    assert again.sum() * 0.25 == pytest.approx(discs(caps).area)
+    assert cap_shares(caps, 0.0, 0.0, 0.5, 0.5, 4, 2).shape == (2, 4)  # another grid
 
 
 def test_designing_with_caps_evens_lambertian_leds_that_dots_alone_cannot(tmp_path):

@@ -67,6 +67,34 @@ def test_radius_rule_and_polydispersity(tiny_job):
     assert np.array_equal(poly, Formulation(polydispersity=0.1).radii(rho, 0.023, 7))
 
 
+def test_containers_are_sized_for_at_least_the_fill_floor(tmp_path):
+    """Where a map falls to zero (a film's clear islands, read bilinearly) the fill near
+    the rim reaches 1e-5 and the circle of §3.3 tens of millimetres: containers are
+    sized for :data:`CONTAINER_FILL_FLOOR` at least, above it by the rule, and the
+    phantoms' reach (twice the largest circle) is held with them."""
+    from optdot.config.schema import load_job
+    from optdot.relax.formulation import CONTAINER_FILL_FLOOR
+    from optdot.stages.beyond_walls import phantom_reach
+
+    form = Formulation()
+    rho = np.array([1e-7, 1e-4, CONTAINER_FILL_FLOOR, 0.02, 0.3])
+    got = form.radii(rho, 0.023, 1)
+    want = circle_radius(np.maximum(rho, CONTAINER_FILL_FLOOR), 0.023) * form.radius_factor
+    assert np.allclose(got, want) and got[0] == got[1] == got[2] > got[3] > got[4]
+    assert got[3] == pytest.approx(circle_radius(np.array([0.02]), 0.023)[0] * form.radius_factor)
+    grid = np.full((8, 8), 0.3)
+    grid[3:5, 3:5] = 0.0  # a clear island; bilinear reads 1e-6 by its rim
+    grid[2, 3] = 1e-6
+    np.savetxt(tmp_path / "m.csv", grid, delimiter=",")
+    (tmp_path / "job.toml").write_text(
+        '[domain]\nwidth = 4.0\nheight = 4.0\n[density]\ngrid = "m.csv"\n'
+        'interpolation = "linear"\n[dots]\ndiameter = 0.046\n'
+    )
+    job = load_job(tmp_path / "job.toml")
+    top = 2 * form.radii(np.array([CONTAINER_FILL_FLOOR]), 0.023, 0)[0]
+    assert phantom_reach(job, form) == pytest.approx(top * (1 + form.polydispersity))
+
+
 def test_stages_split_the_iterations(tiny_job):
     job = dataclasses.replace(
         tiny_job, optimize=dataclasses.replace(tiny_job.optimize, max_iter=30, ftol=0.0)

@@ -109,7 +109,9 @@ def test_the_disc_rectangle_area_is_exact(cx, cy, r, x0, y0, w, h):
 
 
 def test_ring_shares_match_shapely_annuli_on_cells():
-    caps = np.array([[1.3, 1.1, 1.6], [3.7, 2.2, 1.6]])
+    """Caps inside the grid, across its edges and corner, at different offsets to the
+    cells: the rings' share of every cell against shapely's annuli."""
+    caps = np.array([[1.3, 1.1, 1.6], [3.7, 2.2, 1.6], [0.2, 3.45, 1.6], [4.95, -0.1, 1.6]])
     rings = ring_table(1.6, [1.0, 0.6, 0.0, 0.4, 0.8, 0.2, 1.0, 0.5])
     got = ring_shares(caps, rings, 0.0, 0.0, 0.35, 0.3, 14, 12)
     polys = [

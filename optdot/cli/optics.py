@@ -291,8 +291,13 @@ def design(job_file, output, png_path, job_out, rays, iterations, seed, quiet):
             click.echo(
                 f"iteration {f['iteration']:2d}: {f['rays']:>11,} rays, 9-point "
                 f"{f['uniformity_9point']:.3f}, RMS {f['luminance_rms']:.2%} (noise "
-                f"{f['luminance_rms_noise']:.2%}), efficiency {f['efficiency']:.1%}, "
-                f"{time.perf_counter() - t0:.0f} s",
+                f"{f['luminance_rms_noise']:.2%}), efficiency {f['efficiency']:.1%}"
+                + (
+                    f", updates agree {f['update_agreement']:+.2f}"
+                    if math.isfinite(f.get("update_agreement", math.nan))
+                    else ""
+                )
+                + f", {time.perf_counter() - t0:.0f} s",
                 err=True,
             )
 

@@ -163,9 +163,9 @@ class DesignParams:
         smoothing: Gaussian sigma of the update, cells.
         target_file: the file ``target`` came from.
         tolerance: the luminance RMS beyond the rays' noise (a share of the mean) at or
-            under which a guide's design stops before ``iterations``; None: 0.3 of the
+            under which a design may stop before ``iterations`` (once its map's updates
+            also take turns: :class:`optdot.optics.design.Update`); None: 0.3 of the
             noise (:data:`optdot.optics.design.SETTLED_SHARE`); 0 runs every iteration.
-            A film's design runs its iterations.
     """
 
     cell: float | None = None

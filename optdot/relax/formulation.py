@@ -21,6 +21,16 @@ from ..geometry.shapes import DotShape
 from .circles import circle_radius, container_half_sides, hex_radius
 from .penalty import PenaltyTerms
 
+#: The least fill a container is sized for. The circle of §3.3 grows as ``1 / sqrt(rho)``:
+#: where a map falls to zero (a film's clear islands between LEDs, read bilinearly from
+#: cells of 0 beside cells of 0.1) its fill reaches 1e-5 and a 79 µm dot's circle 17 mm,
+#: which overlaps thousands of neighbours (a designed 64 x 44 mm film: 106 s and 4 GB to
+#: generate, 242k dots), sets the phantoms' reach for the whole panel and pushes the dots
+#: of the island's rim by millimetres, out of the band their sizes were given for. At 1 %
+#: a 46 µm dot's circle is 0.31 mm; below it a dot has no neighbour its circle could
+#: space it from within a map cell, and the throw's count alone carries the fill.
+CONTAINER_FILL_FLOOR = 0.01
+
 
 @dataclass(frozen=True, eq=False)
 class Problem:
@@ -145,10 +155,10 @@ class Formulation:
         self, rho: np.ndarray, r0: float | np.ndarray, seed: int, multiplier: float = 1.0
     ) -> np.ndarray:
         """``[n]`` circle radii, mm, for dots of radius ``r0`` (mm, one or ``[n]``) at
-        fill ``rho`` (``[n]``)."""
+        fill ``rho`` (``[n]``; sized for at least :data:`CONTAINER_FILL_FLOOR`)."""
         ramp = np.clip((rho - self.light_rho) / (self.dense_rho - self.light_rho), 0.0, 1.0)
         factor = self.radius_factor * multiplier * (1.0 + (self.dense_factor - 1.0) * ramp)
-        r = circle_radius(rho, r0, 1.0) * factor
+        r = circle_radius(np.maximum(rho, CONTAINER_FILL_FLOOR), r0, 1.0) * factor
         if self.polydispersity > 0:
             sign = np.random.default_rng([seed, 0x9D]).integers(0, 2, len(r)) * 2 - 1
             p = self.polydispersity
