@@ -67,32 +67,49 @@ def test_radius_rule_and_polydispersity(tiny_job):
     assert np.array_equal(poly, Formulation(polydispersity=0.1).radii(rho, 0.023, 7))
 
 
-def test_containers_are_sized_for_at_least_the_fill_floor(tmp_path):
-    """Where a map falls to zero (a film's clear islands, read bilinearly) the fill near
-    the rim reaches 1e-5 and the circle of §3.3 tens of millimetres: containers are
-    sized for :data:`CONTAINER_FILL_FLOOR` at least, above it by the rule, and the
-    phantoms' reach (twice the largest circle) is held with them."""
+def test_a_dip_s_containers_take_their_neighbourhood_s_fill_and_a_sparse_map_keeps_its_own(
+    tmp_path,
+):
+    """Where a map dips towards zero (a designed cell of 1e-6 among cells of 0.3, read
+    bilinearly) §3.3's circle would reach tens of millimetres: the containers there are
+    sized for the neighbourhood's mean, at most :data:`CONTAINER_FILL_FLOOR`, and the
+    phantoms' reach (twice the largest circle) with them: under 2 mm. A map sparse over a wide
+    region keeps its own fill, to the bit (a uniform 0.5 % map sized for 1 % orders:
+    psi6 0.11), and so does the sparse half of a map beside a dense half, away from it."""
     from optdot.config.schema import load_job
-    from optdot.relax.formulation import CONTAINER_FILL_FLOOR
+    from optdot.relax.formulation import CONTAINER_FILL_FLOOR as FLOOR
     from optdot.stages.beyond_walls import phantom_reach
+    from optdot.stages.settings import container_fill, containers
+
+    def job_of(grid, name):
+        np.savetxt(tmp_path / f"{name}.csv", grid, delimiter=",")
+        (tmp_path / f"{name}.toml").write_text(
+            f'[domain]\nwidth = 8.0\nheight = 8.0\n[density]\ngrid = "{name}.csv"\n'
+            'interpolation = "linear"\n[dots]\ndiameter = 0.046\n'
+        )
+        return load_job(tmp_path / f"{name}.toml")
 
     form = Formulation()
-    rho = np.array([1e-7, 1e-4, CONTAINER_FILL_FLOOR, 0.02, 0.3])
-    got = form.radii(rho, 0.023, 1)
-    want = circle_radius(np.maximum(rho, CONTAINER_FILL_FLOOR), 0.023) * form.radius_factor
-    assert np.allclose(got, want) and got[0] == got[1] == got[2] > got[3] > got[4]
-    assert got[3] == pytest.approx(circle_radius(np.array([0.02]), 0.023)[0] * form.radius_factor)
-    grid = np.full((8, 8), 0.3)
-    grid[3:5, 3:5] = 0.0  # a clear island; bilinear reads 1e-6 by its rim
-    grid[2, 3] = 1e-6
-    np.savetxt(tmp_path / "m.csv", grid, delimiter=",")
-    (tmp_path / "job.toml").write_text(
-        '[domain]\nwidth = 4.0\nheight = 4.0\n[density]\ngrid = "m.csv"\n'
-        'interpolation = "linear"\n[dots]\ndiameter = 0.046\n'
-    )
-    job = load_job(tmp_path / "job.toml")
-    top = 2 * form.radii(np.array([CONTAINER_FILL_FLOOR]), 0.023, 0)[0]
-    assert phantom_reach(job, form) == pytest.approx(top * (1 + form.polydispersity))
+    dip = np.full((16, 16), 0.3)
+    dip[6:9, 6:9] = 1e-6  # 1.5 mm across: the centre reads 1e-6, its circle 32 mm
+    job = job_of(dip, "dip")
+    at = np.array([[3.75, 3.75], [1.0, 1.0]])  # the dip's centre, the open map
+    own = job.density.at(at)
+    got = container_fill(job, at)
+    assert own[0] == pytest.approx(1e-6) and 1e3 * own[0] < got[0] <= FLOOR
+    assert got[1] == own[1] == pytest.approx(0.3)
+    low = containers(job).lowest()
+    assert 1e-3 < low <= FLOOR
+    reach = 2 * form.radii(np.array([low]), 0.023, 0)[0] * (1 + form.polydispersity)
+    assert phantom_reach(job, form) == pytest.approx(reach) and reach < 2.0
+    sparse = job_of(np.full((16, 16), 0.005), "sparse")
+    xy = np.random.default_rng(2).uniform(0, 8, (500, 2))
+    assert np.array_equal(container_fill(sparse, xy), sparse.density.at(xy))
+    half = np.full((16, 32), 0.3)
+    half[:, :16] = 0.004  # 4 mm of 0.4 % beside 0.3
+    split = job_of(half, "half")
+    far = np.array([[0.5, 4.0], [1.5, 2.0]])  # over 2 mm from the dense half
+    assert np.array_equal(container_fill(split, far), split.density.at(far))
 
 
 def test_stages_split_the_iterations(tiny_job):

@@ -8,10 +8,12 @@ how the panel edge and the zero-density cells are treated, and staged relaxation
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.ndimage import gaussian_filter
 
 from ..geometry.density import DensityMap
 from ..geometry.domain import Domain
@@ -21,15 +23,61 @@ from ..geometry.shapes import DotShape
 from .circles import circle_radius, container_half_sides, hex_radius
 from .penalty import PenaltyTerms
 
-#: The least fill a container is sized for. The circle of §3.3 grows as ``1 / sqrt(rho)``:
-#: where a map falls to zero (a film's clear islands between LEDs, read bilinearly from
-#: cells of 0 beside cells of 0.1) its fill reaches 1e-5 and a 79 µm dot's circle 17 mm,
-#: which overlaps thousands of neighbours (a designed 64 x 44 mm film: 106 s and 4 GB to
-#: generate, 242k dots), sets the phantoms' reach for the whole panel and pushes the dots
-#: of the island's rim by millimetres, out of the band their sizes were given for. At 1 %
-#: a 46 µm dot's circle is 0.31 mm; below it a dot has no neighbour its circle could
-#: space it from within a map cell, and the throw's count alone carries the fill.
+#: The fill under which a container may be sized for its neighbourhood's instead. The
+#: circle of §3.3 grows as ``1 / sqrt(rho)``: where a map dips towards zero (a film's
+#: clear islands between LEDs, read bilinearly, or a designed cell of 1e-5 among cells of
+#: 0.1) a 79 µm dot's circle reaches 17 mm, overlaps thousands of neighbours, sets the
+#: phantoms' reach for the whole panel and pushes the dots around the dip by
+#: millimetres, out of the band their sizes were given for. Such a dip is far narrower
+#: than its own container; a map sparse over a wide region is not, and keeps its fill.
 CONTAINER_FILL_FLOOR = 0.01
+
+
+@dataclass(frozen=True, eq=False)
+class Containers:
+    """The fill each dot's container is sized for (:func:`containers_of`).
+
+    Under :data:`CONTAINER_FILL_FLOOR`, where the map's mean over the neighbourhood a
+    container at the floor would span (a Gaussian of that radius) is more than twice the
+    fill, the container is sized for that mean, at most the floor: a dip narrower than
+    its container takes its surroundings' spacing, up to the floor's. Elsewhere (a map
+    sparse over a wide region, every fill at or over the floor) the map's own fill.
+
+    Attributes:
+        density: the map.
+        mean: ``[ny, nx]`` the map's mean about each cell (the Gaussian's).
+    """
+
+    density: DensityMap
+    mean: np.ndarray
+
+    def floored(self, rho: np.ndarray, xy: np.ndarray) -> np.ndarray:
+        """``[n]`` the container fill of points at ``xy`` (``[n, 2]`` mm; outside the
+        map's box, its nearest cell's) whose own fill is ``rho`` (``[n]``; 0 stays 0)."""
+        return _floored(rho, self.mean.ravel()[self.density.cell_index(xy)])
+
+    def lowest(self) -> float:
+        """The least non-zero container fill over the map's cells (1 for an empty map)."""
+        g = _floored(self.density.grid, self.mean)
+        live = g[g > 0]
+        return float(live.min()) if live.size else 1.0
+
+
+def _floored(rho: np.ndarray, mean: np.ndarray) -> np.ndarray:
+    """``rho`` raised towards ``mean`` (at most to the floor) where it is a dip."""
+    dip = (rho > 0) & (rho < CONTAINER_FILL_FLOOR) & (mean > 2.0 * rho)
+    return np.where(dip, np.maximum(rho, np.minimum(mean, CONTAINER_FILL_FLOOR)), rho)
+
+
+@functools.lru_cache(maxsize=4)
+def containers_of(density: DensityMap, widest: float) -> Containers:
+    """:class:`Containers` of ``density`` for dots up to ``widest`` mm across."""
+    g = density.grid
+    dx, dy = density.cell_size
+    radius = float(circle_radius(np.array([CONTAINER_FILL_FLOOR]), 0.5 * widest)[0])
+    if not ((g > 0) & (g < CONTAINER_FILL_FLOOR)).any():
+        return Containers(density, g)  # no fill under the floor: nothing to size otherwise
+    return Containers(density, gaussian_filter(g, (radius / dy, radius / dx), mode="nearest"))
 
 
 @dataclass(frozen=True, eq=False)
@@ -155,10 +203,10 @@ class Formulation:
         self, rho: np.ndarray, r0: float | np.ndarray, seed: int, multiplier: float = 1.0
     ) -> np.ndarray:
         """``[n]`` circle radii, mm, for dots of radius ``r0`` (mm, one or ``[n]``) at
-        fill ``rho`` (``[n]``; sized for at least :data:`CONTAINER_FILL_FLOOR`)."""
+        fill ``rho`` (``[n]``)."""
         ramp = np.clip((rho - self.light_rho) / (self.dense_rho - self.light_rho), 0.0, 1.0)
         factor = self.radius_factor * multiplier * (1.0 + (self.dense_factor - 1.0) * ramp)
-        r = circle_radius(np.maximum(rho, CONTAINER_FILL_FLOOR), r0, 1.0) * factor
+        r = circle_radius(rho, r0, 1.0) * factor
         if self.polydispersity > 0:
             sign = np.random.default_rng([seed, 0x9D]).integers(0, 2, len(r)) * 2 - 1
             p = self.polydispersity

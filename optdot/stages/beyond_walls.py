@@ -12,6 +12,7 @@ from ..config.job import Job
 from ..relax.formulation import Formulation
 from ..sampling.phantoms import phantom_dots
 from ..spatial.window import bounds, grown, in_rect
+from .settings import containers
 
 
 def with_phantoms(job, form, xy0, rho, start, frozen, diameters):
@@ -55,9 +56,8 @@ def allowed_at(job: Job):
 
 def phantom_reach(job: Job, form: Formulation) -> float:
     """How far beyond a wall phantoms reach the real dots: twice the largest circle
-    (the lowest non-zero fill, the largest dot), mm."""
-    live = job.density.grid[job.density.grid > 0]
-    rho_min = float(live.min()) if live.size else 1.0
+    (the lowest non-zero container fill, the largest dot), mm."""
+    rho_min = containers(job).lowest()
     widest = job.diameter if job.sizes is None else job.sizes.high
     r = float(form.radii(np.array([rho_min]), 0.5 * widest, 0)[0])
     return 2.0 * r * (1.0 + form.polydispersity)
@@ -78,7 +78,7 @@ def job_phantoms(job: Job, reach: float) -> tuple[np.ndarray, np.ndarray, np.nda
     xy, rho, weight = phantom_dots(
         dens, allowed_at(job), partial, reach, np.pi * r0 * r0, job.optimize.seed, job.dart_weights
     )
-    return xy, rho, job.diameter / np.sqrt(weight)
+    return xy, containers(job).floored(rho, xy), job.diameter / np.sqrt(weight)
 
 
 def phantoms_near(job: Job, form: Formulation, xy0: np.ndarray):

@@ -41,7 +41,7 @@ from ..relax.result import RelaxResult
 from ..sampling.initial import Rect
 from ..spatial.window import bounds, grown
 from .beyond_walls import with_phantoms
-from .settings import areas, rule_diameters, stage_settings
+from .settings import areas, container_fill, rule_diameters, stage_settings
 
 
 def corrected(job: Job, form: Formulation) -> bool:
@@ -197,7 +197,7 @@ def hard_core(
         frozen[n:] = True
         if diameters is not None:
             diameters = np.concatenate([diameters, np.broadcast_to(held[1], (len(hxy),))])
-    rho = job.density.at(xy0)
+    rho = container_fill(job, xy0)
     if frozen is not None:
         # a held dot of a later tile, not yet made legal, may stand in a zero cell: it has
         # no fill of its own there (its circle would be infinite); the map's largest

@@ -13,7 +13,7 @@ from ..relax.optdot import Progress, relax_staged
 from ..relax.result import RelaxResult
 from .beyond_walls import with_phantoms
 from .correction import long_wavelength
-from .settings import rule_diameters, stage_settings
+from .settings import container_fill, rule_diameters, stage_settings
 
 
 def relax(
@@ -56,6 +56,7 @@ def relax(
             xy0, law, job.box, r0, steps=opt.max_iter, step=opt.md_step, skin=opt.skin,
             callback=progress,
         )  # fmt: skip
+    rho = container_fill(job, xy0)
     s = stage_settings(job, formulation)
     form = s.formulation
     diameters = rule_diameters(job, xy0)

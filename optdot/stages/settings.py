@@ -11,7 +11,7 @@ import numpy as np
 
 from ..config.job import Job
 from ..relax.circles import hex_radius
-from ..relax.formulation import Formulation, Problem, formulation_of
+from ..relax.formulation import Containers, Formulation, Problem, containers_of, formulation_of
 from ..relax.optdot import RelaxSettings
 from ..relax.resize import reach
 
@@ -102,6 +102,18 @@ def stage_settings(job: Job, formulation: Formulation | None = None) -> StageSet
         fitted=fitted(job),
         halo=halo_width(job),
     )
+
+
+def containers(job: Job) -> Containers:
+    """The fills ``job``'s containers are sized for: the map's, floored beside its
+    zero-fill cells (:class:`~optdot.relax.formulation.Containers`)."""
+    widest = job.diameter if job.sizes is None else job.sizes.high
+    return containers_of(job.density, float(widest))
+
+
+def container_fill(job: Job, xy: np.ndarray) -> np.ndarray:
+    """``[n]`` the fill the containers of dots at ``xy`` (``[n, 2]`` mm) are sized for."""
+    return containers(job).floored(job.density.at(xy), xy)
 
 
 def rule_diameters(job: Job, xy0: np.ndarray) -> np.ndarray | None:
