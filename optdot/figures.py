@@ -1,7 +1,7 @@
 """Figures drawn the same in ``simulate``'s PNG and in the QA report: a luminance map beside
-its smoothed view, and the halo of one LED lit alone. Matplotlib axes in, nothing out; the
-numbers come from a simulation's figures (the JSON ``simulate`` writes), so both callers
-draw from the same values."""
+its smoothed view, the halo of one LED lit alone, the luminance's angles. Matplotlib axes
+in, nothing out; the numbers come from a simulation's figures (the JSON ``simulate``
+writes), so both callers draw from the same values."""
 
 from __future__ import annotations
 
@@ -110,3 +110,46 @@ def halo_pair(axes: Sequence, halo: dict) -> None:
     share = halo.get("share_own_cell")
     extra = f"; {share:.0%} of its light in its own cell" if share is not None else ""
     ax.set_title(f"radial profile{extra}", fontsize=9)
+
+
+def angles_pair(axes: Sequence, table, angles: dict) -> list:
+    """The luminance's angles (``simulate``'s ``angular_luminance`` table, rows polar
+    rings, columns azimuth bins, and its ``angles`` figures with the planes' profiles): a
+    polar map on ``axes[0]``
+    (replaced by a polar axes in the same place, returned in the list) and the profiles
+    in the horizontal and vertical planes on ``axes[1]`` (half the on-axis luminance
+    and the half angles marked). Luminance relative to a Lambertian of the same flux."""
+    lum = np.array([[np.nan if v is None else v for v in r] for r in table], np.float64)
+    nt, nphi = lum.shape
+    fig = axes[0].figure
+    spec = axes[0].get_subplotspec()
+    axes[0].remove()
+    ax = fig.add_subplot(spec, projection="polar")
+    phi = np.radians(np.linspace(0, 360, nphi + 1))
+    theta = np.linspace(0, 90, nt + 1)
+    im = ax.pcolormesh(phi, theta, lum, cmap="viridis", shading="flat")
+    ax.set_ylim(0, 90)
+    ax.set_yticks([30, 60, 90])
+    ax.set_yticklabels(["30°", "60°", "90°"], fontsize=7)
+    ax.set_title("luminance by direction (radius: polar angle)", fontsize=9)
+    fig.colorbar(im, ax=ax, label="luminance / Lambertian's", shrink=0.8)
+    pr = axes[1]
+    centres = (np.arange(nt) + 0.5) * (90 / nt)
+    half = angles.get("half_luminance_deg") or {}
+    for (name, prof), color in zip(
+        (angles.get("profiles") or {}).items(), "C0 C1".split(), strict=False
+    ):
+        prof = np.array([np.nan if v is None else v for v in prof], np.float64)
+        h = half.get(name)
+        label = f"{name}: half at {h:.1f}°" if h is not None else f"{name}: over half to 90°"
+        pr.plot(centres, prof, color=color, lw=1.2, label=label)
+        if h is not None:
+            pr.axvline(h, color=color, lw=0.8, ls="--")
+    on = angles.get("on_axis")
+    if on is not None and math.isfinite(on):
+        pr.axhline(0.5 * on, color="0.4", lw=0.7, ls=":")
+    pr.axhline(1.0, color="k", lw=0.6)
+    pr.set(xlabel="polar angle, degrees", ylabel="luminance / Lambertian's", xlim=(0, 90))
+    pr.legend(fontsize=8)
+    pr.set_title(f"on axis {on:.3f} of a Lambertian's" if on is not None else "", fontsize=9)
+    return [ax, pr]

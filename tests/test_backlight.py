@@ -98,7 +98,7 @@ def test_a_lambertian_point_source_lights_a_plane_as_cos4_over_h2(tmp_path):
     job = load_job(_point_source(tmp_path, h), need_map=False)
     scene = scene_of(job, rays, coverage=BARE)
     fates = np.zeros(len(FATES), np.int64)
-    r = np.concatenate([np.hypot(x - 20, y - 20) for x, y in traced(job, scene, 3, rays, fates)])
+    r = np.concatenate([np.hypot(x - 20, y - 20) for x, y, _ in traced(job, scene, 3, rays, fates)])
     edges = np.array([0.0, 0.5, 1.0, 2.0, 3.0, 5.0, 8.0, 14.0])
     got = np.histogram(r, edges)[0] / rays
     cum = edges**2 / (edges**2 + h * h)

@@ -18,7 +18,7 @@ from optdot.optics.design import design
 from optdot.optics.rays import fresnel as _fresnel
 from optdot.optics.rays import last_at_most
 from optdot.optics.simulate import Coverage, simulate
-from optdot.optics.tables import FATES, UNFINISHED
+from optdot.optics.tables import FATES, UNCOUPLED, UNFINISHED
 from optdot.optics.trace import RAY_CHUNK, trace
 
 from .conftest import SAMPLES, cli, one_error
@@ -224,15 +224,18 @@ def test_a_ray_ends_the_same_whatever_call_or_chunk_traced_it(lossy):
     job, pattern = lossy
     scene = scene_of(job, 10_000, dots=pattern)
     first, count = 37, 3 * RAY_CHUNK + 5
-    fate, x, y = trace(11, first, count, scene)
+    fate, x, y, d = trace(11, first, count, scene)
+    came = fate != UNCOUPLED  # a ray turned back at birth has no direction written
     edges = [0, 1, RAY_CHUNK - 1, RAY_CHUNK, 2 * RAY_CHUNK + 1, count - 2, count - 1]
     for j in edges + list(range(5, count, 97)):
-        f1, x1, y1 = trace(11, first + j, 1, scene)
+        f1, x1, y1, d1 = trace(11, first + j, 1, scene)
         assert (f1[0], x1[0], y1[0]) == (fate[j], x[j], y[j]), j
+        assert not came[j] or np.array_equal(d1[0], d[j]), j
     tail = trace(11, first + RAY_CHUNK + 3, count - RAY_CHUNK - 3, scene)
     assert all(
-        np.array_equal(a[RAY_CHUNK + 3 :], b) for a, b in zip((fate, x, y), tail, strict=True)
+        np.array_equal(a[RAY_CHUNK + 3 :], b) for a, b in zip((fate, x, y), tail[:3], strict=True)
     )
+    assert np.array_equal(d[RAY_CHUNK + 3 :][came[RAY_CHUNK + 3 :]], tail[3][came[RAY_CHUNK + 3 :]])
     assert len(set(fate.tolist())) > 2  # rays end in several ways
 
 

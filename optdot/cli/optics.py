@@ -196,6 +196,16 @@ def _print_simulation(sim, seconds: float, echo=click.echo) -> None:
             f"outside {region}{less}: brightest bin {s['outside_max']:.3f} of the mean at "
             f"({x:.2f}, {y:.2f}) mm" + (" (hidden by the bezel)" if "viewing_area_mm" in s else "")
         )
+    if s.get("angles", {}).get("rays"):
+        a = s["angles"]
+        half = ", ".join(
+            f"{k} {'over 87.5' if v is None else f'{v:.1f}'} deg"
+            for k, v in a["half_luminance_deg"].items()
+        )
+        echo(
+            f"angles: on-axis luminance {a['on_axis']:.3f} ± {a['on_axis_sigma']:.3f} of a "
+            f"Lambertian's of the same flux; half luminance at {half}"
+        )
     if "halo" in s:
         _print_halo(s["halo"], echo)
 

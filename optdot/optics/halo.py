@@ -89,7 +89,7 @@ def halo(
     square = (cx - side * cell, cx + side * cell, cy - side * cell, cy + side * cell)
     lit = np.zeros((2 * side, 2 * side), np.int64)
     scene = scene_of(job, rays, dots, coverage, only_led=k)
-    for px, py in traced(job, scene, seed, rays, fates, progress):
+    for px, py, _ in traced(job, scene, seed, rays, fates, progress):
         h, _, _ = np.histogram2d(py, px, bins=(2 * side, 2 * side), range=(square[2:], square[:2]))
         lit += h.astype(np.int64)
         dx, dy = px - cx, py - cy

@@ -36,6 +36,7 @@ from ..config.job import Job
 from ..errors import JobError
 from ..pattern import DotSource
 from ..runtime.stop import check_interrupt
+from .angles import Angles
 from .scene import Coverage, coverage_of, has_optics, is_direct, probe, scene_of
 from .tables import FATES, MAX_EVENTS, SHEET_FACE, UNCOUPLED, UNFINISHED, Scene
 from .trace import trace
@@ -91,6 +92,7 @@ class Simulation:
     extra: dict = field(default_factory=dict)
     area: tuple[float, float, float, float] | None = None
     stack: str = "guide"
+    angles: Angles | None = None
 
     @property
     def efficiency(self) -> float:
@@ -188,6 +190,7 @@ class Simulation:
             **({"viewing_area_mm": list(self.area)} if self.area is not None else {}),
             **outside,
             **({"warnings": [warned]} if warned is not None else {}),
+            **({"angles": self.angles.figures()} if self.angles is not None else {}),
             **self.extra,
         }
 
@@ -270,7 +273,9 @@ def simulate(
     spot_counts = np.zeros(9, np.int64)
     r2 = (0.5 * spot_mm) ** 2
     fates = np.zeros(len(FATES), np.int64)
-    for px, py in traced(job, scene, seed, rays, fates, progress):
+    angles = Angles.empty()
+    for px, py, air in traced(job, scene, seed, rays, fates, progress):
+        angles.add(air)
         ix = np.clip(((px - x0) / (x1 - x0) * nbx).astype(np.int64), 0, nbx - 1)
         iy = np.clip(((py - y0) / (y1 - y0) * nby).astype(np.int64), 0, nby - 1)
         counts += np.bincount(iy * nbx + ix, minlength=nby * nbx)
@@ -293,6 +298,7 @@ def simulate(
         seed=seed,
         area=area,
         stack=job.backlight.kind if job.backlight is not None else "guide",
+        angles=angles,
     )
 
 
@@ -303,10 +309,12 @@ def traced(
     rays: int,
     fates: np.ndarray,
     progress: Callable[[int, int], None] | None = None,
-) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Trace ``rays`` rays of ``scene`` batch by batch (after checking light can leave),
     adding each batch's fates to ``fates`` (``[len(FATES)]`` int64) and yielding ``(x,
-    y)``: where the batch's extracted rays left the top, mm (float64).
+    y, air)``: where the batch's extracted rays left the top, mm (float64), and the
+    directions in air (``[m, 3]``) of those that left it going up (an idealised
+    extractor's rays end at the dot, without one).
 
     Raises:
         JobError: light stays in the stack, or none enters it.
@@ -318,7 +326,7 @@ def traced(
         check_interrupt()  # Ctrl-C or SIGTERM: stop at the next batch, nothing written
         count = min(size, rays - first)
         t0 = time.perf_counter()
-        fate, ex, ey = trace(seed, first, count, scene)
+        fate, ex, ey, ed = trace(seed, first, count, scene)
         size = _batch(count * BATCH_SECONDS / max(time.perf_counter() - t0, 1e-9))
         fates += np.bincount(fate, minlength=len(FATES))
         if first == 0 and fates[UNCOUPLED] == count:
@@ -328,7 +336,8 @@ def traced(
                 "near 90 degrees meets the edge at grazing incidence)"
             )
         out = fate == 0
-        yield ex[out].astype(np.float64), ey[out].astype(np.float64)
+        d = ed[out].astype(np.float64)
+        yield ex[out].astype(np.float64), ey[out].astype(np.float64), d[d[:, 2] > 0]
         first += count
         if progress is not None:
             progress(first, rays)
@@ -397,7 +406,7 @@ def _check_light_leaves(job, seed: int, rays: int, scene: Scene) -> float:
     """
     count = min(rays, PROBE_RAYS)
     t0 = time.perf_counter()
-    fate, _, _ = trace(seed, 0, count, probe(scene, PROBE_EVENTS))
+    fate, _, _, _ = trace(seed, 0, count, probe(scene, PROBE_EVENTS))
     per_ray = (time.perf_counter() - t0) / count
     entered = int(np.count_nonzero(fate != UNCOUPLED))
     inside = int(np.count_nonzero(fate == UNFINISHED))

@@ -151,12 +151,12 @@ def _birth(state, k, emit, layer, prof_theta, prof_cdf, prof_mode):  # pragma: n
 @nb.njit(cache=True)
 def _trace_rays(
     seed, first, lo, hi, emit, emit_start, prof_theta, prof_cdf, prof_mode, layer, face,
-    walls, normals, pr_arrays, max_events, fate, ex, ey,
+    walls, normals, pr_arrays, max_events, fate, ex, ey, ed,
 ):  # pragma: no cover - compiled  # fmt: skip
     """Rays ``first + lo .. first + hi - 1`` (:func:`trace`'s tables unpacked,
-    ``pr_arrays`` the :class:`~optdot.optics.tables.Print` as a tuple), each one's fate
-    and end written at ``lo .. hi - 1`` of ``fate``, ``ex``, ``ey``: born, then stepped
-    leg by leg to the next wall or face, which decides what it goes on with.
+    ``pr_arrays`` the :class:`~optdot.optics.tables.Print` as a tuple), each one's fate,
+    end and direction (not for rays turned back at birth) at ``lo .. hi - 1`` of ``fate``,
+    ``ex``, ``ey``, ``ed``: born, then stepped leg by leg to the next wall or face.
 
     A serial loop of its own, which :func:`trace` runs in parallel over chunks: numba's
     parallel passes analyse a ``prange`` loop's whole body, which a ray's whole life
@@ -227,7 +227,7 @@ def _trace_rays(
             z0, z1, n, absorb = layer[li, L_Z0], layer[li, L_Z1], layer[li, L_N], layer[li, L_ABS]
             budget = tau / absorb if absorb > 0 else np.inf
             z, new_leg = (z0 if up else z1), True
-        fate[j], ex[j], ey[j] = end, x, y
+        fate[j], ex[j], ey[j], ed[j, 0], ed[j, 1], ed[j, 2] = end, x, y, dxn, dyn, dz
 
 
 @nb.njit(cache=True, parallel=True)
@@ -239,8 +239,9 @@ def trace(seed, first, count, scene):  # pragma: no cover - compiled
         scene: a :class:`Scene`.
 
     Returns:
-        ``(fate [count] int8, x [count] float32, y [count] float32)``: how and where each
-        ray ended (where it left the top face, for extracted rays).
+        ``(fate [count] int8, x [count] float32, y [count] float32, d [count, 3]
+        float32)``: how and where each ray ended (where it left the top face, for
+        extracted rays) and its direction then (in the air above, for those).
     """
     src, st, pr = scene.sources, scene.stack, scene.print
     emit, emit_start, prof_theta, prof_cdf, prof_mode = (
@@ -272,10 +273,11 @@ def trace(seed, first, count, scene):  # pragma: no cover - compiled
     fate = np.empty(count, np.int8)
     ex = np.empty(count, np.float32)
     ey = np.empty(count, np.float32)
+    ed = np.empty((count, 3), np.float32)
     for c in nb.prange((count + RAY_CHUNK - 1) // RAY_CHUNK):
         _trace_rays(
             seed, first, c * RAY_CHUNK, min(count, (c + 1) * RAY_CHUNK), emit, emit_start,
             prof_theta, prof_cdf, prof_mode, layer, face, walls, normals, pr_arrays,
-            max_events, fate, ex, ey,
+            max_events, fate, ex, ey, ed,
         )  # fmt: skip
-    return fate, ex, ey
+    return fate, ex, ey, ed

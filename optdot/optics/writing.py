@@ -17,6 +17,7 @@ from ..config.job import Job
 from ..config.writer import job_toml, rebased
 from ..errors import JobError
 from ..io.atomic import atomic_path
+from .angles import STEP_DEG
 from .design import Designed
 from .simulate import Simulation
 
@@ -31,6 +32,18 @@ def simulation_json(sim: Simulation, job: Job, pattern: Path | None, dots: int |
         "box_mm": list(sim.box),
         "luminance": np.round(sim.luminance, 5).tolist(),
         "luminance_rows": "row 0 = bottom (y = ymin)",
+        **(
+            {
+                "angular_luminance": sim.angles.rows(),
+                "angular_luminance_rows": (
+                    f"row k: polar angle {STEP_DEG:g} k to {STEP_DEG:g} (k + 1) deg from the "
+                    f"normal; column m: azimuth {STEP_DEG:g} m to {STEP_DEG:g} (m + 1) deg "
+                    "from +x towards +y; 1 = a Lambertian top of the same flux"
+                ),
+            }
+            if sim.angles is not None
+            else {}
+        ),
     }
     return json.dumps(_finite(doc), indent=1, allow_nan=False) + "\n"
 
@@ -84,22 +97,24 @@ def write_text(path: Path, text: str) -> None:
 
 def luminance_png(path: Path, sim: Simulation, title: str) -> None:
     """The relative luminance over the panel with the 9 spots, beside its smoothed view
-    (the Monte Carlo noise said on each, and the rays that would bring it to 1 %), and
-    for a direct-lit stack the halo of one LED lit alone (its map and radial profile),
-    as a PNG."""
+    (the Monte Carlo noise said on each, and the rays that would bring it to 1 %), for a
+    direct-lit stack the halo of one LED lit alone (its map and radial profile), and the
+    luminance's angles (a polar map and the two planes' profiles), as a PNG."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.patches import Circle
 
-    from ..figures import halo_pair, luminance_pair, noise_text
+    from ..figures import angles_pair, halo_pair, luminance_pair, noise_text
 
     x0, y0, x1, y1 = sim.box
     figures = sim.summary()
     halo = figures.get("halo")
-    rows = 2 if halo else 1
-    heights = [5.2 * min((y1 - y0) / (x1 - x0), 1.5) + 1.2, 5.6][:rows]
+    angles = figures.get("angles") if sim.angles is not None and sim.angles.total else None
+    heights = [5.2 * min((y1 - y0) / (x1 - x0), 1.5) + 1.2]
+    heights += [5.6] * (bool(halo) + bool(angles))
+    rows = len(heights)
     fig, axes = plt.subplots(
         rows, 2, figsize=(13, sum(heights)), dpi=110, squeeze=False, layout="constrained",
         gridspec_kw={"height_ratios": heights},
@@ -127,6 +142,8 @@ def luminance_png(path: Path, sim: Simulation, title: str) -> None:
     )  # fmt: skip
     if halo:
         halo_pair(axes[1], halo)
+    if angles:
+        angles_pair(axes[rows - 1], sim.angles.rows(), angles)
     u9, _ = sim.uniformity9()
     fig.suptitle(
         f"{title}: efficiency {sim.efficiency:.1%}, 9-point {u9:.3f}; {noise_text(figures)}",

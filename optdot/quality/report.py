@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..figures import halo_pair, luminance_pair, structure_text
+from ..figures import angles_pair, halo_pair, luminance_pair, structure_text
 from ..io.atomic import atomic_path, expect_tail
 from .gate import QAResult, jnd_text
 from .visibility import BLOB_JND
@@ -280,7 +280,9 @@ def _simulation_section(result: QAResult) -> str:
     lum, ext, spots = result.arrays["luminance"]
     w, h = ext[1] - ext[0], ext[3] - ext[2]
     halo = result.arrays.get("halo")
-    heights = [max(2.5, min(6.0, 5.2 * h / max(w, 1e-9) + 1.2)), 5.6][: 2 if halo else 1]
+    angles = result.arrays.get("angles")
+    heights = [max(2.5, min(6.0, 5.2 * h / max(w, 1e-9) + 1.2))]
+    heights += [5.6] * (bool(halo) + bool(angles))
     fig, axes = plt.subplots(
         len(heights), 2, figsize=(12, sum(heights)), squeeze=False, layout="constrained",
         gridspec_kw={"height_ratios": heights},
@@ -305,6 +307,8 @@ def _simulation_section(result: QAResult) -> str:
         _frame(ax, area)
     if halo:
         halo_pair(axes[1], halo)
+    if angles:
+        angles_pair(axes[len(heights) - 1], angles, sim["angles"])
     fig.suptitle("Simulated luminance (circles: 9-point spots)", fontsize=10)
     png = _png_base64(fig)
     halo_text = ""
@@ -317,6 +321,17 @@ def _simulation_section(result: QAResult) -> str:
         halo_text = (
             f" The LED at ({hx:.2f}, {hy:.2f}) mm lit alone (below): its halo is {w50} wide at "
             f"half its peak and {w10} at a tenth."
+        )
+    if angles:
+        a = sim["angles"]
+        halves = ", ".join(
+            f"{k} {'over 87.5°' if v is None else f'{v:.1f}°'}"
+            for k, v in (a.get("half_luminance_deg") or {}).items()
+        )
+        halo_text += (
+            f" By direction (below): on-axis luminance {_n(a.get('on_axis'), '.3f')} ± "
+            f"{_n(a.get('on_axis_sigma'), '.3f')} of a Lambertian's of the same flux; half "
+            f"luminance at {html.escape(halves)}."
         )
     region = (
         "the viewing area (dashed)"

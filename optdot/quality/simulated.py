@@ -40,7 +40,8 @@ FIGURES = (
 def attach_simulation(result: QAResult, doc: dict[str, Any], label: str) -> None:
     """Put the simulation ``doc`` (its ``luminance`` already an ``[ny, nx]`` array) into
     ``result``: figures in ``metrics["simulation"]``, the map in ``arrays["luminance"]``
-    (and a direct-lit stack's halo of one LED in ``arrays["halo"]``).
+    (a direct-lit stack's halo of one LED in ``arrays["halo"]``, the luminance's angles in
+    ``arrays["angles"]``).
     A simulation of another pattern (another dot count) is marked, not refused."""
     figures = {k: doc.get(k) for k in FIGURES}
     figures["file"] = label
@@ -50,6 +51,9 @@ def attach_simulation(result: QAResult, doc: dict[str, Any], label: str) -> None
     x0, y0, x1, y1 = (float(v) for v in doc["box_mm"])
     spots = np.array(doc.get("spots") or np.zeros((0, 3)), dtype=np.float64).reshape(-1, 3)
     result.arrays["luminance"] = (np.asarray(doc["luminance"]), (x0, x1, y0, y1), spots)
+    if doc.get("angular_luminance") and (doc.get("angles") or {}).get("rays"):
+        result.arrays["angles"] = doc["angular_luminance"]
+        figures["angles"] = doc["angles"]
     if doc.get("halo"):  # one LED lit alone: drawn beside the luminance
         result.arrays["halo"] = doc["halo"]
         figures["halo"] = {k: v for k, v in doc["halo"].items() if k not in ("map", "profile")}

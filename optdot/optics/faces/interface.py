@@ -30,8 +30,9 @@ def meet_interface(state, f, up, n, n_to, is_top, ink, dxn, dyn, dz):  # pragma:
     """A ray meeting a face (its row ``f``, :func:`~optdot.optics.tables.face_row`) going
     up (``up``) or down, from index ``n`` toward ``n_to`` (``is_top``: the top face), on
     the print's ink (``ink``: the stepping's print test) or not: ``(state, act, dx, dy,
-    dz)`` (``SAME_LEG``, ``NEW_LEG``, ``CROSS`` with the direction it crosses in, or a
-    fate)."""
+    dz)`` (``SAME_LEG``, ``NEW_LEG``, ``CROSS`` with the direction it crosses in, out of
+    the top the direction it leaves in, or a fate). A ray's fate and place are decided
+    before a draw the top face's haze makes: it ends there."""
     if ink:  # the dots lie on the bottom of the layer above the face
         state, u = uniform(state)
         if u < f[F_DOT_R]:
@@ -46,9 +47,7 @@ def meet_interface(state, f, up, n, n_to, is_top, ink, dxn, dyn, dz):  # pragma:
     cos_c = f[F_COS_UP] if up else f[F_COS_DOWN]
     if abs(dz) > cos_c:
         state, u = uniform(state)
-        if u >= fresnel(abs(dz), n, n_to):
-            if is_top:
-                return state, CROSS, dxn, dyn, dz
+        if u >= fresnel(abs(dz), n, n_to):  # through (out of the top: into the air)
             dxn, dyn, dz = refract(dxn, dyn, dz, n, n_to)
             if f[F_HAZE] > 0.5:
                 state, dxn, dyn, dz = scatter_through(
