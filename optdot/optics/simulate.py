@@ -312,9 +312,9 @@ def traced(
 ) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Trace ``rays`` rays of ``scene`` batch by batch (after checking light can leave),
     adding each batch's fates to ``fates`` (``[len(FATES)]`` int64) and yielding ``(x,
-    y, air)``: where the batch's extracted rays left the top, mm (float64), and the
-    directions in air (``[m, 3]``) of those that left it going up (an idealised
-    extractor's rays end at the dot, without one).
+    y, air)``: where the batch's extracted rays left the top, mm (float64), and their
+    directions in air (``[m, 3]`` float32; an idealised extractor's rays end at the dot,
+    going down: :class:`~optdot.optics.angles.Angles` leaves them out).
 
     Raises:
         JobError: light stays in the stack, or none enters it.
@@ -336,8 +336,7 @@ def traced(
                 "near 90 degrees meets the edge at grazing incidence)"
             )
         out = fate == 0
-        d = ed[out].astype(np.float64)
-        yield ex[out].astype(np.float64), ey[out].astype(np.float64), d[d[:, 2] > 0]
+        yield ex[out].astype(np.float64), ey[out].astype(np.float64), ed[out]
         first += count
         if progress is not None:
             progress(first, rays)
