@@ -13,6 +13,7 @@ from optdot.config.schema import load_job
 from optdot.optics.angles import STEP_DEG, Angles
 from optdot.optics.simulate import simulate
 
+from .conftest import cli, one_error
 from .test_backlight import direct_job
 
 SAMPLES = Path(__file__).resolve().parents[1] / "samples"
@@ -105,3 +106,40 @@ def test_a_stack_under_a_lambertian_diffuser_leaves_lambertian_and_every_ray_is_
     clear = simulate(load_job(direct_job(tmp_path, 10.0, 10.0, 0.3), need_map=True), 400_000)
     c = clear.summary()["angles"]
     assert c["on_axis"] > 1.1 and clear.angles.luminance()[16].mean() < 0.9
+
+
+def test_a_simulation_file_s_angles_are_checked_and_the_command_says_what_it_cannot_judge(
+    tmp_path,
+):
+    """``qa --simulation`` reads the angles back checked: a ragged table, a string in it,
+    a figure that is not a number: one line naming the file and the field, no traceback.
+    ``simulate`` says when too few rays left near the normal to state the on-axis
+    luminance and half angles, and when the rays ended at the dots (an idealised
+    extractor) so no angle was measured."""
+    import json
+
+    sheets = [{"kind": "diffuser", "transmittance": 0.65}]
+    job = direct_job(tmp_path, 10.0, 10.0, 0.3, sheets=sheets)
+    rc, err, out = cli("simulate", job, "--rays", "2000", "--json", tmp_path / "s.json")
+    assert rc == 0 and "too few to judge the on-axis luminance" in out, out
+    rc, err, out = cli("simulate", job, "--rays", "200000")
+    assert rc == 0 and "angles: on-axis luminance" in out, out
+    np.savetxt(tmp_path / "d.csv", np.array([[1.0, 1.0]]), delimiter=",", header="x_mm,y_mm")
+    good = json.loads((tmp_path / "s.json").read_text())
+    for field, bad, words in (
+        ("angular_luminance", [[1, 2], [3]], "all as long"),
+        ("angular_luminance", [[1, "x"], [0, 1]], "not a number >= 0"),
+        ("angles", {**good["angles"], "on_axis": "high"}, "angles.on_axis"),
+    ):
+        doc = {**good, field: bad}
+        (tmp_path / "bad.json").write_text(json.dumps(doc))
+        one_error(("qa", tmp_path / "d.csv", "--no-job", "--simulation", tmp_path / "bad.json"), 2,
+                  "bad.json", words)  # fmt: skip
+    text = (SAMPLES / "lgp" / "job.toml").read_text()
+    text = text.replace("dot_albedo = 0.9", 'dot_albedo = 0.9\ndot_scatter = "extract"')
+    (tmp_path / "guide.toml").write_text(text)
+    grid = np.full((8, 12), 0.2)
+    np.savetxt(tmp_path / "g.csv", grid, delimiter=",")
+    (tmp_path / "guide.toml").write_text(text + '\n[density]\ngrid = "g.csv"\n')
+    rc, err, out = cli("simulate", tmp_path / "guide.toml", "--rays", "20000")
+    assert rc == 0 and "angles: none measured" in out, (out, err)

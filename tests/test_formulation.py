@@ -102,9 +102,15 @@ def test_a_dip_s_containers_take_their_neighbourhood_s_fill_and_a_sparse_map_kee
     assert 1e-3 < low <= FLOOR
     reach = 2 * form.radii(np.array([low]), 0.023, 0)[0] * (1 + form.polydispersity)
     assert phantom_reach(job, form) == pytest.approx(reach) and reach < 2.0
+    from optdot.relax.circles import hex_radius
+    from optdot.tiling.plan import max_spacing
+
+    # a tiled run's seams are sized by the same fills (1e-6 asked for seams of 40 mm)
+    assert max_spacing(job) == pytest.approx(2 * hex_radius(np.array([low]), 0.023)[0])
     sparse = job_of(np.full((16, 16), 0.005), "sparse")
     xy = np.random.default_rng(2).uniform(0, 8, (500, 2))
     assert np.array_equal(container_fill(sparse, xy), sparse.density.at(xy))
+    assert max_spacing(sparse) == 2 * hex_radius(np.array([0.005]), 0.023)[0]
     half = np.full((16, 32), 0.3)
     half[:, :16] = 0.004  # 4 mm of 0.4 % beside 0.3
     split = job_of(half, "half")

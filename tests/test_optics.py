@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from optdot.config.schema import load_job
+from optdot.errors import JobError
 from optdot.optics.design import design
 from optdot.optics.rays import fresnel as _fresnel
 from optdot.optics.rays import last_at_most
@@ -544,6 +545,23 @@ def test_design_stops_when_the_map_no_longer_changes_anything_the_rays_resolve(t
         assert got.history[-1]["rays"] == 60_000
     every = design(replace(job, design=replace(job.design, tolerance=0.0)), seed=1, rays=60_000)
     assert len(every.history) == 16 and every.stopped == "ran its 16 iterations"
+
+
+def test_a_design_with_a_target_stops_on_its_structure_against_the_target(tmp_path):
+    """With a target the luminance's structure is judged against it (a 1-2-3 ramp: the
+    RMS against a flat luminance stays ~30 % and the design never stopped); a design of
+    under 10 rays a cell (each cell's luminance mostly noise) is refused."""
+    from dataclasses import replace
+
+    job = load_job(SAMPLES / "lgp" / "job.toml", need_map=False)
+    ramp = np.repeat([[1.0, 2.0, 3.0]], 2, axis=0)
+    aimed = replace(job, design=replace(job.design, target=ramp))
+    got = design(aimed, seed=1, rays=60_000)
+    assert len(got.history) < 16 and "against the target" in got.stopped
+    judged = got.history[-2]
+    assert judged["luminance_rms_target"] < judged["luminance_rms"]
+    with pytest.raises(JobError, match="under 10 a cell"):  # a map of noise, never settled
+        design(job, seed=1, rays=1000)
     text = (SAMPLES / "lgp" / "job.toml").read_text().replace("[design]", "[design]\ntolerance = 2")
     (tmp_path / "job.toml").write_text(text)
     one_error(("check", tmp_path / "job.toml"), 2, "design.tolerance = 2.0", "0 <= x <= 1")

@@ -23,6 +23,10 @@ SEED = click.option(
     help="Monte Carlo seed: the same job, rays and seed give the same figures.",
 )
 
+#: Rays within the first polar ring under which ``simulate`` does not state the on-axis
+#: luminance and half angles (their noise would be 10 % or more).
+MIN_ON_AXIS_RAYS = 100
+
 
 @dataclass(frozen=True)
 class Trace:
@@ -196,8 +200,16 @@ def _print_simulation(sim, seconds: float, echo=click.echo) -> None:
             f"outside {region}{less}: brightest bin {s['outside_max']:.3f} of the mean at "
             f"({x:.2f}, {y:.2f}) mm" + (" (hidden by the bezel)" if "viewing_area_mm" in s else "")
         )
-    if s.get("angles", {}).get("rays"):
-        a = s["angles"]
+    a = s.get("angles")
+    if a is not None and not a.get("rays"):
+        if s["counts"].get("extracted"):
+            echo("angles: none measured: the rays ended at the dots (an idealised extractor)")
+    elif a is not None and a.get("on_axis_rays", 0) < MIN_ON_AXIS_RAYS:
+        echo(
+            f"angles: {a.get('on_axis_rays', 0)} rays left within 5 deg of the normal, too few "
+            f"to judge the on-axis luminance and its half angles (trace more rays)"
+        )
+    elif a is not None:
         half = ", ".join(
             f"{k} {'over 87.5' if v is None else f'{v:.1f}'} deg"
             for k, v in a["half_luminance_deg"].items()
@@ -300,7 +312,13 @@ def design(job_file, output, png_path, job_out, rays, iterations, seed, quiet):
         if not quiet:
             click.echo(
                 f"iteration {f['iteration']:2d}: {f['rays']:>11,} rays, 9-point "
-                f"{f['uniformity_9point']:.3f}, RMS {f['luminance_rms']:.2%} (noise "
+                f"{f['uniformity_9point']:.3f}, RMS "
+                + (
+                    f"against the target {f['luminance_rms_target']:.2%}"
+                    if "luminance_rms_target" in f
+                    else f"{f['luminance_rms']:.2%}"
+                )
+                + " (noise "
                 f"{f['luminance_rms_noise']:.2%}), efficiency {f['efficiency']:.1%}"
                 + (
                     f", updates agree {f['update_agreement']:+.2f}"

@@ -97,6 +97,7 @@ class Angles:
         profiles = {name: self.profile(plane) for name, plane in PLANES}
         return {
             "rays": n,
+            "on_axis_rays": int(ring),
             "on_axis": float(on_axis),
             "on_axis_sigma": float(sigma),
             "half_luminance_deg": {k: _half_angle(v) for k, v in profiles.items()},

@@ -69,6 +69,9 @@ LEVEL_GROWTH = 1.5
 MIN_CELL = 0.05
 #: Rays per cell of the last iteration when ``[design] rays`` is not given.
 RAYS_PER_CELL = 400
+#: Fewest rays a design cell the last iteration may trace: under it each cell's
+#: luminance is mostly noise (32 % at 10), the map follows it and never settles.
+MIN_RAYS_PER_CELL = 10
 #: Highest claim ``fill (1 + gap / D) ** 2`` the sizes a design asks for allow: random
 #: patterns hold to 0.80 (and the relaxation's guarantee to 0.78); hard disks begin to
 #: order near 0.70 (Bernard & Krauth 2011), but at 0.75 QA's psi6 stays at 0.02 (the
@@ -117,9 +120,11 @@ SETTLED_SHARE = 0.3
 
 def settled(figures: dict, tolerance: float | None) -> bool:
     """Whether an iteration's luminance (its ``figures``) holds no structure the map still
-    needs to correct: its RMS beyond the rays' noise at or under ``tolerance`` (a share of
-    the mean), or under :data:`SETTLED_SHARE` of the noise when None; never for 0."""
-    return _within(figures["luminance_rms"], figures["luminance_rms_noise"], tolerance)
+    needs to correct: its RMS (against the design's target when it has one) beyond the
+    rays' noise at or under ``tolerance`` (a share of the mean), or under
+    :data:`SETTLED_SHARE` of the noise when None; never for 0."""
+    rms = figures.get("luminance_rms_target", figures["luminance_rms"])
+    return _within(rms, figures["luminance_rms_noise"], tolerance)
 
 
 def _within(rms: float, noise: float, tolerance: float | None) -> bool:
@@ -271,6 +276,15 @@ def design(
     total = rays or p.rays or RAYS_PER_CELL * nx * ny
     n_iter = iterations or p.iterations
     live = panel > 0.5
+    cells = max(int(live.sum()), 1)
+    if total < MIN_RAYS_PER_CELL * cells:
+        raise JobError(
+            f"{job.source or 'job'}: {total:,} rays for {cells:,} design cells is under "
+            f"{MIN_RAYS_PER_CELL} a cell: each cell's luminance would be mostly the rays' "
+            f"noise ({1 / math.sqrt(max(total / cells, 1e-9)):.0%} or more); give at least "
+            f"{MIN_RAYS_PER_CELL * cells:,} rays (--rays or design.rays) or larger cells "
+            "(design.cell)"
+        )
     seen = live & _in_area(job, nx, ny, dx, dy)
     grades = None
     update = Update()
@@ -300,7 +314,7 @@ def design(
         cov = Coverage(phi * inside, x0, y0, dx, dy)
         now = job if grades is None else grades.job(job)
         sim = simulate(now, n_rays, seed + 7919 * it, coverage=cov, bins=(nx, ny))
-        figures = _figures(it, sim)
+        figures = _figures(it, sim, None if p.target is None else target)
         history.append(figures)
         if not last:
             phi = step(phi, sim)
@@ -343,17 +357,27 @@ def _why_stopped(it: int, n_iter: int, figures: dict, tolerance: float | None) -
     told = "" if tolerance is None else f", tolerance {tolerance:.2%}"
     return (
         f"stopped after {it + 2} of at most {n_iter} iterations: at iteration {it + 1} the "
-        f"luminance RMS {figures['luminance_rms']:.2%} was {within} "
+        f"luminance RMS {figures.get('luminance_rms_target', figures['luminance_rms']):.2%}"
+        f"{' against the target' if 'luminance_rms_target' in figures else ''} was {within} "
         f"({figures['luminance_rms_noise']:.2%}{told}) and the map's last {DISAGREEMENTS + 1} "
         f"updates took turns (the last two's correlation {figures['update_agreement']:+.2f}): "
         "noise moves it now"
     )
 
 
-def _figures(it: int, sim: Simulation) -> dict:
+def _figures(it: int, sim: Simulation, target: np.ndarray | None = None) -> dict:
+    """An iteration's figures; with a ``target`` (``[ny, nx]`` on the traced bins) the
+    RMS the stop judges is the luminance's against it (``luminance_rms_target``)."""
     u9, u9s = sim.uniformity9()
     rms, noise, lmin, lmax = sim.rms()
+    extra = {}
+    if target is not None:
+        m = sim.measured & (target > 0)
+        c = sim.counts[m].astype(np.float64)
+        want = target[m] * (c.sum() / max(float(target[m].sum()), 1e-300))
+        extra["luminance_rms_target"] = float(np.std(c / want)) if c.sum() > 0 else math.nan
     return {
+        **extra,
         "iteration": it + 1,
         "rays": sim.rays,
         "uniformity_9point": u9,

@@ -87,7 +87,43 @@ def read_simulation(path: Path) -> dict:
     if lum.ndim != 2 or lum.size == 0 or not np.all(np.isfinite(lum)) or len(box) != 4:
         raise JobError(f"{path}: the luminance map or box_mm is malformed")
     doc["luminance"] = lum
+    if "angular_luminance" in doc or "angles" in doc:
+        problem = _angles_problem(doc.get("angular_luminance"), doc.get("angles"))
+        if problem is not None:
+            raise JobError(f"{path}: {problem}")
     return doc
+
+
+def _angles_problem(table, figures) -> str | None:
+    """What is wrong with a simulation file's ``angular_luminance`` table (rings of
+    azimuth bins, numbers >= 0 or null, every ring as long) and its ``angles`` figures,
+    or None."""
+    ok_row = isinstance(table, list) and len(table) > 0
+    rows = table if ok_row else []
+    if not ok_row or not all(isinstance(r, list) and len(r) == len(rows[0]) > 0 for r in rows):
+        return "angular_luminance must be a table of rings of azimuth bins, all as long"
+    if not all(v is None or (_number(v) and v >= 0) for r in rows for v in r):
+        return "angular_luminance holds a value that is not a number >= 0 (or null)"
+    if not isinstance(figures, dict) or not _number(figures.get("rays")):
+        return "angles must hold the figures of the angular_luminance table (rays, on_axis, ...)"
+    for key in ("on_axis", "on_axis_sigma"):
+        if figures.get(key) is not None and not _number(figures[key]):
+            return f"angles.{key} must be a number or null"
+    half = figures.get("half_luminance_deg", {})
+    profiles = figures.get("profiles", {})
+    if not isinstance(half, dict) or not all(v is None or _number(v) for v in half.values()):
+        return "angles.half_luminance_deg must map planes to angles in degrees or null"
+    if not isinstance(profiles, dict) or not all(
+        isinstance(v, list) and len(v) == len(rows) and all(x is None or _number(x) for x in v)
+        for v in profiles.values()
+    ):
+        return "angles.profiles must map planes to one number (or null) a ring"
+    return None
+
+
+def _number(v) -> bool:
+    """``v`` is a finite JSON number (not a bool)."""
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
 def write_text(path: Path, text: str) -> None:

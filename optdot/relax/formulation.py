@@ -56,9 +56,13 @@ class Containers:
         map's box, its nearest cell's) whose own fill is ``rho`` (``[n]``; 0 stays 0)."""
         return _floored(rho, self.mean.ravel()[self.density.cell_index(xy)])
 
+    def grid(self) -> np.ndarray:
+        """``[ny, nx]`` the container fill of each of the map's cells."""
+        return _floored(self.density.grid, self.mean)
+
     def lowest(self) -> float:
         """The least non-zero container fill over the map's cells (1 for an empty map)."""
-        g = _floored(self.density.grid, self.mean)
+        g = self.grid()
         live = g[g > 0]
         return float(live.min()) if live.size else 1.0
 
