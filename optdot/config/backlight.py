@@ -67,6 +67,10 @@ Keys (every length in mm, panel coordinates; reflectances and transmittances 0..
 - ``kind = "diffuser"``; ``transmittance`` (required), ``reflectance`` (default: the rest,
   ``1 - transmittance``; diffuse, recycled); ``spread``: ``"lambertian"`` (default) or a
   Gaussian spread of what it transmits, degrees; ``gap``: air under the sheet (default 0).
+- ``kind = "prism"``: a prism sheet (BEF): a flat base under straight prisms, traced
+  surface by surface (:mod:`optdot.optics.faces.prism_sheet`); ``refractive_index``
+  (default 1.58), ``apex_angle`` (degrees, default 90), ``grooves``: the axis the prisms
+  run along, ``"x"`` (default) or ``"y"`` (two crossed sheets: one of each); ``gap``.
 """
 
 from __future__ import annotations
@@ -83,7 +87,7 @@ from .light_guide import EDGE_FINISH, led_profile, number_in, reflector_finish, 
 
 KINDS = ("direct", "edge")
 PRINTS = ("film", "guide")
-SHEET_KINDS = ("diffuser",)
+SHEET_KINDS = ("diffuser", "prism")
 #: Most LEDs of a direct-lit grid (a 65-inch mini-LED TV has ~20,000 zones).
 MAX_LEDS = 1_000_000
 
@@ -128,6 +132,14 @@ SHEET_KEYS: dict[str, tuple[type, ...]] = {
     "reflectance": (int, float),
     "spread": (str, int, float),
     "gap": (int, float),
+    "refractive_index": (int, float),
+    "apex_angle": (int, float),
+    "grooves": (str,),
+}
+#: The keys of each sheet kind (``kind`` and ``gap`` every kind's).
+SHEET_KIND_KEYS = {
+    "diffuser": ("transmittance", "reflectance", "spread"),
+    "prism": ("refractive_index", "apex_angle", "grooves"),
 }
 
 
@@ -172,13 +184,18 @@ class Film:
 
 @dataclass(frozen=True)
 class Sheet:
-    """A diffuser sheet above the film. spread: ``"lambertian"`` or degrees."""
+    """A sheet above the film: a diffuser (``transmittance``, ``reflectance``, ``spread``:
+    ``"lambertian"`` or degrees) or a prism sheet (``refractive_index``, ``apex_angle``
+    degrees, ``grooves``: the axis the prisms run along, ``"x"`` or ``"y"``)."""
 
     transmittance: float
     reflectance: float
     spread: str | float = "lambertian"
     gap: float = 0.0
     kind: str = "diffuser"
+    refractive_index: float = 1.58
+    apex_angle: float = 90.0
+    grooves: str = "x"
 
 
 @dataclass(frozen=True)
@@ -369,6 +386,19 @@ def _sheet(sec: Any, k: int, where: str) -> Sheet:
     kind = sec.get("kind", "diffuser")
     if kind not in SHEET_KINDS:
         raise JobError(f"{where}: {lab}.kind = {kind!r} must be one of {', '.join(SHEET_KINDS)}")
+    other = [k for k in sec if k not in ("kind", "gap", *SHEET_KIND_KEYS[kind])]
+    if other:
+        raise JobError(f"{where}: {lab}.{other[0]} is not a key of a {kind} sheet")
+    gap = number_in(sec, "gap", 0.0, 0, 1000, where, lab, "in mm, ")
+    if kind == "prism":
+        n = number_in(sec, "refractive_index", 1.58, 1.0, 3.0, where, lab, "", lo_open=True)
+        apex = number_in(sec, "apex_angle", 90.0, 0, 180, where, lab, "in degrees, ", lo_open=True)
+        if apex >= 180:
+            raise JobError(f"{where}: {lab}.apex_angle = {apex:g} must be under 180 degrees")
+        grooves = sec.get("grooves", "x")
+        if grooves not in ("x", "y"):
+            raise JobError(f'{where}: {lab}.grooves = {grooves!r} must be "x" or "y"')
+        return Sheet(1.0, 0.0, "lambertian", gap, kind, n, apex, grooves)
     if "transmittance" not in sec:
         raise JobError(f"{where}: missing required key {lab}.transmittance")
     t = number_in(sec, "transmittance", 0, 0, 1, where, lab, "", lo_open=True)
@@ -379,7 +409,6 @@ def _sheet(sec: Any, k: int, where: str) -> Sheet:
             "absorbed)"
         )
     spread = _spread(sec.get("spread", "lambertian"), f"{lab}.spread", where)
-    gap = number_in(sec, "gap", 0.0, 0, 1000, where, lab, "in mm, ")
     return Sheet(t, r, spread, gap, kind)
 
 

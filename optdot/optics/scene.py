@@ -65,6 +65,7 @@ from .tables import (
     L_Z0,
     L_Z1,
     MAX_EVENTS,
+    PRISM_FACE,
     SHEET_FACE,
     Print,
     Scene,
@@ -296,6 +297,12 @@ def _dress_film(face: np.ndarray, bl: Backlight, film: int, mark: int) -> None:
         face[film + 1, F_HAZE_SIG] = 0.0 if f.haze == "lambertian" else math.radians(f.haze)
     for k, sheet in enumerate(bl.sheets):
         i = film + 2 + k
+        if sheet.kind == "prism":  # the columns prism_sheet reads
+            face[i, F_KIND] = PRISM_FACE
+            face[i, F_SHEET_T] = sheet.refractive_index
+            face[i, F_SPREAD] = 1.0 if sheet.grooves == "y" else 0.0
+            face[i, F_SPREAD_SIG] = math.radians(0.5 * sheet.apex_angle)
+            continue
         face[i, F_KIND] = SHEET_FACE
         face[i, F_SHEET_T], face[i, F_SHEET_R] = sheet.transmittance, sheet.reflectance
         face[i, F_SPREAD] = 0.0 if sheet.spread == "lambertian" else 1.0

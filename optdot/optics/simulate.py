@@ -38,7 +38,7 @@ from ..pattern import DotSource
 from ..runtime.stop import check_interrupt
 from .angles import Angles
 from .scene import Coverage, coverage_of, has_optics, is_direct, probe, scene_of
-from .tables import FATES, MAX_EVENTS, SHEET_FACE, UNCOUPLED, UNFINISHED, Scene
+from .tables import FATES, MAX_EVENTS, PRISM_FACE, SHEET_FACE, UNCOUPLED, UNFINISHED, Scene
 from .trace import trace
 
 __all__ = ["Coverage", "Simulation", "coverage_of", "simulate"]
@@ -349,7 +349,7 @@ def _batch(rays: float) -> int:
 
 def fates_of(scene: Scene, fates: np.ndarray) -> dict[str, int]:
     """Rays per fate by name; ``absorbed_sheets`` only where the stack has sheets."""
-    sheets = bool(np.any(scene.stack.face[:, 0] == SHEET_FACE))
+    sheets = bool(np.any(np.isin(scene.stack.face[:, 0], (SHEET_FACE, PRISM_FACE))))
     return {
         name: int(v)
         for name, v in zip(FATES, fates, strict=True)

@@ -63,7 +63,7 @@ def face_row(face, fi):  # pragma: no cover - compiled
 
 assert F_COLS == 16, "face_row reads every column"
 #: Face kinds (:mod:`optdot.optics.faces`: what each does to a ray).
-BOTTOM_FACE, INTERFACE, SHEET_FACE = 0, 1, 2
+BOTTOM_FACE, INTERFACE, SHEET_FACE, PRISM_FACE = 0, 1, 2, 3
 #: What a face or a wall did to a ray that goes on (a fate, ``>= 0``, ends it): turned it
 #: back without changing its horizontal course, sent it on a new course in the same layer,
 #: or let it through into the layer on the other side.

@@ -1,5 +1,6 @@
 """What the faces and walls of a traced stack do to a ray: each kind of face one module
-(:mod:`.reflector`, :mod:`.interface`, :mod:`.sheet`; the walls :mod:`.walls`), each
+(:mod:`.reflector`, :mod:`.interface`, :mod:`.diffuser_sheet`, :mod:`.prism_sheet`; the
+walls :mod:`.slab_walls`), each
 with its compiled ``meet_*`` kernel, and :func:`meet_face` dispatching on the face's
 kind (:data:`optdot.optics.tables.BOTTOM_FACE`, ...). A kernel returns ``(state, act,
 dx, dy, dz)``: a fate (``>= 0``) that ends the ray, or what it goes on with
@@ -16,9 +17,10 @@ from __future__ import annotations
 
 import numba as nb
 
-from ..tables import BOTTOM_FACE, F_KIND, SHEET_FACE
+from ..tables import BOTTOM_FACE, F_KIND, PRISM_FACE, SHEET_FACE
 from .diffuser_sheet import meet_sheet
 from .interface import meet_interface
+from .prism_sheet import meet_prism
 from .reflector import meet_reflector
 from .slab_walls import meet_wall, wall_distance
 
@@ -33,6 +35,8 @@ def meet_face(state, f, up, n, n_to, is_top, ink, dxn, dyn, dz):  # pragma: no c
     kind = int(f[F_KIND])
     if kind == SHEET_FACE:
         return meet_sheet(state, f, up, dxn, dyn, dz)
+    if kind == PRISM_FACE:
+        return meet_prism(state, f, up, dxn, dyn, dz)
     if kind == BOTTOM_FACE:
         return meet_reflector(state, f, n, ink, dxn, dyn, dz)
     return meet_interface(state, f, up, n, n_to, is_top, ink, dxn, dyn, dz)
