@@ -562,6 +562,9 @@ def test_a_design_with_a_target_stops_on_its_structure_against_the_target(tmp_pa
     assert judged["luminance_rms_target"] < judged["luminance_rms"]
     with pytest.raises(JobError, match="under 10 a cell"):  # a map of noise, never settled
         design(job, seed=1, rays=1000)
+    hidden = replace(job, viewing_area=(14.9, 9.9, 15.1, 10.1))  # not one design cell's centre
+    with pytest.raises(JobError, match="smaller bezel or a larger active_area"):
+        design(hidden, seed=1, rays=60_000)
     text = (SAMPLES / "lgp" / "job.toml").read_text().replace("[design]", "[design]\ntolerance = 2")
     (tmp_path / "job.toml").write_text(text)
     one_error(("check", tmp_path / "job.toml"), 2, "design.tolerance = 2.0", "0 <= x <= 1")

@@ -266,7 +266,11 @@ def simulate(
         raise JobError(
             f"{job.source or 'job'}: a border of {border_mm:g} mm leaves no "
             f"{(x1 - x0) / nbx:.3g} x {(y1 - y0) / nby:.3g} mm bin of {where} to measure: give "
-            "a smaller --border or --bin"
+            + (
+                "a smaller --border or --bin"
+                if bins is None
+                else "a smaller bezel or a larger active_area, or smaller cells (design.cell)"
+            )
         )
     counts = np.zeros(nby * nbx, np.int64)
     spots = _spot_centres(area if area is not None else box)
