@@ -137,3 +137,90 @@ def test_a_prism_sheet_s_keys_are_checked(tmp_path, key, value, words):
     job = tmp_path / "job.toml"
     job.write_text(STACK + PRISM + f"{key} = {value}\n" + '[density]\ngrid = "m.csv"\n')
     one_error(("check", job), 2, f"backlight.sheets[1].{key}", words)
+
+
+def _fresnel_ref(cos_i: float, n1: float, n2: float) -> float:
+    """Unpolarised Fresnel reflectance, written out again here (not the tracer's)."""
+    s_t = n1 / n2 * math.sqrt(max(0.0, 1 - cos_i**2))
+    if s_t >= 1:
+        return 1.0
+    c_t = math.sqrt(1 - s_t**2)
+    rs = ((n1 * cos_i - n2 * c_t) / (n1 * cos_i + n2 * c_t)) ** 2
+    rp = ((n1 * c_t - n2 * cos_i) / (n1 * c_t + n2 * cos_i)) ** 2
+    return 0.5 * (rs + rp)
+
+
+def _single_pass(d: tuple, n: float = 1.58, positions: int = 400) -> float:
+    """The share of light of direction ``d`` (from below, in air) that a 90° prism film
+    lets through upwards, by another method than the tracer's: every Fresnel split
+    followed with its weight (no random numbers), the prisms as explicit segments of
+    periods -8..8, each leg the nearest segment the ray meets, over ``positions`` entry
+    points evenly across a period."""
+    h = 0.5
+    segs = []
+    for k in range(-8, 9):
+        segs += [((k, 0.0), (k + 0.5, h)), ((k + 0.5, h), (k + 1.0, 0.0))]
+    up_total = 0.0
+
+    def follow(u, z, v, inside, wgt, depth):
+        nonlocal up_total
+        if wgt < 1e-7 or depth > 40:
+            return
+        p, q, w = v
+        best, hit = math.inf, None
+        for (a, b), (c, e) in segs:
+            den = p * (e - b) - w * (c - a)
+            if abs(den) < 1e-15:
+                continue
+            t = ((a - u) * (e - b) - (b - z) * (c - a)) / den
+            s = ((a - u) * w - (b - z) * p) / den
+            if 1e-10 < t < best and -1e-12 <= s <= 1 + 1e-12:
+                best, hit = t, ((a, b), (c, e))
+        if inside and w < 0 and -z / w < best:  # the flat base first: out below, or back up
+            r = _fresnel_ref(-w, n, 1.0)
+            follow(u + p * (-z / w), 0.0, (p, q, -w), True, wgt * r, depth + 1)
+            return
+        if hit is None:
+            if not inside and w > 0:
+                up_total += wgt  # above the apexes, in air
+            return
+        (a, b), (c, e) = hit
+        u2, z2 = u + p * best, z + w * best
+        length = math.hypot(c - a, e - b)
+        nu, nz = -(e - b) / length, (c - a) / length
+        if nz < 0:
+            nu, nz = -nu, -nz  # the facet's normal out into the air
+        cos = p * nu + w * nz
+        n1, n2 = (n, 1.0) if inside else (1.0, n)
+        r = _fresnel_ref(abs(cos), n1, n2)
+        follow(u2, z2, (p - 2 * cos * nu, q, w - 2 * cos * nz), inside, wgt * r, depth + 1)
+        if r < 1:
+            eta = n1 / n2
+            tangent = (p - cos * nu, q, w - cos * nz)  # the part along the facet, scaled
+            t2 = [eta * x for x in tangent]
+            along = math.sqrt(max(0.0, 1 - sum(x * x for x in t2)))
+            sign = 1.0 if cos > 0 else -1.0  # on through the facet
+            v2 = (t2[0] + sign * along * nu, t2[1], t2[2] + sign * along * nz)
+            follow(u2, z2, v2, not inside, wgt * (1 - r), depth + 1)
+
+    p, q, w = d
+    r0 = _fresnel_ref(w, 1.0, n)
+    v = (p / n, q / n, math.sqrt(1 - (p * p + q * q) / (n * n)))
+    for k in range(positions):
+        follow((k + 0.5) / positions, 0.0, v, True, (1 - r0) / positions, 0)
+    return up_total
+
+
+@pytest.mark.parametrize("deg, phi", [(20, 0), (30, 0), (45, 0), (35, 40), (60, 75)])
+def test_the_share_through_agrees_with_a_weighted_trace_of_every_split(deg, phi):
+    """The tracer draws one path per ray; here every Fresnel split is followed with its
+    weight, by explicit segments: the share of light through the film agrees within
+    4 sigma of the tracer's 40,000 rays, at angles that cross one facet, two, or come
+    back, and out of the cross-section plane."""
+    t, f = math.radians(deg), math.radians(phi)
+    d = (math.sin(t) * math.cos(f), math.sin(t) * math.sin(f), math.cos(t))
+    want = _single_pass(d)
+    out = _meet(40_000, True, *d, _row())
+    got = float(np.mean(out[:, 0] == CROSS))
+    sigma = math.sqrt(max(want * (1 - want), 1e-4) / 40_000)
+    assert abs(got - want) < 4 * sigma + 2e-3, (got, want)

@@ -18,7 +18,7 @@ from ..config.job import Job
 from ..errors import JobError
 from ..geometry.density import axis_overlap
 from ..relax.circles import hex_radius
-from ..relax.formulation import containers_of
+from ..stages.settings import containers
 
 #: Dots per tile that minimise the time per dot on this kind of machine (2 cores, L2 of
 #: 1-2 MB per core): measured by ``benchmarks/panels.py --sweep`` (BENCHMARKS.md).
@@ -144,8 +144,7 @@ def max_spacing(job: Job) -> float:
     """Largest hexagonal spacing of the map's non-zero cells, mm (2 r' at the lowest
     container fill, :class:`~optdot.relax.formulation.Containers`; when sizes vary, of
     each cell's fill at its own diameter)."""
-    widest = job.diameter if job.sizes is None else job.sizes.high
-    g = containers_of(job.density, float(widest)).grid()
+    g = containers(job).grid()
     if not (g > 0).any():
         return float(2.0 * hex_radius(np.array([1.0]), 0.5 * job.diameter)[0])
     d = job.cell_diameters
