@@ -32,7 +32,7 @@ from optdot.errors import ExportError
 from optdot.geometry.caps import CAP_APPID
 from optdot.geometry.kinds import Curve
 from optdot.geometry.orientation import degrees
-from optdot.geometry.shapes import CIRCLE, Footprints, Kind
+from optdot.geometry.shapes import Footprints, Kind
 from optdot.io.atomic import atomic_path, expect_tail
 from optdot.pattern import DotSource, Pattern, caps_of
 from optdot.printing.mask import mask_cap_rings, mask_ring, mask_rings
@@ -151,7 +151,7 @@ def _template(
     ``sheet``, the panel is the block :data:`PANEL_BLOCK`, arrayed by one INSERT."""
     uniform = pattern.uniform_diameter
     radius = _MARK_R if uniform is None else _mask_radius(pattern_process, 0.5 * uniform)
-    shaped = pattern.kind is not CIRCLE
+    shaped = not pattern.kind.round
     doc = _new_document(version)
     if version != "R12":  # R12 has no $INSUNITS: drawing units are mm by convention
         doc.header["$INSUNITS"] = 4  # millimetres
@@ -335,7 +335,7 @@ def write_dxf(pattern: DotSource, path: str | Path, opts: ExportOptions) -> None
             "and y apart; DXF draws circles and arcs, which such a scale makes ellipses: "
             "write GDSII or OASIS"
         )
-    shaped = pattern.kind is not CIRCLE
+    shaped = not pattern.kind.round
     sizes, names = [], {}
     if shaped:  # every size the dots have: a block each
         keys = set()

@@ -108,7 +108,7 @@ def dot_cell(name: str, kind: Kind, size_um: np.ndarray, opts: ExportOptions) ->
     Raises:
         ExportError: the tolerance needs too many vertices, or too few to read as round.
     """
-    if kind is not CIRCLE or opts.process is not None:
+    if not kind.round or opts.process is not None:
         dot = gdstk.Cell(name)
         size, tol = np.asarray(size_um) * 1e-3, opts.tolerance_um * 1e-3
         if opts.process is None:

@@ -542,10 +542,10 @@ def read_dxf(path: Path, opts: ExportOptions | None = None) -> Pattern:
                 rings.append(np.array(pts, dtype=np.float64) * scale)
     except GeometryError as err:
         raise PatternFileError(str(err)) from None
-    for _, f in [s for s in shaped if s[0] is CIRCLE]:  # round outlines: discs
+    for _, f in [s for s in shaped if s[0].round]:  # round outlines: discs
         xy_l.append(tuple(f.centre / scale))  # back to drawing units, as the others
         r_l.append(0.5 * float(f.size[0]) / scale)
-    shaped = [s for s in shaped if s[0] is not CIRCLE]
+    shaped = [s for s in shaped if not s[0].round]
     if shaped:
         kinds = {k for k, _ in shaped}
         if xy_l or len(kinds) > 1:

@@ -24,7 +24,6 @@ from pathlib import Path
 import numpy as np
 
 from optdot.errors import ExportError
-from optdot.geometry.shapes import CIRCLE
 from optdot.io.atomic import atomic_path, expect_size
 from optdot.io.patterns import format_fixed6
 from optdot.pattern import DotSource, caps_of
@@ -50,7 +49,7 @@ def write_speos(pattern: DotSource, path: str | Path, opts: ExportOptions) -> No
             f"{path}: the pattern prints graded caps over its LEDs (rings), which a mapping "
             "of elements cannot hold; export the caps' rings from the GDSII/OASIS or DXF mask"
         )
-    if len(caps) and pattern.kind is not CIRCLE:
+    if len(caps) and not pattern.kind.round:
         raise ExportError(
             f"{path}: the pattern prints caps over its LEDs, which a mapping of "
             f"{pattern.kind.name} elements cannot scale into discs; export the caps' "

@@ -30,7 +30,6 @@ from .formats import FORMATS
 from .geometry.caps import no_caps
 from .geometry.domain import Domain
 from .geometry.morton import spatial_order
-from .geometry.shapes import CIRCLE, DotShape
 from .io.atomic import transaction
 from .io.dataset import is_dataset
 from .io.outputs import check_outputs
@@ -264,7 +263,7 @@ def with_job_panel(pattern: Pattern, job: Job | None) -> Pattern:
 def dot_rule(job: Job) -> DotRule:
     """The footprints ``job`` draws, as QA holds a file's dots to them; with sizes, the
     band of diameters each place may have (:func:`size_band`)."""
-    shape = job.shape if job.shape is not None else DotShape(CIRCLE, (job.diameter,))
+    shape = job.shape
     grid = job.process.grid if job.process is not None else 0.0
     return DotRule(shape, job.sizes, size_band(job), TOLERANCE + GRID_SIZE_SLACK * grid)
 
@@ -364,13 +363,17 @@ def qa(
     else:
         outline = None if job.domain.rectangle else job.domain
         gap = job.judged_gap  # dots of varying size collide below it
-        if dots.uniform_diameter is None and job.shape is None and job.sizes is None:
+        if dots.uniform_diameter is None and job.shape.kind.round and job.sizes is None:
             # a one-size job's centre distances, as edge gaps: a file whose sizes differ
             # (by a nudge the footprint check lets through) is held to the same limits
             gap = job.collision_distance - job.diameter
             if params.close_gap is None:
                 params = replace(params, close_gap=max(params.close_distance - job.diameter, 0))
-        field = job.orientation if job.shape and job.orientation.follows_position else None
+        field = (
+            job.orientation
+            if not job.shape.kind.round and job.orientation.follows_position
+            else None
+        )
         result = run_qa(
             dots,
             job.density,

@@ -27,7 +27,7 @@ def _check_fill(job: Job, where: str) -> None:
     grid = job.density.grid
     k = int(np.argmax(grid))
     iy, ix = divmod(k, grid.shape[1])
-    if job.shape is not None:
+    if not job.shape.kind.round:
         check_shaped_fill(job, float(grid[iy, ix]), where, " " + _cell(job, iy, ix))
         return
     spread = (job.min_distance / job.diameter) ** 2
@@ -80,7 +80,7 @@ def _check_room(job: Job, n: int, where: str) -> None:
             f"{where}: the map asks for 0 dots (mean fill fraction x panel area is under half "
             f"a dot of {job.diameter:g} mm)"
         )
-    if job.sizes is None or job.shape is not None:  # shaped: at the rule's size there
+    if job.sizes is None or not job.shape.kind.round:  # shaped: at the rule's size there
         _check_fill(job, where)
     if job.domain.rectangle and job.domain.edge_margin == 0:
         return  # fill fractions below the packing limit always fit
@@ -116,7 +116,7 @@ def use_tiles(job: Job, mode: str = "auto") -> bool:
 def _bytes(job: Job, n: int) -> float:
     """Peak bytes of a process relaxing ``n`` of ``job``'s dots (shaped dots: their
     measured share more, :data:`~optdot.runtime.cost.SHAPED_MEMORY`)."""
-    scale = 1.0 if job.shape is None else SHAPED_MEMORY
+    scale = 1.0 if job.shape.kind.round else SHAPED_MEMORY
     return estimate_bytes(n, job.optimize.lbfgs_memory) * scale
 
 
@@ -155,7 +155,7 @@ def check_job(
     n = job.n_dots
     _check_room(job, n, where)
     opt = job.optimize
-    shaped = job.shape is not None
+    shaped = not job.shape.kind.round
     if not use_tiles(job, tiles):
         check_memory(n, opt.lbfgs_memory, where)
         cost = estimate_cost(n, opt.max_iter, opt.lbfgs_memory, formats=formats, shaped=shaped)

@@ -17,7 +17,7 @@ import numpy as np
 
 from .config.job import Job
 from .files import sha256_file
-from .geometry.shapes import CIRCLE, Footprints
+from .geometry.shapes import Footprints
 from .io.dataset_write import write_dataset
 from .io.manifest import manifest_of
 from .pattern import Pattern
@@ -65,7 +65,7 @@ def resume_key(job: Job, plan: TilePlan) -> str | None:
 def _tiled_meta(job: Job, plan: TilePlan) -> dict:
     opt = job.optimize
     shaped = {}
-    if job.shape is not None:
+    if not job.shape.kind.round:
         shaped = {"shape": job.shape.kind.name, "orientation": job.orientation.mode}
     return {
         **shaped,
@@ -190,8 +190,8 @@ def _run_tiled(job, plan, executor_cm, output, progress, announce=None) -> Patte
     meta = _tiled_meta(job, plan)
     outline = None if job.domain.rectangle else job.domain
     # sizes (and shaped dots' bounding discs) are known once written
-    one = job.diameter if job.sizes is None and job.shape is None else None
-    kind = CIRCLE if job.shape is None else job.shape.kind
+    one = job.diameter if job.sizes is None and job.shape.kind.round else None
+    kind = job.shape.kind
     if output is not None:
         manifest = manifest_of(
             job.name, job.optimize.seed, one, one, job.box, meta, outline, plan.to_json(), kind
@@ -219,7 +219,7 @@ def _run_tiled(job, plan, executor_cm, output, progress, announce=None) -> Patte
     xy = np.concatenate([got[t][0] for t in plan.tiles()])
     dots = Footprints.concat([got[t][1] for t in plan.tiles()], kind)
     stats = {"total_s": run.seconds, "history": []}
-    shaped = None if kind is CIRCLE else dots
+    shaped = None if kind.round else dots
     return Pattern(
         xy=xy, diameter=dots.diameter, box=job.box, meta=meta, stats=stats, outline=outline,
         dots=shaped,

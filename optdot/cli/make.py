@@ -71,7 +71,7 @@ for _param in check.params:  # the shared --quiet speaks of a progress bar check
 
 
 def _diameter_text(job) -> str:
-    if job.shape is not None:
+    if not job.shape.kind.round:
         sizes = " × ".join(f"{v * 1e3:.4g}" for v in job.shape.size[:2])
         scaled = ""
         if job.sizes is not None:

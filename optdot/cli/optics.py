@@ -293,7 +293,7 @@ def design(job_file, output, png_path, job_out, rays, iterations, seed, quiet):
         from ..errors import JobError
 
         raise JobError(f"{job_file}: no [light_guide] or [backlight] section to design for")
-    if job.shape is not None:  # the map must be one the dots can be dealt at
+    if not job.shape.kind.round:  # the map must be one the dots can be dealt at
         from ..config.shaping import check_shaped_fill
 
         check_shaped_fill(job, job.design.fill_range[1], f"{job_file}: design.fill_range")

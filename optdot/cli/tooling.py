@@ -55,7 +55,7 @@ def _read_with_job(path: Path, job, opts=None):
     from ..pipeline import with_job_panel
 
     if job is not None:  # a mask read as the job's dots, printed by its process
-        made = job.shape.kind if job.shape is not None and job.shape.kind.derived else None
+        made = job.shape.kind if job.shape.kind.derived else None
         if opts is None and (job.process is not None or made is not None):
             opts = ExportOptions(process=job.process, kind=made)
         elif opts is not None and made is not None and opts.kind is None:

@@ -20,7 +20,7 @@ from ..geometry.density import DensityMap
 from ..geometry.domain import Domain
 from ..geometry.limits import DIAMETER_RANGE_MM, MAX_EXTENT_MM
 from ..geometry.orientation import Orientation
-from ..geometry.shapes import DotShape
+from ..geometry.shapes import CIRCLE, DotShape
 from ..geometry.sizes import DotSizes, dots_per_cell
 from ..printing.laser import Laser
 from ..printing.process import Process
@@ -231,8 +231,10 @@ class Job:
             (``[domain] active_area`` or ``bezel``), or None for the whole panel. QA's
             visibility and ``simulate``'s figures are judged inside it; every geometric
             check (collisions, protrusion, empty cells, coverage) covers the whole panel.
-        shape: the dot's kind and size when it is not a circle (``[dots] shape``), or
-            None; :attr:`diameter` is then the disc of the same area's.
+        shape: the dot's kind and size (``[dots] shape``; given None, a circle of
+            :attr:`diameter`). A round kind's size is its (smallest) diameter; any
+            other's is its footprint at scale 1, and :attr:`diameter` the disc of the
+            same area's (the smallest's).
         orientation: where shaped dots' long axes point (``[orientation]``).
         process: how the masks print (``[process]``), or None: masks are the pattern.
             The pattern is then the print, relaxed to the process's gaps
@@ -258,7 +260,7 @@ class Job:
     backlight: Backlight | None = None
     design: DesignParams = field(default_factory=DesignParams)
     viewing_area: tuple[float, float, float, float] | None = None
-    shape: DotShape | None = None
+    shape: DotShape = None  # type: ignore[assignment]  # filled in: a circle
     orientation: Orientation = field(default_factory=Orientation)
     process: Process | None = None
     laser: Laser | None = None
@@ -274,6 +276,8 @@ class Job:
 
     def __post_init__(self) -> None:
         where = str(self.source) if self.source else "job"
+        if not isinstance(self.shape, DotShape):  # not given: the paper's circle
+            object.__setattr__(self, "shape", DotShape(CIRCLE, (self.diameter,)))
         if self.domain is None:
             d = self.density
             object.__setattr__(
@@ -305,7 +309,7 @@ class Job:
                     f"{where}: optimize.method = 'md' takes one dot size (the baseline of "
                     "Idé et al. has one); give dots.diameter as a number or use 'optdot'"
                 )
-        if self.shape is not None:
+        if not self.shape.kind.round:
             if self.optimize.method == "md":
                 raise JobError(
                     f"{where}: optimize.method = 'md' places discs (the baseline of Idé et al.); "
@@ -324,9 +328,9 @@ class Job:
         dots of the smallest size; for shaped dots, the width + gap: nearer, two
         footprints are too close at any angles; the guarantee pass then holds their
         exact edge gaps to ``optimize.gap``)."""
-        if self.shape is not None:
-            return 2.0 * self.shape.inner_radius * self._low_scale + self.optimize.gap
-        return self.diameter + self.optimize.gap
+        if self.shape.kind.round:
+            return self.diameter + self.optimize.gap
+        return 2.0 * self.shape.inner_radius * self._low_scale + self.optimize.gap
 
     def shape_scale(self, diameters: np.ndarray) -> np.ndarray:
         """``[n]`` factors shaped dots of area-equivalent ``diameters`` (``[n]`` mm) are
@@ -342,7 +346,9 @@ class Job:
     def dot_radius(self) -> float:
         """How far a dot reaches from its centre, mm: the radius (the smallest, with
         ``sizes``), or a shaped dot's bounding radius (the smallest's)."""
-        return 0.5 * self.diameter if self.shape is None else self.shape.extent * self._low_scale
+        if self.shape.kind.round:
+            return 0.5 * self.diameter
+        return self.shape.extent * self._low_scale
 
     @cached_property
     def cell_diameters(self) -> np.ndarray | None:

@@ -20,7 +20,7 @@ from ..files import input_problem
 from ..geometry.density import INTERPOLATIONS, DensityMap
 from ..geometry.domain import DEFAULT_TOLERANCE, Domain, orient_all
 from ..geometry.outline_io import keep_out_is_wkt, load_outline, parse_keep_out
-from ..geometry.shapes import CIRCLE
+from ..geometry.shapes import DotShape
 from ..geometry.sizes import DEFAULT_STEP, DotSizes
 from .backlight import BACKLIGHT_KEYS, backlight_from, check_leds_inside, led_caps
 from .grids import load_grid, validate_grid
@@ -35,7 +35,14 @@ from .light_guide import (
     light_guide_from,
 )
 from .process_section import PROCESS_KEYS, check_caps, check_printable, process_from
-from .shaping import DOT_SHAPE_KEYS, ORIENTATION_KEYS, dot_shape, orientation, shape_sizes
+from .shaping import (
+    DOT_SHAPE_KEYS,
+    ORIENTATION_KEYS,
+    dot_kind,
+    dot_shape,
+    orientation,
+    shape_sizes,
+)
 from .sheet_section import SHEET_KEYS, sheet_from
 
 SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
@@ -266,29 +273,27 @@ def job_from_dict(
     if interpolation == "linear":
         density = density.interpolated()
     dots = sections["dots"]
-    shape = dot_shape(dots, where)
-    if shape is None:
+    kind = dot_kind(dots, where)
+    if kind.round:
         if "diameter" not in dots:
             raise JobError(f"{where}: missing required key dots.diameter")
         diameter, sizes, size_file = _dot_sizes(dots, sections.get("qa", {}), qa, base, where)
     else:
+        shape = dot_shape(dots, kind, where)
         sizes = shape_sizes(dots, shape, sections.get("qa", {}), qa, where)
         diameter = shape.equivalent_diameter if sizes is None else sizes.low
         size_file = None
     laser = None
     if "laser" in sections:
         laser = laser_from(sections["laser"], where)
-        diameter, sizes = laser_sizes(laser, diameter, sizes, shape is not None, where)
+        diameter, sizes = laser_sizes(laser, diameter, sizes, not kind.round, where)
+    if kind.round:  # a round dot's size is its (smallest) diameter
+        shape = DotShape(kind, (diameter,))
     process = None
     if "process" in sections:
         process = process_from(sections["process"], where)
-        kind = CIRCLE if shape is None else shape.kind
-        low = (
-            np.array([diameter])
-            if shape is None
-            else np.asarray(shape.size) * (diameter / shape.equivalent_diameter)
-        )
-        check_printable(process, kind, low, where)
+        low = np.asarray(shape.size) * (diameter / shape.equivalent_diameter)
+        check_printable(process, shape.kind, low, where)
         try:
             opt = replace(opt, gap=process.relaxation_gap(opt.gap))
         except JobError as e:

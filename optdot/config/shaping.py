@@ -33,12 +33,12 @@ from ..errors import JobError
 from ..geometry.kinds import shaped_names
 from ..geometry.limits import DIAMETER_RANGE_MM, MAX_SHAPED_FILL
 from ..geometry.orientation import Orientation, led_centres
-from ..geometry.shapes import CIRCLE, KINDS, DotShape
+from ..geometry.shapes import CIRCLE, KINDS, DotShape, Kind
 from .grids import load_grid
 
 DOT_SHAPE_KEYS: dict[str, tuple[type, ...]] = {
     "shape": (str,),
-    **{p: (int, float) for k in KINDS.values() if k is not CIRCLE for p in k.params},
+    **{p: (int, float) for k in KINDS.values() if not k.round for p in k.params},
     **{key: t for k in KINDS.values() for key, t in k.keys.items()},
     "scale": (list,),
 }
@@ -58,31 +58,42 @@ def _a(name: str) -> str:
     return ("an " if name[0] in "aeiou" else "a ") + name
 
 
-def dot_shape(dots: dict[str, Any], where: str) -> DotShape | None:
-    """The ``[dots]`` shape, or None for circles (``shape`` absent or ``"circle"``).
+def dot_kind(dots: dict[str, Any], where: str) -> Kind:
+    """The ``[dots]`` kind (``shape``, default the circle's). A round kind's dots are
+    sized by ``dots.diameter`` (a number, a range or a size file); the others' by their
+    own keys (:func:`dot_shape`).
 
     Raises:
-        JobError: an unknown kind, a size that is missing, not a length or cannot be
-            drawn (length under width, a corner radius over half the width, an aspect
-            over :data:`MAX_ASPECT`).
+        JobError: an unknown kind; a shaped dot's key given for a round kind.
     """
-    name = dots.get("shape", "circle")
-    sized = [k for k in DOT_SHAPE_KEYS if k not in ("shape", "scale") and k in dots]
+    name = dots.get("shape", CIRCLE.name)
     if name not in KINDS:
         raise JobError(f"{where}: dots.shape = {name!r} must be one of {', '.join(KINDS)}")
-    if KINDS[name] is CIRCLE:
-        if "scale" in dots:
-            raise JobError(
-                f"{where}: dots.scale scales a shaped dot; circles vary by dots.diameter = "
-                "[low, high]"
-            )
-        if sized:
-            raise JobError(
-                f"{where}: dots.{sized[0]} is a shaped dot's size; circles take dots.diameter "
-                f"(or set dots.shape = {shaped_names()})"
-            )
-        return None
     kind = KINDS[name]
+    sized = [k for k in DOT_SHAPE_KEYS if k not in ("shape", "scale") and k in dots]
+    if kind.round and "scale" in dots:
+        raise JobError(
+            f"{where}: dots.scale scales a shaped dot; {kind.name}s vary by dots.diameter = "
+            "[low, high]"
+        )
+    if kind.round and sized:
+        raise JobError(
+            f"{where}: dots.{sized[0]} is a shaped dot's size; {kind.name}s take dots.diameter "
+            f"(or set dots.shape = {shaped_names()})"
+        )
+    return kind
+
+
+def dot_shape(dots: dict[str, Any], kind: Kind, where: str) -> DotShape:
+    """The ``[dots]`` shape of a kind that is not round (:func:`dot_kind`).
+
+    Raises:
+        JobError: a size that is missing, not a length or cannot be drawn (length under
+            width, a corner radius over half the width, an aspect over
+            :data:`MAX_ASPECT`).
+    """
+    name = kind.name
+    sized = [k for k in DOT_SHAPE_KEYS if k not in ("shape", "scale") and k in dots]
     if "diameter" in dots:
         keys = kind.keys if kind.derived else kind.params
         raise JobError(
@@ -222,7 +233,7 @@ def shape_sizes(dots: dict[str, Any], shape: DotShape, qa_sec: dict[str, Any], q
 
 def orientation(
     sec: dict[str, Any],
-    shape: DotShape | None,
+    shape: DotShape,
     guide,
     box: tuple[float, float, float, float],
     base: Path,
@@ -238,7 +249,7 @@ def orientation(
     """
     if not sec:
         return Orientation()
-    if shape is None:
+    if shape.kind.round:
         raise JobError(
             f"{where}: [orientation] turns shaped dots; circles have no long axis "
             f"(set dots.shape = {shaped_names()})"

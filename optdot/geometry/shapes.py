@@ -21,7 +21,6 @@ diameter. Each kind is one module of :mod:`optdot.geometry.kinds`, its registry.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -76,7 +75,7 @@ class DotShape:
     def equivalent_diameter(self) -> float:
         """The diameter of the disc of the same area, mm: what sets the spacing and the
         count (one footprint per ``area / fill``)."""
-        return 2.0 * math.sqrt(self.area / math.pi)
+        return float(self.kind.equivalent_diameter(np.array([self.size]))[0])
 
     def scale_of(self, diameters: np.ndarray) -> np.ndarray:
         """``[n]`` factors dots of area-equivalent ``diameters`` (``[n]`` mm) are this
@@ -132,7 +131,7 @@ class Footprints:
     @property
     def diameter(self) -> np.ndarray:
         """``[n]`` diameters of circles, mm (the width of the bounding disc otherwise)."""
-        return self.size[:, 0] if self.kind is CIRCLE else 2.0 * self.extent()
+        return 2.0 * self.extent()
 
     def area(self) -> np.ndarray:
         """``[n]`` areas, mm²."""
@@ -144,7 +143,7 @@ class Footprints:
 
     def equivalent_diameter(self) -> np.ndarray:
         """``[n]`` diameters of the discs of the same areas, mm (a disc's own)."""
-        return 2.0 * np.sqrt(self.area() / np.pi)
+        return self.kind.equivalent_diameter(self.size)
 
     @classmethod
     def concat(cls, parts: list[Footprints], kind: Kind = CIRCLE) -> Footprints:

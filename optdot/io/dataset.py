@@ -67,7 +67,7 @@ def read_part_file(path: Path, count: int, kind: Kind = CIRCLE) -> tuple[np.ndar
         raise PatternFileError(f"{path}: holds {table.num_rows} dots, the manifest says {count}")
     cols = [table.column(c).to_numpy().astype(np.float64, copy=False) for c in names]
     xy = np.column_stack(cols[:2])
-    if kind is CIRCLE:
+    if kind.round:
         return xy, Footprints.circles(cols[2])
     return xy, file_footprints(path, kind, np.column_stack(cols[2:-1]), cols[-1])
 
@@ -261,5 +261,5 @@ def load_dataset(path: str | Path, box=None):
     meta = dict(m.get("meta", {}))
     if isinstance(m.get("tiles"), dict) and m["tiles"].get("nx", 1) * m["tiles"].get("ny", 1) > 1:
         meta["tiling"] = {"xs": m["tiles"]["xs"], "ys": m["tiles"]["ys"]}
-    shaped = None if ds.kind is CIRCLE else dots
+    shaped = None if ds.kind.round else dots
     return Pattern(xy=xy, diameter=d, box=the_box, meta=meta, outline=outline, dots=shaped)

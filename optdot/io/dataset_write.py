@@ -57,7 +57,7 @@ def _table(xy: np.ndarray, dots: Footprints):
     import pyarrow as pa
 
     values = [xy[:, 0], xy[:, 1], *(dots.size[:, c] for c in range(dots.size.shape[1]))]
-    if dots.kind is not CIRCLE:
+    if not dots.kind.round:
         values.append(degrees(dots.angles))
     return pa.table(
         {
@@ -323,7 +323,7 @@ def write_dataset(
         doc = {"format": FORMAT, "version": VERSION, **manifest, "parts": parts}
         if doc["diameter_mm"] is None:  # sizes known once written: uniform, median
             doc.update(size_fields(writer.sizes))
-            if kind is not CIRCLE:  # bounding discs: a median, never "every dot's size"
+            if not kind.round:  # bounding discs: a median, never "every dot's size"
                 doc["uniform_diameter_mm"] = None
         doc["n"] = sum(p["count"] for p in parts)
         data = json.dumps(doc, indent=1, sort_keys=True).encode() + b"\n"

@@ -47,7 +47,7 @@ def columns(kind: Kind) -> tuple[str, ...]:
     :data:`COLUMNS` for discs; else ``x_mm, y_mm``, the kind's sizes in mm
     (``length_mm, width_mm[, corner_radius_mm]``) and ``angle_deg`` (the long axis from
     +x, counter-clockwise)."""
-    if kind is CIRCLE:
+    if kind.round:
         return COLUMNS
     return ("x_mm", "y_mm", *(f"{p}_mm" for p in kind.params), "angle_deg")
 
@@ -229,7 +229,7 @@ def manifest_of(
     ``diameter`` None: the nominal and uniform diameters are taken from the parts as
     they are written (:class:`DatasetWriter`). ``kind``: the dots' footprint kind
     (named only when not the circle: a disc dataset's manifest is as it always was)."""
-    shaped = {} if kind is CIRCLE else {"shape": kind.name}
+    shaped = {} if kind.round else {"shape": kind.name}
     if kind.spec():
         shaped["shape_spec"] = kind.spec()
     return {

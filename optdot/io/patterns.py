@@ -37,7 +37,7 @@ from ..geometry.domain import Domain, orient_all
 from ..geometry.kinds import kind_of
 from ..geometry.limits import validate_dots
 from ..geometry.orientation import degrees
-from ..geometry.shapes import CIRCLE, KINDS, Footprints, Kind
+from ..geometry.shapes import KINDS, Footprints, Kind
 from ..pattern import Pattern
 from .atomic import atomic_path, expect_size
 from .dataset import load_dataset
@@ -49,7 +49,7 @@ CSV_HEADER = "x_mm,y_mm,diameter_mm"
 
 def csv_header(kind: Kind) -> str:
     """The CSV header of dots of ``kind`` (:data:`CSV_HEADER` for circles)."""
-    if kind is CIRCLE:
+    if kind.round:
         return CSV_HEADER
     return ",".join(["x_mm", "y_mm", *(f"{p}_mm" for p in kind.params), "angle_deg"])
 
@@ -285,7 +285,7 @@ def _load_csv(path: Path, box: tuple[float, float, float, float] | None) -> Patt
         raise PatternFileError(
             f"{path}: expected {header.count(',') + 1} columns ({header}), got {data.shape[1]}"
         )
-    if kind is CIRCLE:
+    if kind.round:
         return _validated(path, data[:, :2], data[:, 2], box, {})
     dots = file_footprints(path, kind, data[:, 2:-1], data[:, -1])
     return _validated(path, data[:, :2], dots.diameter, box, {}, dots)
@@ -338,10 +338,10 @@ def _load_npz(path: Path, box: tuple[float, float, float, float] | None) -> Patt
             dots = None
             if "shape" in z:
                 name = str(z["shape"])
-                if name not in KINDS or KINDS[name] is CIRCLE:
+                if name not in KINDS or KINDS[name].round:
                     raise PatternFileError(
                         f"{path}: shape = {name[:40]!r} is not a shaped dot's kind "
-                        f"({', '.join(k for k in KINDS if k != 'circle')})"
+                        f"({', '.join(k for k, v in KINDS.items() if not v.round)})"
                     )
                 try:
                     spec = json.loads(str(z["shape_spec"])) if "shape_spec" in z else None

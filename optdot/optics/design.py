@@ -194,7 +194,7 @@ def sizes_asked(job: Job, fill_max: float) -> tuple[float, float] | None:
     Raises:
         JobError: no dot size up to :data:`MAX_SIZE_ASKED` reaches ``fill_max``.
     """
-    if job.shape is not None:
+    if not job.shape.kind.round:
         return None
     gap = job.qa.effective_close_gap
     top = job.sizes.high if job.sizes is not None else job.diameter

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry.shapes import CIRCLE, DotShape, Footprints, Kind
+from ..geometry.shapes import DotShape, Footprints, Kind
 from ..geometry.sizes import DotSizes
 
 #: How far a footprint's size parameter may be off the job's, mm (0.1 µm): masks read
@@ -96,9 +96,9 @@ class DotRule:
         """The job's dot in words, sizes in µm: ``circle 46 µm``, ``ellipse 80 × 40 µm``,
         ``rounded_rectangle 120 × 30 µm, corner_radius 5 µm``, or with sizes
         ``circle 30–120 µm on 0.5 µm steps``."""
-        if self.sizes is not None and self.shape.kind is CIRCLE:
+        if self.sizes is not None and self.shape.kind.round:
             s = self.sizes
-            return f"circle {_um(s.low)}–{_um(s.high)} µm on {_um(s.step)} µm steps"
+            return f"{self.shape.kind.name} {_um(s.low)}–{_um(s.high)} µm on {_um(s.step)} µm steps"
         text = footprint_text(self.shape.kind, self.shape.size)
         if self.sizes is not None:
             s = self.sizes
@@ -113,7 +113,7 @@ class DotRule:
         if self.sizes is None:
             return np.broadcast_to(size, (dots.n, len(size)))
         d = self.sizes.quantise(dots.equivalent_diameter())
-        if kind is CIRCLE:
+        if kind.round:
             return d[:, None]
         return kind.drawable(np.round(np.outer(self.shape.scale_of(d), size), 6))
 

@@ -45,7 +45,7 @@ from ..errors import ResourceError
 from ..geometry.density import DensityMap
 from ..geometry.domain import box_protruding
 from ..geometry.orientation import Orientation, axis
-from ..geometry.shapes import CIRCLE, Footprints
+from ..geometry.shapes import Footprints
 from ..pattern import coverage_pixels
 from ..runtime.memory import available_bytes
 from ..spatial.window import bounds, in_rect
@@ -186,7 +186,7 @@ def _first_pass(
             _add_angles(f, xy, dots.angle, field, dots.kind.period)
         if rule is not None:
             _add_strays(f, xy, dots, rule)
-        if dots.kind is not CIRCLE:  # each size parameter's range, for the report
+        if not dots.kind.round:  # each size parameter's range, for the report
             lo, hi = dots.size.min(axis=0), dots.size.max(axis=0)
             f.size_lo = lo if f.size_lo is None else np.minimum(f.size_lo, lo)
             f.size_hi = hi if f.size_hi is None else np.maximum(f.size_hi, hi)
@@ -211,7 +211,7 @@ def _first_pass(
         if f.luminance is not None:
             f.luminance.add(xy, disc_area(uniform) if area is None else area)
         # coverage counts each dot's area: a shaped dot as the disc of its area
-        dc = d if dots.kind is CIRCLE else dots.equivalent_diameter()
+        dc = d if dots.kind.round else dots.equivalent_diameter()
         if f.walls is not None:
             f.walls.add(xy, dc)
         if density is not None:
@@ -330,7 +330,7 @@ def _second_pass(
         if len(pr):
             dist = np.hypot(*(pts[pr[:, 0]] - pts[pr[:, 1]]).T)
             close_at, collision_at = close, collision
-            if gaps is not None and dots.kind is not CIRCLE:  # the exact edge gaps
+            if gaps is not None and not dots.kind.round:  # the exact edge gaps
                 both = Footprints.concat([dots, halo_dots], dots.kind)
                 dist = both.gap(pts, pr[:, 0], pr[:, 1])
                 close_at, collision_at = gaps

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..geometry.density import DensityMap
 from ..geometry.orientation import Orientation
-from ..geometry.shapes import CIRCLE, Footprints
+from ..geometry.shapes import Footprints
 from .metrics import coverage, disc_area, radial_spectrum
 from .seams import seam_finish
 from .source import Source
@@ -70,7 +70,7 @@ def summarize(
     else:
         m["collision_gap_mm"] = gaps[1]
         m["close_gap_mm"] = gaps[0]
-    if src.kind is not CIRCLE:
+    if not src.kind.round:
         m["shape"] = {
             "kind": src.kind.name,
             "gaps": "exact edge-to-edge distances of the footprints",

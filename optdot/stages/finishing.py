@@ -79,7 +79,7 @@ def finish(
             d = fit_sizes(xy, d, job.sizes, job.density, job.domain, s.fit_sigma, fit, window)
         radius, dmin = 0.5 * d, d + job.optimize.gap
     diameter = job.diameter if d is None else d[:n]
-    if job.shape is None:
+    if job.shape.kind.round:
         leg = make_legal(xy, job.density, home, job.domain, radius, dmin, where, frozen)
         return Finished(np.ascontiguousarray(leg.xy[:n]), diameter, leg)
     thrown, fixed = xy0, None

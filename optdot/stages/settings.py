@@ -29,8 +29,8 @@ def problem_of(job: Job) -> Problem:
         min_distance=job.min_distance,
         close_target=job.close_target,
         seed=job.optimize.seed,
-        reach=None if job.shape is None else job.dot_radius,
-        shaped=None if job.shape is None else (job.shape, job.orientation, job.optimize.gap),
+        reach=None if job.shape.kind.round else job.dot_radius,
+        shaped=None if job.shape.kind.round else (job.shape, job.orientation, job.optimize.gap),
     )
 
 

@@ -117,7 +117,7 @@ import numpy as np
 from .. import stages
 from ..config.job import Job
 from ..geometry.morton import spatial_order
-from ..geometry.shapes import CIRCLE, Footprints
+from ..geometry.shapes import Footprints
 from ..relax.lowpass import CoarseField, LatticePart
 from ..relax.shaped import turned
 from ..spatial.window import bounds, grown, in_rect
@@ -157,7 +157,7 @@ class FinalDots:
         """Final dots of ``job`` as a part file holds them (``xy [n, 2]`` mm and
         footprints): discs' diameters; shaped dots' footprints and their area-equivalent
         diameters (on the size rule's quantisation, the sizes they were made at)."""
-        if dots.kind is CIRCLE:
+        if dots.kind.round:
             return cls(xy, dots.diameter)
         if job.sizes is None:
             return cls(xy, job.diameter, dots)
@@ -408,7 +408,7 @@ def held_dots(job: Job, dots: TileDots | FinalDots) -> stages.Held:
         return stages.Held(dots.xy, dots.diameter, angle)
     d = stages.rule_diameters(job, dots.xy0)
     angle = None
-    if job.shape is not None:
+    if not job.shape.kind.round:
         angle = turned(job.shape, job.orientation, dots.xy, dots.xy0).angles
     return stages.Held(dots.xy, job.diameter if d is None else d, angle)
 
@@ -428,7 +428,7 @@ def legalize_tile(
     """
     n = len(dots.xy)
     if n == 0:
-        none = None if job.shape is None else job.shape.footprints(np.zeros(0))
+        none = None if job.shape.kind.round else job.shape.footprints(np.zeros(0))
         return FinalDots(dots.xy, job.diameter if job.sizes is None else np.zeros(0), none)
     width = stages.stage_settings(job).halo
     window = grown(plan.rect(*dots.tile), width)

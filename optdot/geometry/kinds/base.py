@@ -167,6 +167,11 @@ class Kind:
         """``[n]`` bounding radii about the centre, mm."""
         raise NotImplementedError
 
+    def equivalent_diameter(self, size: np.ndarray) -> np.ndarray:
+        """``[n]`` diameters of the discs of the same areas, mm: what sets a dot's
+        spacing, its count and the coverage it is counted at."""
+        return 2.0 * np.sqrt(self.area(size) / np.pi)
+
     def gap(
         self,
         d: np.ndarray,

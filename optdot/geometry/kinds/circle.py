@@ -44,6 +44,18 @@ class Circle(Kind):
     def extent(self, size: np.ndarray) -> np.ndarray:
         return 0.5 * size[:, 0]
 
+    def equivalent_diameter(self, size: np.ndarray) -> np.ndarray:
+        return size[:, 0].astype(np.float64, copy=True)
+
+    def inradius(self, size: np.ndarray) -> np.ndarray:
+        return 0.5 * size[:, 0]
+
+    def aspect(self, size: np.ndarray) -> np.ndarray:
+        return np.ones(len(size))
+
+    def narrowest(self, size: np.ndarray) -> np.ndarray:
+        return size[:, 0].astype(np.float64, copy=True)
+
     def support(self, theta, size, angle) -> np.ndarray:
         return np.broadcast_to(
             0.5 * size[..., 0], np.broadcast_shapes(np.shape(theta), size.shape[:-1])
