@@ -113,7 +113,7 @@ def _read_layout(path: Path, opts: ExportOptions) -> Pattern:
         xy, rings, caps, diameters = _printed(opts.process, xy, rings, caps, diameters)
     xy = np.round(xy, 6)
     kinds = {d.kind for d in diameters}
-    if kinds == {CIRCLE}:
+    if all(k.round for k in kinds):
         d = np.concatenate([d.size[:, 0] for d in diameters])
         return _seeded(_pattern(path, xy, d, rings, True, caps=caps, cap_rings=cap_rings), seed)
     if len(kinds) > 1:

@@ -5,6 +5,8 @@ pipeline asks of it, and answer it consistently with its other answers."""
 from __future__ import annotations
 
 import math
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -159,3 +161,50 @@ def test_every_suffix_of_a_mask_reads_back(tiny_pattern, tmp_path):
             np.testing.assert_allclose(np.sort(got.xy, axis=0), want, atol=2e-6)
     with pytest.raises(PatternFileError, match=r"unknown format '\.txt' \(gds, oas, dxf, csv"):
         read_any(tmp_path / "m.txt")
+
+
+#: What asks "is it a circle?" rather than asking the kind: identity with the registry's
+#: circle, a job or pattern without a shape, or a kind's name compared.
+CIRCLE_BRANCH = re.compile(
+    r"\bis (not )?CIRCLE\b|[=!]= ?CIRCLE\b|shape is (not )?None"
+    r"|\bkind\.name [=!]=|\bname [=!]= ?['\"](circle|ellipse|rounded_rectangle|polygon)['\"]"
+)
+
+
+def test_no_branch_on_the_kind_outside_the_registry():
+    """The kinds' module answers for each kind (its :attr:`~Kind.round`, its formulas); a
+    branch on the circle's identity or on a kind's name anywhere else is the second path
+    a new kind would miss."""
+    root = Path(__file__).resolve().parent.parent
+    kinds = root / "optdot" / "geometry" / "kinds"
+    hits = []
+    for f in [*(root / "optdot").rglob("*.py"), *(root / "exporters").rglob("*.py")]:
+        if kinds in f.parents:
+            continue
+        for n, line in enumerate(f.read_text().splitlines(), 1):
+            if CIRCLE_BRANCH.search(line.split("#")[0]):
+                hits.append(f"{f.relative_to(root)}:{n}: {line.strip()}")
+    assert not hits, "\n".join(hits)
+
+
+@pytest.mark.parametrize("name", sorted(SIZES))
+def test_a_kind_s_equivalent_diameter_is_the_disc_of_its_area(name):
+    """What sets a dot's spacing and count: the disc of the footprint's area; a round
+    kind's own diameter to the last bit (a job's circle keeps its bytes)."""
+    kind = _kind(name)
+    size = np.array([SIZES[name]]) * np.array([[1.0], [1.7], [0.61]])
+    got = kind.equivalent_diameter(size)
+    np.testing.assert_allclose(got, 2.0 * np.sqrt(kind.area(size) / np.pi), rtol=1e-14)
+    if kind.round:
+        assert np.array_equal(got, size[:, 0])
+        assert np.array_equal(kind.inradius(size), 0.5 * size[:, 0])
+
+
+def test_a_job_that_names_no_kind_has_the_circle_of_its_diameter():
+    from optdot.config.job import Job
+    from optdot.geometry.density import DensityMap
+
+    job = Job(2.0, 2.0, DensityMap(np.full((2, 2), 0.3), 2.0, 2.0), 0.046)
+    assert job.shape.kind is KINDS["circle"] and job.shape.size == (0.046,)
+    assert job.shape.equivalent_diameter == 0.046 and job.min_distance == 0.046 + job.optimize.gap
+    assert job.dot_radius == 0.023

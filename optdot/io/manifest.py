@@ -119,8 +119,8 @@ def manifest_problem(doc: dict[str, Any]) -> str | None:
         return "uniform_diameter_mm must be null or a number > 0"
     if not isinstance(doc.get("meta", {}), dict):
         return "meta must be an object"
-    if "shape" in doc and (doc["shape"] not in KINDS or doc["shape"] == CIRCLE.name):
-        return f"shape must be one of {', '.join(k for k in KINDS if k != CIRCLE.name)}"
+    if "shape" in doc and (doc["shape"] not in KINDS or KINDS[doc["shape"]].round):
+        return f"shape must be one of {', '.join(k for k, v in KINDS.items() if not v.round)}"
     if "shape" in doc:
         try:
             kind_of(doc["shape"], doc.get("shape_spec"))

@@ -269,9 +269,7 @@ def _add_strays(f: FirstSums, xy: np.ndarray, dots: Footprints, rule: DotRule) -
     if f.stray_example is None:
         i = int(np.flatnonzero(bad)[0])
         x, y = xy[i]
-        text = footprint_text(dots.kind, dots.size[i])
-        if dots.kind != rule.shape.kind and dots.kind.name == rule.shape.kind.name:
-            text += " of other vertices"  # a polygon: the kind is made per job
+        text = footprint_text(dots.kind, dots.size[i]) + dots.kind.unlike(rule.shape.kind)
         f.stray_example = f"{text} at ({x:.3f}, {y:.3f}) mm"
 
 

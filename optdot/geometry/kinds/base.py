@@ -54,6 +54,9 @@ class Kind:
     #: The least turn that maps a footprint onto itself, rad (its angles are equal
     #: modulo it).
     period: float = math.pi
+    #: Words for a footprint of this kind made per job from other keys than the job's
+    #: (:attr:`derived`: a polygon "of other vertices").
+    made_otherwise: str = ""
 
     def __reduce__(self):
         """Pickled by name, so a kind sent to a worker or read in a child process comes
@@ -76,6 +79,11 @@ class Kind:
             ValueError: the spec does not make the kind (the message names the field).
         """
         raise NotImplementedError
+
+    def unlike(self, other: Kind) -> str:
+        """Words for how this kind differs from ``other`` beyond its name and size (a
+        kind made per job from other keys: :attr:`made_otherwise`), or ``""``."""
+        return self.made_otherwise if other != self and other.name == self.name else ""
 
     def spec(self) -> dict:
         """What a file holds to name this kind besides its name (a JSON object; empty

@@ -127,6 +127,7 @@ class Polygon(Kind):
     #: ``[dots]`` keys the kind reads besides its size parameters, which it derives.
     keys = {"vertices": (list,)}
     derived = True
+    made_otherwise = " of other vertices"
 
     def __init__(self, vertices=None):
         self.base = None if vertices is None else np.asarray(vertices, np.float64)
