@@ -207,12 +207,12 @@ def main() -> None:
     run("md", method="md")
     if not uniform:
         return
-    from optdot.stages import throw
+    from optdot.stages import stage_settings, throw
 
     n = job.density.dot_count(math.pi * 0.023**2)
     box = (0.0, 0.0, job.density.width, job.density.height)
     peers = {
-        "sobol": lambda: throw(job, n, 1, None, "uniform"),
+        "sobol": lambda: throw(stage_settings(job), n, 1, None, "uniform"),
         "poisson": lambda: np.random.default_rng(1).uniform(box[:2], box[2:], (n, 2)),
         "scipy PoissonDisk": lambda: poisson_disk(job, n),
         "lloyd": lambda: lloyd(throw(job, n, 1, None, "uniform"), box),

@@ -109,20 +109,21 @@ def generate(
         warm("generate", announce=stage)  # a first run: its kernels on all cores
 
     stage("throwing darts")
-    xy_init = stages.throw(job, n, opt.seed, None, where)
+    settings = stages.stage_settings(job, formulation)  # the values every stage takes
+    xy_init = stages.throw(settings, n, opt.seed, None, where)
     order = spatial_order(xy_init)
     xy0 = np.ascontiguousarray(xy_init[order])
     timings["initial_s"] = time.perf_counter() - t0
 
     t1 = time.perf_counter()
     stage("relaxing")
-    relaxed = stages.relax(job, xy0, progress=progress, formulation=formulation)
+    relaxed = stages.relax(settings, xy0, progress=progress)
     info, history = relaxed.run_info(), relaxed.history
     timings["relax_s"] = time.perf_counter() - t1
 
     t2 = time.perf_counter()
     stage("guarantee pass")
-    done = stages.finish(job, relaxed.xy, xy0, where)
+    done = stages.finish(settings, relaxed.xy, xy0, where)
     leg = done.legalize
     timings["legalize_s"] = time.perf_counter() - t2
 

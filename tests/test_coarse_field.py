@@ -274,13 +274,14 @@ def test_the_potential_on_live_cells_solves_their_own_laplacian():
 
 def test_a_moved_throw_stays_in_the_panel_and_out_of_zero_cells():
     job = tiny_job()  # 6 x 6 mm, one quarter of fill 0
-    xy = stages.throw(job, 800, 5, None, "test")
+    s = stages.stage_settings(job)
+    xy = stages.throw(s, 800, 5, None, "test")
     g = Lattice.over(job.box, 0.5, 1 << 16)
     # a field that pushes everything 0.4 mm down and left
     ux = np.full((g.ny, g.nx + 1), -0.4, np.float32)
     uy = np.full((g.ny + 1, g.nx), -0.4, np.float32)
     push = CoarseField(g, ux, uy, 10.0)
-    moved = stages.coarse_shift(job, push, xy)
+    moved = stages.coarse_shift(s, push, xy)
     assert not job.density.empty_mask(moved).any()
     assert (moved >= 0).all() and (moved <= 6.0).all()
     went = np.hypot(*(moved - xy).T) > 0
@@ -295,8 +296,9 @@ def test_a_tiled_throw_loses_its_long_wavelength_grain():
     job = load_job(SAMPLES / "led" / "job.toml")
     plan = plan_tiles(job, 10.0)
     raw = [tasks.initial_task(job, plan, *t) for t in plan.tiles()]
-    field = stages.coarse_solve(job, [stages.coarse_part(job, xy) for xy in raw])
-    moved = np.concatenate([stages.coarse_shift(job, field, xy) for xy in raw])
+    s = stages.stage_settings(job)
+    field = stages.coarse_solve(s, [stages.coarse_part(s, xy) for xy in raw])
+    moved = np.concatenate([stages.coarse_shift(s, field, xy) for xy in raw])
     raw = np.concatenate(raw)
     area = np.full(len(raw), np.pi * (0.5 * job.diameter) ** 2)
     sp = job_spacing(job)
@@ -312,7 +314,7 @@ def test_only_a_steep_map_gets_the_wide_passs_rounds(tmp_path):
     panel's smooth gradient does not (0.02) and keeps one round; a uniform map reads 0."""
     from optdot.config.schema import load_job
     from optdot.relax.lowpass import steepness
-    from optdot.stages import wide_rounds
+    from optdot.stages import stage_settings, wide_rounds
     from optdot.stages.correction import STEEP, _wide_lattice
     from optdot.stages.settings import formulation_for
 
@@ -332,12 +334,13 @@ def test_only_a_steep_map_gets_the_wide_passs_rounds(tmp_path):
     flat = job_of(np.full((4, 6), 0.2), 6.0, 4.0, tmp_path / "c")
     rounds = formulation_for(steep).lowpass_last_steps
     assert rounds > 1
+    steep, smooth, flat = (stage_settings(j) for j in (steep, smooth, flat))
     assert wide_rounds(steep) == rounds and wide_rounds(smooth) == 1 == wide_rounds(flat)
     from optdot.stages import wide_sigma
 
-    def steep_of(job):
-        s = wide_sigma(job)
-        return steepness(job.density, _wide_lattice(job, s), s)
+    def steep_of(settings):
+        s = wide_sigma(settings)
+        return steepness(settings.density, _wide_lattice(settings, s), s)
 
     assert steep_of(steep) > 3 * STEEP and steep_of(smooth) < 0.5 * STEEP
     assert steep_of(flat) == pytest.approx(0.0, abs=1e-9)

@@ -64,6 +64,8 @@ def test_a_write_past_the_file_size_limit_keeps_the_old_file(tmp_path, tiny_csv,
 
 
 def test_generate_under_a_file_size_limit_keeps_the_old_pattern(tmp_path):
+    warm = tmp_path.parent / "warm.npz"  # kernels compiled and cached, unlimited: the
+    optdot_limited(1 << 30, "generate", TINY, "-o", warm, "-q")  # limit hits the pattern
     out = tmp_path / "dots.npz"
     out.write_bytes(b"OLD")
     r = optdot_limited(2000, "generate", TINY, "-o", out, "-q")

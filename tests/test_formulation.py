@@ -79,7 +79,7 @@ def test_a_dip_s_containers_take_their_neighbourhood_s_fill_and_a_sparse_map_kee
     from optdot.config.schema import load_job
     from optdot.relax.formulation import CONTAINER_FILL_FLOOR as FLOOR
     from optdot.stages.beyond_walls import phantom_reach
-    from optdot.stages.settings import container_fill, containers
+    from optdot.stages.settings import containers, stage_settings
 
     def job_of(grid, name):
         np.savetxt(tmp_path / f"{name}.csv", grid, delimiter=",")
@@ -95,13 +95,13 @@ def test_a_dip_s_containers_take_their_neighbourhood_s_fill_and_a_sparse_map_kee
     job = job_of(dip, "dip")
     at = np.array([[3.75, 3.75], [1.0, 1.0]])  # the dip's centre, the open map
     own = job.density.at(at)
-    got = container_fill(job, at)
+    got = stage_settings(job).container_fill(at)
     assert own[0] == pytest.approx(1e-6) and 1e3 * own[0] < got[0] <= FLOOR
     assert got[1] == own[1] == pytest.approx(0.3)
     low = containers(job).lowest()
     assert 1e-3 < low <= FLOOR
     reach = 2 * form.radii(np.array([low]), 0.023, 0)[0] * (1 + form.polydispersity)
-    assert phantom_reach(job, form) == pytest.approx(reach) and reach < 2.0
+    assert phantom_reach(stage_settings(job, form)) == pytest.approx(reach) and reach < 2.0
     from optdot.relax.circles import hex_radius
     from optdot.tiling.plan import max_spacing
 
@@ -109,13 +109,13 @@ def test_a_dip_s_containers_take_their_neighbourhood_s_fill_and_a_sparse_map_kee
     assert max_spacing(job) == pytest.approx(2 * hex_radius(np.array([low]), 0.023)[0])
     sparse = job_of(np.full((16, 16), 0.005), "sparse")
     xy = np.random.default_rng(2).uniform(0, 8, (500, 2))
-    assert np.array_equal(container_fill(sparse, xy), sparse.density.at(xy))
+    assert np.array_equal(stage_settings(sparse).container_fill(xy), sparse.density.at(xy))
     assert max_spacing(sparse) == 2 * hex_radius(np.array([0.005]), 0.023)[0]
     half = np.full((16, 32), 0.3)
     half[:, :16] = 0.004  # 4 mm of 0.4 % beside 0.3
     split = job_of(half, "half")
     far = np.array([[0.5, 4.0], [1.5, 2.0]])  # over 2 mm from the dense half
-    assert np.array_equal(container_fill(split, far), split.density.at(far))
+    assert np.array_equal(stage_settings(split).container_fill(far), split.density.at(far))
 
 
 def test_stages_split_the_iterations(tiny_job):

@@ -1,4 +1,6 @@
-"""The stages of generation as functions of a job and a set of dots: one path for every dot.
+"""The stages of generation as functions of a run's settings and a set of dots: one path
+for every dot. A job becomes those settings once (:func:`stage_settings`, values: the
+panel, the map, the dots, the formulation); no stage takes the job.
 
 :func:`optdot.pipeline.generate` runs them once over the whole panel; the tiles of
 :mod:`optdot.tiling.tasks` run the same functions over a tile, with the neighbouring
@@ -39,16 +41,15 @@ from .held import Held
 from .relaxation import relax
 from .settings import (
     FIT_SHARE,
+    StageSettings,
     fit_sigma,
     fitted,
     formulation_for,
     halo_width,
     job_spacing,
     problem_of,
-    rule_diameters,
     settings_for,
     stage_settings,
-    thrown_areas,
 )
 from .throw import coarse_part, coarse_shift, coarse_solve, throw
 
@@ -57,6 +58,7 @@ __all__ = [
     "TILE_GRID",
     "Finished",
     "Held",
+    "StageSettings",
     "coarse_part",
     "coarse_shift",
     "coarse_solve",
@@ -74,10 +76,8 @@ __all__ = [
     "phantoms_near",
     "problem_of",
     "relax",
-    "rule_diameters",
     "settings_for",
     "stage_settings",
-    "thrown_areas",
     "throw",
     "wide_part",
     "wide_rounds",

@@ -8,18 +8,16 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..config.job import Job
-from ..relax.formulation import Formulation
 from ..sampling.phantoms import phantom_dots
 from ..spatial.window import bounds, grown, in_rect
-from .settings import containers
+from .settings import StageSettings
 
 
-def with_phantoms(job, form, xy0, rho, start, frozen, diameters):
+def with_phantoms(s: StageSettings, xy0, rho, start, frozen, diameters):
     """The phantom dots near the walls appended (frozen): ``(xy0, rho, start, frozen,
     diameters, phantom mask)``."""
     n = len(xy0)
-    pxy, prho, pd = phantoms_near(job, form, xy0)
+    pxy, prho, pd = phantoms_near(s, xy0)
     xy0 = np.concatenate([xy0, pxy])
     rho = np.concatenate([rho, prho])
     start = None if start is None else np.concatenate([start, pxy])
@@ -34,10 +32,10 @@ def with_phantoms(job, form, xy0, rho, start, frozen, diameters):
     return xy0, rho, start, frozen, diameters, phantom
 
 
-def allowed_at(job: Job):
+def allowed_at(s: StageSettings):
     """``allowed(xy) -> [m] bool``: a real dot's centre may stand there (in the map's box,
     inside the outline, in a non-zero cell)."""
-    dens, dom = job.density, job.domain
+    dens, dom = s.density, s.domain
 
     def allowed(xy: np.ndarray) -> np.ndarray:
         ok = (
@@ -54,38 +52,38 @@ def allowed_at(job: Job):
     return allowed
 
 
-def phantom_reach(job: Job, form: Formulation) -> float:
+def phantom_reach(s: StageSettings) -> float:
     """How far beyond a wall phantoms reach the real dots: twice the largest circle
     (the lowest non-zero container fill, the largest dot), mm."""
-    rho_min = containers(job).lowest()
-    widest = job.diameter if job.sizes is None else job.sizes.high
-    r = float(form.radii(np.array([rho_min]), 0.5 * widest, 0)[0])
+    form = s.formulation
+    rho_min = s.containers.lowest()
+    r = float(form.radii(np.array([rho_min]), 0.5 * s.widest, 0)[0])
     return 2.0 * r * (1.0 + form.polydispersity)
 
 
 @lru_cache(maxsize=4)
-def job_phantoms(job: Job, reach: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def job_phantoms(s: StageSettings, reach: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The job's phantom dots (:func:`~optdot.sampling.phantoms.phantom_dots`), thrown
     once per job and process: ``(xy [m, 2] mm, rho [m], diameter [m] mm)``. The cache
-    holds the job, so its identity stays unique while cached."""
-    dens = job.density
+    holds the settings, so their identity stays unique while cached."""
+    dens = s.density
     partial = None
-    if not job.domain.rectangle:
+    if not s.domain.rectangle:
         ny, nx = dens.shape
         cw, ch = dens.cell_size
-        partial = job.domain.cell_fractions(dens.x0, dens.y0, cw, ch, nx, ny) < 1.0
-    r0 = 0.5 * job.diameter
+        partial = s.domain.cell_fractions(dens.x0, dens.y0, cw, ch, nx, ny) < 1.0
+    r0 = 0.5 * s.diameter
     xy, rho, weight = phantom_dots(
-        dens, allowed_at(job), partial, reach, np.pi * r0 * r0, job.optimize.seed, job.dart_weights
+        dens, allowed_at(s), partial, reach, np.pi * r0 * r0, s.optimize.seed, s.dart_weights
     )
-    return xy, containers(job).floored(rho, xy), job.diameter / np.sqrt(weight)
+    return xy, s.containers.floored(rho, xy), s.diameter / np.sqrt(weight)
 
 
-def phantoms_near(job: Job, form: Formulation, xy0: np.ndarray):
+def phantoms_near(s: StageSettings, xy0: np.ndarray):
     """The job's phantom dots within reach of the box around ``xy0`` (``[n, 2]`` mm):
     ``(xy [m, 2] mm, rho [m], diameter [m] mm)``. A tile's phantoms are the panel's in
     its window, so they do not depend on the tiling."""
-    reach = phantom_reach(job, form)
-    xy, rho, d = job_phantoms(job, reach)
+    reach = phantom_reach(s)
+    xy, rho, d = job_phantoms(s, reach)
     m = in_rect(xy, grown(bounds(xy0), reach))
     return xy[m], rho[m], d[m]

@@ -22,8 +22,6 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..config.job import Job
-from ..relax.formulation import Formulation
 from ..relax.lowpass import (
     MAX_SHIFT,
     CoarseField,
@@ -41,13 +39,12 @@ from ..relax.result import RelaxResult
 from ..sampling.initial import Rect
 from ..spatial.window import bounds, grown
 from .beyond_walls import with_phantoms
-from .settings import areas, container_fill, rule_diameters, stage_settings
+from .settings import StageSettings
 
 
-def corrected(job: Job, form: Formulation) -> bool:
-    """Whether ``job`` gets the long-wavelength correction."""
-    iterations = stage_settings(job).relax.max_iter
-    return job.optimize.method != "md" and form.lowpass > 0 and iterations > 0
+def corrected(s: StageSettings) -> bool:
+    """Whether the run gets the long-wavelength correction."""
+    return s.optimize.method != "md" and s.formulation.lowpass > 0 and s.relax.max_iter > 0
 
 
 #: Lattice step of the wide pass, in its blurs (two cells a sigma).
@@ -57,41 +54,35 @@ WIDE_STEP = 0.5
 WIDE_CELLS = 1 << 23
 
 
-def wide_sigma(job: Job, formulation: Formulation | None = None) -> float | None:
+def wide_sigma(s: StageSettings) -> float | None:
     """The blur of the correction's last pass, mm, when it is solved over the whole panel
     (two passes or more); None otherwise."""
-    s = stage_settings(job, formulation)
     form = s.formulation
-    if not corrected(job, form) or form.lowpass < 2:
+    if not corrected(s) or form.lowpass < 2:
         return None
     return form.lowpass_sigmas()[-1] * s.spacing
 
 
-def wide_part(
-    job: Job, xy: np.ndarray, area: np.ndarray, formulation: Formulation | None = None
-) -> LatticePart | None:
+def wide_part(s: StageSettings, xy: np.ndarray, area: np.ndarray) -> LatticePart | None:
     """Dots at ``xy`` (``[n, 2]`` mm) of areas ``area`` (``[n]`` mm²) deposited on the
-    wide pass's lattice, for :func:`wide_solve`; None when the job has no wide pass."""
-    sigma = wide_sigma(job, formulation)
+    wide pass's lattice, for :func:`wide_solve`; None when the run has no wide pass."""
+    sigma = wide_sigma(s)
     if sigma is None:
         return None
-    return deposit_part(xy, area, _wide_lattice(job, sigma))
+    return deposit_part(xy, area, _wide_lattice(s, sigma))
 
 
-def wide_solve(
-    job: Job, parts: list[LatticePart | None], formulation: Formulation | None = None
-) -> CoarseField | None:
+def wide_solve(s: StageSettings, parts: list[LatticePart | None]) -> CoarseField | None:
     """The wide pass's field over the panel from the :func:`wide_part` of every set of
     its dots, added in the order given (the plan's tile order: the same bytes whoever
-    computed what); None when the job has no wide pass."""
-    sigma = wide_sigma(job, formulation)
+    computed what); None when the run has no wide pass."""
+    sigma = wide_sigma(s)
     if sigma is None:
         return None
-    s = stage_settings(job, formulation)
     form = s.formulation
-    rounds = wide_rounds(job, form) > 1  # a steep map: its own cap (one round: the first's)
+    rounds = wide_rounds(s) > 1  # a steep map: its own cap (one round: the first's)
     cap = ((form.lowpass_last_cap if rounds else 0.0) or MAX_SHIFT) * s.spacing
-    return coarse_field(list(parts), _wide_lattice(job, sigma), job.density, sigma, cap, job.domain)
+    return coarse_field(list(parts), _wide_lattice(s, sigma), s.density, sigma, cap, s.domain)
 
 
 #: Largest relative change of the blurred fill between neighbouring cells of the wide
@@ -102,50 +93,43 @@ def wide_solve(
 STEEP = 0.1
 
 
-def wide_rounds(job: Job, formulation: Formulation | None = None) -> int:
-    """How many rounds of the wide pass ``job`` gets (0 without a wide pass): the
+def wide_rounds(s: StageSettings) -> int:
+    """How many rounds of the wide pass the run gets (0 without a wide pass): the
     formulation's ``lowpass_last_steps`` where the map is steep (:data:`STEEP`), else one
     (each round in tiles is a barrier over the panel)."""
-    form = stage_settings(job, formulation).formulation
-    sigma = wide_sigma(job, form)
+    form = s.formulation
+    sigma = wide_sigma(s)
     if sigma is None:
         return 0
     steps = max(1, form.lowpass_last_steps)
     if steps == 1:
         return 1
-    return steps if _steepness(job, sigma) > STEEP else 1
+    return steps if _steepness(s, sigma) > STEEP else 1
 
 
 @lru_cache(maxsize=8)
-def _steepness(job: Job, sigma: float) -> float:
-    return steepness(job.density, _wide_lattice(job, sigma), sigma)
+def _steepness(s: StageSettings, sigma: float) -> float:
+    return steepness(s.density, _wide_lattice(s, sigma), sigma)
 
 
-def _wide_lattice(job: Job, sigma: float) -> Lattice:
-    """The wide pass's lattice over the job's box for a blur of ``sigma`` mm."""
-    return Lattice.over(job.box, WIDE_STEP * sigma, WIDE_CELLS)
+def _wide_lattice(s: StageSettings, sigma: float) -> Lattice:
+    """The wide pass's lattice over the panel's box for a blur of ``sigma`` mm."""
+    return Lattice.over(s.box, WIDE_STEP * sigma, WIDE_CELLS)
 
 
-def correction_region(
-    job: Job,
-    xy0: np.ndarray,
-    xy: np.ndarray,
-    region: Rect,
-    formulation: Formulation | None = None,
-):
+def correction_region(s: StageSettings, xy0: np.ndarray, xy: np.ndarray, region: Rect):
     """The coverage error a tile's correction solves, over ``region`` (the windows it
     blends grown by :func:`correction_pad`, :func:`optdot.tiling.tasks.correct_tile`) on
     the lattice every tile shares: ``(RegionError, cap mm)``, or None when the formulation
     has no correction. Every dot in the region and within a lattice cell around it must be
     given."""
-    s = stage_settings(job, formulation)
     form = s.formulation
-    if not corrected(job, form) or not len(xy0):
+    if not corrected(s) or not len(xy0):
         return None
-    area, _ = areas(job, job.density.at(xy0), rule_diameters(job, xy0))
+    area, _ = s.areas(s.density.at(xy0), s.rule_diameters(xy0))
     spacing = s.spacing
-    h = max(grid_step(job.density, spacing), TILE_GRID * spacing)
-    err = RegionError(xy, area, job.density, h, form.lowpass_sigma * spacing, region, job.domain)
+    h = max(grid_step(s.density, spacing), TILE_GRID * spacing)
+    err = RegionError(xy, area, s.density, h, form.lowpass_sigma * spacing, region, s.domain)
     return err, MAX_SHIFT * spacing
 
 
@@ -155,23 +139,21 @@ def correction_region(
 TILE_GRID = 0.5
 
 
-def correction_pad(job: Job, formulation: Formulation | None = None) -> float:
+def correction_pad(s: StageSettings) -> float:
     """How far beyond its windows a tile's correction deposits and blurs, mm (4 blur
     sigmas and 2 lattice cells): a window's error is then the same in every tile that
     solves it, whatever lies past its edge in the tile's region. At most 3.8 spacings."""
-    s = stage_settings(job, formulation)
     form = s.formulation
     spacing = s.spacing
-    h = max(grid_step(job.density, spacing), TILE_GRID * spacing)
+    h = max(grid_step(s.density, spacing), TILE_GRID * spacing)
     return 4.0 * form.lowpass_sigma * spacing + 2.0 * h
 
 
 def hard_core(
-    job: Job,
+    s: StageSettings,
     xy0: np.ndarray,
     xy: np.ndarray,
     held: tuple[np.ndarray, np.ndarray | float] | None = None,
-    formulation: Formulation | None = None,
 ) -> np.ndarray:
     """The formulation's hard-core iterations (see :func:`long_wavelength`) for a tile's dots
     after its correction, with its neighbours' dots held: ``[n, 2]`` new positions, mm.
@@ -180,14 +162,13 @@ def hard_core(
         held: ``(positions [h, 2] mm, diameters [h] or one, mm)`` of the neighbours (final
             for the tiles settled before, corrected for the others).
     """
-    s = stage_settings(job, formulation)
     form = s.formulation
-    if job.optimize.method == "md" or not form.lowpass_core_iter or not len(xy0):
+    if s.optimize.method == "md" or not form.lowpass_core_iter or not len(xy0):
         return xy
     if s.relax.max_iter == 0:
         return xy
     n = len(xy0)
-    diameters = rule_diameters(job, xy0)
+    diameters = s.rule_diameters(xy0)
     frozen = None
     if held is not None and len(held[0]):
         hxy = np.asarray(held[0], np.float64)
@@ -197,25 +178,25 @@ def hard_core(
         frozen[n:] = True
         if diameters is not None:
             diameters = np.concatenate([diameters, np.broadcast_to(held[1], (len(hxy),))])
-    rho = container_fill(job, xy0)
+    rho = s.container_fill(xy0)
     if frozen is not None:
         # a held dot of a later tile, not yet made legal, may stand in a zero cell: it has
         # no fill of its own there (its circle would be infinite); the map's largest
         # gives it the smallest circle, the least push on the dots around it, and the
         # guarantee pass settles the pair by the true sizes
-        rho = np.where(frozen & (rho <= 0), float(job.density.grid.max()), rho)
+        rho = np.where(frozen & (rho <= 0), float(s.density.grid.max()), rho)
     phantom = None
     if form.phantoms:
         xy0, rho, start, frozen, diameters, phantom = with_phantoms(
-            job, form, xy0, rho, xy, frozen, diameters
+            s, xy0, rho, xy, frozen, diameters
         )
         xy = start
     res = RelaxResult(np.ascontiguousarray(xy), np.nan, 0, 0, 0, "", [])
-    res = core_iterations(job, form, res, xy0, rho, frozen, diameters, phantom)
+    res = core_iterations(s, res, xy0, rho, frozen, diameters, phantom)
     return np.ascontiguousarray(res.xy[:n])
 
 
-def long_wavelength(job, form, res, xy0, rho, frozen, diameters, phantom) -> RelaxResult:
+def long_wavelength(s: StageSettings, res, xy0, rho, frozen, diameters, phantom) -> RelaxResult:
     """The long-wavelength correction (:mod:`optdot.relax.lowpass`) after the
     relaxation, then the hard core alone.
 
@@ -233,8 +214,9 @@ def long_wavelength(job, form, res, xy0, rho, frozen, diameters, phantom) -> Rel
     pairs under 60 µm after the relaxation, 7,357 after a correction, 541 after 10 core
     iterations) without bringing the grain back. Measured in BENCHMARKS.md.
     """
-    res, xy0 = correction_passes(job, form, res, xy0, rho, frozen, diameters, phantom)
-    res = core_iterations(job, form, res, xy0, rho, frozen, diameters, phantom)
+    form = s.formulation
+    res, xy0 = correction_passes(s, res, xy0, rho, frozen, diameters, phantom)
+    res = core_iterations(s, res, xy0, rho, frozen, diameters, phantom)
     if form.lowpass or form.lowpass_core_iter:
         res.message += (
             f"; then {form.lowpass} long-wavelength passes ({form.lowpass_iter} iterations "
@@ -243,28 +225,28 @@ def long_wavelength(job, form, res, xy0, rho, frozen, diameters, phantom) -> Rel
     return res
 
 
-def correction_passes(job, form, res, xy0, rho, frozen, diameters, phantom):
+def correction_passes(s: StageSettings, res, xy0, rho, frozen, diameters, phantom):
     """The correction passes of :func:`long_wavelength`: ``(result, containers moved)``."""
+    form = s.formulation
     real = np.ones(len(xy0), bool) if phantom is None else ~phantom
     movers = real if frozen is None else real & ~frozen
-    area, spacing = areas(job, rho[real], None if diameters is None else diameters[real])
+    area, spacing = s.areas(rho[real], None if diameters is None else diameters[real])
     # the dots' box grown by a spacing (clipped to the map's): the target must cover the
     # strip between the outermost centres and the walls, whose coverage they carry
     window = grown(bounds(xy0[real]), spacing)
-    s = stage_settings(job)
     settings = dataclasses.replace(s.relax, max_iter=form.lowpass_iter)
     sigmas = form.lowpass_sigmas()
-    wide = wide_sigma(job, form) is not None
+    wide = wide_sigma(s) is not None
     for k, sigma in enumerate(sigmas):
         last = k == len(sigmas) - 1
-        for _ in range(wide_rounds(job, form) if wide and last else 1):
+        for _ in range(wide_rounds(s) if wide and last else 1):
             u = np.zeros_like(xy0)
             if wide and last:
-                part = wide_part(job, res.xy[real], area, form)
-                shift = wide_solve(job, [part], form).displacement(res.xy[real])
+                part = wide_part(s, res.xy[real], area)
+                shift = wide_solve(s, [part]).displacement(res.xy[real])
             else:
                 shift = displacement(
-                    res.xy[real], area, job.density, spacing, sigma, window, job.domain
+                    res.xy[real], area, s.density, spacing, sigma, window, s.domain
                 )
             u[real] = shift
             u[~movers] = 0.0
@@ -279,9 +261,10 @@ def correction_passes(job, form, res, xy0, rho, frozen, diameters, phantom):
     return res, xy0
 
 
-def core_iterations(job, form, res, xy0, rho, frozen, diameters, phantom) -> RelaxResult:
+def core_iterations(s: StageSettings, res, xy0, rho, frozen, diameters, phantom) -> RelaxResult:
     """The hard-core iterations of :func:`long_wavelength`: soft circles too small to meet,
     containers as they were."""
+    form = s.formulation
     if not form.lowpass_core_iter:
         return res
     shrink = 1e-3
@@ -289,7 +272,6 @@ def core_iterations(job, form, res, xy0, rho, frozen, diameters, phantom) -> Rel
         form, radius_factor=form.radius_factor * shrink,
         container_factor=form.container_factor / shrink,
     )  # fmt: skip
-    s = stage_settings(job)
     settings = dataclasses.replace(s.relax, max_iter=form.lowpass_core_iter)
     more = relax_staged(
         s.problem, core_only, xy0, rho, settings, None, start=res.xy, frozen=frozen,

@@ -7,14 +7,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config.job import Job
 from ..geometry.shapes import Footprints
 from ..relax.legalize import LegalizeResult, make_legal
 from ..relax.resize import fit_sizes
 from ..relax.shaped import make_legal_shapes
 from ..sampling.initial import Rect
 from .held import Held
-from .settings import rule_diameters, stage_settings
+from .settings import StageSettings
 
 
 @dataclass
@@ -36,7 +35,7 @@ class Finished:
 
 
 def finish(
-    job: Job,
+    s: StageSettings,
     xy: np.ndarray,
     xy0: np.ndarray,
     where: str,
@@ -60,8 +59,8 @@ def finish(
         GuaranteeError: a violation is left after the pass.
     """
     n = len(xy)
-    d = rule_diameters(job, xy0)
-    home = job.density.cell_index(xy0)
+    d = s.rule_diameters(xy0)
+    home = s.density.cell_index(xy0)
     frozen = None
     if held is not None and len(held[0]):
         xy = np.concatenate([xy, held[0]])
@@ -71,16 +70,15 @@ def finish(
         if d is not None:
             d = np.concatenate([d, np.broadcast_to(held[1], (len(held[0]),))])
     if d is None:
-        radius, dmin = job.dot_radius, job.min_distance
+        radius, dmin = s.dot_radius, s.min_distance
     else:
-        s = stage_settings(job)
         if s.fitted:
             fit = None if frozen is None else ~frozen
-            d = fit_sizes(xy, d, job.sizes, job.density, job.domain, s.fit_sigma, fit, window)
-        radius, dmin = 0.5 * d, d + job.optimize.gap
-    diameter = job.diameter if d is None else d[:n]
-    if job.shape.kind.round:
-        leg = make_legal(xy, job.density, home, job.domain, radius, dmin, where, frozen)
+            d = fit_sizes(xy, d, s.sizes, s.density, s.domain, s.fit_sigma, fit, window)
+        radius, dmin = 0.5 * d, d + s.optimize.gap
+    diameter = s.diameter if d is None else d[:n]
+    if s.shape.kind.round:
+        leg = make_legal(xy, s.density, home, s.domain, radius, dmin, where, frozen)
         return Finished(np.ascontiguousarray(leg.xy[:n]), diameter, leg)
     thrown, fixed = xy0, None
     if frozen is not None:  # held shaped dots keep their angles
@@ -88,9 +86,9 @@ def finish(
         if held.angle is None:
             raise ValueError(f"{where}: held shaped dots come without their angles")
         fixed = held.angle
-    scale = None if d is None else job.shape_scale(d)  # footprints scaled by their sizes
+    scale = None if d is None else s.shape.scale_of(d)  # footprints scaled by their sizes
     leg, dots = make_legal_shapes(
-        xy, thrown, job.density, home, job.domain, job.shape, job.orientation,
-        job.optimize.gap, where, frozen, fixed, scale,
+        xy, thrown, s.density, home, s.domain, s.shape, s.orientation,
+        s.optimize.gap, where, frozen, fixed, scale,
     )  # fmt: skip
     return Finished(np.ascontiguousarray(leg.xy[:n]), diameter, leg, dots.take(slice(0, n)))

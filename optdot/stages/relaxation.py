@@ -5,24 +5,21 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config.job import Job
 from ..relax.circles import hex_radius
-from ..relax.formulation import Formulation
 from ..relax.md import MDForce, md_relax
 from ..relax.optdot import Progress, relax_staged
 from ..relax.result import RelaxResult
 from .beyond_walls import with_phantoms
 from .correction import long_wavelength
-from .settings import container_fill, rule_diameters, stage_settings
+from .settings import StageSettings
 
 
 def relax(
-    job: Job,
+    s: StageSettings,
     xy0: np.ndarray,
     start: np.ndarray | None = None,
     frozen: np.ndarray | None = None,
     progress: Progress | None = None,
-    formulation: Formulation | None = None,
     lowpass: bool = True,
 ) -> RelaxResult:
     """Relax the dots thrown at ``xy0`` (``[n, 2]`` mm, Morton order for speed): OptDot
@@ -33,37 +30,35 @@ def relax(
             ``xy0``).
         frozen: ``[n]`` bool, dots held still (a tile's neighbours).
         progress: ``progress(iteration, value)``; a true return halts.
-        formulation: overrides the job's (benchmarks try variants).
         lowpass: run the formulation's long-wavelength correction and its hard-core
             iterations (:func:`long_wavelength`) after the relaxation. Tiles relax without
             (False): the correction runs once their seams are relaxed, blended over
             windows that span the seams (:func:`correction_region`), and the hard core in
             their guarantee task (:func:`hard_core`).
     """
-    opt = job.optimize
-    rho = job.density.at(xy0)
+    opt = s.optimize
+    rho = s.density.at(xy0)
     if opt.method == "md":
         if start is not None or frozen is not None:
             raise ValueError("the MD baseline relaxes a whole panel, not a tile")
-        r0 = 0.5 * job.diameter
+        r0 = 0.5 * s.diameter
         law = MDForce(
-            core=job.min_distance,
+            core=s.min_distance,
             spacing=2.0 * hex_radius(rho, r0),
             decay=opt.md_decay,
             cutoff=opt.md_cutoff,
         )
         return md_relax(
-            xy0, law, job.box, r0, steps=opt.max_iter, step=opt.md_step, skin=opt.skin,
+            xy0, law, s.box, r0, steps=opt.max_iter, step=opt.md_step, skin=opt.skin,
             callback=progress,
         )  # fmt: skip
-    rho = container_fill(job, xy0)
-    s = stage_settings(job, formulation)
+    rho = s.container_fill(xy0)
     form = s.formulation
-    diameters = rule_diameters(job, xy0)
+    diameters = s.rule_diameters(xy0)
     phantom = None
     if form.phantoms and len(xy0):
         xy0, rho, start, frozen, diameters, phantom = with_phantoms(
-            job, form, xy0, rho, start, frozen, diameters
+            s, xy0, rho, start, frozen, diameters
         )
     res = relax_staged(
         s.problem,
@@ -78,7 +73,7 @@ def relax(
         phantom=phantom,
     )
     if lowpass and (form.lowpass or form.lowpass_core_iter) and s.relax.max_iter > 0:
-        res = long_wavelength(job, form, res, xy0, rho, frozen, diameters, phantom)
+        res = long_wavelength(s, res, xy0, rho, frozen, diameters, phantom)
     if phantom is not None:
         res.xy = np.ascontiguousarray(res.xy[~phantom])
     return res

@@ -24,14 +24,13 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..config.job import Job
 from ..relax.lowpass import CoarseField, Lattice, LatticePart, coarse_field, deposit_part
 from ..sampling.initial import Rect, initial_dots_in
 from .correction import corrected
-from .settings import stage_settings, thrown_areas
+from .settings import StageSettings
 
 
-def throw(job: Job, n: int, seed: int | Sequence[int], rect: Rect | None, where: str):
+def throw(s: StageSettings, n: int, seed: int | Sequence[int], rect: Rect | None, where: str):
     """``[n, 2]`` initial dots of the window ``rect`` (None: the panel), mm, generation
     order: darts in proportion to the fill (to the dot count when sizes vary), only
     those inside the outline kept.
@@ -39,8 +38,8 @@ def throw(job: Job, n: int, seed: int | Sequence[int], rect: Rect | None, where:
     Raises:
         GeometryError: the map is zero over (most of) the window's part of the panel.
     """
-    inside = None if job.domain.rectangle else job.domain.contains
-    return initial_dots_in(job.density, n, seed, inside, job.dart_weights, rect, where)
+    inside = None if s.domain.rectangle else s.domain.contains
+    return initial_dots_in(s.density, n, seed, inside, s.dart_weights, rect, where)
 
 
 #: Blur of the panel-wide field, in spacings. Notebook crop (spacing 0.14 mm), 4 x 2
@@ -59,42 +58,41 @@ COARSE_SHIFT = 0.5
 COARSE_CELLS = 1 << 23
 
 
-def coarse_lattice(job: Job) -> Lattice:
-    """The lattice of the panel-wide field over the job's box."""
-    return Lattice.over(job.box, COARSE_STEP * stage_settings(job).spacing, COARSE_CELLS)
+def coarse_lattice(s: StageSettings) -> Lattice:
+    """The lattice of the panel-wide field over the panel's box."""
+    return Lattice.over(s.box, COARSE_STEP * s.spacing, COARSE_CELLS)
 
 
-def coarse_part(job: Job, xy0: np.ndarray) -> LatticePart:
+def coarse_part(s: StageSettings, xy0: np.ndarray) -> LatticePart:
     """A tile's initial dots ``xy0`` (``[n, 2]`` mm) deposited by their areas on
     :func:`coarse_lattice`, for :func:`coarse_solve`."""
-    return deposit_part(xy0, thrown_areas(job, xy0), coarse_lattice(job))
+    return deposit_part(xy0, s.thrown_areas(xy0), coarse_lattice(s))
 
 
-def coarse_solve(job: Job, parts: list[LatticePart]) -> CoarseField | None:
+def coarse_solve(s: StageSettings, parts: list[LatticePart]) -> CoarseField | None:
     """The panel-wide field (:class:`optdot.relax.lowpass.CoarseField`) from every tile's
     :func:`coarse_part`, added in the order given (the plan's tile order, so the bytes do
     not depend on who computed what); None when the job has no long-wavelength
     correction."""
-    s = stage_settings(job)
-    if not corrected(job, s.formulation):
+    if not corrected(s):
         return None
     spacing = s.spacing
     return coarse_field(
-        parts, coarse_lattice(job), job.density, COARSE_SIGMA * spacing, COARSE_SHIFT * spacing,
-        job.domain,
+        parts, coarse_lattice(s), s.density, COARSE_SIGMA * spacing, COARSE_SHIFT * spacing,
+        s.domain,
     )  # fmt: skip
 
 
-def coarse_shift(job: Job, coarse: CoarseField | None, xy: np.ndarray) -> np.ndarray:
+def coarse_shift(s: StageSettings, coarse: CoarseField | None, xy: np.ndarray) -> np.ndarray:
     """Initial dots ``xy`` (``[n, 2]`` mm) moved along the panel-wide field: ``[n, 2]``,
     a new array. A dot the move would take out of the panel, or into a cell of fill 0,
     stays where it was thrown (the throw's promise: every dot starts in a lit cell)."""
     if coarse is None or not len(xy):
         return xy
     new = xy + coarse.displacement(xy)
-    x0, y0, x1, y1 = job.box
+    x0, y0, x1, y1 = s.box
     ok = (new[:, 0] >= x0) & (new[:, 0] <= x1) & (new[:, 1] >= y0) & (new[:, 1] <= y1)
-    ok &= job.density.at(new) > 0
-    if not job.domain.rectangle:
-        ok &= job.domain.contains(new)
+    ok &= s.density.at(new) > 0
+    if not s.domain.rectangle:
+        ok &= s.domain.contains(new)
     return np.ascontiguousarray(np.where(ok[:, None], new, xy))

@@ -40,7 +40,7 @@ from ..geometry.shapes import Footprints
 from ..relax.lowpass import CoarseField
 from ..runtime.cluster import single_threaded
 from ..runtime.stop import check_interrupt
-from ..stages import wide_rounds
+from ..stages import stage_settings, wide_rounds
 from .plan import TilePlan, plan_tiles
 from .tasks import (
     FinalDots,
@@ -86,7 +86,7 @@ KIND_NAMES = {
 def wide_steps(job: Job) -> int:
     """Rounds of the wide pass a tiled run of ``job`` makes (0 without a wide pass;
     :func:`optdot.stages.wide_rounds`)."""
-    return wide_rounds(job)
+    return wide_rounds(stage_settings(job))
 
 
 def field_name(r: int) -> str:

@@ -182,7 +182,7 @@ def initial_tile(job: Job, plan: TilePlan, i: int, j: int) -> np.ndarray:
     if n == 0:
         return np.zeros((0, 2))
     seed = [job.optimize.seed, SALT, plan.index(i, j)]
-    return stages.throw(job, n, seed, plan.rect(i, j), _where(i, j))
+    return stages.throw(stages.stage_settings(job), n, seed, plan.rect(i, j), _where(i, j))
 
 
 def initial_task(job: Job, plan: TilePlan, i: int, j: int) -> np.ndarray:
@@ -205,17 +205,19 @@ def relax_tile(
     the tiles ``around`` it within the halo, moved alike, held still (so the border dots
     feel the right density across the border and do not spill into it). The moved
     throw is the tile's containers from here on."""
-    xy0 = stages.coarse_shift(job, coarse, xy0)
+    s = stages.stage_settings(job)
+    xy0 = stages.coarse_shift(s, coarse, xy0)
     if len(xy0) == 0:
         return TileDots((i, j), xy0, xy0.copy())
     box = grown(plan.rect(i, j), plan.halo)
-    halo = [stages.coarse_shift(job, coarse, a[in_rect(a, box)]) for a in around]
+    halo = [stages.coarse_shift(s, coarse, a[in_rect(a, box)]) for a in around]
     halo_xy = np.concatenate(halo) if halo else np.zeros((0, 2))
     n = len(xy0)
     both = np.ascontiguousarray(np.concatenate([xy0, halo_xy]))
     frozen = np.zeros(len(both), bool)
     frozen[n:] = True
-    run = stages.relax(job, both, frozen=frozen if len(halo_xy) else None, lowpass=False)
+    held = frozen if len(halo_xy) else None
+    run = stages.relax(s, both, frozen=held, lowpass=False)
     return TileDots((i, j), xy0, np.ascontiguousarray(run.xy[:n]))
 
 
@@ -266,7 +268,7 @@ def relax_seams(job: Job, plan: TilePlan, i: int, j: int, parts: list[TileDots])
     sel = np.flatnonzero(near | mobile)
     frozen = ~mobile[sel]
     run = stages.relax(
-        job,
+        stages.stage_settings(job),
         np.ascontiguousarray(xy0[sel]),
         start=np.ascontiguousarray(xy[sel]),
         frozen=frozen,
@@ -296,32 +298,33 @@ def apply_seams(dots: TileDots, results: list[SeamMoves]) -> TileDots:
 def deposit_task(job: Job, xy0: np.ndarray) -> LatticePart:
     """A tile's initial dots ``xy0`` deposited on the panel-wide lattice
     (:func:`optdot.stages.coarse_part`)."""
-    return stages.coarse_part(job, xy0)
+    return stages.coarse_part(stages.stage_settings(job), xy0)
 
 
 def coarse_task(job: Job, *parts: LatticePart) -> CoarseField | None:
     """The panel-wide field from every tile's deposit, in the plan's tile order
     (:func:`optdot.stages.coarse_solve`)."""
-    return stages.coarse_solve(job, list(parts))
+    return stages.coarse_solve(stages.stage_settings(job), list(parts))
 
 
 def wide_deposit_task(job: Job, dots: TileDots) -> LatticePart | None:
     """A tile's dots after its first correction pass (:func:`correct_tile`) deposited on
     the wide pass's lattice (:func:`optdot.stages.wide_part`), for :func:`wide_task`."""
-    return stages.wide_part(job, dots.xy, stages.thrown_areas(job, dots.xy0))
+    s = stages.stage_settings(job)
+    return stages.wide_part(s, dots.xy, s.thrown_areas(dots.xy0))
 
 
 def wide_task(job: Job, *parts: LatticePart) -> CoarseField | None:
     """The wide pass's field over the panel from every tile's :func:`wide_deposit_task`,
     in the plan's tile order (:func:`optdot.stages.wide_solve`)."""
-    return stages.wide_solve(job, list(parts))
+    return stages.wide_solve(stages.stage_settings(job), list(parts))
 
 
 def containers(job: Job, plan: TilePlan, coarse: CoarseField | None, i: int, j: int) -> np.ndarray:
     """Tile ``(i, j)``'s containers as its relaxation made them (:func:`relax_tile`): its
     throw moved along the panel-wide field, thrown again (every step a pure function, so
     the same bytes), ``[n, 2]`` mm."""
-    return stages.coarse_shift(job, coarse, initial_task(job, plan, i, j))
+    return stages.coarse_shift(stages.stage_settings(job), coarse, initial_task(job, plan, i, j))
 
 
 def first_positions(dots: TileDots) -> np.ndarray:
@@ -375,11 +378,11 @@ def correct_tile(job: Job, plan: TilePlan, dots: TileDots, *around: TileDots) ->
     rect = plan.rect(i, j)
     region = (rect[0] - tx / 2 - m, rect[1] - ty / 2 - m,
               rect[2] + tx / 2 + m, rect[3] + ty / 2 + m)  # fmt: skip
-    region = grown(region, stages.correction_pad(job))
+    region = grown(region, stages.correction_pad(stages.stage_settings(job)))
     near = [in_rect(a.xy, grown(region, plan.halo)) for a in around]
     xy0 = np.concatenate([dots.xy0] + [a.xy0[k] for a, k in zip(around, near, strict=True)])
     xy = np.concatenate([dots.xy] + [a.xy[k] for a, k in zip(around, near, strict=True)])
-    got = stages.correction_region(job, xy0, xy, region)
+    got = stages.correction_region(stages.stage_settings(job), xy0, xy, region)
     if got is None:
         return dots
     err, cap = got
@@ -406,7 +409,7 @@ def held_dots(job: Job, dots: TileDots | FinalDots) -> stages.Held:
     if isinstance(dots, FinalDots):
         angle = None if dots.dots is None else dots.dots.angles
         return stages.Held(dots.xy, dots.diameter, angle)
-    d = stages.rule_diameters(job, dots.xy0)
+    d = stages.stage_settings(job).rule_diameters(dots.xy0)
     angle = None
     if not job.shape.kind.round:
         angle = turned(job.shape, job.orientation, dots.xy, dots.xy0).angles
@@ -433,6 +436,6 @@ def legalize_tile(
     width = stages.stage_settings(job).halo
     window = grown(plan.rect(*dots.tile), width)
     held = stages.Held.near(neighbours, grown(bounds(dots.xy), width))
-    xy = stages.hard_core(job, dots.xy0, dots.xy, held)
-    done = stages.finish(job, xy, dots.xy0, _where(*dots.tile), held, window)
+    xy = stages.hard_core(stages.stage_settings(job), dots.xy0, dots.xy, held)
+    done = stages.finish(stages.stage_settings(job), xy, dots.xy0, _where(*dots.tile), held, window)
     return FinalDots(done.xy, done.diameter, done.dots)
