@@ -166,9 +166,9 @@ def direct(args) -> None:
     print(f"stack: {args.profile} LEDs, {len(job.backlight.leds.positions)} on a 5 mm grid{caps}")
 
     t0 = time.perf_counter()
-    got = design(job, seed=1)
+    got = design(job.bench, seed=1)
     t_design = time.perf_counter() - t0
-    write_design(got, job, out / "map.csv", out / "map.png", out / "map.toml")
+    write_design(got, job.bench, out / "map.csv", out / "map.png", out / "map.toml")
     last = got.history[-1]
     print(
         f"design: {got.fill.shape[1]} x {got.fill.shape[0]} cells, {len(got.history)} "
@@ -201,13 +201,13 @@ def direct(args) -> None:
         ("designed map, real dots", designed, {"dots": pattern}),
     ):
         t0 = time.perf_counter()
-        sim = simulate(on, rays, seed=7, **kw)
+        sim = simulate(on.bench, rays, seed=7, **kw)
         dt = time.perf_counter() - t0
         result[label] = figures(f"{label} ({rays:.2g} rays, {dt:.0f} s)", sim)
     ratio = result["designed map, real dots"]["efficiency"] / result["bare film"]["efficiency"]
     print(f"efficiency of the designed stack / the bare stack's: {ratio:.3f}")
     t0 = time.perf_counter()
-    hal = halo(designed, int(float(args.halo_rays)), seed=3, dots=pattern)
+    hal = halo(designed.bench, int(float(args.halo_rays)), seed=3, dots=pattern)
     print(
         f"halo of the LED at {hal['led_mm']} lit alone ({args.halo_rays} rays, "
         f"{time.perf_counter() - t0:.0f} s): width at 50 % {hal['width50_mm']:.2f} mm, at 10 % "
@@ -232,13 +232,13 @@ def guide_film(args) -> None:
     (out / "film.toml").write_text(GUIDE + FILM + INK_AND_DIFFUSER)
     film = load_job(out / "film.toml", need_map=False)
     t0 = time.perf_counter()
-    f = design(film, seed=2)
+    f = design(film.bench, seed=2)
     print(f"film designed in {time.perf_counter() - t0:.1f} s, fill {f.fill.min():.3f}.."
           f"{f.fill.max():.3f}")  # fmt: skip
     nx, ny = f.fill.shape[1], f.fill.shape[0]
-    a = figures(f"guide alone ({rays:.2g} rays)", simulate(guide, rays, seed=9))
+    a = figures(f"guide alone ({rays:.2g} rays)", simulate(guide.bench, rays, seed=9))
     cov = Coverage(f.fill, 0.0, 0.0, 30.0 / nx, 20.0 / ny)
-    b = figures(f"guide + film ({rays:.2g} rays)", simulate(film, rays, seed=9, coverage=cov))
+    b = figures(f"guide + film ({rays:.2g} rays)", simulate(film.bench, rays, seed=9, coverage=cov))
     lift = b["u9"] - a["u9"]
     sigma = math.hypot(a["u9_sigma"], b["u9_sigma"])
     print(f"9-point lift {lift:+.3f} ± {sigma:.3f} ({lift / sigma:.1f} sigma)")

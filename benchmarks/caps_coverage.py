@@ -75,7 +75,7 @@ def run(
     path.write_text(text + INK_AND_DIFFUSER + design_sec)
     job = load_job(path, need_map=False)
     t0 = time.perf_counter()
-    got = design(job, seed=1)
+    got = design(job.bench, seed=1)
     dt = time.perf_counter() - t0
     dx, dy = got.cell
     print(f"caps {cap:g} mm: design {dt:.1f} s, fill {got.fill.min():.3f}..{got.fill.max():.3f}")
@@ -84,7 +84,7 @@ def run(
         rings = ring_table(cap, got.cap_ink)
         job = replace(job, domain=replace(job.domain, cap_rings=rings))
     inside = job.domain.cell_fractions(0.0, 0.0, dx, dy, *got.fill.shape[::-1])
-    sim = simulate(job, rays, seed=7, coverage=Coverage(got.fill * inside, 0.0, 0.0, dx, dy))
+    sim = simulate(job.bench, rays, seed=7, coverage=Coverage(got.fill * inside, 0.0, 0.0, dx, dy))
     figures(f"caps {cap:g} mm, coverage ({rays:.2g} rays)", sim)
     per = int(round(5.0 / (60.0 / sim.luminance.shape[1])))
     np.set_printoptions(precision=2, linewidth=120)

@@ -53,8 +53,8 @@ def designed_lgp(out: Path) -> Path:
     """The lgp sample designed as the README does (``optdot design``, default settings)."""
     job = load_job(HERE.parent / "samples" / "lgp" / "job.toml", need_map=False)
     t = time.perf_counter()
-    got = design(job)
-    write_design(got, job, out / "map.csv", None, out / "map.toml")
+    got = design(job.bench)
+    write_design(got, job.bench, out / "map.csv", None, out / "map.toml")
     print(f"designed lgp in {time.perf_counter() - t:.1f} s")
     return out / "map.toml"
 
@@ -72,7 +72,7 @@ def coverage_error(job, xy: np.ndarray, area: float) -> np.ndarray:
 
 def traced(job, pattern, rays: int) -> np.ndarray:
     """Extracted rays per ``BIN`` bin over the panel (``[nby, nbx]``)."""
-    return simulate(job, rays, seed=11, dots=pattern, bin_mm=BIN).counts.astype(np.float64)
+    return simulate(job.bench, rays, seed=11, dots=pattern, bin_mm=BIN).counts.astype(np.float64)
 
 
 def main() -> None:
@@ -92,7 +92,7 @@ def main() -> None:
     base = formulation.PRESETS["optdot"]
     edge_rows = None
     t = time.perf_counter()
-    coverage = traced(job, None, rays) if rays else None
+    coverage = traced(job.bench, None, rays) if rays else None
     if rays:
         print(f"coverage mode: {rays:,} rays in {time.perf_counter() - t:.1f} s")
     for steps in args.steps:
@@ -122,7 +122,7 @@ def main() -> None:
             print(f"  across the LED at x = {mid + 15 * RASTER:g} mm, y = 0.25..5.75: {prof} %")
         if rays:
             t = time.perf_counter()
-            dots = traced(job, pattern, rays)
+            dots = traced(job.bench, pattern, rays)
             s = BLUR / BIN
             a = gaussian_filter(dots, s, mode="mirror")
             b = gaussian_filter(coverage, s, mode="mirror")

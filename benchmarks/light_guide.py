@@ -113,7 +113,7 @@ def main() -> None:
         return
     t0 = time.perf_counter()
     got = design(
-        job,
+        job.bench,
         rays=args.design_rays,
         report=lambda f: print(
             f"  iteration {f['iteration']:2d}: {f['rays']:>11,} rays, 9-point "
@@ -123,7 +123,7 @@ def main() -> None:
         ),
     )
     t_design = time.perf_counter() - t0
-    write_design(got, job, out / "map.csv", out / "map.png", out / "map.toml")
+    write_design(got, job.bench, out / "map.csv", out / "map.png", out / "map.toml")
     last = got.history[-1]
     print(
         f"design: {len(got.history)} iterations, {t_design:.0f} s, peak {peak_rss_mb():.0f} MB; "
@@ -158,7 +158,7 @@ def run_generate_and_simulate(args, out: Path) -> None:
     rays = int(args.rays)
     for mode, src in (("coverage", None), ("dots", pattern)):
         t0 = time.perf_counter()
-        sim = simulate(job, rays, seed=1, dots=src, bin_mm=5.0)
+        sim = simulate(job.bench, rays, seed=1, dots=src, bin_mm=5.0)
         dt = time.perf_counter() - t0
         s = sim.summary()
         print(

@@ -134,7 +134,7 @@ def differing(out: Path, ref: Path) -> list[str]:
         o = out / name
         if not o.exists():
             bad.append(f"{name} (missing)")
-        elif name.name.endswith("_qa.json"):
+        elif name.name.endswith("qa.json"):  # _qa.json, .gds.qa.json
             if _undated(o) != _undated(r):
                 bad.append(str(name))
         elif not filecmp.cmp(o, r, shallow=False):

@@ -454,7 +454,9 @@ def provenance_of(dots: DotSource, job: Job | None) -> dict[str, Any]:
     seed = dots.meta.get("seed")
     if seed is None and job is not None and source is None:
         seed = job.optimize.seed  # made from this job in this run
-    return provenance(job, source, seed)
+    if job is None:
+        return provenance(None, (), source, seed)
+    return provenance(job.source, job.inputs, source, seed)
 
 
 def export(

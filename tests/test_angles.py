@@ -75,7 +75,7 @@ def test_what_leaves_a_clear_top_follows_snell(tmp_path):
 
     job = load_job(SAMPLES / "lgp" / "job.toml", need_map=False)
     grid = np.linspace(0.05, 0.35, 40)[:, None] * np.ones((1, 60))
-    scene = scene_of(job, 200_000, coverage=Coverage(grid, 0.0, 0.0, 0.5, 0.5))
+    scene = scene_of(job.bench, 200_000, coverage=Coverage(grid, 0.0, 0.0, 0.5, 0.5))
     fate, _, _, d = trace(3, 0, 200_000, scene)
     out = d[fate == 0].astype(np.float64)
     assert np.allclose(np.linalg.norm(out, axis=1), 1.0, atol=1e-6)
@@ -93,7 +93,7 @@ def test_a_stack_under_a_lambertian_diffuser_leaves_lambertian_and_every_ray_is_
     scattered light it carries, which Fresnel dims at grazing exits)."""
     sheets = [{"kind": "diffuser", "transmittance": 0.65}]
     job = load_job(direct_job(tmp_path, 10.0, 10.0, 0.3, sheets=sheets), need_map=True)
-    sim = simulate(job, 400_000, seed=5)
+    sim = simulate(job.bench, 400_000, seed=5)
     a = sim.angles
     assert a.total == sim.fates["extracted"]
     lum = a.luminance()

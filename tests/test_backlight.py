@@ -96,9 +96,11 @@ def test_a_lambertian_point_source_lights_a_plane_as_cos4_over_h2(tmp_path):
     foot is sin^2(theta) = r^2 / (r^2 + h^2), ring by ring within 1 % (and 4 sigma)."""
     h, rays = 2.0, 1_000_000
     job = load_job(_point_source(tmp_path, h), need_map=False)
-    scene = scene_of(job, rays, coverage=BARE)
+    scene = scene_of(job.bench, rays, coverage=BARE)
     fates = np.zeros(len(FATES), np.int64)
-    r = np.concatenate([np.hypot(x - 20, y - 20) for x, y, _ in traced(job, scene, 3, rays, fates)])
+    r = np.concatenate(
+        [np.hypot(x - 20, y - 20) for x, y, _ in traced(job.bench, scene, 3, rays, fates)]
+    )
     edges = np.array([0.0, 0.5, 1.0, 2.0, 3.0, 5.0, 8.0, 14.0])
     got = np.histogram(r, edges)[0] / rays
     cum = edges**2 / (edges**2 + h * h)
@@ -114,7 +116,7 @@ def test_the_halo_of_a_bare_lambertian_source_has_the_closed_form_widths(tmp_pat
     3 % out to where it is 0.2."""
     h = 2.0
     job = load_job(_point_source(tmp_path, h), need_map=False)
-    got = halo(job, 1_000_000, seed=1, coverage=BARE)
+    got = halo(job.bench, 1_000_000, seed=1, coverage=BARE)
     w50 = 2 * h * math.tan(math.acos(0.5**0.25))
     w10 = 2 * h * math.tan(math.acos(0.1**0.25))
     assert got["width50_mm"] == pytest.approx(w50, rel=0.02)
@@ -244,7 +246,7 @@ def test_the_reflector_finish_reaches_the_scene_and_bad_ones_get_one_line(tmp_pa
     )
     job = load_job(guide, need_map=False)
     assert job.light_guide.reflector_finish == "specular"
-    assert scene_of(job, 1000, coverage=BARE).stack.face[0, F_REFL_FINISH] == 1.0
+    assert scene_of(job.bench, 1000, coverage=BARE).stack.face[0, F_REFL_FINISH] == 1.0
     guide.write_text(guide.read_text().replace('"specular"', '"matte"'))
     one_error(("simulate", guide, "--rays", "1000"), 2, "light_guide.reflector_finish")
 
@@ -268,7 +270,9 @@ def test_a_uniform_film_over_a_diffuse_reflector_transmits_t_over_1_minus_r_rr(t
         top={"frame": 1.0, "frame_finish": "specular"},
     )
     job = load_job(path, need_map=False)
-    sim = simulate(job, rays, seed=2, coverage=Coverage(np.ones((1, 1)), 0.0, 0.0, 20.0, 20.0))
+    sim = simulate(
+        job.bench, rays, seed=2, coverage=Coverage(np.ones((1, 1)), 0.0, 0.0, 20.0, 20.0)
+    )
     d = 1 - r * rr
     for fate, want in (
         ("extracted", t / d),
@@ -315,7 +319,7 @@ def test_a_sheet_that_sends_light_back_lifts_the_recycled_share(tmp_path):
     leaves, more is lost at the bottom, and what leaves is flatter (the sheet spreads
     what it sends back across the cavity)."""
     bare_job = load_job(direct_job(tmp_path, fill=None), need_map=False)
-    bare = simulate(bare_job, 400_000, seed=1, coverage=BARE)
+    bare = simulate(bare_job.bench, 400_000, seed=1, coverage=BARE)
     (tmp_path / "s").mkdir()
     sheet = direct_job(tmp_path / "s", fill=None, sheets=[{"transmittance": 0.5}])
     with_sheet = simulate(load_job(sheet, need_map=False), 400_000, seed=1, coverage=BARE)
@@ -334,8 +338,8 @@ def test_real_dots_match_the_coverage_mode_on_a_film(tmp_path):
     job = load_job(path)
     pattern = generate(job)
     rays = 400_000
-    cov = simulate(job, rays, seed=6)
-    real = simulate(job, rays, seed=6, dots=pattern)
+    cov = simulate(job.bench, rays, seed=6)
+    real = simulate(job.bench, rays, seed=6, dots=pattern)
     assert real.mode == "dots" and cov.mode == "coverage"
     for k in ("extracted", "absorbed_dots", "lost_bottom", "lost_edges"):
         a, b = cov.fates[k] / rays, real.fates[k] / rays
@@ -346,9 +350,9 @@ def test_real_dots_match_the_coverage_mode_on_a_film(tmp_path):
 def test_the_same_seed_gives_the_same_counts(tmp_path):
     path = direct_job(tmp_path, sheets=[{"transmittance": 0.6, "spread": 20.0}])
     job = load_job(path)
-    a = simulate(job, 50_000, seed=9)
-    b = simulate(job, 50_000, seed=9)
-    c = simulate(job, 50_000, seed=10)
+    a = simulate(job.bench, 50_000, seed=9)
+    b = simulate(job.bench, 50_000, seed=9)
+    c = simulate(job.bench, 50_000, seed=10)
     assert a.fates == b.fates and np.array_equal(a.counts, b.counts)
     assert not np.array_equal(a.counts, c.counts)
 
@@ -444,7 +448,7 @@ def test_period_classes_group_cells_alike_within_their_pitch_cells_and_towards_t
     from optdot.optics.periodic import fold, period_classes
 
     job = load_job(direct_job(tmp_path, 20.0, 15.0, leds={"pitch": [5.0, 5.0], "size": 0.2}))
-    c = period_classes(job, 20, 15, 1.0, 1.0)
+    c = period_classes(job.bench, 20, 15, 1.0, 1.0)
     assert c is not None and c.shape == (15, 20)
     blocks = c.reshape(3, 5, 4, 5).transpose(0, 2, 1, 3)  # [row, col, phase y, phase x]
     assert np.array_equal(blocks[1, 1], blocks[1, 2])  # inner cells alike (one inner row)
@@ -460,7 +464,7 @@ def test_period_classes_group_cells_alike_within_their_pitch_cells_and_towards_t
         m = c == k
         assert np.allclose(got[m], (v * w)[m].sum() / w[m].sum() * w[m])
     # a cell that does not divide the pitch: no classes
-    assert period_classes(job, 30, 15, 20 / 30, 1.0) is None
+    assert period_classes(job.bench, 30, 15, 20 / 30, 1.0) is None
 
 
 @pytest.mark.slow  # over 1.5 s
@@ -481,21 +485,21 @@ def test_designing_a_film_evens_a_direct_lit_backlight_and_puts_ink_over_the_led
     text = path.read_text() + "[design]\nfill_range = [0.0, 0.7]\nrays = 400000\n"
     path.write_text(text)
     job = load_job(path, need_map=False)
-    got = design(job, seed=3, iterations=8)
+    got = design(job.bench, seed=3, iterations=8)
     assert got.fill.shape == (40, 40) and got.cell == (0.5, 0.5)
     # judged in 1 mm bins with 2M rays (noise ~1.5 %, a tenth of the bare film's RMS)
-    bare = simulate(job, 2_000_000, seed=1, coverage=BARE, bins=(20, 20))
+    bare = simulate(job.bench, 2_000_000, seed=1, coverage=BARE, bins=(20, 20))
     cov = Coverage(got.fill, 0.0, 0.0, 0.5, 0.5)
-    new = simulate(job, 2_000_000, seed=1, coverage=cov, bins=(20, 20))
+    new = simulate(job.bench, 2_000_000, seed=1, coverage=cov, bins=(20, 20))
     cells = got.fill.reshape(4, 10, 4, 10).mean(axis=(0, 2))  # by phase in the pitch cell
     assert cells[4:6, 4:6].min() > 0.4 > 0.1 > cells[0, 0]  # LEDs at the pitch centres
     assert got.fill[10:30, 10:30].min() < 0.02
     rms_bare, rms_new = bare.rms()[0], new.rms()[0]
     assert rms_new < rms_bare / 4, (rms_bare, rms_new)
-    write_design(got, job, tmp_path / "map.csv", None, tmp_path / "map.toml")
+    write_design(got, job.bench, tmp_path / "map.csv", None, tmp_path / "map.toml")
     again = load_job(tmp_path / "map.toml")
     assert again.backlight == job.backlight
-    assert simulate(again, 20_000, seed=1).fates["extracted"] > 0
+    assert simulate(again.bench, 20_000, seed=1).fates["extracted"] > 0
 
 
 def test_a_design_that_needs_dense_ink_asks_for_larger_dots(tmp_path):
@@ -505,14 +509,14 @@ def test_a_design_that_needs_dense_ink_asks_for_larger_dots(tmp_path):
     from optdot.optics.design import SIZE_CLAIM, sizes_asked
 
     job = load_job(direct_job(tmp_path))
-    assert sizes_asked(job, 0.2) is None
-    lo, hi = sizes_asked(job, 0.57)
+    assert sizes_asked(job.bench, 0.2) is None
+    lo, hi = sizes_asked(job.bench, 0.57)
     assert lo == 0.046 and hi == 0.096  # 14 µm / (sqrt(0.75 / 0.57) - 1) = 95.2 µm, up
     assert 0.57 * (1 + 0.014 / hi) ** 2 <= SIZE_CLAIM
-    lo, hi = sizes_asked(job, 0.72)  # past 0.675: up to the 0.80 random patterns hold
+    lo, hi = sizes_asked(job.bench, 0.72)  # past 0.675: up to the 0.80 random patterns hold
     assert hi == 0.259 and 0.72 * (1 + 0.014 / hi) ** 2 <= 0.80
     with pytest.raises(Exception, match="1 mm reach"):
-        sizes_asked(job, 0.79)
+        sizes_asked(job.bench, 0.79)
 
 
 def _guide(tmp: Path, film: bool) -> Path:
@@ -553,9 +557,9 @@ def test_a_film_designed_over_a_guide_lifts_its_9_point_uniformity(tmp_path):
     np.savetxt(tmp_path / "guide.csv", g.fill, delimiter=",")
     guide = simulate(load_job(_guide(tmp_path, False)), 8_000_000, seed=2, bins=(30, 20))
     job = load_job(_guide(tmp_path, True), need_map=False)
-    got = design(job, seed=5, iterations=8)
+    got = design(job.bench, seed=5, iterations=8)
     cov = Coverage(got.fill, 0.0, 0.0, 1.0, 1.0)
-    with_film = simulate(job, 8_000_000, seed=2, coverage=cov, bins=(30, 20))
+    with_film = simulate(job.bench, 8_000_000, seed=2, coverage=cov, bins=(30, 20))
     u0, s0 = guide.uniformity9()
     u1, s1 = with_film.uniformity9()
     assert u1 > u0 + 2 * math.hypot(s0, s1), (u0, u1, s0, s1)
@@ -580,9 +584,9 @@ def test_batches_do_not_change_the_counts(tmp_path, monkeypatch):
     import optdot.optics.simulate as sim_mod
 
     job = load_job(direct_job(tmp_path, sheets=[{"transmittance": 0.6}]))
-    one = simulate(job, 20_000, seed=4)
+    one = simulate(job.bench, 20_000, seed=4)
     monkeypatch.setattr(sim_mod, "BATCH_SECONDS", 1e-9)
-    many = simulate(job, 20_000, seed=4)
+    many = simulate(job.bench, 20_000, seed=4)
     assert many.fates == one.fates and np.array_equal(many.counts, one.counts)
     assert np.array_equal(many.spots, one.spots)
 
@@ -595,7 +599,7 @@ def test_a_fine_grid_gets_bounded_bins_and_a_bin_too_fine_is_refused(tmp_path):
 
     leds = {"pitch": [0.05, 0.05], "size": 0.02}
     job = load_job(direct_job(tmp_path, 30.0, 30.0, leds=leds))
-    b = default_bin(job)
+    b = default_bin(job.bench)
     assert (30.0 / b) ** 2 <= DEFAULT_BINS * 1.0001
     one_error(("simulate", tmp_path / "job.toml", "--bin", "0.01", "--no-halo"), 2,
               "job.toml", "9,000,000", "--bin")  # fmt: skip

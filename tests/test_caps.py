@@ -101,8 +101,8 @@ def test_the_coverage_mode_with_caps_matches_real_dots_with_caps(tmp_path):
     job = _capped(tmp_path, fill=0.3)
     pattern = generate(job)
     rays = 300_000
-    cov = simulate(job, rays, seed=6)
-    real = simulate(job, rays, seed=6, dots=pattern)
+    cov = simulate(job.bench, rays, seed=6)
+    real = simulate(job.bench, rays, seed=6, dots=pattern)
     for k in ("extracted", "absorbed_dots", "lost_bottom"):
         a, b = cov.fates[k] / rays, real.fates[k] / rays
         sigma = math.sqrt(2 * max(a, 1e-6) * (1 - a) / rays)
@@ -113,7 +113,7 @@ def test_the_design_s_shares_add_up_and_cap_shares_match_the_discs(tmp_path):
     from optdot.optics.design import _shares, design_grid
 
     job = _capped(tmp_path)
-    nx, ny, dx, dy = design_grid(job)
+    nx, ny, dx, dy = design_grid(job.bench)
     inside, panel, capped = _shares(job, nx, ny, dx, dy)
     ring = panel - inside - capped  # the gap around each cap: neither dots nor ink
     gap = job.qa.effective_close_gap
@@ -139,8 +139,8 @@ def test_designing_with_caps_evens_lambertian_leds_that_dots_alone_cannot(tmp_pa
     plain = load_job(direct_job(tmp_path, 10.0, 10.0, None, leds=leds), need_map=False)
     capped = direct_job(tmp_path, 10.0, 10.0, None, leds={**leds, "cap": 0.8})
     capped = load_job(capped, need_map=False)
-    a = design(plain, seed=1, rays=600_000, iterations=6)
-    b = design(capped, seed=1, rays=600_000, iterations=6)
+    a = design(plain.bench, seed=1, rays=600_000, iterations=6)
+    b = design(capped.bench, seed=1, rays=600_000, iterations=6)
     rms_a, rms_b = a.history[-1]["luminance_rms"], b.history[-1]["luminance_rms"]
     assert rms_b < 0.8 * rms_a, (rms_a, rms_b)
     assert 0 <= b.fill.min() and b.fill.max() <= capped.design.fill_range[1]
@@ -321,7 +321,7 @@ def test_the_film_step_acts_on_each_cell_s_whole_ink_cap_included(tmp_path):
     path = direct_job(tmp_path, 10.0, 10.0, None, leds=leds)
     path.write_text(path.read_text() + "[design]\nsmoothing = 0\n")
     job = load_job(path, need_map=False)
-    nx, ny, dx, dy = design_grid(job)
+    nx, ny, dx, dy = design_grid(job.bench)
     inside, panel, capped = _shares(job, nx, ny, dx, dy)
     live = panel > 0.5
     step = _film_step(job, nx, ny, dx, dy, (inside, panel, capped), live, np.ones((ny, nx)), live)
@@ -346,6 +346,6 @@ def test_caps_keep_the_led_grid_s_symmetry_for_the_design(tmp_path):
     from optdot.optics.periodic import period_classes
 
     job = _capped(tmp_path, fill=None)
-    assert period_classes(job, *design_grid(job)) is not None
+    assert period_classes(job.bench, *design_grid(job.bench)) is not None
     other = direct_job(tmp_path, 10.0, 10.0, None, leds={"pitch": [5.0, 5.0], "size": 0.2})
-    assert period_classes(load_job(other, need_map=False), *design_grid(job)) is not None
+    assert period_classes(load_job(other, need_map=False), *design_grid(job.bench)) is not None

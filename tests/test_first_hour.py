@@ -171,7 +171,7 @@ def test_a_keep_out_touching_the_edge_is_clear_slab_not_a_notch(tmp_path):
         path = tmp_path / f"{name}.toml"
         path.write_text(text.replace("positions = [5.0, 15.0, 25.0]", "positions = [5.0, 24.0]"))
         job = load_job(path)  # the LED at 24 mm sits on the keep-out's stretch of edge
-        sim = simulate(job, 400_000, seed=3)
+        sim = simulate(job.bench, 400_000, seed=3)
         effs.append((sim.efficiency, sim.summary()["efficiency_sigma"]))
     (a, sa), (b, sb) = effs
     assert abs(a - b) < 3 * (sa**2 + sb**2) ** 0.5, effs

@@ -184,7 +184,7 @@ def test_a_band_under_too_much_light_takes_more_ink(tmp_path):
     from optdot.optics.design import Grades, design_grid
 
     job = _graded(tmp_path)
-    nx, ny, dx, dy = design_grid(job)
+    nx, ny, dx, dy = design_grid(job.bench)
     g = Grades(job, nx, ny, dx, dy)
     before = g.ink.copy()
     too_bright = np.full((ny, nx), -0.2)  # every cell brighter than wanted
@@ -291,14 +291,14 @@ def test_the_tracer_s_rings_pass_the_light_their_coverage_does(tmp_path):
     job = _graded(tmp_path, fill=None, cap=3.0, cap_ink=ink)
     empty = Coverage(np.zeros((1, 1)), 0.0, 0.0, 10.0, 10.0)
     rays = 400_000
-    rings = simulate(job, rays, seed=3, coverage=empty).efficiency
+    rings = simulate(job.bench, rays, seed=3, coverage=empty).efficiency
     shares = ring_shares(job.domain.caps, job.domain.cap_rings, 0.0, 0.0, 0.1, 0.1, 100, 100)
     bare_path = direct_job(tmp_path, 10.0, 10.0, None, leds={"pitch": [5.0, 5.0]})
     bare = load_job(bare_path, need_map=False)
-    raster = simulate(bare, rays, seed=3, coverage=Coverage(shares, 0.0, 0.0, 0.1, 0.1))
-    none = simulate(bare, rays, seed=3, coverage=empty).efficiency
+    raster = simulate(bare.bench, rays, seed=3, coverage=Coverage(shares, 0.0, 0.0, 0.1, 0.1))
+    none = simulate(bare.bench, rays, seed=3, coverage=empty).efficiency
     solid = replace(job, domain=replace(job.domain, cap_rings=None))
-    full = simulate(solid, rays, seed=3, coverage=empty).efficiency
+    full = simulate(solid.bench, rays, seed=3, coverage=empty).efficiency
     assert full < rings < none
     noise = 3 * math.sqrt(rings * (1 - rings) / rays) * math.sqrt(2)
     assert abs(rings - raster.efficiency) <= noise + 0.002
@@ -338,11 +338,11 @@ def test_no_dot_of_the_coverage_lands_between_a_cap_s_rings(tmp_path):
     job = _graded(tmp_path, fill=None, cap=3.0, cap_ink=[0.0] * 30)
     inside = job.domain.cell_fractions(0.0, 0.0, 1.0, 1.0, 10, 10)
     rays = 400_000
-    coarse = simulate(job, rays, seed=5, coverage=Coverage(0.5 * inside, 0.0, 0.0, 1.0, 1.0))
+    coarse = simulate(job.bench, rays, seed=5, coverage=Coverage(0.5 * inside, 0.0, 0.0, 1.0, 1.0))
     bare_path = direct_job(tmp_path, 10.0, 10.0, None, leds={"pitch": [5.0, 5.0]})
     bare = load_job(bare_path, need_map=False)
     free = 1.0 - cap_shares(job.domain.caps, 0.0, 0.0, 0.05, 0.05, 200, 200)
-    fine = simulate(bare, rays, seed=5, coverage=Coverage(0.5 * free, 0.0, 0.0, 0.05, 0.05))
+    fine = simulate(bare.bench, rays, seed=5, coverage=Coverage(0.5 * free, 0.0, 0.0, 0.05, 0.05))
     noise = 3 * math.sqrt(2 * fine.efficiency * (1 - fine.efficiency) / rays)
     assert abs(coarse.efficiency - fine.efficiency) <= noise + 0.002
 

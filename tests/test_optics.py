@@ -88,7 +88,7 @@ def test_closed_forms_are_traced_within_one_percent(tmp_path, both_ends):
     x = (np.arange(400) + 0.5) * L / 400
     e = 0.8 if not both_ends else 0.7
     phi = _both_ends_map(x, e) if both_ends else _one_end_map(x, e)
-    sim = simulate(job, 1_000_000, seed=1, coverage=_with_map(job, phi), bins=(20, 1))
+    sim = simulate(job.bench, 1_000_000, seed=1, coverage=_with_map(job, phi), bins=(20, 1))
     assert sim.fates["extracted"] + sim.fates["lost_edges"] == sim.injected
     assert abs(sim.efficiency / e - 1) < 0.01, sim.efficiency
     prof = sim.counts[0] / sim.counts[0].mean()
@@ -96,7 +96,7 @@ def test_closed_forms_are_traced_within_one_percent(tmp_path, both_ends):
     assert np.abs(prof - 1).max() < 4.5 * sigma and np.abs(prof - 1).max() < 0.02, prof
     # the same map a tenth too dense near the LEDs is seen
     bent = phi * np.where(x < 30, 1.1, 1.0)
-    worse = simulate(job, 1_000_000, seed=1, coverage=_with_map(job, bent), bins=(20, 1))
+    worse = simulate(job.bench, 1_000_000, seed=1, coverage=_with_map(job, bent), bins=(20, 1))
     prof = worse.counts[0] / worse.counts[0].mean()
     assert np.abs(prof - 1).max() > 0.04
 
@@ -104,7 +104,7 @@ def test_closed_forms_are_traced_within_one_percent(tmp_path, both_ends):
 @pytest.mark.slow
 def test_design_recovers_the_one_end_closed_form(tmp_path):
     job = load_job(_one_d_job(tmp_path, False), need_map=False)
-    got = design(job, seed=2, rays=2_000_000, iterations=16)
+    got = design(job.bench, seed=2, rays=2_000_000, iterations=16)
     phi = got.fill[0]
     x = (np.arange(len(phi)) + 0.5) * got.cell[0]
     # the closed form whose largest fill is the range's top, as the design's level rule
@@ -128,7 +128,7 @@ def test_design_follows_a_target_map(tmp_path):
     path.write_text(text)
     job = load_job(path, need_map=False)
     assert tmp_path / "target.csv" in job.inputs
-    got = design(job, seed=4, rays=1_000_000, iterations=16)
+    got = design(job.bench, seed=4, rays=1_000_000, iterations=16)
     prof = got.last.counts[0].astype(float)
     want = np.interp(
         np.arange(50) + 0.5, np.linspace(0, 50, 10, endpoint=False) + 2.5, np.linspace(0.5, 1.5, 10)
@@ -168,7 +168,7 @@ def lossy(tmp_path_factory):
 def test_energy_is_conserved_ray_by_ray(lossy):
     job, pattern = lossy
     for dots in (None, pattern):
-        sim = simulate(job, 200_000, seed=5, dots=dots)
+        sim = simulate(job.bench, 200_000, seed=5, dots=dots)
         f = sim.fates
         assert sum(f.values()) == sim.rays == 200_000
         assert sim.injected == sim.rays - f["not_coupled"]
@@ -207,13 +207,13 @@ def test_same_seed_same_counts_on_any_thread_count(lossy):
     before = numba.get_num_threads()
     try:
         numba.set_num_threads(1)
-        one = simulate(job, 50_000, seed=9, dots=pattern)
+        one = simulate(job.bench, 50_000, seed=9, dots=pattern)
         numba.set_num_threads(max(2, before))
-        two = simulate(job, 50_000, seed=9, dots=pattern)
+        two = simulate(job.bench, 50_000, seed=9, dots=pattern)
     finally:
         numba.set_num_threads(before)
     assert one.fates == two.fates and np.array_equal(one.counts, two.counts)
-    other = simulate(job, 50_000, seed=10, dots=pattern)
+    other = simulate(job.bench, 50_000, seed=10, dots=pattern)
     assert not np.array_equal(other.counts, one.counts)
 
 
@@ -223,7 +223,7 @@ def test_a_ray_ends_the_same_whatever_call_or_chunk_traced_it(lossy):
     from optdot.optics.scene import scene_of
 
     job, pattern = lossy
-    scene = scene_of(job, 10_000, dots=pattern)
+    scene = scene_of(job.bench, 10_000, dots=pattern)
     first, count = 37, 3 * RAY_CHUNK + 5
     fate, x, y, d = trace(11, first, count, scene)
     came = fate != UNCOUPLED  # a ray turned back at birth has no direction written
@@ -254,8 +254,8 @@ def test_real_dots_agree_with_the_coverage_mode_in_5mm_cells(tmp_path):
     )
     job = load_job(tmp_path / "job.toml")
     pattern = generate(job)
-    a = simulate(job, 1_500_000, seed=1, bin_mm=5.0)
-    b = simulate(job, 1_500_000, seed=2, dots=pattern, bin_mm=5.0)
+    a = simulate(job.bench, 1_500_000, seed=1, bin_mm=5.0)
+    b = simulate(job.bench, 1_500_000, seed=2, dots=pattern, bin_mm=5.0)
     ca, cb = a.counts.astype(float), b.counts.astype(float)
     z = (ca - cb) / np.sqrt(ca + cb)
     assert np.abs(z).max() < 3.0 and np.mean(z**2) < 2.0, z
@@ -263,7 +263,7 @@ def test_real_dots_agree_with_the_coverage_mode_in_5mm_cells(tmp_path):
     # a pattern missing every fifth dot is told apart
     keep = np.arange(pattern.n) % 5 != 0
     sparse = dataclasses.replace(pattern, xy=pattern.xy[keep], diameter=pattern.diameter[keep])
-    c = simulate(job, 1_500_000, seed=2, dots=sparse, bin_mm=5.0).counts.astype(float)
+    c = simulate(job.bench, 1_500_000, seed=2, dots=sparse, bin_mm=5.0).counts.astype(float)
     assert np.abs((ca - c) / np.sqrt(ca + c)).max() > 4
 
 
@@ -450,7 +450,7 @@ def test_design_honours_its_fill_range_with_few_iterations(tmp_path, fill_range,
     text = text.replace("fill_range = [0.0, 0.4]", f"fill_range = {fill_range}")
     (tmp_path / "job.toml").write_text(text)
     job = load_job(tmp_path / "job.toml", need_map=False)
-    fill = design(job, seed=1, rays=40_000, iterations=iterations).fill
+    fill = design(job.bench, seed=1, rays=40_000, iterations=iterations).fill
     lo, hi = fill_range
     assert fill.min() >= lo - 1e-12 and fill.max() <= hi + 1e-12
     if iterations > 1:
@@ -475,7 +475,7 @@ def test_the_guide_as_a_scene_gives_the_single_slab_kernels_counts():
     that kernel (optdot 840ef03) gave for this job, rays and seed, ray for ray."""
     job = load_job(SAMPLES / "lgp" / "job.toml", need_map=False)
     grid = np.linspace(0.05, 0.35, 40)[:, None] * np.ones((1, 60))
-    sim = simulate(job, 300_000, seed=3, coverage=Coverage(grid, 0.0, 0.0, 0.5, 0.5))
+    sim = simulate(job.bench, 300_000, seed=3, coverage=Coverage(grid, 0.0, 0.0, 0.5, 0.5))
     assert sim.fates == {
         "extracted": 201618,
         "absorbed_bulk": 1602,
@@ -533,7 +533,7 @@ def test_design_stops_when_the_map_no_longer_changes_anything_the_rays_resolve(t
     job = load_job(SAMPLES / "lgp" / "job.toml", need_map=False)
     film = load_job(SAMPLES / "minled" / "job.toml", need_map=False)
     for j in (job, film):
-        got = design(j, seed=1, rays=60_000)
+        got = design(j.bench, seed=1, rays=60_000)
         n = len(got.history)
         assert n < 16 and got.stopped.startswith(f"stopped after {n} of at most 16")
         judged = got.history[-2]  # the trace that found nothing left to correct
@@ -556,15 +556,15 @@ def test_a_design_with_a_target_stops_on_its_structure_against_the_target(tmp_pa
     job = load_job(SAMPLES / "lgp" / "job.toml", need_map=False)
     ramp = np.repeat([[1.0, 2.0, 3.0]], 2, axis=0)
     aimed = replace(job, design=replace(job.design, target=ramp))
-    got = design(aimed, seed=1, rays=60_000)
+    got = design(aimed.bench, seed=1, rays=60_000)
     assert len(got.history) < 16 and "against the target" in got.stopped
     judged = got.history[-2]
     assert judged["luminance_rms_target"] < judged["luminance_rms"]
     with pytest.raises(JobError, match="under 10 a cell"):  # a map of noise, never settled
-        design(job, seed=1, rays=1000)
+        design(job.bench, seed=1, rays=1000)
     hidden = replace(job, viewing_area=(14.9, 9.9, 15.1, 10.1))  # not one design cell's centre
     with pytest.raises(JobError, match="smaller bezel or a larger active_area"):
-        design(hidden, seed=1, rays=60_000)
+        design(hidden.bench, seed=1, rays=60_000)
     text = (SAMPLES / "lgp" / "job.toml").read_text().replace("[design]", "[design]\ntolerance = 2")
     (tmp_path / "job.toml").write_text(text)
     one_error(("check", tmp_path / "job.toml"), 2, "design.tolerance = 2.0", "0 <= x <= 1")

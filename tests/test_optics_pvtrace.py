@@ -120,7 +120,7 @@ def test_pvtrace_agrees_on_extraction_and_losses():
         },
     }
     job = job_from_dict(raw, need_map=False)
-    ours = simulate(job, 1_000_000, seed=3, dots=Pattern(centres, D, (0.0, 0.0, W, H)))
+    ours = simulate(job.bench, 1_000_000, seed=3, dots=Pattern(centres, D, (0.0, 0.0, W, H)))
     theirs = _pvtrace(centres, RAYS)
     assert theirs["missed"] <= RAYS // 500
     emitted = RAYS - theirs["missed"]
@@ -133,5 +133,5 @@ def test_pvtrace_agrees_on_extraction_and_losses():
     p = theirs["not_coupled"] / emitted
     assert abs(ours.fates["not_coupled"] / ours.rays - p) < 3.5 * math.sqrt(p * (1 - p) / emitted)
     # the comparison can tell: the extraction differs by a quarter without the dots
-    bare = simulate(job, 200_000, seed=3, dots=Pattern(centres[:0], D, (0.0, 0.0, W, H)))
+    bare = simulate(job.bench, 200_000, seed=3, dots=Pattern(centres[:0], D, (0.0, 0.0, W, H)))
     assert bare.efficiency < 0.05 < theirs["extracted"] / injected

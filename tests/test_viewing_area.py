@@ -150,7 +150,7 @@ def test_simulate_measures_the_viewing_area_and_reports_the_hot_spots_hidden_out
     from optdot.optics.simulate import simulate
 
     job = load_job(_lgp_with(tmp_path, "bezel = [0, 3, 0, 0]"))
-    sim = simulate(job, 200_000, seed=1, bin_mm=0.5)
+    sim = simulate(job.bench, 200_000, seed=1, bin_mm=0.5)
     yc = (np.arange(sim.measured.shape[0]) + 0.5) * sim.bin[1]
     assert sim.measured[yc < 3.0].sum() == 0 and sim.measured[yc > 3.0].all()
     assert sim.border == 0.0
@@ -173,7 +173,7 @@ def test_simulate_without_a_viewing_area_leaves_out_its_border_and_says_what_is_
     from optdot.optics.simulate import simulate
 
     job = load_job(_lgp_with(tmp_path, ""))
-    sim = simulate(job, 100_000, seed=1, bin_mm=1.0)
+    sim = simulate(job.bench, 100_000, seed=1, bin_mm=1.0)
     assert sim.border == 5.0 and sim.area is None
     assert sim.measured.sum() == 20 * 10
     peak, (x, y) = sim.hidden_peak()
@@ -293,7 +293,7 @@ def test_the_luminance_plot_draws_the_measured_region(tmp_path, monkeypatch):
     from optdot.optics.writing import luminance_png
 
     job = load_job(_lgp_with(tmp_path, "bezel = [0, 3, 0, 0]"))
-    sim = simulate(job, 20_000, seed=1, bin_mm=0.5)
+    sim = simulate(job.bench, 20_000, seed=1, bin_mm=0.5)
     drawn = _dashed_frames(monkeypatch)
     luminance_png(tmp_path / "l.png", sim, "t")
     # the bins as traced and their smoothed view: the measured region on each

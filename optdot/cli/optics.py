@@ -129,16 +129,17 @@ def simulate(job_file, pattern, trace, bins, files, quiet):
         dots = _read_with_job(pattern, job)
         traced_as_made(pattern, dots, job)
     t0 = time.perf_counter()
-    sim = run(job, rays, seed, dots=dots, bin_mm=bin_mm, spot_mm=spot_mm, border_mm=border_mm)
-    if trace.halo and is_direct(job):
+    bench = job.bench
+    sim = run(bench, rays, seed, dots=dots, bin_mm=bin_mm, spot_mm=spot_mm, border_mm=border_mm)
+    if trace.halo and is_direct(bench):
         from ..optics.halo import halo as one_led
 
-        sim.extra["halo"] = one_led(job, max(rays // 4, 1000), seed, dots=dots)
+        sim.extra["halo"] = one_led(bench, max(rays // 4, 1000), seed, dots=dots)
     if dots is not None and job.process is not None and job.process.gain_tolerance > 0:
         from ..optics.band import tolerance_band
 
         sim.extra["tolerance_band"] = tolerance_band(
-            job, dots, sim, rays, seed, bin_mm=bin_mm, spot_mm=spot_mm, border_mm=border_mm
+            bench, dots, sim, rays, seed, bin_mm=bin_mm, spot_mm=spot_mm, border_mm=border_mm
         )
     seconds = time.perf_counter() - t0  # printed, not written: same seed, same bytes
     _print_simulation(sim, seconds)
@@ -154,7 +155,7 @@ def simulate(job_file, pattern, trace, bins, files, quiet):
         click.echo(f"optdot: warning: {warning}", err=True)
     with transaction():
         if json_path is not None:
-            write_text(json_path, simulation_json(sim, job, pattern, dots.n if dots else None))
+            write_text(json_path, simulation_json(sim, bench, pattern, dots.n if dots else None))
         if png_path is not None:
             luminance_png(png_path, sim, job.name)
 
@@ -297,8 +298,8 @@ def design(job_file, output, png_path, job_out, rays, iterations, seed, quiet):
         from ..config.shaping import check_shaped_fill
 
         check_shaped_fill(job, job.design.fill_range[1], f"{job_file}: design.fill_range")
-    check_iterations(job, iterations or job.design.iterations)
-    nx, ny, dx, dy = design_grid(job)
+    check_iterations(job.bench, iterations or job.design.iterations)
+    nx, ny, dx, dy = design_grid(job.bench)
     p = job.design
     if not quiet:
         click.echo(
@@ -329,11 +330,11 @@ def design(job_file, output, png_path, job_out, rays, iterations, seed, quiet):
                 err=True,
             )
 
-    got = run(job, seed=seed, rays=rays, iterations=iterations, report=report)
+    got = run(job.bench, seed=seed, rays=rays, iterations=iterations, report=report)
     if not quiet:
         click.echo(f"design {got.stopped}", err=True)
     with transaction():
-        write_design(got, job, output, png_path, job_out)
+        write_design(got, job.bench, output, png_path, job_out)
     last = got.history[-1]
     if got.sizes is not None:
         lo_d, hi_d = got.sizes

@@ -26,6 +26,7 @@ from ..printing.laser import Laser
 from ..printing.process import Process
 from ..printing.sheet import Sheet
 from .backlight import Backlight
+from .bench import Bench
 from .grids import validate_grid
 from .light_guide import DesignParams, LightGuide
 from .viewing import DEFAULT_VIEW, Viewing, viewing
@@ -322,6 +323,25 @@ class Job:
                 )
         validate_grid(self.density.grid, f"{where}: density.grid")
 
+    @cached_property
+    def bench(self) -> Bench:
+        """What the optics take from the job (:class:`~optdot.config.bench.Bench`)."""
+        return Bench(
+            source=self.source,
+            name=self.name,
+            domain=self.domain,
+            density=self.density,
+            viewing_area=self.viewing_area,
+            light_guide=self.light_guide,
+            backlight=self.backlight,
+            design=self.design,
+            process=self.process,
+            shape=self.shape,
+            sizes=self.sizes,
+            diameter=self.diameter,
+            close_gap=self.qa.effective_close_gap,
+        )
+
     @property
     def min_distance(self) -> float:
         """Smallest allowed centre distance, mm (diameter + gap; with ``sizes``, of two
@@ -410,10 +430,7 @@ class Job:
     @cached_property
     def cell_weights(self) -> np.ndarray | None:
         """``[ny, nx]`` share of each grid cell inside the domain (None: all of it)."""
-        if self.domain.rectangle:
-            return None
-        d = self.density
-        return self.domain.cell_fractions(d.x0, d.y0, *d.cell_size, d.shape[1], d.shape[0])
+        return self.domain.map_weights(self.density)
 
     @property
     def n_dots(self) -> int:

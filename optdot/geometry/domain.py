@@ -124,6 +124,15 @@ class Domain:
             return 0
         return int(room.buffer(h, quad_segs=16).area / (np.pi * h * h)) + 1
 
+    def map_weights(self, density) -> np.ndarray | None:
+        """``[ny, nx]`` share of each cell of ``density`` (a
+        :class:`~optdot.geometry.density.DensityMap`) inside the domain, or None for a
+        rectangle (all of every cell)."""
+        if self.rectangle:
+            return None
+        d = density
+        return self.cell_fractions(d.x0, d.y0, *d.cell_size, d.shape[1], d.shape[0])
+
     def cell_fractions(
         self, x0: float, y0: float, cw: float, ch: float, nx: int, ny: int
     ) -> np.ndarray:

@@ -19,7 +19,7 @@ BAND_FIGURES = (
 )
 
 
-def tolerance_band(job, dots, nominal, rays: int, seed: int, **where) -> dict:
+def tolerance_band(bench, dots, nominal, rays: int, seed: int, **where) -> dict:
     """``{"gain_mm": [3], <figure>: [3]}`` at ``gain - tol``, nominal and ``gain + tol``:
     the pattern ``dots`` (the nominal print) grown by ``∓tol``
     (:func:`optdot.printing.process.grown_sizes`) and traced with the same ``rays`` and
@@ -27,7 +27,7 @@ def tolerance_band(job, dots, nominal, rays: int, seed: int, **where) -> dict:
     ``nominal`` (its :class:`~optdot.optics.simulate.Simulation`)."""
     band = {"gain_mm": [], **{k: [] for k in BAND_FIGURES}}
     feet = dots.shape
-    for delta in job.process.gain_ends():
+    for delta in bench.process.gain_ends():
         if delta == 0.0:
             s = nominal.summary()
         else:
@@ -35,8 +35,8 @@ def tolerance_band(job, dots, nominal, rays: int, seed: int, **where) -> dict:
             other = replace(
                 dots, diameter=grown.diameter, dots=None if dots.dots is None else grown
             )
-            s = simulate(job, rays, seed, dots=other, **where).summary()
-        band["gain_mm"].append(job.process.dot_gain + delta)
+            s = simulate(bench, rays, seed, dots=other, **where).summary()
+        band["gain_mm"].append(bench.process.dot_gain + delta)
         for k in BAND_FIGURES:
             band[k].append(s[k])
     return band

@@ -48,7 +48,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.ndimage import distance_transform_edt, gaussian_filter, map_coordinates, zoom
 
-from ..config.job import Job
+from ..config.bench import Bench
 from ..errors import JobError
 from ..geometry.caps import cap_shares, design_bands, ring_shares, ring_table
 from ..geometry.domain import centres_in_box, polygon_cell_fractions
@@ -184,7 +184,7 @@ class Update:
 DISAGREEMENTS = 2
 
 
-def sizes_asked(job: Job, fill_max: float) -> tuple[float, float] | None:
+def sizes_asked(bench: Bench, fill_max: float) -> tuple[float, float] | None:
     """The diameter range ``(low, high)`` (mm, high rounded up to 1 µm) whose largest dots
     keep QA's close gap at ``fill_max``: with a claim ``fill (1 + gap / D) ** 2`` of at
     most :data:`SIZE_CLAIM`, or of :data:`~optdot.geometry.limits.MAX_RANDOM_FILL` for a
@@ -194,50 +194,50 @@ def sizes_asked(job: Job, fill_max: float) -> tuple[float, float] | None:
     Raises:
         JobError: no dot size up to :data:`MAX_SIZE_ASKED` reaches ``fill_max``.
     """
-    if not job.shape.kind.round:
+    if not bench.shape.kind.round:
         return None
-    gap = job.qa.effective_close_gap
-    top = job.sizes.high if job.sizes is not None else job.diameter
+    gap = bench.close_gap
+    top = bench.sizes.high if bench.sizes is not None else bench.diameter
     if fill_max * (1 + gap / top) ** 2 <= SIZE_CLAIM:
         return None
-    low = job.sizes.low if job.sizes is not None else job.diameter
+    low = bench.sizes.low if bench.sizes is not None else bench.diameter
     claim = SIZE_CLAIM if fill_max <= SIZE_SWITCH * SIZE_CLAIM else MAX_RANDOM_FILL
     high = gap / (math.sqrt(claim / fill_max) - 1) if fill_max < claim else math.inf
     if high > MAX_SIZE_ASKED:
         raise JobError(
-            f"{job.source or 'job'}: the designed map's largest fill {fill_max:.3g} is more "
+            f"{bench.where}: the designed map's largest fill {fill_max:.3g} is more "
             f"than dots up to {MAX_SIZE_ASKED:g} mm reach with a {gap * 1e3:.3g} µm gap; "
             "lower design.fill_range's top"
         )
     return low, max(low, math.ceil(round(high * 1e3, 6)) / 1e3)
 
 
-def check_iterations(job: Job, n_iter: int) -> None:
+def check_iterations(bench: Bench, n_iter: int) -> None:
     """Refuse a design of one iteration: the first iteration only traces the map it
     starts from (a film's bare film, a guide's flat level), so one would return that
     start, never a designed map."""
     if n_iter < 2:
-        start = "the bare film" if prints_on_film(job) else "a flat map at its starting level"
+        start = "the bare film" if prints_on_film(bench) else "a flat map at its starting level"
         raise JobError(
-            f"{job.source or 'job'}: design.iterations = {n_iter}: a map needs at least 2 "
+            f"{bench.where}: design.iterations = {n_iter}: a map needs at least 2 "
             f"(the first traces {start}, the next the first designed map)"
         )
 
 
-def prints_on_film(job: Job) -> bool:
+def prints_on_film(bench: Bench) -> bool:
     """The job's dots are printed on a film (direct-lit, or over the guide): more ink
     means less light through (the film rule), not more out of the guide."""
-    return job.backlight is not None and job.backlight.print == "film"
+    return bench.backlight is not None and bench.backlight.print == "film"
 
 
-def design_grid(job: Job) -> tuple[int, int, float, float]:
+def design_grid(bench: Bench) -> tuple[int, int, float, float]:
     """``(nx, ny, dx, dy)`` of the design grid over the panel box: cells of ``[design]
     cell`` mm, by default a tenth of a direct-lit grid's LED pitch (at least
     :data:`MIN_CELL`, and no more cells than ``simulate``'s default bins), else 1 mm."""
-    x0, y0, x1, y1 = job.box
-    c = job.design.cell
+    x0, y0, x1, y1 = bench.box
+    c = bench.design.cell
     if c is None:
-        pitch = job.backlight.pitch if job.backlight is not None else None
+        pitch = bench.backlight.pitch if bench.backlight is not None else None
         c = 1.0
         if pitch is not None:  # no finer than the bins simulate makes by default
             floor = math.sqrt((x1 - x0) * (y1 - y0) / DEFAULT_BINS)
@@ -248,29 +248,30 @@ def design_grid(job: Job) -> tuple[int, int, float, float]:
 
 
 def design(
-    job: Job,
+    bench: Bench,
     seed: int = 0,
     rays: int | None = None,
     iterations: int | None = None,
     report: Callable[[dict], None] | None = None,
     start: np.ndarray | None = None,
 ) -> Designed:
-    """Design the fill map of ``job``'s light guide (see the module doc).
+    """Design the fill map of a job's light guide (see the module doc).
 
     Args:
-        job: with a ``[light_guide]``; ``[design]`` sets cell, fill range, target.
+        bench: a job's (:attr:`~optdot.config.job.Job.bench`) with a ``[light_guide]``;
+            ``[design]`` sets cell, fill range, target.
         seed: Monte Carlo seed (each iteration offsets it).
         rays: rays of the last iteration (default ``[design] rays`` or 400 per cell).
         iterations: most iterations (default ``[design] iterations``).
         report: called with each iteration's figures.
         start: ``[ny, nx]`` starting map (default uniform at the middle of the range).
     """
-    if not has_optics(job):
-        raise JobError(f"{job.source or 'job'}: no [light_guide] or [backlight] to design for")
-    p = job.design
-    nx, ny, dx, dy = design_grid(job)
-    x0, y0 = job.box[:2]
-    inside, panel, capped = _shares(job, nx, ny, dx, dy)
+    if not has_optics(bench):
+        raise JobError(f"{bench.where}: no [light_guide] or [backlight] to design for")
+    p = bench.design
+    nx, ny, dx, dy = design_grid(bench)
+    x0, y0 = bench.box[:2]
+    inside, panel, capped = _shares(bench, nx, ny, dx, dy)
     lo, hi = p.fill_range
     target = _target(p.target, ny, nx)
     total = rays or p.rays or RAYS_PER_CELL * nx * ny
@@ -279,23 +280,23 @@ def design(
     cells = max(int(live.sum()), 1)
     if total < MIN_RAYS_PER_CELL * cells:
         raise JobError(
-            f"{job.source or 'job'}: {total:,} rays for {cells:,} design cells is under "
+            f"{bench.where}: {total:,} rays for {cells:,} design cells is under "
             f"{MIN_RAYS_PER_CELL} a cell: each cell's luminance would be mostly the rays' "
             f"noise ({1 / math.sqrt(max(total / cells, 1e-9)):.0%} or more); give at least "
             f"{MIN_RAYS_PER_CELL * cells:,} rays (--rays or design.rays) or larger cells "
             "(design.cell)"
         )
-    seen = live & _in_area(job, nx, ny, dx, dy)
+    seen = live & _in_area(bench, nx, ny, dx, dy)
     grades = None
     update = Update()
     if start is None:
-        check_iterations(job, n_iter)
-    if prints_on_film(job):
+        check_iterations(bench, n_iter)
+    if prints_on_film(bench):
         phi = np.full((ny, nx), lo) if start is None else np.array(start, np.float64)
-        if job.domain.cap_rings is not None:
-            grades = Grades(job, nx, ny, dx, dy)
+        if bench.domain.cap_rings is not None:
+            grades = Grades(bench, nx, ny, dx, dy)
         shares = (inside, panel, capped)
-        step = _film_step(job, nx, ny, dx, dy, shares, live, target, seen, update, grades)
+        step = _film_step(bench, nx, ny, dx, dy, shares, live, target, seen, update, grades)
     else:
         # the level starts at LEVEL_START of the top (never under the floor) and reaches
         # the top by the last update however few the iterations: fill_range is honoured
@@ -312,7 +313,7 @@ def design(
         last = it == n_iter - 1 or finishing
         n_rays = total if last else min(total, max(1000, total // 16) * 2**it)
         cov = Coverage(phi * inside, x0, y0, dx, dy)
-        now = job if grades is None else grades.job(job)
+        now = bench if grades is None else grades.printing(bench)
         sim = simulate(now, n_rays, seed + 7919 * it, coverage=cov, bins=(nx, ny))
         figures = _figures(it, sim, None if p.target is None else target)
         history.append(figures)
@@ -337,13 +338,13 @@ def design(
     assert sim is not None
     if not phi.max() > 0:
         raise JobError(
-            f"{job.source or 'job'}: the designed map is empty: the luminance follows the "
+            f"{bench.where}: the designed map is empty: the luminance follows the "
             "target without any ink (nothing to print), or design.fill_range leaves none"
         )
     sizes = None
-    if prints_on_film(job):
+    if prints_on_film(bench):
         dotted = inside > 1e-9
-        sizes = sizes_asked(job, float(phi[dotted].max()) if dotted.any() else 0.0)
+        sizes = sizes_asked(bench, float(phi[dotted].max()) if dotted.any() else 0.0)
         if capped is not None:
             phi = _extended(phi, dotted & live)
     ink = None if grades is None else grades.ink
@@ -404,12 +405,12 @@ def _target(target: np.ndarray | None, ny: int, nx: int) -> np.ndarray:
     return np.maximum(t, 0.0) / max(float(t.mean()), 1e-300)
 
 
-def _shares(job: Job, nx: int, ny: int, dx: float, dy: float):
+def _shares(bench: Bench, nx: int, ny: int, dx: float, dy: float):
     """``(inside, panel, capped)``, each ``[ny, nx]`` over the design grid: the share of
     each cell where dots may go, where the light is seen (the panel: ``inside`` when the
     job has no caps) and under a cap (None without caps)."""
-    x0, y0 = job.box[:2]
-    dom = job.domain
+    x0, y0 = bench.box[:2]
+    dom = bench.domain
     inside = polygon_cell_fractions(dom.geometry, x0, y0, dx, dy, nx, ny, dom.rectangle)
     if dom.caps is None:
         return inside, inside, None
@@ -417,13 +418,13 @@ def _shares(job: Job, nx: int, ny: int, dx: float, dy: float):
     return inside, panel, cap_shares(dom.caps, x0, y0, dx, dy, nx, ny)
 
 
-def _in_area(job: Job, nx: int, ny: int, dx: float, dy: float) -> np.ndarray:
+def _in_area(bench: Bench, nx: int, ny: int, dx: float, dy: float) -> np.ndarray:
     """``[ny, nx]`` bool: design cells whose centres lie in the job's viewing area
     (every cell without one)."""
-    if job.viewing_area is None:
+    if bench.viewing_area is None:
         return np.ones((ny, nx), bool)
-    x0, y0 = job.box[:2]
-    seen = centres_in_box(x0, y0, dx, dy, nx, ny, job.viewing_area)
+    x0, y0 = bench.box[:2]
+    seen = centres_in_box(x0, y0, dx, dy, nx, ny, bench.viewing_area)
     return seen if seen.any() else np.ones((ny, nx), bool)
 
 
@@ -484,14 +485,14 @@ class Grades:
             mm; capped: ``[ny, nx]`` the share of each design cell they print.
     """
 
-    def __init__(self, job: Job, nx: int, ny: int, dx: float, dy: float) -> None:
-        leds = job.backlight.leds
+    def __init__(self, bench: Bench, nx: int, ny: int, dx: float, dy: float) -> None:
+        leds = bench.backlight.leds
         self.diameter = float(leds.cap)
-        self.caps = job.domain.caps
+        self.caps = bench.domain.caps
         given = leds.cap_ink
         n = design_bands(self.diameter)
         self.ink = np.zeros(n) if isinstance(given, str) else np.array(given, np.float64)
-        self.grid = (*job.box[:2], dx, dy, nx, ny)
+        self.grid = (*bench.box[:2], dx, dy, nx, ny)
         self._set(self.ink)
 
     def _set(self, ink: np.ndarray) -> None:
@@ -499,9 +500,9 @@ class Grades:
         self.rings = ring_table(self.diameter, ink)
         self.capped = ring_shares(self.caps, self.rings, *self.grid)
 
-    def job(self, job: Job) -> Job:
-        """``job`` printing the rings of now."""
-        return replace(job, domain=replace(job.domain, cap_rings=self.rings))
+    def printing(self, bench: Bench) -> Bench:
+        """``bench`` printing the rings of now."""
+        return replace(bench, domain=replace(bench.domain, cap_rings=self.rings))
 
     def update(self, logq: np.ndarray, judged: np.ndarray, k: float, level: float) -> None:
         """One step of the bands: ``logq`` ``[ny, nx]`` the cells' log ratios, ``k`` the
@@ -525,7 +526,7 @@ class Grades:
         self._set(np.clip((1.0 - v) / k, 0.0, 1.0))
 
 
-def _film_step(job, nx, ny, dx, dy, shares, live, target, seen, update=None, grades=None):
+def _film_step(bench, nx, ny, dx, dy, shares, live, target, seen, update=None, grades=None):
     """The film rule's update ``step(phi, sim) -> phi`` (see the module doc): the map's
     clear share carries light through, so the multiplicative step acts on each cell's
     relative transmission ``v = 1 - k phi`` (``k = 1 - T_ink / T_clear``), and the map is
@@ -551,9 +552,9 @@ def _film_step(job, nx, ny, dx, dy, shares, live, target, seen, update=None, gra
     for the top fill, and the largest dots the job's sizes allow.)
 
     ``update`` (:class:`Update`, a new one when None) measures each step."""
-    lo, hi = job.design.fill_range
-    k = job.backlight.ink_contrast
-    classes = period_classes(job, nx, ny, dx, dy)
+    lo, hi = bench.design.fill_range
+    k = bench.backlight.ink_contrast
+    classes = period_classes(bench, nx, ny, dx, dy)
     update = update if update is not None else Update()
     inside, panel, capped = shares
 
@@ -564,7 +565,7 @@ def _film_step(job, nx, ny, dx, dy, shares, live, target, seen, update=None, gra
 
         if classes is not None:
             logq = fold(logq, w, classes)
-        logq = _smoothed(logq, w, job.design.smoothing)
+        logq = _smoothed(logq, w, bench.design.smoothing)
         now = capped if grades is None else grades.capped
         if now is None:
             ink = phi

@@ -25,7 +25,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..config.job import Job
+from ..config.bench import Bench
 from ..errors import JobError
 from ..pattern import DotSource
 from .scene import Coverage, is_direct, scene_of
@@ -38,18 +38,18 @@ RINGS_PER_PITCH = 40
 MAP_BINS_PER_PITCH = 8
 
 
-def halo_led(job: Job) -> int:
+def halo_led(bench: Bench) -> int:
     """Index of the LED nearest the centre of the viewing area (else of the panel)."""
-    bl = job.backlight
+    bl = bench.backlight
     assert bl is not None and bl.leds is not None
-    x0, y0, x1, y1 = job.viewing_area or job.box
+    x0, y0, x1, y1 = bench.viewing_area or bench.box
     xy = bl.leds.positions
     d = np.hypot(xy[:, 0] - 0.5 * (x0 + x1), xy[:, 1] - 0.5 * (y0 + y1))
     return int(np.argmin(d))
 
 
 def halo(
-    job: Job,
+    bench: Bench,
     rays: int,
     seed: int = 0,
     dots: DotSource | None = None,
@@ -69,13 +69,13 @@ def halo(
     Raises:
         JobError: the job is not direct-lit.
     """
-    if not is_direct(job):
-        raise JobError(f"{job.source or 'job'}: a halo needs a direct-lit [backlight]")
-    bl = job.backlight
+    if not is_direct(bench):
+        raise JobError(f"{bench.where}: a halo needs a direct-lit [backlight]")
+    bl = bench.backlight
     assert bl is not None and bl.leds is not None
-    k = halo_led(job)
+    k = halo_led(bench)
     cx, cy = (float(v) for v in bl.leds.positions[k])
-    x0, y0, x1, y1 = job.box
+    x0, y0, x1, y1 = bench.box
     reach = min(cx - x0, x1 - cx, cy - y0, y1 - cy)
     scale = bl.pitch if bl.pitch is not None else bl.gap
     dr = scale / RINGS_PER_PITCH
@@ -88,8 +88,8 @@ def halo(
     side = max(1, int(reach / cell))
     square = (cx - side * cell, cx + side * cell, cy - side * cell, cy + side * cell)
     lit = np.zeros((2 * side, 2 * side), np.int64)
-    scene = scene_of(job, rays, dots, coverage, only_led=k)
-    for px, py, _ in traced(job, scene, seed, rays, fates, progress):
+    scene = scene_of(bench, rays, dots, coverage, only_led=k)
+    for px, py, _ in traced(bench, scene, seed, rays, fates, progress):
         h, _, _ = np.histogram2d(py, px, bins=(2 * side, 2 * side), range=(square[2:], square[:2]))
         lit += h.astype(np.int64)
         dx, dy = px - cx, py - cy

@@ -18,23 +18,23 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config.job import Job
+from ..config.bench import Bench
 
 #: How close to a whole number the cells per pitch and the grid's offset must be.
 TOLERANCE = 1e-6
 
 
-def period_classes(job: Job, nx: int, ny: int, dx: float, dy: float) -> np.ndarray | None:
+def period_classes(bench: Bench, nx: int, ny: int, dx: float, dy: float) -> np.ndarray | None:
     """``[ny, nx]`` int64 class of each design cell (cells of one class get one
     correction), or None when the grid's symmetry does not hold (see the module doc)."""
-    bl = job.backlight
+    bl = bench.backlight
     if bl is None or bl.leds is None or bl.leds.pitch is None:
         return None
-    if job.design.target is not None or not _rectangle_panel(job):
+    if bench.design.target is not None or not _rectangle_panel(bench):
         return None
     px, py = bl.leds.pitch
     xy = bl.leds.positions
-    x0, y0 = job.box[:2]
+    x0, y0 = bench.box[:2]
     ix = _axis(nx, dx, px, float(xy[:, 0].min()) - 0.5 * px - x0, len(np.unique(xy[:, 0])))
     iy = _axis(ny, dy, py, float(xy[:, 1].min()) - 0.5 * py - y0, len(np.unique(xy[:, 1])))
     if ix is None or iy is None:
@@ -74,13 +74,13 @@ def fold(logq_w: np.ndarray, w: np.ndarray, classes: np.ndarray) -> np.ndarray:
     return mean[classes] * w
 
 
-def _rectangle_panel(job: Job) -> bool:
+def _rectangle_panel(bench: Bench) -> bool:
     """The panel is its box: the plain rectangle, or one whose only holes are the caps
     over its LEDs (they sit on the grid, so the symmetry holds)."""
-    dom = job.domain
+    dom = bench.domain
     if dom.rectangle:
         return True
-    x0, y0, x1, y1 = job.box
+    x0, y0, x1, y1 = bench.box
     return dom.caps is not None and abs(dom.lit.area - (x1 - x0) * (y1 - y0)) <= 1e-9 * (
         (x1 - x0) * (y1 - y0)
     )

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config.backlight import Backlight
-from ..config.job import Job
+from ..config.bench import Bench
 from ..config.light_guide import EDGE_FINISH, REFLECTOR_FINISH, LightGuide
 from ..errors import JobError
 from ..geometry.caps import cap_shares, no_caps
@@ -89,36 +89,37 @@ class Coverage:
     dy: float
 
 
-def coverage_of(job: Job) -> Coverage:
+def coverage_of(bench: Bench) -> Coverage:
     """The job's map as a coverage raster: fill times the share of each cell inside the
     panel."""
-    d = job.density
+    d = bench.density
     g = np.array(d.grid, dtype=np.float64)
-    w = job.cell_weights
+    w = bench.cell_weights
     if w is not None:
         g = g * w
     dx, dy = d.cell_size
     return Coverage(np.clip(g, 0, 1), d.x0, d.y0, dx, dy)
 
 
-def is_direct(job: Job) -> bool:
+def is_direct(bench: Bench) -> bool:
     """The job's backlight is direct-lit (LEDs under the printed film)."""
-    return job.backlight is not None and job.backlight.kind == "direct"
+    return bench.backlight is not None and bench.backlight.kind == "direct"
 
 
-def has_optics(job: Job) -> bool:
+def has_optics(bench: Bench) -> bool:
     """The job says what its dots are printed in (``[light_guide]`` or ``[backlight]``)."""
-    return job.light_guide is not None or job.backlight is not None
+    return bench.light_guide is not None or bench.backlight is not None
 
 
 def scene_of(
-    job: Job,
+    bench: Bench,
     rays: int,
     dots: DotSource | None = None,
     coverage: Coverage | None = None,
     only_led: int | None = None,
 ) -> Scene:
-    """The tracer's scene of ``job``'s backlight, ``rays`` rays shared among its LEDs.
+    """The tracer's scene of a job's backlight (``bench``), ``rays`` rays shared among
+    its LEDs.
 
     Args:
         dots: the real pattern on the printed face (None: the map's coverage).
@@ -128,13 +129,13 @@ def scene_of(
     Raises:
         JobError: no light guide or backlight; a guide that is several pieces.
     """
-    if not has_optics(job):
-        raise JobError(f"{job.source or 'job'}: no [light_guide] or [backlight] to trace")
-    box = job.box
-    walls, normals = _walls(job)
-    bl = job.backlight
+    if not has_optics(bench):
+        raise JobError(f"{bench.where}: no [light_guide] or [backlight] to trace")
+    box = bench.box
+    walls, normals = _walls(bench)
+    bl = bench.backlight
     if bl is None or bl.kind == "edge":
-        guide = job.light_guide
+        guide = bench.light_guide
         assert guide is not None
         sources = _edge_sources(guide, rays, box)
         layer, face = _edge_stack(guide, bl)
@@ -144,7 +145,7 @@ def scene_of(
         layer, face = _direct_stack(bl)
     face[:, F_TEST] = (face[:, F_KIND] == BOTTOM_FACE) | (face[:, F_PRINT] > 0)
     stack = Stack(layer, face, walls, normals, MAX_EVENTS)
-    return Scene(sources, stack, _print(job, dots, coverage))
+    return Scene(sources, stack, _print(bench, dots, coverage))
 
 
 def probe(scene: Scene, events: int) -> Scene:
@@ -351,15 +352,14 @@ def _direct_stack(bl: Backlight) -> tuple[np.ndarray, np.ndarray]:
     return layer, face
 
 
-def _walls(job: Job) -> tuple[np.ndarray, np.ndarray]:
+def _walls(bench: Bench) -> tuple[np.ndarray, np.ndarray]:
     """The side walls: the panel outline's outer ring as segments, with inward normals.
     Holes and keep-outs are clear slab without dots (a keep-out touching the edge is no
     notch in the slab)."""
-    polys = job.domain.slab_polygons()
+    polys = bench.domain.slab_polygons()
     if len(polys) != 1:
         raise JobError(
-            f"{job.source or 'job'}: the panel is {len(polys)} separate pieces; a backlight "
-            "is one stack"
+            f"{bench.where}: the panel is {len(polys)} separate pieces; a backlight is one stack"
         )
     ring = np.asarray(polys[0].exterior.coords)[:-1]  # counter-clockwise
     a, b = ring, np.roll(ring, -1, axis=0)
@@ -374,26 +374,26 @@ def _walls(job: Job) -> tuple[np.ndarray, np.ndarray]:
 # -- what is printed ---------------------------------------------------------------------
 
 
-def _print(job: Job, dots: DotSource | None, coverage: Coverage | None) -> Print:
+def _print(bench: Bench, dots: DotSource | None, coverage: Coverage | None) -> Print:
     """The printed faces: the job's dots (or the coverage of its map), the caps (the
     dots' own, else the job's), and the other face's coverage. A coverage raster holds
     the dots' share of each cell; with caps it is turned into the share of the cell
     outside its caps (the tracer tests the caps first)."""
-    other = _other_coverage(job)
+    other = _other_coverage(bench)
     phi2 = np.ascontiguousarray(other.grid, dtype=np.float64)
     g2 = np.array([other.x0, other.y0, other.dx, other.dy], np.float64)
-    printed = dots.outline if dots is not None else job.domain  # the pattern's own caps
+    printed = dots.outline if dots is not None else bench.domain  # the pattern's own caps
     caps = (
         caps_of(dots) if dots is not None else no_caps() if printed.caps is None else printed.caps
     )
-    cap_start, cap, cap_g = cap_grid(caps, job.box)
+    cap_start, cap, cap_g = cap_grid(caps, bench.box)
     if printed is None or printed.cap_rings is None:
         ring = np.array([[0.0, np.inf]])  # solid caps, whatever their diameters
     else:
         ring = np.ascontiguousarray(printed.cap_rings**2, np.float64)
     caps_part = (cap_start, cap, cap_g, ring)
     if dots is None:
-        cov = coverage or coverage_of(job)
+        cov = coverage or coverage_of(bench)
         phi = np.ascontiguousarray(cov.grid, dtype=np.float64)
         if len(caps):
             ny, nx = phi.shape
@@ -403,7 +403,7 @@ def _print(job: Job, dots: DotSource | None, coverage: Coverage | None) -> Print
         start, x, y = np.zeros(2, np.int64), np.zeros(1), np.zeros(1)
         dots_part = (False, phi, g, start, x, y, np.zeros((1, 6)), np.ones(7))
     else:
-        start, x, y, foot, cg = dot_grid(dots, job.box)
+        start, x, y, foot, cg = dot_grid(dots, bench.box)
         dots_part = (True, np.zeros((1, 1)), np.ones(4), start, x, y, foot, cg)
     return Print(*dots_part, phi2, g2, *caps_part)
 
@@ -435,10 +435,10 @@ def _cells(x: np.ndarray, y: np.ndarray, rmax: float, box) -> tuple:
     return start, order, np.array([x0, y0, cell, cell, nx, ny, rmax], np.float64)
 
 
-def _other_coverage(job: Job) -> Coverage:
+def _other_coverage(bench: Bench) -> Coverage:
     """The second printed face's coverage (``backlight.other_map``), or an empty map."""
-    x0, y0, x1, y1 = job.box
-    bl = job.backlight
+    x0, y0, x1, y1 = bench.box
+    bl = bench.backlight
     value = bl.other_map if bl is not None and bl.kind == "edge" else 0.0
     grid = np.full((1, 1), float(value)) if np.isscalar(value) else np.asarray(value)
     ny, nx = grid.shape

@@ -19,7 +19,7 @@ Monte Carlo noise of each figure:
 The exitance of the top face is what a diffuser sheet turns into luminance, so the map is
 called luminance (relative: 1 = the mean over the measured region).
 
-Reproducible: the same job, rays and seed give the same counts on any thread count (each
+Reproducible: the same bench, rays and seed give the same counts on any thread count (each
 ray has its own random stream; counts are integers).
 """
 
@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..config.job import Job
+from ..config.bench import Bench
 from ..errors import JobError
 from ..pattern import DotSource
 from ..runtime.stop import check_interrupt
@@ -196,7 +196,7 @@ class Simulation:
 
 
 def simulate(
-    job: Job,
+    bench: Bench,
     rays: int,
     seed: int = 0,
     dots: DotSource | None = None,
@@ -211,7 +211,8 @@ def simulate(
     """Trace ``rays`` rays through the job's backlight.
 
     Args:
-        job: a job with a ``[light_guide]`` or a ``[backlight]``.
+        bench: a job's (:attr:`~optdot.config.job.Job.bench`) with a ``[light_guide]``
+            or a ``[backlight]``.
         rays: rays to emit (shared among the LEDs by power).
         seed: random seed (>= 0).
         dots: the real pattern to trace (explicit mode); None for the coverage mode.
@@ -226,27 +227,27 @@ def simulate(
         progress: ``progress(done, total)`` after each batch.
         only_led: light only this LED of a direct-lit grid (its index), for its halo.
     """
-    if not has_optics(job):
-        raise JobError(f"{job.source or 'job'}: no [light_guide] or [backlight] to simulate")
+    if not has_optics(bench):
+        raise JobError(f"{bench.where}: no [light_guide] or [backlight] to simulate")
     if not 1 <= rays <= 10**10:
-        raise JobError(f"{job.source or 'job'}: rays = {rays} must be 1..1e10")
+        raise JobError(f"{bench.where}: rays = {rays} must be 1..1e10")
     if seed < 0:
-        raise JobError(f"{job.source or 'job'}: seed = {seed} must be >= 0")
-    x0, y0, x1, y1 = box = job.box
-    area = job.viewing_area
+        raise JobError(f"{bench.where}: seed = {seed} must be >= 0")
+    x0, y0, x1, y1 = box = bench.box
+    area = bench.viewing_area
     given = border_mm is not None
     if border_mm is None:
         border_mm = 0.0 if area is not None else BORDER_MM
     short = min(x1 - x0, y1 - y0)
-    bin_mm = default_bin(job) if bin_mm is None else float(bin_mm)
+    bin_mm = default_bin(bench) if bin_mm is None else float(bin_mm)
     spot_mm = min(10.0, short / 6) if spot_mm is None else float(spot_mm)
     if not 0 < bin_mm <= max(x1 - x0, y1 - y0) or not 0 < spot_mm <= short / 3:
         raise JobError(
-            f"{job.source or 'job'}: bin {bin_mm:g} mm / spot {spot_mm:g} mm: must be > 0 and "
+            f"{bench.where}: bin {bin_mm:g} mm / spot {spot_mm:g} mm: must be > 0 and "
             f"fit the panel ({x1 - x0:g} x {y1 - y0:g} mm; bins at most its longer side, "
             "spots at most a third of the shorter side)"
         )
-    scene = scene_of(job, rays, dots, coverage, only_led)
+    scene = scene_of(bench, rays, dots, coverage, only_led)
     if bins is None:
         nbx = max(1, int(round((x1 - x0) / bin_mm)))
         nby = max(1, int(round((y1 - y0) / bin_mm)))
@@ -254,17 +255,17 @@ def simulate(
         nbx, nby = bins
     if nbx * nby > MAX_BINS:
         raise JobError(
-            f"{job.source or 'job'}: bins of {(x1 - x0) / nbx:.3g} x {(y1 - y0) / nby:.3g} mm "
+            f"{bench.where}: bins of {(x1 - x0) / nbx:.3g} x {(y1 - y0) / nby:.3g} mm "
             f"make {nbx * nby:,} over the panel, more than {MAX_BINS:,}; give a larger --bin"
         )
-    measured = _measured(job, nbx, nby, border_mm)
+    measured = _measured(bench, nbx, nby, border_mm)
     if not measured.any() and not given and border_mm > 0:  # a panel narrower than two
         border_mm = 0.0  # default borders: its figures over all of it (``border`` says so)
-        measured = _measured(job, nbx, nby, border_mm)
+        measured = _measured(bench, nbx, nby, border_mm)
     if not measured.any():
         where = "the viewing area" if area is not None else "the panel"
         raise JobError(
-            f"{job.source or 'job'}: a border of {border_mm:g} mm leaves no "
+            f"{bench.where}: a border of {border_mm:g} mm leaves no "
             f"{(x1 - x0) / nbx:.3g} x {(y1 - y0) / nby:.3g} mm bin of {where} to measure: give "
             + (
                 "a smaller --border or --bin"
@@ -278,7 +279,7 @@ def simulate(
     r2 = (0.5 * spot_mm) ** 2
     fates = np.zeros(len(FATES), np.int64)
     angles = Angles.empty()
-    for px, py, air in traced(job, scene, seed, rays, fates, progress):
+    for px, py, air in traced(bench, scene, seed, rays, fates, progress):
         angles.add(air)
         ix = np.clip(((px - x0) / (x1 - x0) * nbx).astype(np.int64), 0, nbx - 1)
         iy = np.clip(((py - y0) / (y1 - y0) * nby).astype(np.int64), 0, nby - 1)
@@ -301,13 +302,13 @@ def simulate(
         border=border_mm,
         seed=seed,
         area=area,
-        stack=job.backlight.kind if job.backlight is not None else "guide",
+        stack=bench.backlight.kind if bench.backlight is not None else "guide",
         angles=angles,
     )
 
 
 def traced(
-    job: Job,
+    bench: Bench,
     scene: Scene,
     seed: int,
     rays: int,
@@ -323,7 +324,7 @@ def traced(
     Raises:
         JobError: light stays in the stack, or none enters it.
     """
-    per_ray = _check_light_leaves(job, seed, rays, scene)
+    per_ray = _check_light_leaves(bench, seed, rays, scene)
     size = _batch(BATCH_SECONDS / max(per_ray, 1e-12))
     first = 0
     while first < rays:
@@ -335,7 +336,7 @@ def traced(
         fates += np.bincount(fate, minlength=len(FATES))
         if first == 0 and fates[UNCOUPLED] == count:
             raise JobError(
-                f"{job.source or 'job'}: no light enters the {_what(job)}: all {count:,} "
+                f"{bench.where}: no light enters the {_what(bench)}: all {count:,} "
                 "rays of the first batch are turned back at the LED edge (a collimated tilt "
                 "near 90 degrees meets the edge at grazing incidence)"
             )
@@ -388,7 +389,7 @@ def unfinished_warning(shares: dict[str, float]) -> str | None:
     )
 
 
-def _check_light_leaves(job, seed: int, rays: int, scene: Scene) -> float:
+def _check_light_leaves(bench, seed: int, rays: int, scene: Scene) -> float:
     """Refuse a set-up that keeps its light: a guide with nothing that lets light out
     (no dots, no absorption, mirror edges) traces every ray to :data:`MAX_EVENTS`, days
     for a default run. The first :data:`PROBE_RAYS` rays (the run's own) are traced with
@@ -417,35 +418,35 @@ def _check_light_leaves(job, seed: int, rays: int, scene: Scene) -> float:
     unfinished = share ** (MAX_EVENTS / PROBE_EVENTS)
     if unfinished > REFUSED_UNFINISHED:
         raise JobError(
-            f"{job.source or 'job'}: light hardly leaves this {_what(job)}: {inside:,} of the "
+            f"{bench.where}: light hardly leaves this {_what(bench)}: {inside:,} of the "
             f"first {entered:,} rays that entered are still inside after {PROBE_EVENTS:,} "
             f"events, so about {unfinished:.0%} of a run's rays would end unfinished at its "
-            f"limit of {MAX_EVENTS:,}; give the light a way out ({_ways_out(job)})"
+            f"limit of {MAX_EVENTS:,}; give the light a way out ({_ways_out(bench)})"
         )
     return per_ray
 
 
-def _ways_out(job: Job) -> str:
+def _ways_out(bench: Bench) -> str:
     """What lets light out of the job's stack, for a message."""
-    if job.backlight is None:
+    if bench.backlight is None:
         return "more dots, absorption > 0, edge_reflectance < 1, a reflector < 1"
     ways = "ink that transmits, a sheet that transmits more, frame < 1, a reflector < 1"
-    if job.backlight.kind == "edge":
+    if bench.backlight.kind == "edge":
         ways += ", edge_reflectance < 1"
     return ways
 
 
-def _what(job: Job) -> str:
-    return "backlight" if is_direct(job) else "guide"
+def _what(bench: Bench) -> str:
+    return "backlight" if is_direct(bench) else "guide"
 
 
-def default_bin(job: Job) -> float:
+def default_bin(bench: Bench) -> float:
     """The luminance bin, mm: a direct-lit grid's pitch / 10 (its LEDs' pattern resolved;
     no finer than :data:`DEFAULT_BINS` bins over the panel), else 1/20 of the panel's
     shorter side, at most 5 mm."""
-    x0, y0, x1, y1 = job.box
+    x0, y0, x1, y1 = bench.box
     short = min(x1 - x0, y1 - y0)
-    pitch = job.backlight.pitch if job.backlight is not None else None
+    pitch = bench.backlight.pitch if bench.backlight is not None else None
     if pitch is not None:  # at most DEFAULT_BINS of them
         floor = math.sqrt((x1 - x0) * (y1 - y0) / DEFAULT_BINS)
         return max(min(pitch / 10, short / 20), floor)
@@ -459,15 +460,15 @@ def _spot_centres(box) -> np.ndarray:
     return np.column_stack([gx.ravel(), gy.ravel()])
 
 
-def _measured(job: Job, nbx: int, nby: int, border: float) -> np.ndarray:
+def _measured(bench: Bench, nbx: int, nby: int, border: float) -> np.ndarray:
     """Bins wholly inside the panel (and the job's viewing area) shrunk by ``border``
     mm; caps and their rings are panel (:attr:`~optdot.geometry.domain.Domain.lit`)."""
     import shapely
 
-    x0, y0, x1, y1 = job.box
-    region = job.domain.lit
-    if job.viewing_area is not None:
-        region = region.intersection(shapely.box(*job.viewing_area))
+    x0, y0, x1, y1 = bench.box
+    region = bench.domain.lit
+    if bench.viewing_area is not None:
+        region = region.intersection(shapely.box(*bench.viewing_area))
     inner = region.buffer(-border) if border > 0 else region
     xs = np.linspace(x0, x1, nbx + 1)
     ys = np.linspace(y0, y1, nby + 1)

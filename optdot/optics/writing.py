@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config.job import Job
+from ..config.bench import Bench
 from ..config.writer import job_toml, rebased
 from ..errors import JobError
 from ..io.atomic import atomic_path
@@ -22,10 +22,10 @@ from .design import Designed
 from .simulate import Simulation
 
 
-def simulation_json(sim: Simulation, job: Job, pattern: Path | None, dots: int | None) -> str:
+def simulation_json(sim: Simulation, bench: Bench, pattern: Path | None, dots: int | None) -> str:
     """The figures of ``sim`` with the luminance map (JSON text)."""
     doc = {
-        "job": str(job.source) if job.source else job.name,
+        "job": str(bench.source) if bench.source else bench.name,
         "pattern": str(pattern) if pattern else None,
         "dots": dots,
         **sim.summary(),
@@ -211,20 +211,21 @@ def map_png(path: Path, fill: np.ndarray) -> None:
 
 
 def designed_job(
-    job: Job,
+    bench: Bench,
     map_path: Path,
     job_path: Path,
     sizes: tuple[float, float] | None = None,
     cap_ink: np.ndarray | None = None,
 ) -> str:
-    """TOML of ``job`` reading its map from ``map_path``, to be written at ``job_path``;
+    """TOML of the job of ``bench`` reading its map from ``map_path``, to be written at
+    ``job_path``;
     with ``sizes``, its dots' diameters ``[low, high]`` mm (the claim rule sizes them);
     with ``cap_ink``, its graded caps' band inks (``[backlight.leds] cap_ink``, 4
     decimals)."""
-    if job.source is None:
+    if bench.source is None:
         raise JobError("the designed job needs the job file it comes from")
-    raw = tomllib.loads(Path(job.source).read_text(encoding="utf-8-sig"))
-    raw = rebased(raw, Path(job.source).parent, job_path.parent)
+    raw = tomllib.loads(Path(bench.source).read_text(encoding="utf-8-sig"))
+    raw = rebased(raw, Path(bench.source).parent, job_path.parent)
     import os
 
     rel = os.path.relpath(os.path.abspath(map_path), os.path.abspath(job_path.parent))
@@ -247,13 +248,13 @@ def _ordered(raw: dict) -> dict:
 
 
 def write_design(
-    designed: Designed, job: Job, out_csv: Path, out_png: Path | None, out_job: Path | None
+    designed: Designed, bench: Bench, out_csv: Path, out_png: Path | None, out_job: Path | None
 ) -> None:
     """Write the designed map (CSV, optional PNG) and the job that uses it."""
     text = map_csv(designed.fill)
     job_text = None
     if out_job is not None:
-        job_text = designed_job(job, out_csv, out_job, designed.sizes, designed.cap_ink)
+        job_text = designed_job(bench, out_csv, out_job, designed.sizes, designed.cap_ink)
     write_text(out_csv, text)
     if out_png is not None:
         map_png(out_png, designed.fill)

@@ -81,11 +81,17 @@ def mask_digest(prov: dict[str, Any]) -> str:
     return mask_lines(prov)[0].rsplit("sha256:", 1)[1]
 
 
-def provenance(job, pattern_path: str | Path | None, seed: int | None) -> dict[str, Any]:
+def provenance(
+    job_file: Path | None,
+    inputs: tuple[Path, ...],
+    pattern_path: str | Path | None,
+    seed: int | None,
+) -> dict[str, Any]:
     """The traceability block of a QA result.
 
     Args:
-        job: the :class:`~optdot.config.job.Job` judged against, or None.
+        job_file: the job file judged against, or None.
+        inputs: every file the job reads (the job file among them or not).
         pattern_path: the file (or dataset) judged, or None for a pattern in memory.
         seed: the seed that made the pattern, when known.
 
@@ -97,15 +103,15 @@ def provenance(job, pattern_path: str | Path | None, seed: int | None) -> dict[s
     def entry(p) -> dict[str, Any]:
         return {"path": str(p), "sha256": sha256_of(p)}
 
-    source = getattr(job, "source", None) if job is not None else None
-    inputs = [entry(p) for p in (job.inputs if job is not None else ()) if Path(p) != source]
+    source = job_file
+    read = [entry(p) for p in inputs if Path(p) != source]
     out = {
         "optdot": version(),
         "date_utc": now_utc(),
         "seed": seed,
         "pattern": entry(pattern_path) if pattern_path else None,
         "job": entry(source) if source else None,
-        "inputs": inputs,
+        "inputs": read,
     }
     out["mask_digest"] = mask_digest(out)
     return out
