@@ -275,3 +275,28 @@ def test_no_module_name_twice():
         if f.name != "__init__.py" and "__pycache__" not in f.parts:
             names.setdefault(f.name, []).append(str(f.relative_to(ROOT)))
     assert not {k: v for k, v in names.items() if len(v) > 1}
+
+
+#: Where a job may be taken whole: the commands, the orchestration of one process and of
+#: tiles, the job's own sections, and the one place a job becomes the stages' values.
+TAKE_THE_JOB = ("cli/", "config/", "pipeline.py", "preflight.py", "tiled.py", "tiling/")
+JOB_TO_VALUES = "stages/settings.py"
+
+
+def test_below_the_orchestration_functions_take_values_not_the_job():
+    """The stages take the run's :class:`~optdot.stages.StageSettings`, the optics a
+    :class:`~optdot.config.bench.Bench`, QA and the writers their records: a function
+    with a ``job`` parameter anywhere else threads the job where a value would do."""
+    import ast
+
+    bad = []
+    for f in [*(ROOT / "optdot").rglob("*.py"), *(ROOT / "exporters").rglob("*.py")]:
+        rel = f.relative_to(ROOT / "optdot" if "optdot" in f.parts else ROOT).as_posix()
+        if rel.startswith(TAKE_THE_JOB) or rel == JOB_TO_VALUES:
+            continue
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                args = node.args.posonlyargs + node.args.args + node.args.kwonlyargs
+                if any(a.arg == "job" for a in args):
+                    bad.append(f"{rel}:{node.lineno} {node.name}")
+    assert not bad, bad

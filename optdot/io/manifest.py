@@ -215,7 +215,7 @@ def size_fields(sizes: dict[float, int]) -> dict[str, Any]:
 
 
 def manifest_of(
-    job: str | None,
+    job_name: str | None,
     seed: int | None,
     diameter: float | None,
     uniform: float | None,
@@ -234,7 +234,7 @@ def manifest_of(
         shaped["shape_spec"] = kind.spec()
     return {
         **shaped,
-        "job": job,
+        "job": job_name,
         "seed": seed,
         "diameter_mm": None if diameter is None else float(diameter),
         "uniform_diameter_mm": uniform,
