@@ -39,7 +39,7 @@ from _common import machine  # noqa: E402
 
 from optdot.config.schema import Job, load_job  # noqa: E402
 from optdot.geometry.density import DensityMap  # noqa: E402
-from optdot.pipeline import generate  # noqa: E402
+from optdot.orchestration.pipeline import generate  # noqa: E402
 from optdot.quality.gate import run_qa  # noqa: E402
 from optdot.relax.formulation import PRESETS, Formulation  # noqa: E402
 from optdot.spatial.cellgrid import pairs_within  # noqa: E402

@@ -39,14 +39,14 @@ def _work(group: str, folder: Path) -> None:
     """Run ``group``'s work in this process."""
     from optdot import load_job
     from optdot.io.patterns import load_pattern
-    from optdot.pipeline import generate_to, qa
+    from optdot.orchestration.pipeline import generate_to, qa
 
     if group == "generate":
         job = load_job(LED)
         generate_to(job, folder / "led.npz", tiles="off")
         qa(load_pattern(folder / "led.npz", job.box), job)
     else:
-        from optdot.tiling.run import warm_up
+        from optdot.orchestration.tiling.run import warm_up
 
         warm_up()
 

@@ -41,7 +41,7 @@ from optdot.config.schema import load_job  # noqa: E402
 from optdot.optics.design import design  # noqa: E402
 from optdot.optics.simulate import simulate  # noqa: E402
 from optdot.optics.writing import write_design  # noqa: E402
-from optdot.pipeline import generate, qa  # noqa: E402
+from optdot.orchestration.pipeline import generate, qa  # noqa: E402
 
 RASTER = 0.025  # mm
 BLUR = 1.0  # mm

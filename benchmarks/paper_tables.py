@@ -29,8 +29,8 @@ sys.path.insert(0, str(HERE))
 from _common import machine, peak_rss_mb  # noqa: E402
 
 from optdot.config.schema import Job, load_job  # noqa: E402
+from optdot.orchestration.pipeline import generate  # noqa: E402
 from optdot.pattern import Pattern  # noqa: E402
-from optdot.pipeline import generate  # noqa: E402
 from optdot.quality.gate import run_qa  # noqa: E402
 from optdot.testing import close_pairs  # noqa: E402
 

@@ -23,7 +23,7 @@ from shapes import job as write_job  # benchmarks/shapes.py: the same edge-lit j
 
 from optdot.config.schema import load_job
 from optdot.geometry.kinds import KINDS
-from optdot.pipeline import generate, qa
+from optdot.orchestration.pipeline import generate, qa
 from optdot.relax import optdot as relax_optdot
 from optdot.relax.exactgap import ExactGapTerm
 from optdot.relax.multisphere import MultiSphereTerm

@@ -56,7 +56,7 @@ def _one(name: str, gain: float, grid: float, min_space: float, tmp: Path) -> st
     from optdot.config.schema import load_job
     from optdot.exporters import ExportOptions, write
     from optdot.exporters.readback import read_any
-    from optdot.pipeline import generate
+    from optdot.orchestration.pipeline import generate
 
     t0 = time.perf_counter()
     src = ROOT / "samples" / name

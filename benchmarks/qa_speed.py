@@ -20,7 +20,7 @@ from _common import machine, peak_rss_mb  # noqa: E402
 
 from optdot.config.schema import Job  # noqa: E402
 from optdot.geometry.density import DensityMap  # noqa: E402
-from optdot.pipeline import generate  # noqa: E402
+from optdot.orchestration.pipeline import generate  # noqa: E402
 from optdot.quality.gate import run_qa  # noqa: E402
 from optdot.quality.report import write_html, write_json  # noqa: E402
 

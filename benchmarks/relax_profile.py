@@ -5,7 +5,8 @@ Run: python benchmarks/relax_profile.py [--dots 1.2e6] [--job JOB.toml] [--warm]
 Builds the led sample scaled to about ``--dots`` dots of 46 µm (or reads ``--job``),
 wraps the relaxation's compiled kernels in timers (the penalty and gradient, the L-BFGS
 vector work, the Verlet list's rebuilds and mover patches; nothing in optdot is
-changed), runs :func:`optdot.pipeline.generate` in this process (``--warm``: once before,
+changed), runs :func:`optdot.orchestration.pipeline.generate` in this process (``--warm``: once
+before,
 so no compilation is timed) and prints: dots, seconds, the stages' seconds, each
 kernel's calls and seconds, the penalty's nanoseconds per dot-evaluation (on the dots the
 kernels see, phantoms included) and its listed pairs per dot, and peak memory.
@@ -28,7 +29,7 @@ from _common import machine, peak_rss_mb  # noqa: E402
 import optdot.relax.lbfgs as lbfgs  # noqa: E402
 import optdot.relax.optdot as relax  # noqa: E402
 import optdot.spatial.verlet as verlet  # noqa: E402
-from optdot import pipeline  # noqa: E402
+from optdot.orchestration import pipeline  # noqa: E402
 from optdot.config.schema import load_job  # noqa: E402
 
 ROOT = HERE.parent

@@ -15,7 +15,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import machine, peak_rss_mb  # noqa: E402
 
 from optdot.config.schema import load_job  # noqa: E402
-from optdot.pipeline import generate  # noqa: E402
+from optdot.orchestration.pipeline import generate  # noqa: E402
 from optdot.testing import close_pairs  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

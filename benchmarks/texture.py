@@ -48,7 +48,7 @@ sys.path.insert(0, str(HERE))
 from _common import machine  # noqa: E402
 
 from optdot.config.schema import load_job  # noqa: E402
-from optdot.pipeline import generate  # noqa: E402
+from optdot.orchestration.pipeline import generate  # noqa: E402
 from optdot.quality.metrics import patch_coherence, psi6  # noqa: E402
 from optdot.quality.texture import (  # noqa: E402
     band_mean,

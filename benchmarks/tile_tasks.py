@@ -21,8 +21,8 @@ import panels  # noqa: E402
 
 import optdot  # noqa: E402
 from optdot import load_job  # noqa: E402
-from optdot.tiling.plan import plan_tiles  # noqa: E402
-from optdot.tiling.run import InProcess, run_tiles  # noqa: E402
+from optdot.orchestration.tiling.plan import plan_tiles  # noqa: E402
+from optdot.orchestration.tiling.run import InProcess, run_tiles  # noqa: E402
 
 
 class Timed(InProcess):

@@ -25,7 +25,7 @@ sys.path.insert(0, str(ROOT))
 
 from optdot.config.schema import load_job  # noqa: E402
 from optdot.config.viewing import VIEW_PRESETS, viewing  # noqa: E402
-from optdot.pipeline import generate  # noqa: E402
+from optdot.orchestration.pipeline import generate  # noqa: E402
 from optdot.quality.visibility import LuminanceGrid, visibility  # noqa: E402
 
 

@@ -36,9 +36,9 @@ from .errors import (
 _API = {
     "load_job": "optdot.config.schema",
     "Job": "optdot.config.job",
-    "generate": "optdot.pipeline",
-    "qa": "optdot.pipeline",
-    "export": "optdot.pipeline",
+    "generate": "optdot.orchestration.pipeline",
+    "qa": "optdot.orchestration.pipeline",
+    "export": "optdot.orchestration.pipeline",
     "Pattern": "optdot.pattern",
     "load_pattern": "optdot.io.patterns",
     "save_pattern": "optdot.io.patterns",

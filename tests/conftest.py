@@ -55,7 +55,7 @@ def tiny_job():
 
 @pytest.fixture(scope="session")
 def tiny_pattern(tiny_job):
-    from optdot.pipeline import generate
+    from optdot.orchestration.pipeline import generate
 
     return generate(tiny_job)
 

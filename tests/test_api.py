@@ -33,7 +33,6 @@ ALLOWED = {
     "spatial": set(),
     "relax": {"errors", "geometry", "spatial"},
     "stages": {"config", "errors", "geometry", "relax", "sampling", "spatial"},
-    "tiling": {"config", "errors", "geometry", "relax", "runtime", "spatial", "stages"},
     "pattern": {"geometry"},
     "quality": {
         "config",
@@ -57,35 +56,22 @@ ALLOWED = {
         "printing",
         "runtime",
     },
-    "preflight": {"config", "errors", "geometry", "runtime", "tiling"},
     "testing": {"relax"},
-    "tiled": {
+    "orchestration": {
         "config",
         "errors",
+        "exporters",
         "files",
-        "geometry",
-        "io",
-        "pattern",
-        "preflight",
-        "runtime",
-        "tiling",
-    },
-    "pipeline": {
         "formats",
-        "io",
-        "preflight",
-        "tiled",
-        "config",
-        "errors",
         "geometry",
+        "io",
         "pattern",
         "printing",
         "quality",
         "relax",
         "runtime",
-        "exporters",
+        "spatial",
         "stages",
-        "tiling",
     },
     "optics": {
         "config",
@@ -106,7 +92,7 @@ ALLOWED = {
         "formats",
         "io",
         "optics",
-        "pipeline",
+        "orchestration",
         "quality",
         "runtime",
     },
@@ -279,7 +265,7 @@ def test_no_module_name_twice():
 
 #: Where a job may be taken whole: the commands, the orchestration of one process and of
 #: tiles, the job's own sections, and the one place a job becomes the stages' values.
-TAKE_THE_JOB = ("cli/", "config/", "pipeline.py", "preflight.py", "tiled.py", "tiling/")
+TAKE_THE_JOB = ("cli/", "config/", "orchestration/")
 JOB_TO_VALUES = "stages/settings.py"
 
 

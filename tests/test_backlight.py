@@ -332,7 +332,7 @@ def test_a_sheet_that_sends_light_back_lifts_the_recycled_share(tmp_path):
 def test_real_dots_match_the_coverage_mode_on_a_film(tmp_path):
     """A 10 x 10 mm film at fill 0.3 over four LEDs: the real pattern's efficiency and
     shares agree with the coverage mode's within 4 sigma (and 1 % of the light)."""
-    from optdot.pipeline import generate
+    from optdot.orchestration.pipeline import generate
 
     path = direct_job(tmp_path, 10.0, 10.0, 0.3, cavity={"gap": 1.0})
     job = load_job(path)

@@ -45,7 +45,7 @@ def test_a_cap_is_cut_out_of_the_dots_domain_with_qa_s_gap(tmp_path):
 
 
 def test_generated_dots_keep_out_of_every_cap_and_its_gap(tmp_path):
-    from optdot.pipeline import generate
+    from optdot.orchestration.pipeline import generate
 
     job = _capped(tmp_path, fill=0.5)
     pattern = generate(job)
@@ -96,7 +96,7 @@ def test_a_cap_over_a_bare_film_is_ink_exactly_where_the_disc_is(tmp_path):
 
 
 def test_the_coverage_mode_with_caps_matches_real_dots_with_caps(tmp_path):
-    from optdot.pipeline import generate
+    from optdot.orchestration.pipeline import generate
 
     job = _capped(tmp_path, fill=0.3)
     pattern = generate(job)
@@ -164,7 +164,7 @@ def test_bad_caps_get_one_line(tmp_path, leds, words):
 def test_caps_survive_npz_and_datasets_and_bad_caps_are_refused(tmp_path):
     from optdot.io.dataset import load_dataset
     from optdot.io.patterns import load_pattern, save_pattern
-    from optdot.pipeline import generate
+    from optdot.orchestration.pipeline import generate
 
     job = _capped(tmp_path, fill=0.3)
     pattern = generate(job)
@@ -259,7 +259,7 @@ def test_qa_fails_a_pattern_whose_caps_differ_from_the_job_s(tmp_path):
     """QA with the job: every cap the job asks for is printed, at its place and size; a
     pattern without them (made for the uncapped job) fails, naming a missing cap."""
     from optdot.io.patterns import load_pattern, save_pattern
-    from optdot.pipeline import generate
+    from optdot.orchestration.pipeline import generate
     from optdot.quality.gate import caps_check
 
     capped_path = direct_job(tmp_path, 10.0, 10.0, 0.3, leds=CAPPED)

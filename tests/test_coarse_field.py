@@ -12,6 +12,9 @@ from hypothesis import strategies as st
 from optdot import stages
 from optdot.config.schema import load_job
 from optdot.geometry.density import DensityMap
+from optdot.orchestration.tiling import tasks
+from optdot.orchestration.tiling.plan import plan_tiles
+from optdot.orchestration.tiling.run import tiny_job
 from optdot.relax.lowpass import (
     CoarseField,
     Lattice,
@@ -23,9 +26,6 @@ from optdot.relax.lowpass import (
     live_potential,
 )
 from optdot.stages.settings import job_spacing
-from optdot.tiling import tasks
-from optdot.tiling.plan import plan_tiles
-from optdot.tiling.run import tiny_job
 
 from .conftest import SAMPLES
 

@@ -16,7 +16,7 @@ import pytest
 from optdot.config.schema import load_job
 from optdot.geometry.curves import Conic, bulge_arc
 from optdot.geometry.outline_io import load_outline
-from optdot.pipeline import generate
+from optdot.orchestration.pipeline import generate
 from tests.conftest import write_job
 
 NM = 1e-6  # mm

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from optdot.pipeline import generate
+from optdot.orchestration.pipeline import generate
 from optdot.relax.circles import circle_radius, hex_radius
 from optdot.relax.formulation import PRESETS, Formulation, formulation_of
 from optdot.relax.optdot import RelaxSettings, relax_staged
@@ -102,8 +102,8 @@ def test_a_dip_s_containers_take_their_neighbourhood_s_fill_and_a_sparse_map_kee
     assert 1e-3 < low <= FLOOR
     reach = 2 * form.radii(np.array([low]), 0.023, 0)[0] * (1 + form.polydispersity)
     assert phantom_reach(stage_settings(job, form)) == pytest.approx(reach) and reach < 2.0
+    from optdot.orchestration.tiling.plan import max_spacing
     from optdot.relax.circles import hex_radius
-    from optdot.tiling.plan import max_spacing
 
     # a tiled run's seams are sized by the same fills (1e-6 asked for seams of 40 mm)
     assert max_spacing(job) == pytest.approx(2 * hex_radius(np.array([low]), 0.023)[0])

@@ -16,8 +16,8 @@ from optdot.geometry.kinds.polygon import Polygon, canonical
 from optdot.geometry.shapes import CIRCLE, KINDS, DotShape, Footprints
 from optdot.geometry.sizes import DotSizes
 from optdot.io.patterns import load_pattern, save_pattern
+from optdot.orchestration.pipeline import generate, qa
 from optdot.pattern import Pattern
-from optdot.pipeline import generate, qa
 from optdot.quality.conformance import TOLERANCE, DotRule
 
 from .conftest import cli, write_job

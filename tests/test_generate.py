@@ -6,7 +6,7 @@ import pytest
 
 from optdot.config.schema import load_job
 from optdot.io.patterns import pattern_csv_bytes
-from optdot.pipeline import generate
+from optdot.orchestration.pipeline import generate
 from optdot.relax.legalize import check_guarantee, legalize
 from optdot.testing import close_pairs
 
@@ -102,7 +102,8 @@ def test_the_generate_command_loads_only_what_generating_needs():
         "pyarrow", "matplotlib", "gdstk", "ezdxf",
     )  # fmt: skip
     code = (
-        "import sys, optdot.cli.main, optdot.pipeline, optdot.stages, optdot.relax.lowpass; "
+        "import sys, optdot.cli.main, optdot.orchestration.pipeline, optdot.stages, "
+        "optdot.relax.lowpass; "
         f"print(sorted(m for m in {heavy!r} if m in sys.modules))"
     )
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

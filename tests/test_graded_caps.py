@@ -210,7 +210,7 @@ def test_the_design_sizes_graded_caps_and_writes_them_into_its_job(tmp_path):
 
 
 def _pattern(tmp_path):
-    from optdot.pipeline import generate
+    from optdot.orchestration.pipeline import generate
 
     job = _graded(tmp_path)
     return job, generate(job)

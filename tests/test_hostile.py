@@ -148,12 +148,12 @@ def test_temporary_beside_a_long_name(tiny):
 
 def test_generate_onto_a_directory_fails_before_the_run(tiny, monkeypatch):
     (tiny / "out.csv").mkdir()
-    import optdot.pipeline
+    import optdot.orchestration.pipeline
 
     def never(*a, **k):
         raise AssertionError("the optimisation ran before the output was checked")
 
-    monkeypatch.setattr(optdot.pipeline, "generate", never)
+    monkeypatch.setattr(optdot.orchestration.pipeline, "generate", never)
     one_error(["generate", tiny / "job.toml", "-o", tiny / "out.csv"], 2, "is a directory")
     one_error(["generate", tiny / "job.toml", "-o", tiny / "nodir" / "x.csv"], 2, "does not exist")
 
@@ -315,12 +315,12 @@ def test_no_gdstk_lines_or_warnings_on_stderr(tmp_path):
 
 
 def test_an_internal_error_is_one_line_with_a_log(tiny, monkeypatch, tmp_path):
-    import optdot.pipeline
+    import optdot.orchestration.pipeline
 
     def bug(*a, **k):
         raise ZeroDivisionError("a planted bug")
 
-    monkeypatch.setattr(optdot.pipeline, "generate", bug)
+    monkeypatch.setattr(optdot.orchestration.pipeline, "generate", bug)
     monkeypatch.setenv("TMPDIR", str(tmp_path))
     import tempfile
 

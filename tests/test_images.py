@@ -13,7 +13,7 @@ from PIL import Image
 from optdot.config.schema import load_job
 from optdot.errors import JobError
 from optdot.geometry.domain import polygon_cell_fractions
-from optdot.pipeline import generate, qa
+from optdot.orchestration.pipeline import generate, qa
 
 from .conftest import SAMPLES
 

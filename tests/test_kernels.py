@@ -110,7 +110,7 @@ for i in todo:  # a unit the helper compiled: loaded from the cache it wrote
         theirs += 1
 assert theirs > 0
 from optdot import load_job
-from optdot.pipeline import generate_to
+from optdot.orchestration.pipeline import generate_to
 generate_to(load_job(sys.argv[1]), sys.argv[2], tiles="off")
 """
 
@@ -134,7 +134,7 @@ def test_a_cold_cache_compiled_by_helpers_gives_the_same_bytes(tmp_path):
     assert run.returncode == 0, run.stderr[-3000:]
     warm_out = tmp_path / "warm.npz"
     from optdot import load_job
-    from optdot.pipeline import generate_to
+    from optdot.orchestration.pipeline import generate_to
 
     generate_to(load_job(TINY), warm_out, tiles="off")
     assert cold_out.read_bytes() == warm_out.read_bytes()
@@ -167,7 +167,7 @@ class _Client:
 
 
 def test_a_tiled_first_run_compiles_on_every_worker(monkeypatch):
-    from optdot import tiled
+    from optdot.orchestration import tiled
 
     compiled: list[list[int]] = []
 
@@ -202,7 +202,7 @@ def test_a_tiled_first_run_compiles_on_every_worker(monkeypatch):
 def test_generate_warms_its_kernels_first(monkeypatch, tiny_job):
     import dataclasses
 
-    from optdot import pipeline
+    from optdot.orchestration import pipeline
 
     asked: list[str] = []
     monkeypatch.setattr(pipeline, "warm", lambda group, announce=None: asked.append(group))

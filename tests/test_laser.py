@@ -13,7 +13,7 @@ import pytest
 
 from optdot.config.schema import load_job
 from optdot.io.patterns import load_pattern
-from optdot.pipeline import generate
+from optdot.orchestration.pipeline import generate
 from optdot.printing.laser import Laser, path_length, serpentine, shortest_path
 
 from .conftest import SAMPLES, cli, one_error, write_job

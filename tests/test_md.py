@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from optdot.pipeline import generate
+from optdot.orchestration.pipeline import generate
 from optdot.relax.md import MDForce, md_forces, md_relax
 from optdot.relax.result import RelaxResult
 from optdot.spatial.blocks import PairList

@@ -356,7 +356,7 @@ def test_impossible_jobs_are_refused_before_any_work(tmp_path):
     np.savetxt(tmp_path / "ok.csv", np.full((4, 6), 0.78), delimiter=",")
     (tmp_path / "ok.toml").write_text(base.format(grid="ok.csv"))
     from optdot.config.schema import load_job
-    from optdot.preflight import _check_fill
+    from optdot.orchestration.preflight import _check_fill
 
     _check_fill(load_job(tmp_path / "ok.toml"), "ok")  # the guarantee holds at 0.78
 

@@ -158,7 +158,7 @@ def _lossy_job(tmp: Path, outline: bool = False) -> Path:
 
 @pytest.fixture(scope="module")
 def lossy(tmp_path_factory):
-    from optdot.pipeline import generate
+    from optdot.orchestration.pipeline import generate
 
     tmp = tmp_path_factory.mktemp("lossy")
     job = load_job(_lossy_job(tmp))
@@ -242,7 +242,7 @@ def test_a_ray_ends_the_same_whatever_call_or_chunk_traced_it(lossy):
 
 @pytest.mark.slow
 def test_real_dots_agree_with_the_coverage_mode_in_5mm_cells(tmp_path):
-    from optdot.pipeline import generate
+    from optdot.orchestration.pipeline import generate
 
     grid = np.array([[0.08, 0.16, 0.3, 0.45]] * 2)
     np.savetxt(tmp_path / "density.csv", grid, delimiter=",")

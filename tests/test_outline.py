@@ -19,7 +19,7 @@ from optdot.cli import main
 from optdot.config.schema import load_job
 from optdot.geometry.domain import Domain, validate_polygon
 from optdot.geometry.edges import EdgeIndex, signed_distances
-from optdot.pipeline import generate
+from optdot.orchestration.pipeline import generate
 from optdot.relax.formulation import PRESETS
 from optdot.relax.penalty import penalty_fast
 from optdot.spatial.blocks import PairList

@@ -15,7 +15,7 @@ from optdot.geometry.kinds import KINDS, contains_packed, packed, turned
 from optdot.geometry.kinds.polygon import Polygon, canonical
 from optdot.geometry.orientation import axis
 from optdot.io.patterns import load_pattern, save_pattern
-from optdot.pipeline import generate
+from optdot.orchestration.pipeline import generate
 
 from .conftest import cli, write_job
 

@@ -17,7 +17,7 @@ from optdot.config.schema import load_job
 from optdot.exporters.options import ExportOptions
 from optdot.exporters.readback import read_any
 from optdot.geometry.kinds import KINDS, turned
-from optdot.pipeline import generate
+from optdot.orchestration.pipeline import generate
 from optdot.printing.mask import mask_ring
 from optdot.printing.process import Process
 

@@ -21,7 +21,7 @@ def _lines(text: str) -> list[str]:
 
 
 def test_stages_are_named_and_the_bar_ends_where_the_relaxation_stopped(tiny_job):
-    from optdot.pipeline import generate
+    from optdot.orchestration.pipeline import generate
 
     out = _Tty()
     bar = ProgressBar(tiny_job.optimize.max_iter, label="optdot", stream=out)
@@ -68,7 +68,7 @@ def test_nothing_is_drawn_when_stderr_is_not_a_terminal():
 
 
 def test_export_names_its_stages(tiny_pattern, tiny_job, tmp_path):
-    from optdot.pipeline import export
+    from optdot.orchestration.pipeline import export
 
     seen: list[str] = []
     export(tiny_pattern, {"gds": tmp_path / "m.gds"}, tiny_job, stage=seen.append)

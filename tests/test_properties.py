@@ -33,7 +33,7 @@ from optdot.exporters import write
 from optdot.exporters.readback import read_any
 from optdot.geometry.limits import DIAMETER_RANGE_MM, MAX_EXTENT_MM
 from optdot.geometry.outline_io import load_outline
-from optdot.pipeline import _check_room, qa
+from optdot.orchestration.pipeline import _check_room, qa
 
 SOAK = int(os.environ.get("OPTDOT_SOAK", "0"))
 SETTINGS = settings(

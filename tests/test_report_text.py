@@ -39,7 +39,7 @@ def test_a_shaped_report_draws_footprints_and_their_angles(tmp_path):
 
     from optdot.config.schema import load_job
     from optdot.geometry.shapes import KINDS
-    from optdot.pipeline import generate, qa
+    from optdot.orchestration.pipeline import generate, qa
     from optdot.quality.report import write_html
 
     from .conftest import write_job

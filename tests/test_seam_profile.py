@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from optdot.config.schema import load_job
+from optdot.orchestration.tiling import run as tiling_run
+from optdot.orchestration.tiling.plan import plan_tiles
 from optdot.relax.lowpass import coverage_error
-from optdot.tiling import run as tiling_run
-from optdot.tiling.plan import plan_tiles
 
 from .conftest import SAMPLES
 
@@ -71,8 +71,8 @@ def test_seams_carry_the_interiors_coverage(led):
 def _own_window_only(job_, plan_, dots, *around):
     """A first correction pass by each tile's own window alone (no blend)."""
     import optdot.stages as stages
+    from optdot.orchestration.tiling import tasks
     from optdot.spatial.window import grown, in_rect
-    from optdot.tiling import tasks
 
     if len(dots.xy) == 0:
         return dots

@@ -15,7 +15,7 @@ from optdot.config.schema import load_job
 from optdot.geometry.orientation import Orientation, axis
 from optdot.geometry.shapes import KINDS as KINDS_
 from optdot.io.patterns import load_pattern, save_pattern
-from optdot.pipeline import generate, qa
+from optdot.orchestration.pipeline import generate, qa
 
 from .conftest import cli, one_error, write_job
 

@@ -19,10 +19,10 @@ from optdot.geometry.orientation import axis
 from optdot.io.dataset import MANIFEST, load_dataset, open_dataset
 from optdot.io.dataset_write import save_dataset
 from optdot.io.patterns import load_pattern, save_pattern
-from optdot.pipeline import generate, generate_tiled, qa
+from optdot.orchestration.pipeline import generate, generate_tiled, qa
+from optdot.orchestration.tiling.plan import plan_tiles
+from optdot.orchestration.tiling.run import InProcess
 from optdot.runtime.stop import stop_note
-from optdot.tiling.plan import plan_tiles
-from optdot.tiling.run import InProcess
 
 from .conftest import optdot
 from .test_shaped_dots import ELLIPSE, PRISM, _check_guarantee_with_shapely, _job

@@ -109,7 +109,7 @@ def test_qa_judges_the_one_panel(sheet, fmt):
 
 
 def test_labels_name_the_job_the_run_and_the_panel(sheet):
-    from optdot.pipeline import generate, qa, sheet_labels
+    from optdot.orchestration.pipeline import generate, qa, sheet_labels
 
     _, _, job, _ = sheet
     result = qa(generate(job), job)

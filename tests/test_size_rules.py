@@ -272,9 +272,9 @@ def test_tiled_run_with_varying_sizes_calls_the_same_stages(tmp_path):
     count, no pair is closer than its mixed-pair limit (brute force), the sizes are
     fitted (not the rule's cell sizes) within the range, and the coverage is as good as
     one process's."""
-    from optdot.pipeline import generate_tiled, use_tiles
-    from optdot.tiling.plan import plan_tiles
-    from optdot.tiling.run import InProcess
+    from optdot.orchestration.pipeline import generate_tiled, use_tiles
+    from optdot.orchestration.tiling.plan import plan_tiles
+    from optdot.orchestration.tiling.run import InProcess
 
     path = write_job(
         tmp_path,

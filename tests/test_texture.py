@@ -13,7 +13,7 @@ from scipy.ndimage import distance_transform_edt
 
 from optdot.config.schema import load_job
 from optdot.geometry.density import DensityMap
-from optdot.pipeline import generate
+from optdot.orchestration.pipeline import generate
 from optdot.quality.texture import (
     band_mean,
     blurred_coverage_rms,
@@ -155,7 +155,7 @@ def test_without_phantoms_the_first_band_is_bright(tmp_path):
 def test_qa_warns_of_layering_at_walls_and_passes_the_flat_pattern(tmp_path):
     """QA's advisory wall check: the pre-issue-24 relaxation layers (WARN, the verdict says
     PASS WITH WARNINGS), the default does not."""
-    from optdot.pipeline import qa
+    from optdot.orchestration.pipeline import qa
 
     job = wall_job(tmp_path, 0.2)
     old = dataclasses.replace(PRESETS["optdot"], phantoms=False, lowpass=0, lowpass_core_iter=0)
@@ -196,8 +196,8 @@ def test_long_wavelength_correction_removes_the_grain(tmp_path, passes):
 def test_qa_reports_the_grain_on_the_densest_patch(tmp_path):
     """QA's grain figure: S at k·a 0.3-1 over a 10 mm square around the densest region,
     ~1 for random dots, tiny for optdot's pattern; shown in the HTML report."""
+    from optdot.orchestration.pipeline import qa
     from optdot.pattern import Pattern
-    from optdot.pipeline import qa
     from optdot.quality.report import write_html
 
     job = load_job(SAMPLES / "uniform" / "job.toml")

@@ -1,4 +1,5 @@
-"""Tiled generation (optdot.tiling), the Parquet dataset and streamed hierarchical masks.
+"""Tiled generation (optdot.orchestration.tiling), the Parquet dataset and streamed hierarchical
+masks.
 
 The Dask cases run the real command on a LocalCluster: the led sample (111k dots) in
 8 tiles of 10 mm, on 2 workers and on 1 worker, must give the same bytes."""
@@ -19,12 +20,12 @@ from scipy.spatial import cKDTree
 from optdot.config.schema import load_job
 from optdot.errors import PatternFileError
 from optdot.io.dataset import MANIFEST, load_dataset, open_dataset
-from optdot.pipeline import generate_tiled, qa
+from optdot.orchestration.pipeline import generate_tiled, qa
+from optdot.orchestration.tiling.plan import plan_tiles, tile_integrals
+from optdot.orchestration.tiling.run import InProcess, field_name, wide_steps
+from optdot.orchestration.tiling.tasks import initial_tile
 from optdot.relax.legalize import legalize
 from optdot.testing import close_pairs
-from optdot.tiling.plan import plan_tiles, tile_integrals
-from optdot.tiling.run import InProcess, field_name, wide_steps
-from optdot.tiling.tasks import initial_tile
 
 from .conftest import SAMPLES
 from .conftest import optdot as _optdot
@@ -494,7 +495,7 @@ class _Counting(InProcess):
         return fn(*args)
 
     def finished(self, handles):
-        from optdot.tiling.tasks import FinalDots
+        from optdot.orchestration.tiling.tasks import FinalDots
 
         done = 0
         for h in handles:
@@ -629,7 +630,7 @@ def test_a_foreign_directory_in_the_staging_place_is_never_removed(tmp_path):
 def test_export_takes_a_dataset_as_the_dots(tiled, tmp_path):
     """The library's export() takes an opened dataset where a pattern goes: masks stream
     from it, the CSV reads it whole; KLayout reads the dataset's dots from the GDS."""
-    from optdot.pipeline import export
+    from optdot.orchestration.pipeline import export
 
     d, _ = tiled
     ds = open_dataset(d / "two.parquet")
@@ -664,7 +665,7 @@ def test_a_tiled_run_lets_go_of_each_tile_once_handed_over(memory):
     workers' memory is short (``slim``), the wide pass holds only the first passes'
     positions across its barrier, not their containers (the 55-inch TV: 6.9 → 5.7 GB);
     and the outputs are the same."""
-    from optdot.tiling.run import run_tiles, slim_first_passes, tiny_job
+    from optdot.orchestration.tiling.run import run_tiles, slim_first_passes, tiny_job
 
     job = tiny_job()
     ex = _Watching(memory)

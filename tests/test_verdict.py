@@ -32,7 +32,7 @@ def led(
     dot in ten taken out within 2 mm of the panel's centre, a dark spot of several JND);
     the clean pattern (``clean.csv``) reads under 1 JND."""
     from optdot.config.schema import load_job
-    from optdot.pipeline import generate
+    from optdot.orchestration.pipeline import generate
 
     d = tmp_path_factory.mktemp("led")
     for f in (SAMPLES / "led").iterdir():

@@ -153,7 +153,7 @@ def test_deposit_keeps_every_dots_area():
 @pytest.fixture(scope="module")
 def led():
     from optdot.config.schema import load_job
-    from optdot.pipeline import generate
+    from optdot.orchestration.pipeline import generate
 
     job = load_job(LED)
     return job, generate(job)
@@ -225,7 +225,7 @@ def test_the_clean_led_sample_reports_its_own_largest_jnd(led, tmp_path):
     (0.03) and steep, reads 0.10 with the wide pass solved six times from where the dots
     stand; 0.48 with one step, 0.96 when it moved relative error, 2.2 with two fine
     passes and no wide one."""
-    from optdot.pipeline import qa
+    from optdot.orchestration.pipeline import qa
     from optdot.quality.visibility import BLOB_JND
 
     job, pattern = led
@@ -249,7 +249,7 @@ def test_the_corner_lit_sample_by_its_empty_corner_is_not_seen():
     across the walls' faces) leaves 0.43; on the first pass's half-spacing grid it left
     1.10, a bright blob at the corner's border."""
     from optdot.config.schema import load_job
-    from optdot.pipeline import generate, qa
+    from optdot.orchestration.pipeline import generate, qa
 
     job = load_job(SAMPLES / "tsuno" / "job.toml")
     vis = qa(generate(job), job).metrics["visibility"]
@@ -262,7 +262,7 @@ def test_the_outline_sample_is_not_seen_at_its_notch():
     blob under 0.7 JND (0.41). With the wide pass's flow free to cross the notch, which
     the dots cannot, its convex corner at (23.8, 6.8) mm read -1.41 JND, 0.23 % short."""
     from optdot.config.schema import load_job
-    from optdot.pipeline import generate, qa
+    from optdot.orchestration.pipeline import generate, qa
 
     job = load_job(SAMPLES / "outline" / "job.toml")
     vis = qa(generate(job), job).metrics["visibility"]
@@ -499,7 +499,7 @@ def test_a_steep_sparse_map_in_front_of_leds_is_not_seen(tmp_path):
     its cap held the sparse dots: 3.83 JND, a dark/bright pair at each LED, as on every
     map ``design`` made; solved six times from where the dots stand, 0.09."""
     from optdot.config.schema import load_job
-    from optdot.pipeline import generate, qa
+    from optdot.orchestration.pipeline import generate, qa
 
     from .conftest import write_job
 
@@ -520,10 +520,10 @@ def test_a_steep_sparse_map_in_front_of_leds_is_not_seen_in_tiles(tmp_path):
     tiles (one round left 8.4 JND and 24 blobs on a designed 120 x 70 mm guide tiled,
     0.41 and none with six)."""
     from optdot.config.schema import load_job
-    from optdot.pipeline import qa
-    from optdot.tiled import generate_tiled
-    from optdot.tiling.plan import plan_tiles
-    from optdot.tiling.run import InProcess
+    from optdot.orchestration.pipeline import qa
+    from optdot.orchestration.tiled import generate_tiled
+    from optdot.orchestration.tiling.plan import plan_tiles
+    from optdot.orchestration.tiling.run import InProcess
 
     from .conftest import write_job
 

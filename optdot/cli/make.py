@@ -25,7 +25,7 @@ def check(job_file, run, tiling):
     """Check JOB_FILE without running it: is it valid, how many dots, one process or
     tiles, and about how long, how much memory and disk it will take (exit 0: it would
     run; otherwise the one-line reason the run itself would give)."""
-    from ..pipeline import check_job
+    from ..orchestration.pipeline import check_job
 
     job = load_job_with(job_file, run)
     got = check_job(job, tiling.tiles, tiling.tile_size, tiling.workers)
@@ -106,7 +106,7 @@ def _duration(seconds: float) -> str:
 @user_errors
 def generate(job_file, output, run, tiling):
     """Generate the dot pattern of JOB_FILE and write it to OUTPUT."""
-    from ..pipeline import PATTERN_SUFFIXES, generate_to
+    from ..orchestration.pipeline import PATTERN_SUFFIXES, generate_to
 
     if output.suffix.lower() not in PATTERN_SUFFIXES:
         raise click.BadParameter(

@@ -198,7 +198,7 @@ def progress_bar(job, quiet: bool):
 
 def run_job(job, quiet: bool):
     """Generate the job's pattern with a progress bar."""
-    from ..pipeline import generate
+    from ..orchestration.pipeline import generate
 
     bar, progress, _ = progress_bar(job, quiet)
     try:

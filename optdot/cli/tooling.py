@@ -52,7 +52,7 @@ def _read_with_job(path: Path, job, opts=None):
     read as the print it makes under the job's ``[process]``, unless ``opts`` say how)."""
     from ..exporters.options import ExportOptions
     from ..exporters.readback import read_any
-    from ..pipeline import with_job_panel
+    from ..orchestration.pipeline import with_job_panel
 
     if job is not None:  # a mask read as the job's dots, printed by its process
         made = job.shape.kind if job.shape.kind.derived else None
@@ -109,7 +109,7 @@ def traced_as_made(path: Path, pattern, job) -> None:
         JobError: one line naming the file and what differs.
     """
     from ..errors import JobError
-    from ..pipeline import dot_rule
+    from ..orchestration.pipeline import dot_rule
     from ..quality.conformance import footprint_text
 
     rule = dot_rule(job)
@@ -273,7 +273,7 @@ def export(source, style, choice, keep, layers, reports, run, **paths):
     and --html/--json keep the gate's report (written also when the gate fails).
     """
     from ..exporters.options import ExportOptions
-    from ..pipeline import export as export_pattern
+    from ..orchestration.pipeline import export as export_pattern
 
     outputs = {k: v for k, v in paths.items() if v is not None}
     if not outputs:
@@ -412,7 +412,7 @@ def qa(pattern_file, choice, reports, simulation_path, limits, looks, layers, qu
     """Check PATTERN_FILE (csv, npz, a .parquet dataset, gds, oas, dxf) before tooling:
     exit 0 pass, 1 fail, 5 passed but incomplete (no --job: the map was not checked)."""
     from ..io.atomic import transaction
-    from ..pipeline import qa as run_gate
+    from ..orchestration.pipeline import qa as run_gate
     from ..quality.report import write_reports
 
     close_gap = limits.close_gap
@@ -492,7 +492,7 @@ def _incomplete_export(dots, reports: dict, quiet: bool) -> None:
     """``export`` without a job: the gate judged, its report written, nothing else, and
     the exit code ``qa`` gives the same pattern (1 failed, else :data:`INCOMPLETE`)."""
     from ..io.atomic import transaction
-    from ..pipeline import qa as run_gate
+    from ..orchestration.pipeline import qa as run_gate
     from ..quality.report import write_reports
 
     result = run_gate(dots, None)

@@ -353,7 +353,8 @@ def displacement(
 class RegionError:
     """The blurred relative coverage error over a region of a lattice shared by every tile
     (origin the map's corner, step ``h``), for the windows a tile blends
-    (:func:`optdot.tiling.tasks.correct_tile`): deposited, resampled and blurred once for
+    (:func:`optdot.orchestration.tiling.tasks.correct_tile`): deposited, resampled and blurred once
+    for
     the region, then solved window by window (:meth:`field`). Two tiles that solve the same
     window snap it to the same lattice lines and see the same dots there, so they get the
     same field.

@@ -14,7 +14,8 @@
   ``distributed.Client`` to it; its workers must have optdot installed. Every task sets
   numba to one thread per Dask thread itself (:func:`single_threaded`).
 
-Before the job, one worker runs a tiny tiled job (:func:`optdot.tiling.run.warm_up`), so
+Before the job, one worker runs a tiny tiled job (:func:`optdot.orchestration.tiling.run.warm_up`),
+so
 kernels are compiled and cached once, not raced for by every worker.
 """
 

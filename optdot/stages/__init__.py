@@ -2,8 +2,8 @@
 for every dot. A job becomes those settings once (:func:`stage_settings`, values: the
 panel, the map, the dots, the formulation); no stage takes the job.
 
-:func:`optdot.pipeline.generate` runs them once over the whole panel; the tiles of
-:mod:`optdot.tiling.tasks` run the same functions over a tile, with the neighbouring
+:func:`optdot.orchestration.pipeline.generate` runs them once over the whole panel; the tiles of
+:mod:`optdot.orchestration.tiling.tasks` run the same functions over a tile, with the neighbouring
 tiles' dots held still around it. Nothing here knows whether it sees a panel or a tile:
 
 * :func:`throw` (:mod:`.throw`): the initial dots of a window (the panel, or a tile),

@@ -119,7 +119,8 @@ def _wide_lattice(s: StageSettings, sigma: float) -> Lattice:
 
 def correction_region(s: StageSettings, xy0: np.ndarray, xy: np.ndarray, region: Rect):
     """The coverage error a tile's correction solves, over ``region`` (the windows it
-    blends grown by :func:`correction_pad`, :func:`optdot.tiling.tasks.correct_tile`) on
+    blends grown by :func:`correction_pad`, :func:`optdot.orchestration.tiling.tasks.correct_tile`)
+    on
     the lattice every tile shares: ``(RegionError, cap mm)``, or None when the formulation
     has no correction. Every dot in the region and within a lattice cell around it must be
     given."""

@@ -3,7 +3,7 @@ throw's long-wavelength grain removed across the whole panel before any tile rel
 
 Why the tiles need the second. The relaxation keeps the long-wavelength grain of its
 throw (:mod:`optdot.relax.lowpass`): one process removes it after relaxing, by one field
-over the panel. A tile's correction (:func:`optdot.tiling.tasks.correct_tile`) solves
+over the panel. A tile's correction (:func:`optdot.orchestration.tiling.tasks.correct_tile`) solves
 over windows a tile wide, each with its own mean and walls, so it misses wavelengths of
 a tile and longer, and neighbouring windows disagree about them by 25-45 %
 (BENCHMARKS.md): on a crop of the notebook panel tiled at 15 mm the strongest

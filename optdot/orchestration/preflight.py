@@ -1,6 +1,8 @@
 """Checks before any work: whether a job can run at all, how (one process or tiles),
-and what it would cost. :func:`check_job` is every check :func:`optdot.pipeline.generate`
-and :func:`optdot.tiled.generate_tiled` make before they start, without running anything.
+and what it would cost. :func:`check_job` is every check
+:func:`optdot.orchestration.pipeline.generate`
+and :func:`optdot.orchestration.tiled.generate_tiled` make before they start, without running
+anything.
 """
 
 from __future__ import annotations
@@ -11,13 +13,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .config.job import Job
-from .config.shaping import check_shaped_fill
-from .errors import JobError, ResourceError
-from .geometry.limits import MAX_RANDOM_FILL
-from .runtime.cluster import embedded_workers
-from .runtime.cost import SHAPED_MEMORY, Cost, estimate_cost
-from .runtime.memory import BASE_BYTES, available_bytes, check_memory, estimate_bytes
+from ..config.job import Job
+from ..config.shaping import check_shaped_fill
+from ..errors import JobError, ResourceError
+from ..geometry.limits import MAX_RANDOM_FILL
+from ..runtime.cluster import embedded_workers
+from ..runtime.cost import SHAPED_MEMORY, Cost, estimate_cost
+from ..runtime.memory import BASE_BYTES, available_bytes, check_memory, estimate_bytes
 from .tiling.plan import TilePlan, plan_tiles
 
 

@@ -1,4 +1,5 @@
-"""Run the tile tasks of :mod:`optdot.tiling.tasks` as one task graph, in process or on Dask.
+"""Run the tile tasks of :mod:`optdot.orchestration.tiling.tasks` as one task graph, in process or
+on Dask.
 
 Every tile's throw and its deposit come first (the panel-wide field the first relaxation
 needs is solved from all of them; the throws are held until their relaxations take them,
@@ -13,7 +14,7 @@ guarantee passes; the first passes are held across the barrier and kept to the e
 place of the merged dots, which are let go: on a panel whose first passes would take
 more than :data:`HOLD_SHARE` of the workers' memory, only their positions (``SLIM``: 16 B
 a dot, not 32), each tile's containers thrown again after it
-(:func:`optdot.tiling.tasks.containers`; the same bytes either way). The wide pass
+(:func:`optdot.orchestration.tiling.tasks.containers`; the same bytes either way). The wide pass
 is solved as many times as the formulation says (``lowpass_last_steps``), each time from
 where the dots stand: each round after the first deposits every tile's first pass moved
 along the fields before it (``STEP``: the moves are made again from the first pass,
@@ -34,13 +35,13 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from ..config.job import Job, OptimizeParams
-from ..geometry.density import DensityMap
-from ..geometry.shapes import Footprints
-from ..relax.lowpass import CoarseField
-from ..runtime.cluster import single_threaded
-from ..runtime.stop import check_interrupt
-from ..stages import stage_settings, wide_rounds
+from ...config.job import Job, OptimizeParams
+from ...geometry.density import DensityMap
+from ...geometry.shapes import Footprints
+from ...relax.lowpass import CoarseField
+from ...runtime.cluster import single_threaded
+from ...runtime.stop import check_interrupt
+from ...stages import stage_settings, wide_rounds
 from .plan import TilePlan, plan_tiles
 from .tasks import (
     FinalDots,
@@ -226,7 +227,8 @@ class TiledRun:
 #: Share of the workers' memory the first correction passes may take while the wide pass
 #: holds them (32 B a dot): past it only their positions are held (16 B a dot) and each
 #: tile's containers are thrown again after the barrier
-#: (:func:`optdot.tiling.tasks.containers`, ~0.4 µs a dot). The 55-inch TV's 114M dots on
+#: (:func:`optdot.orchestration.tiling.tasks.containers`, ~0.4 µs a dot). The 55-inch TV's 114M
+#: dots on
 #: 2 workers of 9.4 GiB: 3.6 GB held, peak 6.75 GiB; slim, 5.61 GiB. The monitor's 27M
 #: dots (0.9 GB) keep them.
 HOLD_SHARE = 0.1

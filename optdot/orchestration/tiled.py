@@ -1,4 +1,4 @@
-"""Generation in tiles (:mod:`optdot.tiling`) on a Dask cluster, or in process: the
+"""Generation in tiles (:mod:`optdot.orchestration.tiling`) on a Dask cluster, or in process: the
 cluster's life, the kernels compiled on it once, and the tiles streamed into a
 ``.parquet`` dataset or gathered into one :class:`~optdot.pattern.Pattern`.
 """
@@ -15,16 +15,16 @@ from pathlib import Path
 
 import numpy as np
 
-from .config.job import Job
-from .files import sha256_file
-from .geometry.shapes import Footprints
-from .io.dataset_write import write_dataset
-from .io.manifest import manifest_of
-from .pattern import Pattern
+from ..config.job import Job
+from ..files import sha256_file
+from ..geometry.shapes import Footprints
+from ..io.dataset_write import write_dataset
+from ..io.manifest import manifest_of
+from ..pattern import Pattern
+from ..runtime import kernels
+from ..runtime.cluster import connect, embedded_workers, scheduler_address
+from ..runtime.stop import check_interrupt
 from .preflight import _check_gathered, _check_room, _check_tile_memory
-from .runtime import kernels
-from .runtime.cluster import connect, embedded_workers, scheduler_address
-from .runtime.stop import check_interrupt
 from .tiling.plan import TilePlan, plan_tiles
 from .tiling.run import InProcess, OnDask, TiledRun, TileProgress, run_tiles, warm_up
 from .tiling.tasks import FinalDots
@@ -93,7 +93,7 @@ def generate_tiled(
     announce: Announce | None = None,
     progress: TileProgress | None = None,
 ) -> Pattern | TiledRun:
-    """Generate ``job`` in tiles (:mod:`optdot.tiling.tasks`) on a Dask cluster.
+    """Generate ``job`` in tiles (:mod:`optdot.orchestration.tiling.tasks`) on a Dask cluster.
 
     Args:
         output: a ``.parquet`` dataset to stream the tiles into (the result is then the
@@ -174,7 +174,7 @@ def _compile_on_workers(client, embedded: bool) -> None:
 
 
 def _warm() -> int:
-    from .runtime.cluster import single_threaded
+    from ..runtime.cluster import single_threaded
 
     single_threaded()
     return warm_up()

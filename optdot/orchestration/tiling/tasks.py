@@ -2,7 +2,8 @@
 
 The problem. A panel of 10⁸ dots does not fit one process (~450 B per dot), and the
 relaxation is local: a dot moves at most its container (3.5-4 circle radii) and feels only
-dots within two circle radii. So the panel is cut into tiles (:mod:`optdot.tiling.plan`)
+dots within two circle radii. So the panel is cut into tiles
+(:mod:`optdot.orchestration.tiling.plan`)
 that workers relax separately. Cut naively, every tile border is a seam: the dots on each
 side were relaxed without the other side, so along the border the pairs are too close
 (or too far) and the eye sees a grid of lines.
@@ -114,13 +115,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import stages
-from ..config.job import Job
-from ..geometry.morton import spatial_order
-from ..geometry.shapes import Footprints
-from ..relax.lowpass import CoarseField, LatticePart
-from ..relax.shaped import turned
-from ..spatial.window import bounds, grown, in_rect
+from ... import stages
+from ...config.job import Job
+from ...geometry.morton import spatial_order
+from ...geometry.shapes import Footprints
+from ...relax.lowpass import CoarseField, LatticePart
+from ...relax.shaped import turned
+from ...spatial.window import bounds, grown, in_rect
 from .plan import TilePlan
 
 #: Salt of a tile's Sobol scrambling seed: ``[seed, SALT, tile index]``.
@@ -329,7 +330,7 @@ def containers(job: Job, plan: TilePlan, coarse: CoarseField | None, i: int, j: 
 
 def first_positions(dots: TileDots) -> np.ndarray:
     """What a run short of memory holds of a tile's first correction pass across the wide
-    pass's barrier (:func:`optdot.tiling.run.slim_first_passes`): its positions, ``[n,
+    pass's barrier (:func:`optdot.orchestration.tiling.run.slim_first_passes`): its positions, ``[n,
     2]`` mm (16 B a dot; the containers, 16 B more, are thrown again after the barrier,
     :func:`containers`: on the 55-inch TV the held first passes were 3.6 GB of a 6.75 GiB
     peak)."""

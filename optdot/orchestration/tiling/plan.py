@@ -14,11 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config.job import Job
-from ..errors import JobError
-from ..geometry.density import axis_overlap
-from ..relax.circles import hex_radius
-from ..stages.settings import containers
+from ...config.job import Job
+from ...errors import JobError
+from ...geometry.density import axis_overlap
+from ...relax.circles import hex_radius
+from ...stages.settings import containers
 
 #: Dots per tile that minimise the time per dot on this kind of machine (2 cores, L2 of
 #: 1-2 MB per core): measured by ``benchmarks/panels.py --sweep`` (BENCHMARKS.md).
@@ -44,7 +44,7 @@ class TilePlan:
             again, mm.
         halo: width of the frozen dots kept around what a task moves, mm.
         margin: how far beyond its tile the long-wavelength correction of a tile reads
-            its neighbours' dots, mm (:func:`optdot.tiling.tasks.correct_tile`).
+            its neighbours' dots, mm (:func:`optdot.orchestration.tiling.tasks.correct_tile`).
     """
 
     xs: np.ndarray

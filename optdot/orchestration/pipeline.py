@@ -23,18 +23,23 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import stages
-from .config.job import Job, QAParams
-from .errors import ExportError, JobError, QAGateError
-from .formats import FORMATS
-from .geometry.caps import no_caps
-from .geometry.domain import Domain
-from .geometry.morton import spatial_order
-from .io.atomic import transaction
-from .io.dataset import is_dataset
-from .io.outputs import check_outputs
-from .io.patterns import save_pattern
-from .pattern import DotSource, Pattern, caps_of
+from .. import stages
+from ..config.job import Job, QAParams
+from ..errors import ExportError, JobError, QAGateError
+from ..formats import FORMATS
+from ..geometry.caps import no_caps
+from ..geometry.domain import Domain
+from ..geometry.morton import spatial_order
+from ..io.atomic import transaction
+from ..io.dataset import is_dataset
+from ..io.outputs import check_outputs
+from ..io.patterns import save_pattern
+from ..pattern import DotSource, Pattern, caps_of
+from ..quality.conformance import TOLERANCE, DotRule, SizeBand
+from ..relax.formulation import Formulation
+from ..relax.optdot import Progress
+from ..runtime.kernels import warm
+from ..runtime.memory import check_memory
 from .preflight import (
     MAX_RANDOM_FILL,
     TILE_BREAK_EVEN,
@@ -43,16 +48,11 @@ from .preflight import (
     check_job,
     use_tiles,
 )
-from .quality.conformance import TOLERANCE, DotRule, SizeBand
-from .relax.formulation import Formulation
-from .relax.optdot import Progress
-from .runtime.kernels import warm
-from .runtime.memory import check_memory
 from .tiled import Announce, generate_tiled
 from .tiling.run import TileProgress
 
 if TYPE_CHECKING:  # QA (scipy.spatial among it) is loaded by the commands that judge
-    from .quality.gate import QAResult
+    from ..quality.gate import QAResult
 
 __all__ = [
     "MAX_RANDOM_FILL",
@@ -287,7 +287,7 @@ def size_band(job: Job) -> SizeBand | None:
     (:data:`optdot.relax.resize.FREEDOM`) and kept in the range; None for one size."""
     from scipy.ndimage import maximum_filter, minimum_filter
 
-    from .relax.resize import FREEDOM
+    from ..relax.resize import FREEDOM
 
     sizes = job.sizes
     if sizes is None:
@@ -340,7 +340,7 @@ def qa(
         view: overrides of the visibility check, keys of :class:`QAParams`
             (``view``, ``view_distance``, ``view_luminance``, ``psf``, ``max_jnd``).
     """
-    from .quality.gate import caps_check, run_qa
+    from ..quality.gate import caps_check, run_qa
 
     dots = pattern if pattern is not None else dataset
     if dots is None:
@@ -400,7 +400,7 @@ def qa(
             )
         )
     if job is not None and job.process is not None:  # the print across the gain's tolerance
-        from .quality.printed import band_check, tolerance_band
+        from ..quality.printed import band_check, tolerance_band
 
         outline = None if job.domain.rectangle else job.domain
         band = tolerance_band(dots, job.process, job.density, outline, params.smoothing)
@@ -423,8 +423,8 @@ def _refuse_kept_masks(dots: DotSource, job: Job | None, outputs, options, hint:
     Raises:
         ExportError: the first such mask, in the transaction's words.
     """
-    from .io.atomic import lacks_text
-    from .quality.provenance import mask_lines
+    from ..io.atomic import lacks_text
+    from ..quality.provenance import mask_lines
 
     version = "R2010" if options is None else str(getattr(options, "dxf_version", "R2010"))
     # ezdxf writes custom properties (the provenance) from R2004 on
@@ -448,7 +448,7 @@ def provenance_of(dots: DotSource, job: Job | None) -> dict[str, Any]:
     """What made ``dots`` (:func:`optdot.quality.provenance.provenance`): the job, its
     inputs, the dots' file and the seed (the dots' own, else the job's when they were made
     in this run)."""
-    from .quality.provenance import provenance
+    from ..quality.provenance import provenance
 
     source = dots.label or None
     seed = dots.meta.get("seed")
@@ -501,8 +501,8 @@ def export(
             export (the job's files, the pattern's or dataset's own file), or is a
             different mask kept (``overwrite`` False); none was replaced (one transaction).
     """
-    from . import exporters
-    from .quality.report import write_reports
+    from .. import exporters
+    from ..quality.report import write_reports
 
     if pattern is not None and not isinstance(pattern, Pattern):
         stream, pattern = pattern, None  # a dataset given as the dots: streamed
@@ -525,8 +525,8 @@ def export(
             with transaction():
                 write_reports(result, reports, title)
         raise QAGateError(result)
-    from .exporters import ExportOptions
-    from .quality.provenance import mask_lines
+    from ..exporters import ExportOptions
+    from ..quality.provenance import mask_lines
 
     options = replace(
         options or ExportOptions(),
@@ -558,7 +558,7 @@ def export(
 def sheet_labels(job: Job, prov: dict) -> tuple[str, ...]:
     """Each panel's label on the job's sheet, row by row: the job, optdot, the seed, the
     job file's SHA-256 prefix, the sheet's date, the process, the panel's place."""
-    from .printing.sheet import label_text
+    from ..printing.sheet import label_text
 
     sheet = job.sheet
     sha = (prov.get("job") or {}).get("sha256") or ""
@@ -573,6 +573,6 @@ def sheet_labels(job: Job, prov: dict) -> tuple[str, ...]:
 
 def dataset_pattern(ds, job: Job | None) -> Pattern:
     """The whole dataset ``ds`` in memory, on the job's panel when there is a job."""
-    from .io.dataset import load_dataset
+    from ..io.dataset import load_dataset
 
     return with_job_panel(load_dataset(ds.path, box=job.box if job else None), job)
