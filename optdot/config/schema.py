@@ -7,6 +7,7 @@ are errors, so a typo is never silently ignored. Adding an option: one line in
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from dataclasses import replace
@@ -45,6 +46,22 @@ from .shaping import (
 )
 from .sheet_section import SHEET_KEYS, sheet_from
 
+#: The TOML types a record's field annotation takes (a float field takes an integer too).
+FIELD_TYPES: dict[str, tuple[type, ...]] = {
+    "str": (str,),
+    "int": (int,),
+    "float": (int, float),
+    "float | None": (int, float),
+}
+
+
+def spec_keys(record) -> dict[str, tuple[type, ...]]:
+    """The keys of a job section that is one frozen record (``[optimize]``:
+    :class:`~optdot.config.job.OptimizeParams`, ``[qa]``), with the TOML types each
+    field's annotation takes: the record declares the key once."""
+    return {f.name: FIELD_TYPES[str(f.type)] for f in dataclasses.fields(record)}
+
+
 SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
     "": {"name": (str,)},
     "domain": {
@@ -73,40 +90,8 @@ SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
         **DOT_SHAPE_KEYS,
     },
     "orientation": ORIENTATION_KEYS,
-    "optimize": {
-        "method": (str,),
-        "max_iter": (int,),
-        "seed": (int,),
-        "formulation": (str,),
-        "radius_factor": (int, float),
-        "container_factor": (int, float),
-        "lbfgs_memory": (int,),
-        "ftol": (int, float),
-        "gap": (int, float),
-        "skin": (int, float),
-        "md_step": (int, float),
-        "md_decay": (int, float),
-        "md_cutoff": (int, float),
-        "close_target": (int, float),
-    },
-    "qa": {
-        "collision_distance": (int, float),
-        "close_distance": (int, float),
-        "max_collisions": (int,),
-        "max_close_fraction": (int, float),
-        "max_protruding": (int,),
-        "max_in_empty": (int,),
-        "max_coverage_rms": (int, float),
-        "max_psi6_coherence": (int, float),
-        "smoothing": (int, float),
-        "close_gap": (int, float),
-        "view": (str,),
-        "view_distance": (int, float),
-        "view_luminance": (int, float),
-        "psf": (int, float),
-        "max_jnd": (int, float),
-        "warn_jnd": (int, float),
-    },
+    "optimize": spec_keys(OptimizeParams),
+    "qa": spec_keys(QAParams),
     "light_guide": LIGHT_GUIDE_KEYS,
     "backlight": BACKLIGHT_KEYS,
     "design": DESIGN_KEYS,
@@ -115,6 +100,10 @@ SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
     "sheet": SHEET_KEYS,
 }
 _REQUIRED: dict[str, tuple[str, ...]] = {"dots": ()}
+#: The keys of the records' sections whose fields are integers (kept as integers).
+INT_KEYS = frozenset(
+    k for rec in ("optimize", "qa") for k, t in SCHEMA[rec].items() if t == FIELD_TYPES["int"]
+)
 
 
 #: Largest job file read, bytes (a job is a few hundred bytes; values are short).
@@ -545,8 +534,9 @@ def _load_domain(dom: dict[str, Any], base: Path, where: str) -> Domain | None:
 
 
 def _floats(d: dict[str, Any]) -> dict[str, Any]:
-    ints = {"max_iter", "seed", "lbfgs_memory", "max_collisions", "max_protruding", "max_in_empty"}
-    return {k: (v if k in ints or isinstance(v, str) else float(v)) for k, v in d.items()}
+    """A section's values for its record: numbers as floats, where the record's field is
+    not an ``int`` (:func:`spec_keys`)."""
+    return {k: (v if k in INT_KEYS or isinstance(v, str) else float(v)) for k, v in d.items()}
 
 
 def _sections() -> str:
