@@ -48,8 +48,8 @@ from relax_profile import scaled_led  # noqa: E402
 
 import optdot.relax.lbfgs as lbfgs  # noqa: E402
 import optdot.relax.optdot as relax  # noqa: E402
-from optdot.orchestration import pipeline  # noqa: E402
 from optdot.config.schema import load_job  # noqa: E402
+from optdot.orchestration import pipeline  # noqa: E402
 from optdot.relax.penalty import row_pairs  # noqa: E402
 from optdot.spatial.blocks import BLOCK, PairList  # noqa: E402
 from optdot.spatial.cellgrid import (  # noqa: E402

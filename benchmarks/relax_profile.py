@@ -29,8 +29,8 @@ from _common import machine, peak_rss_mb  # noqa: E402
 import optdot.relax.lbfgs as lbfgs  # noqa: E402
 import optdot.relax.optdot as relax  # noqa: E402
 import optdot.spatial.verlet as verlet  # noqa: E402
-from optdot.orchestration import pipeline  # noqa: E402
 from optdot.config.schema import load_job  # noqa: E402
+from optdot.orchestration import pipeline  # noqa: E402
 
 ROOT = HERE.parent
 #: Dots of the led sample as bundled (36 x 15 mm).

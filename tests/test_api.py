@@ -286,3 +286,30 @@ def test_below_the_orchestration_functions_take_values_not_the_job():
                 if any(a.arg == "job" for a in args):
                     bad.append(f"{rel}:{node.lineno} {node.name}")
     assert not bad, bad
+
+
+@pytest.mark.parametrize(
+    ("section", "key", "value", "said"),
+    [
+        ("optimize", "max_iter", "1.5", "optimize.max_iter = 1.5 must be"),
+        ("optimize", "method", "3", "optimize.method = 3 must be"),
+        ("qa", "max_collisions", "0.5", "qa.max_collisions = 0.5 must be"),
+        ("qa", "view", "1", "qa.view = 1 must be"),
+        ("optimize", "maxiter", "5", "unknown key 'optimize.maxiter'"),
+    ],
+)
+def test_a_record_s_section_takes_its_fields_types(tmp_path, section, key, value, said):
+    """``[optimize]`` and ``[qa]`` keys are their records' fields (declared once): an
+    integer field refuses a fraction, a text field a number, a key no field has is
+    unknown; a float field takes an integer."""
+    from optdot.config.schema import load_job
+    from optdot.errors import JobError
+
+    from .conftest import write_job
+
+    grid = np.full((3, 4), 0.3)
+    with pytest.raises(JobError) as e:
+        load_job(write_job(tmp_path, grid, **{section: {key: value}}))
+    assert said in str(e.value), str(e.value)
+    job = load_job(write_job(tmp_path, grid, optimize={"gap": 0, "skin": 1}, qa={"smoothing": 2}))
+    assert job.optimize.gap == 0.0 and isinstance(job.optimize.skin, float)
