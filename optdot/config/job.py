@@ -427,10 +427,11 @@ class Job:
         """Bounding box of the panel ``(xmin, ymin, xmax, ymax)``, mm."""
         return self.domain.box
 
-    @cached_property
+    @property
     def cell_weights(self) -> np.ndarray | None:
-        """``[ny, nx]`` share of each grid cell inside the domain (None: all of it)."""
-        return self.domain.map_weights(self.density)
+        """``[ny, nx]`` share of each grid cell inside the domain (None: all of it; the
+        :attr:`bench`'s, computed once)."""
+        return self.bench.cell_weights
 
     @property
     def n_dots(self) -> int:
