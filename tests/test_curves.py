@@ -50,8 +50,8 @@ def _job(tmp_path, dxf_name: str, rho: float = 0.45):
 
 
 def test_dxf_circle_holes_keep_r0_from_the_true_circles(tmp_path):
-    """A notched panel with two screw holes drawn as DXF CIRCLEs (issue: 147 dots up to
-    0.45 µm too close to the true holes with Bézier flattening)."""
+    """A notched panel with two screw holes drawn as DXF CIRCLEs (flattened as Béziers,
+    147 dots stood up to 0.45 µm too close to the true holes)."""
     holes = [((2.5, 2.5), 1.6), ((6.4, 5.6), 1.2)]
     doc = ezdxf.new("R2010", units=4)
     msp = doc.modelspace()
@@ -75,7 +75,8 @@ def test_dxf_circle_holes_keep_r0_from_the_true_circles(tmp_path):
 
 def test_bulge_and_arc_outline_keeps_r0_from_the_true_curves(tmp_path):
     """Curved side as a bulged polyline (7 mm radius), a slot of LINEs and ARCs, and a
-    round hole drawn as two ARCs (issue: 305 dots up to 1.8 µm inside the r0 band)."""
+    round hole drawn as two ARCs (flattened loosely, 305
+    dots stood up to 1.8 µm inside the r0 band)."""
     # outer: bottom edge, right edge, then a ccw bulge from (9, 6) to (0, 6) with radius 7
     chord = 9.0
     half = math.asin(0.5 * chord / 7.0)  # half the included angle

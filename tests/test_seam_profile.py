@@ -57,9 +57,9 @@ def test_seams_carry_the_interiors_coverage(led):
     assert abs(got["seam_mean"]) < 5e-4, got
     # the throws moved along the panel-wide field before relaxing: the seams, where the
     # windows of two tiles meet, end as smooth as the interior: seeds 1-5, 0.0102-0.0136 %
-    # against 0.0118-0.0125 % (ratios 0.85-1.11; before session 28's first step
-    # 0.83-1.15); a first pass solved tile by tile leaves 0.19 % against 0.097 % (the
-    # tests below); without the field 0.074 % against 0.079 %
+    # against 0.0118-0.0125 % (ratios 0.85-1.11); a first pass solved tile by tile
+    # leaves 0.19 % against 0.097 % (the tests below); without the field 0.074 % against
+    # 0.079 %
     assert got["seam_rms"] < 1.25 * got["inner_rms"], got
     # the wide pass solved over the panel from every tile's first pass, moving coverage
     # over the live cells: 0.014 % overall and inside (relative error moved: 0.029 % and
