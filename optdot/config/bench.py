@@ -14,6 +14,7 @@ import numpy as np
 if TYPE_CHECKING:
     from ..geometry.density import DensityMap
     from ..geometry.domain import Domain
+    from ..geometry.profile import DotProfile
     from ..geometry.shapes import DotShape
     from ..geometry.sizes import DotSizes
     from ..printing.process import Process
@@ -36,6 +37,7 @@ class Bench:
         design: how a map is designed (``[design]``).
         process: how the masks print, or None.
         shape: the dot's kind and size.
+        profile: the dot's 3-D profile (ink, a bump, a dimple).
         sizes: how diameters vary, or None for one size.
         diameter: the (smallest) dot's diameter, mm.
         close_gap: the edge gap QA counts close pairs under, mm.
@@ -51,6 +53,7 @@ class Bench:
     design: DesignParams
     process: Process | None
     shape: DotShape
+    profile: DotProfile
     sizes: DotSizes | None
     diameter: float
     close_gap: float

@@ -20,6 +20,7 @@ from ..geometry.density import DensityMap
 from ..geometry.domain import Domain
 from ..geometry.limits import DIAMETER_RANGE_MM, MAX_EXTENT_MM
 from ..geometry.orientation import Orientation
+from ..geometry.profile import DotProfile
 from ..geometry.shapes import CIRCLE, DotShape
 from ..geometry.sizes import DotSizes, dots_per_cell
 from ..printing.laser import Laser
@@ -236,6 +237,7 @@ class Job:
             :attr:`diameter`). A round kind's size is its (smallest) diameter; any
             other's is its footprint at scale 1, and :attr:`diameter` the disc of the
             same area's (the smallest's).
+        profile: the dots' 3-D profile (``[dots] profile``: ink, a bump or a dimple).
         orientation: where shaped dots' long axes point (``[orientation]``).
         process: how the masks print (``[process]``), or None: masks are the pattern.
             The pattern is then the print, relaxed to the process's gaps
@@ -262,6 +264,7 @@ class Job:
     design: DesignParams = field(default_factory=DesignParams)
     viewing_area: tuple[float, float, float, float] | None = None
     shape: DotShape = None  # type: ignore[assignment]  # filled in: a circle
+    profile: DotProfile = field(default_factory=DotProfile)
     orientation: Orientation = field(default_factory=Orientation)
     process: Process | None = None
     laser: Laser | None = None
@@ -337,6 +340,7 @@ class Job:
             design=self.design,
             process=self.process,
             shape=self.shape,
+            profile=self.profile,
             sizes=self.sizes,
             diameter=self.diameter,
             close_gap=self.qa.effective_close_gap,

@@ -39,7 +39,9 @@ from .process_section import PROCESS_KEYS, check_caps, check_printable, process_
 from .shaping import (
     DOT_SHAPE_KEYS,
     ORIENTATION_KEYS,
+    PROFILE_KEYS,
     dot_kind,
+    dot_profile,
     dot_shape,
     orientation,
     shape_sizes,
@@ -88,6 +90,7 @@ SCHEMA: dict[str, dict[str, tuple[type, ...]]] = {
         "diameter_grid": (str,),
         "diameter_step": (int, float),
         **DOT_SHAPE_KEYS,
+        **PROFILE_KEYS,
     },
     "orientation": ORIENTATION_KEYS,
     "optimize": spec_keys(OptimizeParams),
@@ -295,6 +298,7 @@ def job_from_dict(
     if "sheet" in sections:
         scale = process.scale if process is not None else np.ones(2)
         sheet = sheet_from(sections["sheet"], (x0, y0, x0 + width, y0 + height), scale, where)
+    profile = dot_profile(dots, shape, sizes, guide, backlight, where)
     turn = orientation(
         sections.get("orientation", {}),
         shape,
@@ -333,6 +337,7 @@ def job_from_dict(
         design=design,
         viewing_area=area,
         shape=shape,
+        profile=profile,
         orientation=turn,
         process=process,
         laser=laser,

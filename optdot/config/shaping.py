@@ -33,6 +33,7 @@ from ..errors import JobError
 from ..geometry.kinds import shaped_names
 from ..geometry.limits import DIAMETER_RANGE_MM, MAX_SHAPED_FILL
 from ..geometry.orientation import Orientation, led_centres
+from ..geometry.profile import HEIGHT_KEY, PROFILES, DotProfile
 from ..geometry.shapes import CIRCLE, KINDS, DotShape, Kind
 from .grids import load_grid
 
@@ -41,6 +42,11 @@ DOT_SHAPE_KEYS: dict[str, tuple[type, ...]] = {
     **{p: (int, float) for k in KINDS.values() if not k.round for p in k.params},
     **{key: t for k in KINDS.values() for key, t in k.keys.items()},
     "scale": (list,),
+}
+#: ``[dots]`` keys of a dot's 3-D profile (:mod:`optdot.geometry.profile`).
+PROFILE_KEYS: dict[str, tuple[type, ...]] = {
+    "profile": (str,),
+    **{key: (int, float) for key in HEIGHT_KEY.values()},
 }
 ORIENTATION_KEYS: dict[str, tuple[type, ...]] = {
     "angle": (int, float),
@@ -174,6 +180,51 @@ def _derived_shape(kind, dots: dict[str, Any], sized: list[str], where: str) -> 
             f"wide, which cannot be drawn (at most {MAX_ASPECT:g})"
         )
     return DotShape(kind, tuple(size))
+
+
+def dot_profile(dots: dict[str, Any], shape: DotShape, sizes, guide, backlight, where: str):
+    """The ``[dots]`` profile: ``profile = "ink"`` (default), ``"bump"`` with ``height``
+    or ``"dimple"`` with ``depth`` (mm), a spherical cap on the circle's footprint.
+
+    Raises:
+        JobError: an unknown profile, its height missing, another's given, a cap taller
+            than a hemisphere, a footprint that is not a circle, dots of several sizes,
+            or a stack whose dots are printed on a film (a profile is the guide's).
+    """
+    name = dots.get("profile", PROFILES[0])
+    if name not in PROFILES:
+        raise JobError(f"{where}: dots.profile = {name!r} must be one of {', '.join(PROFILES)}")
+    key = HEIGHT_KEY.get(name)
+    for other in HEIGHT_KEY.values():
+        if other in dots and other != key:
+            whose = " or ".join(f"{p!r}'s" for p, k in HEIGHT_KEY.items() if k == other)
+            raise JobError(f"{where}: dots.{other} is a {whose} (dots.profile = {name!r})")
+    if key is None:
+        return DotProfile()
+    if key not in dots:
+        raise JobError(f"{where}: dots.profile = {name!r} needs dots.{key} (mm)")
+    h = float(dots[key])
+    if not shape.kind.round:
+        raise JobError(
+            f"{where}: dots.profile = {name!r} is a spherical cap on a circle; "
+            f"{shape.kind.name} dots take profile = 'ink'"
+        )
+    if sizes is not None:
+        raise JobError(
+            f"{where}: dots.profile = {name!r} takes dots of one size (dots.diameter a number)"
+        )
+    radius = 0.5 * shape.size[0]
+    if not (math.isfinite(h) and 0 < h <= radius):
+        raise JobError(
+            f"{where}: dots.{key} = {dots[key]!r} must be in mm, 0 < {key} <= {radius:g} "
+            "(the dot's radius: a spherical cap is at most a hemisphere)"
+        )
+    if guide is None or (backlight is not None and backlight.print == "film"):
+        raise JobError(
+            f"{where}: dots.profile = {name!r} shapes dots in a light guide's face; this job "
+            "prints them on a film (or has no [light_guide])"
+        )
+    return DotProfile(name, h)
 
 
 def shape_sizes(dots: dict[str, Any], shape: DotShape, qa_sec: dict[str, Any], qa, where: str):

@@ -48,6 +48,8 @@ from .tables import (
     F_HAZE_SIG,
     F_KIND,
     F_PRINT,
+    F_PROF_K,
+    F_PROFILE,
     F_REFL,
     F_REFL_FINISH,
     F_SHEET_R,
@@ -139,6 +141,9 @@ def scene_of(
         assert guide is not None
         sources = _edge_sources(guide, rays, box)
         layer, face = _edge_stack(guide, bl)
+        if bl is None or bl.print == "guide":  # the guide's dots: ink, or 3-D
+            face[0, F_PROFILE] = bench.profile.code
+            face[0, F_PROF_K] = bench.profile.aspect(0.5 * bench.diameter)
     else:
         assert bl.leds is not None
         sources = _grid_sources(bl, rays, only_led)

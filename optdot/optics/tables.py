@@ -43,10 +43,13 @@ L_COLS = 7
 #: its sigma (rad), critical cosine going up, going down (0 when there is none), the
 #: reflector's finish (BOTTOM: 0 diffuse, 1 specular), whether a ray meeting the face
 #: draws the print test's number (1: a printed face, and the reflector face even bare,
-#: so that a stack's rays draw their numbers in the order they always have).
+#: so that a stack's rays draw their numbers in the order they always have), the dots'
+#: 3-D profile (:data:`~optdot.geometry.profile.PROFILES`' code: 0 ink) and its height
+#: over the footprint's radius.
 (F_KIND, F_PRINT, F_DOT_R, F_DOT_T, F_REFL, F_EXTRACT, F_HAZE, F_HAZE_SIG, F_SHEET_T) = range(9)
 F_SHEET_R, F_SPREAD, F_SPREAD_SIG, F_COS_UP, F_COS_DOWN, F_REFL_FINISH, F_TEST = range(9, 16)
-F_COLS = 16
+F_PROFILE, F_PROF_K = 16, 17
+F_COLS = 18
 
 
 @nb.njit(cache=True, inline="always")
@@ -57,11 +60,11 @@ def face_row(face, fi):  # pragma: no cover - compiled
     return (
         face[fi, 0], face[fi, 1], face[fi, 2], face[fi, 3], face[fi, 4], face[fi, 5],
         face[fi, 6], face[fi, 7], face[fi, 8], face[fi, 9], face[fi, 10], face[fi, 11],
-        face[fi, 12], face[fi, 13], face[fi, 14], face[fi, 15],
+        face[fi, 12], face[fi, 13], face[fi, 14], face[fi, 15], face[fi, 16], face[fi, 17],
     )  # fmt: skip
 
 
-assert F_COLS == 16, "face_row reads every column"
+assert F_COLS == 18, "face_row reads every column"
 #: Face kinds (:mod:`optdot.optics.faces`: what each does to a ray).
 BOTTOM_FACE, INTERFACE, SHEET_FACE, PRISM_FACE = 0, 1, 2, 3
 #: What a face or a wall did to a ray that goes on (a fate, ``>= 0``, ends it): turned it

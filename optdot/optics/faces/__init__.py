@@ -1,6 +1,6 @@
 """What the faces and walls of a traced stack do to a ray: each kind of face one module
 (:mod:`.reflector`, :mod:`.interface`, :mod:`.diffuser_sheet`, :mod:`.prism_sheet`; the
-walls :mod:`.slab_walls`), each
+walls :mod:`.slab_walls`; the 3-D dots of the bottom face :mod:`.dot_profile`), each
 with its compiled ``meet_*`` kernel, and :func:`meet_face` dispatching on the face's
 kind (:data:`optdot.optics.tables.BOTTOM_FACE`, ...). A kernel returns ``(state, act,
 dx, dy, dz)``: a fate (``>= 0``) that ends the ray, or what it goes on with
@@ -17,8 +17,9 @@ from __future__ import annotations
 
 import numba as nb
 
-from ..tables import BOTTOM_FACE, F_KIND, PRISM_FACE, SHEET_FACE
+from ..tables import BOTTOM_FACE, F_KIND, F_PROFILE, PRISM_FACE, SHEET_FACE
 from .diffuser_sheet import meet_sheet
+from .dot_profile import meet_profile
 from .interface import meet_interface
 from .prism_sheet import meet_prism
 from .reflector import meet_reflector
@@ -38,6 +39,8 @@ def meet_face(state, f, up, n, n_to, is_top, ink, dxn, dyn, dz):  # pragma: no c
     if kind == PRISM_FACE:
         return meet_prism(state, f, up, dxn, dyn, dz)
     if kind == BOTTOM_FACE:
+        if ink and f[F_PROFILE] > 0.5:  # a 3-D dot, not ink
+            return meet_profile(state, f, n, dxn, dyn, dz)
         return meet_reflector(state, f, n, ink, dxn, dyn, dz)
     return meet_interface(state, f, up, n, n_to, is_top, ink, dxn, dyn, dz)
 

@@ -48,16 +48,25 @@ def meet_reflector(state, f, n, ink, dxn, dyn, dz):  # pragma: no cover - compil
                 return state, BOTTOM, dxn, dyn, dz
             return state, SAME_LEG, dxn, dyn, -dz  # back in at the angle it left
         if u >= r_face:  # out to the reflector sheet
-            ok = False
-            cn = sn = az = 0.0
-            while True:
-                state, u = uniform(state)
-                if u >= f[F_REFL]:
-                    break
-                state, ok, cn, sn, az = lambert_in(state, n)
-                if ok:
-                    break
-            if not ok:
-                return state, BOTTOM, dxn, dyn, dz
-            return state, NEW_LEG, sn * math.cos(az), sn * math.sin(az), cn
+            return sheet_return(state, f[F_REFL], n, dxn, dyn, dz)
     return state, SAME_LEG, dxn, dyn, -dz
+
+
+@nb.njit(cache=True, inline="always")
+def sheet_return(state, refl, n, dxn, dyn, dz):  # pragma: no cover - compiled
+    """A ray out of the guide's bottom onto a white sheet of reflectance ``refl``:
+    returned Lambertian in air and refracted back into index ``n`` (drawn again while
+    the face reflects it back down), or absorbed: ``(state, NEW_LEG or BOTTOM, dx, dy,
+    dz)``."""
+    ok = False
+    cn = sn = az = 0.0
+    while True:
+        state, u = uniform(state)
+        if u >= refl:
+            break
+        state, ok, cn, sn, az = lambert_in(state, n)
+        if ok:
+            break
+    if not ok:
+        return state, BOTTOM, dxn, dyn, dz
+    return state, NEW_LEG, sn * math.cos(az), sn * math.sin(az), cn
