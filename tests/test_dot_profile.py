@@ -243,10 +243,14 @@ def test_a_mirror_under_bumps_returns_what_a_white_sheet_would_not_absorb(tmp_pa
     [
         ('profile = "lens"', "dots.profile = 'lens' must be one of ink, bump, dimple"),
         ('profile = "bump"', "dots.profile = 'bump' needs dots.height (mm)"),
-        ('profile = "bump"\nheight = 0.024', "dots.height = 0.024 must be in mm, 0 < height"),
+        ('profile = "bump"\nheight = 0.024', "dots.height = 0.024 must be in mm, 0.0001 <="),
         ('profile = "bump"\nheight = -0.01', "dots.height = -0.01 must be in mm"),
-        ('profile = "dimple"\nheight = 0.01', "dots.height is a 'bump''s"),
-        ("height = 0.01", "dots.height is a 'bump''s (dots.profile = 'ink')"),
+        ('profile = "bump"\nheight = 1e-300', "dots.height = 1e-300 must be in mm"),
+        (
+            'profile = "dimple"\nheight = 0.01',
+            "dots.height belongs to dots.profile = 'bump', not 'dimple'",
+        ),
+        ("height = 0.01", "dots.height belongs to dots.profile = 'bump', not 'ink'"),
     ],
 )
 def test_a_profile_that_cannot_be_made_is_refused_in_one_line(tmp_path, dots, said):
@@ -280,3 +284,26 @@ def test_a_profile_on_a_footprint_it_does_not_fit_is_refused(tmp_path):
     (tmp_path / "f.toml").write_text(film)
     with pytest.raises(JobError, match="prints them on a film"):
         load_job(tmp_path / "f.toml")
+
+
+def test_ink_s_scatter_rule_is_refused_beside_a_profile(tmp_path):
+    """``dot_scatter = "extract"`` idealises ink; a bump is traced as what it is."""
+    np.savetxt(tmp_path / "map.csv", np.full((8, 12), 0.2), delimiter=",")
+    text = GUIDE.format(name="s", dots='profile = "bump"\nheight = 0.01', reflector=0.9,
+                        finish="diffuse")  # fmt: skip
+    (tmp_path / "s.toml").write_text(text.replace("dot_albedo = 0.9", 'dot_scatter = "extract"'))
+    with pytest.raises(JobError, match="dot_scatter = 'extract' is what ink dots do"):
+        load_job(tmp_path / "s.toml")
+
+
+def test_a_design_whose_dots_extract_nothing_stops_at_once(tmp_path):
+    """Dots that send no light out of the guide (ink of albedo 0 here; a profile too flat
+    to bend light out is the same) leave no luminance to design from: one line, at the
+    first iteration, not 16 iterations of NaN."""
+    from optdot.optics.design import design
+
+    np.savetxt(tmp_path / "map.csv", np.full((8, 12), 0.2), delimiter=",")
+    text = GUIDE.format(name="d", dots="", reflector=0.9, finish="diffuse")
+    (tmp_path / "d.toml").write_text(text.replace("dot_albedo = 0.9", "dot_albedo = 0.0"))
+    with pytest.raises(JobError, match="no light leaves the top through the map of iteration 1"):
+        design(load_job(tmp_path / "d.toml").bench, rays=20_000)

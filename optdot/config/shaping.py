@@ -182,6 +182,11 @@ def _derived_shape(kind, dots: dict[str, Any], sized: list[str], where: str) -> 
     return DotShape(kind, tuple(size))
 
 
+#: The lowest bump or dimple, mm (0.1 µm: a cap flatter is the flat face, and a sphere
+#: of a vanishing height has no radius a float holds).
+MIN_CAP_HEIGHT = 1e-4
+
+
 def dot_profile(dots: dict[str, Any], shape: DotShape, sizes, guide, backlight, where: str):
     """The ``[dots]`` profile: ``profile = "ink"`` (default), ``"bump"`` with ``height``
     or ``"dimple"`` with ``depth`` (mm), a spherical cap on the circle's footprint.
@@ -197,8 +202,8 @@ def dot_profile(dots: dict[str, Any], shape: DotShape, sizes, guide, backlight, 
     key = HEIGHT_KEY.get(name)
     for other in HEIGHT_KEY.values():
         if other in dots and other != key:
-            whose = " or ".join(f"{p!r}'s" for p, k in HEIGHT_KEY.items() if k == other)
-            raise JobError(f"{where}: dots.{other} is a {whose} (dots.profile = {name!r})")
+            whose = " or ".join(repr(p) for p, k in HEIGHT_KEY.items() if k == other)
+            raise JobError(f"{where}: dots.{other} belongs to dots.profile = {whose}, not {name!r}")
     if key is None:
         return DotProfile()
     if key not in dots:
@@ -214,15 +219,21 @@ def dot_profile(dots: dict[str, Any], shape: DotShape, sizes, guide, backlight, 
             f"{where}: dots.profile = {name!r} takes dots of one size (dots.diameter a number)"
         )
     radius = 0.5 * shape.size[0]
-    if not (math.isfinite(h) and 0 < h <= radius):
+    if not (math.isfinite(h) and MIN_CAP_HEIGHT <= h <= radius):
         raise JobError(
-            f"{where}: dots.{key} = {dots[key]!r} must be in mm, 0 < {key} <= {radius:g} "
-            "(the dot's radius: a spherical cap is at most a hemisphere)"
+            f"{where}: dots.{key} = {dots[key]!r} must be in mm, {MIN_CAP_HEIGHT:g} <= {key} "
+            f"<= {radius:g} (the radius of dots {2 * radius:g} mm across: a spherical cap is "
+            "at most a hemisphere)"
         )
     if guide is None or (backlight is not None and backlight.print == "film"):
         raise JobError(
             f"{where}: dots.profile = {name!r} shapes dots in a light guide's face; this job "
             "prints them on a film (or has no [light_guide])"
+        )
+    if guide.dot_scatter != "lambertian":
+        raise JobError(
+            f"{where}: light_guide.dot_scatter = {guide.dot_scatter!r} is what ink dots do; "
+            f"dots.profile = {name!r} is traced as the structure it is"
         )
     return DotProfile(name, h)
 

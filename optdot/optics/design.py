@@ -315,6 +315,13 @@ def design(
         cov = Coverage(phi * inside, x0, y0, dx, dy)
         now = bench if grades is None else grades.printing(bench)
         sim = simulate(now, n_rays, seed + 7919 * it, coverage=cov, bins=(nx, ny))
+        if sim.fates["extracted"] == 0:  # no luminance to design from
+            raise JobError(
+                f"{bench.where}: no light leaves the top through the map of iteration "
+                f"{it + 1} (fill up to {float(phi.max()):.3g}; 0 of {n_rays:,} rays): the "
+                "dots extract nothing (light_guide.dot_albedo 0, or a dots.profile too flat "
+                "to bend light out of the guide)"
+            )
         figures = _figures(it, sim, None if p.target is None else target)
         history.append(figures)
         if not last:
