@@ -208,3 +208,28 @@ def test_a_job_that_names_no_kind_has_the_circle_of_its_diameter():
     assert job.shape.kind is KINDS["circle"] and job.shape.size == (0.046,)
     assert job.shape.equivalent_diameter == 0.046 and job.min_distance == 0.046 + job.optimize.gap
     assert job.dot_radius == 0.023
+
+
+def test_every_sheet_kind_has_its_face_row():
+    """A sheet kind the job accepts is one the scene knows how to trace (a kind added to
+    the keys without its face would be traced as nothing)."""
+    from optdot.config.backlight import SHEET_KINDS
+    from optdot.optics.scene import SHEET_ROWS
+
+    assert set(SHEET_ROWS) == set(SHEET_KINDS)
+
+
+def test_stacks_are_asked_not_compared_outside_their_record():
+    """What a stack is (direct-lit, printed on its film) is the backlight record's to
+    say (:attr:`~optdot.config.backlight.Backlight.direct`, ``on_film``); a string
+    compared elsewhere is a second place a new stack would have to be taught."""
+    root = Path(__file__).resolve().parent.parent
+    asked = re.compile(r"""\.(kind|print) [=!]= ?["'](direct|edge|film|guide|prism|diffuser)["']""")
+    hits = [
+        f"{f.relative_to(root)}:{n}"
+        for f in (root / "optdot").rglob("*.py")
+        if f.name != "backlight.py"
+        for n, line in enumerate(f.read_text().splitlines(), 1)
+        if asked.search(line)
+    ]
+    assert not hits, hits

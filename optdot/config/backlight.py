@@ -232,6 +232,16 @@ class Backlight:
     reflector_finish: str = "diffuse"
 
     @property
+    def direct(self) -> bool:
+        """Direct-lit: LEDs in a cavity under the printed film (else edge-lit: a guide)."""
+        return self.kind == "direct"
+
+    @property
+    def on_film(self) -> bool:
+        """The job's pattern is printed on the film (else on the guide's face)."""
+        return self.print == "film"
+
+    @property
     def ink_contrast(self) -> float:
         """``k`` of the film's relative transmission ``1 - k phi`` at fill ``phi``: ``1 -
         T_ink / T_clear`` (the ink's diffuse transmittance over the clear face's share of

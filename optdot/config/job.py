@@ -276,7 +276,7 @@ class Job:
         more ink, less light), or None when the dots extract light from a guide (luminance
         as the fill)."""
         bl = self.backlight
-        return bl.ink_contrast if bl is not None and bl.print == "film" else None
+        return bl.ink_contrast if bl is not None and bl.on_film else None
 
     def __post_init__(self) -> None:
         where = str(self.source) if self.source else "job"

@@ -233,7 +233,7 @@ def job_from_dict(
         if domain is not None:
             check_leds_inside(backlight, domain.slab or domain.geometry, where)
     optics = "light_guide" in sections or "backlight" in sections
-    film = backlight is not None and backlight.print == "film"
+    film = backlight is not None and backlight.on_film
     design = design_from(sections.get("design", {}), base, where, film)
     if "density" not in sections and optics and not need_map:
         grid_path, grid = None, np.full((1, 1), 0.5 * sum(design.fill_range))

@@ -225,7 +225,7 @@ def dot_profile(dots: dict[str, Any], shape: DotShape, sizes, guide, backlight, 
             f"<= {radius:g} (the radius of dots {2 * radius:g} mm across: a spherical cap is "
             "at most a hemisphere)"
         )
-    if guide is None or (backlight is not None and backlight.print == "film"):
+    if guide is None or (backlight is not None and backlight.on_film):
         raise JobError(
             f"{where}: dots.profile = {name!r} shapes dots in a light guide's face; this job "
             "prints them on a film (or has no [light_guide])"

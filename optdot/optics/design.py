@@ -227,7 +227,7 @@ def check_iterations(bench: Bench, n_iter: int) -> None:
 def prints_on_film(bench: Bench) -> bool:
     """The job's dots are printed on a film (direct-lit, or over the guide): more ink
     means less light through (the film rule), not more out of the guide."""
-    return bench.backlight is not None and bench.backlight.print == "film"
+    return bench.backlight is not None and bench.backlight.on_film
 
 
 def design_grid(bench: Bench) -> tuple[int, int, float, float]:

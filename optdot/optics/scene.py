@@ -105,7 +105,7 @@ def coverage_of(bench: Bench) -> Coverage:
 
 def is_direct(bench: Bench) -> bool:
     """The job's backlight is direct-lit (LEDs under the printed film)."""
-    return bench.backlight is not None and bench.backlight.kind == "direct"
+    return bench.backlight is not None and bench.backlight.direct
 
 
 def has_optics(bench: Bench) -> bool:
@@ -136,12 +136,12 @@ def scene_of(
     box = bench.box
     walls, normals = _walls(bench)
     bl = bench.backlight
-    if bl is None or bl.kind == "edge":
+    if bl is None or not bl.direct:
         guide = bench.light_guide
         assert guide is not None
         sources = _edge_sources(guide, rays, box)
         layer, face = _edge_stack(guide, bl)
-        if bl is None or bl.print == "guide":  # the guide's dots: ink, or 3-D
+        if bl is None or not bl.on_film:  # the guide's dots: ink, or 3-D
             face[0, F_PROFILE] = bench.profile.code
             face[0, F_PROF_K] = bench.profile.aspect(0.5 * bench.diameter)
     else:
@@ -302,17 +302,27 @@ def _dress_film(face: np.ndarray, bl: Backlight, film: int, mark: int) -> None:
         face[film + 1, F_HAZE] = 1.0 if f.haze == "lambertian" else 2.0
         face[film + 1, F_HAZE_SIG] = 0.0 if f.haze == "lambertian" else math.radians(f.haze)
     for k, sheet in enumerate(bl.sheets):
-        i = film + 2 + k
-        if sheet.kind == "prism":  # the columns prism_sheet reads
-            face[i, F_KIND] = PRISM_FACE
-            face[i, F_SHEET_T] = sheet.refractive_index
-            face[i, F_SPREAD] = 1.0 if sheet.grooves == "y" else 0.0
-            face[i, F_SPREAD_SIG] = math.radians(0.5 * sheet.apex_angle)
-            continue
-        face[i, F_KIND] = SHEET_FACE
-        face[i, F_SHEET_T], face[i, F_SHEET_R] = sheet.transmittance, sheet.reflectance
-        face[i, F_SPREAD] = 0.0 if sheet.spread == "lambertian" else 1.0
-        face[i, F_SPREAD_SIG] = 0.0 if sheet.spread == "lambertian" else math.radians(sheet.spread)
+        SHEET_ROWS[sheet.kind](face[film + 2 + k], sheet)
+
+
+def _diffuser_row(row: np.ndarray, sheet) -> None:
+    """A diffuser sheet's face row: the columns :mod:`.faces.diffuser_sheet` reads."""
+    row[F_KIND] = SHEET_FACE
+    row[F_SHEET_T], row[F_SHEET_R] = sheet.transmittance, sheet.reflectance
+    row[F_SPREAD] = 0.0 if sheet.spread == "lambertian" else 1.0
+    row[F_SPREAD_SIG] = 0.0 if sheet.spread == "lambertian" else math.radians(sheet.spread)
+
+
+def _prism_row(row: np.ndarray, sheet) -> None:
+    """A prism sheet's face row: the columns :mod:`.faces.prism_sheet` reads."""
+    row[F_KIND] = PRISM_FACE
+    row[F_SHEET_T] = sheet.refractive_index
+    row[F_SPREAD] = 1.0 if sheet.grooves == "y" else 0.0
+    row[F_SPREAD_SIG] = math.radians(0.5 * sheet.apex_angle)
+
+
+#: Each sheet kind (``[[backlight.sheets]] kind``) and how its face row is filled.
+SHEET_ROWS = {"diffuser": _diffuser_row, "prism": _prism_row}
 
 
 def _edge_stack(guide: LightGuide, bl: Backlight | None) -> tuple[np.ndarray, np.ndarray]:
@@ -334,7 +344,7 @@ def _edge_stack(guide: LightGuide, bl: Backlight | None) -> tuple[np.ndarray, np
         film, _ = _film_and_sheets(bl, z + bl.film.gap, layers)
     layer = np.array(layers)
     face = _faces(layer)
-    on_guide = bl is None or bl.print == "guide"
+    on_guide = bl is None or not bl.on_film
     face[0, F_PRINT] = 1 if on_guide else 2
     face[0, F_DOT_R] = guide.dot_albedo
     face[0, F_EXTRACT] = 1.0 if guide.dot_scatter == "extract" else 0.0
@@ -444,7 +454,7 @@ def _other_coverage(bench: Bench) -> Coverage:
     """The second printed face's coverage (``backlight.other_map``), or an empty map."""
     x0, y0, x1, y1 = bench.box
     bl = bench.backlight
-    value = bl.other_map if bl is not None and bl.kind == "edge" else 0.0
+    value = bl.other_map if bl is not None and not bl.direct else 0.0
     grid = np.full((1, 1), float(value)) if np.isscalar(value) else np.asarray(value)
     ny, nx = grid.shape
     return Coverage(np.clip(grid, 0, 1), x0, y0, (x1 - x0) / nx, (y1 - y0) / ny)

@@ -431,7 +431,7 @@ def _ways_out(bench: Bench) -> str:
     if bench.backlight is None:
         return "more dots, absorption > 0, edge_reflectance < 1, a reflector < 1"
     ways = "ink that transmits, a sheet that transmits more, frame < 1, a reflector < 1"
-    if bench.backlight.kind == "edge":
+    if not bench.backlight.direct:
         ways += ", edge_reflectance < 1"
     return ways
 
