@@ -307,3 +307,16 @@ def test_a_design_whose_dots_extract_nothing_stops_at_once(tmp_path):
     (tmp_path / "d.toml").write_text(text.replace("dot_albedo = 0.9", "dot_albedo = 0.0"))
     with pytest.raises(JobError, match="no light leaves the top through the map of iteration 1"):
         design(load_job(tmp_path / "d.toml").bench, rays=20_000)
+
+
+def test_simulate_says_what_dots_it_traced(tmp_path):
+    """The summary (JSON, and the command's first line) names a guide's 3-D dots and their
+    height; an ink guide's summary carries no such field (its bytes as before)."""
+    from optdot.cli.optics import _print_simulation
+
+    bump = simulate(_guide(tmp_path, 'profile = "dimple"\ndepth = 0.012').bench, 20_000, 1)
+    assert bump.summary()["dot_profile"] == {"kind": "dimple", "height_mm": 0.012}
+    said = []
+    _print_simulation(bump, 1.0, echo=said.append)
+    assert "(dimples 12 µm deep)" in said[0]
+    assert "dot_profile" not in simulate(_guide(tmp_path, "", "i").bench, 20_000, 1).summary()

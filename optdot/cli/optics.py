@@ -164,7 +164,9 @@ def _print_simulation(sim, seconds: float, echo=click.echo) -> None:
     from ..figures import structure_text
 
     s = sim.summary()
-    mode = "real dots" if sim.mode == "dots" else "map coverage"
+    from ..optics.simulate import traced_what
+
+    mode = traced_what(sim)
     echo(
         f"traced {s['rays']:,} rays through the {mode} in {seconds:.1f} s "
         f"({s['rays'] / max(seconds, 1e-9):,.0f} rays/s), seed {s['seed']}"

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 #: height (none for ink).
 PROFILES = ("ink", "bump", "dimple")
 HEIGHT_KEY = {"bump": "height", "dimple": "depth"}
+#: How each profile's height reads in words ("bumps 10 µm high").
+HEIGHT_WORD = {"bump": "high", "dimple": "deep"}
 
 
 @dataclass(frozen=True)

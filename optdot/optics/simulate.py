@@ -34,6 +34,7 @@ import numpy as np
 
 from ..config.bench import Bench
 from ..errors import JobError
+from ..geometry.profile import HEIGHT_WORD
 from ..pattern import DotSource
 from ..runtime.stop import check_interrupt
 from .angles import Angles
@@ -304,7 +305,28 @@ def simulate(
         area=area,
         stack=bench.backlight.kind if bench.backlight is not None else "guide",
         angles=angles,
+        extra=_profile_extra(bench),
     )
+
+
+def traced_what(sim: Simulation) -> str:
+    """What ``sim`` traced, in words: ``real dots`` or ``map coverage``, with a guide's 3-D
+    dots and their height (``real dots (bumps 10 µm high)``)."""
+    mode = "real dots" if sim.mode == "dots" else "map coverage"
+    shaped = sim.extra.get("dot_profile")
+    if shaped is not None:
+        how = HEIGHT_WORD[shaped["kind"]]
+        mode += f" ({shaped['kind']}s {shaped['height_mm'] * 1e3:.3g} µm {how})"
+    return mode
+
+
+def _profile_extra(bench: Bench) -> dict:
+    """The guide's 3-D dots for the summary (``dot_profile``: kind and height, mm), or
+    nothing for ink (an ink summary is as it always was)."""
+    p = bench.profile
+    if p.code == 0 or (bench.backlight is not None and bench.backlight.on_film):
+        return {}
+    return {"dot_profile": {"kind": p.kind, "height_mm": p.height}}
 
 
 def traced(
