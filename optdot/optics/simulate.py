@@ -323,8 +323,8 @@ def traced_what(sim: Simulation) -> str:
 def _profile_extra(bench: Bench) -> dict:
     """The guide's 3-D dots for the summary (``dot_profile``: kind and height, mm), or
     nothing for ink (an ink summary is as it always was)."""
-    p = bench.profile
-    if p.code == 0 or (bench.backlight is not None and bench.backlight.on_film):
+    p = bench.profile  # a job refuses a profile on a film's dots
+    if p.code == 0:
         return {}
     return {"dot_profile": {"kind": p.kind, "height_mm": p.height}}
 
