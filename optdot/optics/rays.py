@@ -4,6 +4,12 @@ tracer (:mod:`optdot.optics.faces`) draws and turns directions with these (compi
 Each ray draws from its own counter-based generator (SplitMix64 of the run's seed and the
 ray's index, :func:`ray_state`), so a result does not depend on how rays are shared among
 threads. Directions are unit vectors ``(dx, dy, dz)``, ``z`` up through the stack.
+
+The helpers that take numbers only are plain compiled functions, not numba's
+``inline="always"``: LLVM inlines them into the tracer anyway (the same machine speed and
+bits), while numba's own inlining types each one again at every call site, a third of the
+tracer's first compile. Those handed arrays (:func:`last_at_most`) stay inlined by numba:
+a call that passes arrays counts their references.
 """
 
 from __future__ import annotations
@@ -20,27 +26,27 @@ _S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(
 _TO_UNIT = 1.0 / 9007199254740992.0  # 2**-53
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def ray_state(seed, i):  # pragma: no cover - compiled
     """The generator's state for ray ``i`` of a run of ``seed``."""
     return mix(np.uint64(seed) * _M1 ^ np.uint64(i) * _M2 + _GOLDEN)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def mix(z):
     z = (z ^ (z >> _S30)) * _M1
     z = (z ^ (z >> _S27)) * _M2
     return z ^ (z >> _S31)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def uniform(state):
     """SplitMix64: ``(new state, u in [0, 1))``."""
     state = state + _GOLDEN
     return state, float(mix(state) >> _S11) * _TO_UNIT
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def fresnel(cos_i, n1, n2):
     """Unpolarised Fresnel reflectance from index n1 into n2 at incidence cosine cos_i."""
     sin_t = n1 / n2 * math.sqrt(max(0.0, 1.0 - cos_i * cos_i))
@@ -52,7 +58,7 @@ def fresnel(cos_i, n1, n2):
     return 0.5 * (rs * rs + rp * rp)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def lambert_in(state, n):
     """A Lambertian direction in air refracted into index n through a face, with the
     Fresnel transmission drawn: ``(state, ok, cos about the normal, sin, azimuth)``."""
@@ -67,7 +73,7 @@ def lambert_in(state, n):
     return state, True, math.sqrt(1.0 - sin_g * sin_g), sin_g, 2.0 * math.pi * v
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def mirrored(state, refl, r_face):
     """A ray out through a face of Fresnel reflectance ``r_face`` to a mirror of
     reflectance ``refl`` behind it: bounced between the two until the face lets it back
@@ -82,7 +88,7 @@ def mirrored(state, refl, r_face):
             return state, True
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def lambert(state, up):
     """A Lambertian unit direction about +z (``up``) or -z: ``(state, dx, dy, dz)``."""
     state, u = uniform(state)
@@ -144,7 +150,7 @@ def last_at_most(a, value, n):
     return lo
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def refract(dxn, dyn, dz, n1, n2):
     """The direction transmitted from index n1 into n2 through a horizontal face (the
     caller has checked it is not totally reflected): ``(dx, dy, dz)``, dz keeping its
