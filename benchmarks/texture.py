@@ -207,7 +207,8 @@ def main() -> None:
     run("md", method="md")
     if not uniform:
         return
-    from optdot.stages import stage_settings, throw
+    from optdot.orchestration.job_settings import stage_settings
+    from optdot.stages import throw
 
     n = job.density.dot_count(math.pi * 0.023**2)
     box = (0.0, 0.0, job.density.width, job.density.height)

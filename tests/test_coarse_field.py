@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 from optdot import stages
 from optdot.config.schema import load_job
 from optdot.geometry.density import DensityMap
+from optdot.orchestration.job_settings import job_spacing, stage_settings
 from optdot.orchestration.tiling import tasks
 from optdot.orchestration.tiling.plan import plan_tiles
 from optdot.orchestration.tiling.run import tiny_job
@@ -25,7 +26,6 @@ from optdot.relax.lowpass import (
     gradient_at,
     live_potential,
 )
-from optdot.stages.settings import job_spacing
 
 from .conftest import SAMPLES
 
@@ -274,7 +274,7 @@ def test_the_potential_on_live_cells_solves_their_own_laplacian():
 
 def test_a_moved_throw_stays_in_the_panel_and_out_of_zero_cells():
     job = tiny_job()  # 6 x 6 mm, one quarter of fill 0
-    s = stages.stage_settings(job)
+    s = stage_settings(job)
     xy = stages.throw(s, 800, 5, None, "test")
     g = Lattice.over(job.box, 0.5, 1 << 16)
     # a field that pushes everything 0.4 mm down and left
@@ -296,7 +296,7 @@ def test_a_tiled_throw_loses_its_long_wavelength_grain():
     job = load_job(SAMPLES / "led" / "job.toml")
     plan = plan_tiles(job, 10.0)
     raw = [tasks.initial_task(job, plan, *t) for t in plan.tiles()]
-    s = stages.stage_settings(job)
+    s = stage_settings(job)
     field = stages.coarse_solve(s, [stages.coarse_part(s, xy) for xy in raw])
     moved = np.concatenate([stages.coarse_shift(s, field, xy) for xy in raw])
     raw = np.concatenate(raw)
@@ -313,10 +313,10 @@ def test_only_a_steep_map_gets_the_wide_passs_rounds(tmp_path):
     over 10 % between neighbouring lattice cells: a designed LED front does (0.4), a
     panel's smooth gradient does not (0.02) and keeps one round; a uniform map reads 0."""
     from optdot.config.schema import load_job
+    from optdot.orchestration.job_settings import formulation_for, stage_settings
     from optdot.relax.lowpass import steepness
-    from optdot.stages import stage_settings, wide_rounds
+    from optdot.stages import wide_rounds
     from optdot.stages.correction import STEEP, _wide_lattice
-    from optdot.stages.settings import formulation_for
 
     from .conftest import write_job
     from .test_visibility import _led_front_map

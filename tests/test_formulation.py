@@ -7,12 +7,12 @@ import dataclasses
 import numpy as np
 import pytest
 
+from optdot.orchestration.job_settings import problem_of
 from optdot.orchestration.pipeline import generate
 from optdot.relax.circles import circle_radius, hex_radius
 from optdot.relax.formulation import PRESETS, Formulation, formulation_of
 from optdot.relax.optdot import RelaxSettings, relax_staged
 from optdot.spatial.cellgrid import pairs_within
-from optdot.stages import problem_of
 
 
 def test_core_share_floor_and_cap(tiny_job):
@@ -77,9 +77,9 @@ def test_a_dip_s_containers_take_their_neighbourhood_s_fill_and_a_sparse_map_kee
     region keeps its own fill, to the bit (a uniform 0.5 % map sized for 1 % orders:
     psi6 0.11), and so does the sparse half of a map beside a dense half, away from it."""
     from optdot.config.schema import load_job
+    from optdot.orchestration.job_settings import containers, stage_settings
     from optdot.relax.formulation import CONTAINER_FILL_FLOOR as FLOOR
     from optdot.stages.beyond_walls import phantom_reach
-    from optdot.stages.settings import containers, stage_settings
 
     def job_of(grid, name):
         np.savetxt(tmp_path / f"{name}.csv", grid, delimiter=",")

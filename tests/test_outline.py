@@ -19,12 +19,12 @@ from optdot.cli import main
 from optdot.config.schema import load_job
 from optdot.geometry.domain import Domain, validate_polygon
 from optdot.geometry.edges import EdgeIndex, signed_distances
+from optdot.orchestration.job_settings import problem_of
 from optdot.orchestration.pipeline import generate
 from optdot.relax.formulation import PRESETS
 from optdot.relax.penalty import penalty_fast
 from optdot.spatial.blocks import PairList
 from optdot.spatial.cellgrid import neighbor_pairs, pairs_within
-from optdot.stages import problem_of
 from optdot.testing import pairs_brute_force, penalty_reference
 from tests.conftest import SAMPLES, cli, write_job
 

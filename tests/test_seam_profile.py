@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from optdot.config.schema import load_job
+from optdot.orchestration.job_settings import stage_settings
 from optdot.orchestration.tiling import run as tiling_run
 from optdot.orchestration.tiling.plan import plan_tiles
 from optdot.relax.lowpass import coverage_error
@@ -77,11 +78,11 @@ def _own_window_only(job_, plan_, dots, *around):
     if len(dots.xy) == 0:
         return dots
     window = grown(plan_.rect(*dots.tile), plan_.margin)
-    region = grown(window, stages.correction_pad(stages.stage_settings(job_)))
+    region = grown(window, stages.correction_pad(stage_settings(job_)))
     near = [in_rect(a.xy, grown(region, plan_.halo)) for a in around]
     xy0 = np.concatenate([dots.xy0] + [a.xy0[k] for a, k in zip(around, near, strict=True)])
     xy = np.concatenate([dots.xy] + [a.xy[k] for a, k in zip(around, near, strict=True)])
-    err, cap = stages.correction_region(stages.stage_settings(job_), xy0, xy, region)
+    err, cap = stages.correction_region(stage_settings(job_), xy0, xy, region)
     return tasks.TileDots(dots.tile, dots.xy0, dots.xy + err.field(window, dots.xy, cap))
 
 

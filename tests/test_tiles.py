@@ -71,8 +71,8 @@ def test_initial_tile_dots_lie_in_their_tile_and_follow_the_map():
 
 
 def test_frozen_dots_keep_their_positions_exactly():
+    from optdot.orchestration.job_settings import formulation_for, problem_of, settings_for
     from optdot.relax.optdot import relax_staged
-    from optdot.stages import formulation_for, problem_of, settings_for
 
     job = load_job(LED)
     rng = np.random.default_rng(5)

@@ -40,6 +40,7 @@ from ..relax.formulation import Formulation
 from ..relax.optdot import Progress
 from ..runtime.kernels import warm
 from ..runtime.memory import check_memory
+from .job_settings import stage_settings
 from .preflight import (
     MAX_RANDOM_FILL,
     TILE_BREAK_EVEN,
@@ -109,7 +110,7 @@ def generate(
         warm("generate", announce=stage)  # a first run: its kernels on all cores
 
     stage("throwing darts")
-    settings = stages.stage_settings(job, formulation)  # the values every stage takes
+    settings = stage_settings(job, formulation)  # the values every stage takes
     xy_init = stages.throw(settings, n, opt.seed, None, where)
     order = spatial_order(xy_init)
     xy0 = np.ascontiguousarray(xy_init[order])

@@ -1,6 +1,7 @@
 """The stages of generation as functions of a run's settings and a set of dots: one path
-for every dot. A job becomes those settings once (:func:`stage_settings`, values: the
-panel, the map, the dots, the formulation); no stage takes the job.
+for every dot. A job becomes those settings once, in the orchestration
+(:func:`optdot.orchestration.job_settings.stage_settings`, values: the panel, the map, the
+dots, the formulation); no stage takes the job.
 
 :func:`optdot.orchestration.pipeline.generate` runs them once over the whole panel; the tiles of
 :mod:`optdot.orchestration.tiling.tasks` run the same functions over a tile, with the neighbouring
@@ -21,8 +22,8 @@ tiles' dots held still around it. Nothing here knows whether it sees a panel or 
   stand (when sizes vary, :mod:`optdot.relax.resize`), then the guarantee pass and its
   check.
 
-What a job asks of each stage (its problem, formulation, settings, sizes, halo, spacing)
-is :mod:`.settings`.
+What each stage takes (its problem, formulation, settings, sizes, halo, spacing) is
+:class:`.settings.StageSettings`.
 """
 
 from .beyond_walls import job_phantoms, phantom_reach, phantoms_near
@@ -39,18 +40,7 @@ from .correction import (
 from .finishing import Finished, finish
 from .held import Held
 from .relaxation import relax
-from .settings import (
-    FIT_SHARE,
-    StageSettings,
-    fit_sigma,
-    fitted,
-    formulation_for,
-    halo_width,
-    job_spacing,
-    problem_of,
-    settings_for,
-    stage_settings,
-)
+from .settings import FIT_SHARE, StageSettings
 from .throw import coarse_part, coarse_shift, coarse_solve, throw
 
 __all__ = [
@@ -65,19 +55,11 @@ __all__ = [
     "correction_pad",
     "correction_region",
     "finish",
-    "fit_sigma",
-    "fitted",
-    "formulation_for",
-    "halo_width",
     "hard_core",
     "job_phantoms",
-    "job_spacing",
     "phantom_reach",
     "phantoms_near",
-    "problem_of",
     "relax",
-    "settings_for",
-    "stage_settings",
     "throw",
     "wide_part",
     "wide_rounds",

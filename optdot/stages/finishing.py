@@ -50,7 +50,8 @@ def finish(
             dot returns to if it drifted into a zero cell).
         where: the job or tile, for the error message.
         held: dots held still around these (a tile's neighbours within
-            :func:`halo_width`): they count in the coverage and the spacing, and someone
+            :func:`~optdot.orchestration.job_settings.halo_width`): they count in the coverage
+            and the spacing, and someone
             else fixes them; shaped dots' with their angles.
         window: the part of the panel the size fit covers (a tile grown by the fit's
             reach; None: the panel).

@@ -18,7 +18,7 @@ from ...config.job import Job
 from ...errors import JobError
 from ...geometry.density import axis_overlap
 from ...relax.circles import hex_radius
-from ...stages.settings import containers
+from ..job_settings import containers
 
 #: Dots per tile that minimise the time per dot on this kind of machine (2 cores, L2 of
 #: 1-2 MB per core): measured by ``benchmarks/panels.py --sweep`` (BENCHMARKS.md).

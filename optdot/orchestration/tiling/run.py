@@ -41,7 +41,8 @@ from ...geometry.shapes import Footprints
 from ...relax.lowpass import CoarseField
 from ...runtime.cluster import single_threaded
 from ...runtime.stop import check_interrupt
-from ...stages import stage_settings, wide_rounds
+from ...stages import wide_rounds
+from ..job_settings import stage_settings
 from .plan import TilePlan, plan_tiles
 from .tasks import (
     FinalDots,

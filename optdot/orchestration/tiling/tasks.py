@@ -95,8 +95,8 @@ runs over the whole panel; a task only chooses which dots are mobile and which a
    clear the pairs under 60 µm the correction made), then :func:`optdot.stages.finish`:
    sizes fitted to the coverage (when they vary by a rule), then the guarantee pass
    (projection, 1 nm rounding) and its check, with the dots of the 8 neighbouring tiles
-   within a halo
-   (:func:`optdot.stages.halo_width`: the size fit's blur reach when sizes are fitted)
+   within a halo (:func:`optdot.orchestration.job_settings.halo_width`: the size fit's blur
+   reach when sizes are fitted)
    held still, at their final sizes when final, else their rule sizes. Tiles
    are legalised in four checkerboard colours: a tile of colour c waits for its neighbours
    of colours < c and holds their final positions still, so a pair across a border is fixed
@@ -122,6 +122,7 @@ from ...geometry.shapes import Footprints
 from ...relax.lowpass import CoarseField, LatticePart
 from ...relax.shaped import turned
 from ...spatial.window import bounds, grown, in_rect
+from ..job_settings import stage_settings
 from .plan import TilePlan
 
 #: Salt of a tile's Sobol scrambling seed: ``[seed, SALT, tile index]``.
@@ -183,7 +184,7 @@ def initial_tile(job: Job, plan: TilePlan, i: int, j: int) -> np.ndarray:
     if n == 0:
         return np.zeros((0, 2))
     seed = [job.optimize.seed, SALT, plan.index(i, j)]
-    return stages.throw(stages.stage_settings(job), n, seed, plan.rect(i, j), _where(i, j))
+    return stages.throw(stage_settings(job), n, seed, plan.rect(i, j), _where(i, j))
 
 
 def initial_task(job: Job, plan: TilePlan, i: int, j: int) -> np.ndarray:
@@ -206,7 +207,7 @@ def relax_tile(
     the tiles ``around`` it within the halo, moved alike, held still (so the border dots
     feel the right density across the border and do not spill into it). The moved
     throw is the tile's containers from here on."""
-    s = stages.stage_settings(job)
+    s = stage_settings(job)
     xy0 = stages.coarse_shift(s, coarse, xy0)
     if len(xy0) == 0:
         return TileDots((i, j), xy0, xy0.copy())
@@ -269,7 +270,7 @@ def relax_seams(job: Job, plan: TilePlan, i: int, j: int, parts: list[TileDots])
     sel = np.flatnonzero(near | mobile)
     frozen = ~mobile[sel]
     run = stages.relax(
-        stages.stage_settings(job),
+        stage_settings(job),
         np.ascontiguousarray(xy0[sel]),
         start=np.ascontiguousarray(xy[sel]),
         frozen=frozen,
@@ -299,33 +300,33 @@ def apply_seams(dots: TileDots, results: list[SeamMoves]) -> TileDots:
 def deposit_task(job: Job, xy0: np.ndarray) -> LatticePart:
     """A tile's initial dots ``xy0`` deposited on the panel-wide lattice
     (:func:`optdot.stages.coarse_part`)."""
-    return stages.coarse_part(stages.stage_settings(job), xy0)
+    return stages.coarse_part(stage_settings(job), xy0)
 
 
 def coarse_task(job: Job, *parts: LatticePart) -> CoarseField | None:
     """The panel-wide field from every tile's deposit, in the plan's tile order
     (:func:`optdot.stages.coarse_solve`)."""
-    return stages.coarse_solve(stages.stage_settings(job), list(parts))
+    return stages.coarse_solve(stage_settings(job), list(parts))
 
 
 def wide_deposit_task(job: Job, dots: TileDots) -> LatticePart | None:
     """A tile's dots after its first correction pass (:func:`correct_tile`) deposited on
     the wide pass's lattice (:func:`optdot.stages.wide_part`), for :func:`wide_task`."""
-    s = stages.stage_settings(job)
+    s = stage_settings(job)
     return stages.wide_part(s, dots.xy, s.thrown_areas(dots.xy0))
 
 
 def wide_task(job: Job, *parts: LatticePart) -> CoarseField | None:
     """The wide pass's field over the panel from every tile's :func:`wide_deposit_task`,
     in the plan's tile order (:func:`optdot.stages.wide_solve`)."""
-    return stages.wide_solve(stages.stage_settings(job), list(parts))
+    return stages.wide_solve(stage_settings(job), list(parts))
 
 
 def containers(job: Job, plan: TilePlan, coarse: CoarseField | None, i: int, j: int) -> np.ndarray:
     """Tile ``(i, j)``'s containers as its relaxation made them (:func:`relax_tile`): its
     throw moved along the panel-wide field, thrown again (every step a pure function, so
     the same bytes), ``[n, 2]`` mm."""
-    return stages.coarse_shift(stages.stage_settings(job), coarse, initial_task(job, plan, i, j))
+    return stages.coarse_shift(stage_settings(job), coarse, initial_task(job, plan, i, j))
 
 
 def first_positions(dots: TileDots) -> np.ndarray:
@@ -379,11 +380,11 @@ def correct_tile(job: Job, plan: TilePlan, dots: TileDots, *around: TileDots) ->
     rect = plan.rect(i, j)
     region = (rect[0] - tx / 2 - m, rect[1] - ty / 2 - m,
               rect[2] + tx / 2 + m, rect[3] + ty / 2 + m)  # fmt: skip
-    region = grown(region, stages.correction_pad(stages.stage_settings(job)))
+    region = grown(region, stages.correction_pad(stage_settings(job)))
     near = [in_rect(a.xy, grown(region, plan.halo)) for a in around]
     xy0 = np.concatenate([dots.xy0] + [a.xy0[k] for a, k in zip(around, near, strict=True)])
     xy = np.concatenate([dots.xy] + [a.xy[k] for a, k in zip(around, near, strict=True)])
-    got = stages.correction_region(stages.stage_settings(job), xy0, xy, region)
+    got = stages.correction_region(stage_settings(job), xy0, xy, region)
     if got is None:
         return dots
     err, cap = got
@@ -410,7 +411,7 @@ def held_dots(job: Job, dots: TileDots | FinalDots) -> stages.Held:
     if isinstance(dots, FinalDots):
         angle = None if dots.dots is None else dots.dots.angles
         return stages.Held(dots.xy, dots.diameter, angle)
-    d = stages.stage_settings(job).rule_diameters(dots.xy0)
+    d = stage_settings(job).rule_diameters(dots.xy0)
     angle = None
     if not job.shape.kind.round:
         angle = turned(job.shape, job.orientation, dots.xy, dots.xy0).angles
@@ -423,7 +424,8 @@ def legalize_tile(
     """:func:`optdot.stages.hard_core` then :func:`optdot.stages.finish` for one tile;
     ``neighbours``: the dots of the surrounding tiles
     (:func:`held_dots`; final for earlier colours), held still within
-    :func:`optdot.stages.halo_width` of the tile's dots. The hard core runs here, not in
+    :func:`~optdot.orchestration.job_settings.halo_width` of the tile's dots. The hard core
+    runs here, not in
     the correction task, so that every pair across a border is cleared by the later tile
     against the earlier one's final dots, as the guarantee pass settles them.
 
@@ -434,9 +436,9 @@ def legalize_tile(
     if n == 0:
         none = None if job.shape.kind.round else job.shape.footprints(np.zeros(0))
         return FinalDots(dots.xy, job.diameter if job.sizes is None else np.zeros(0), none)
-    width = stages.stage_settings(job).halo
+    width = stage_settings(job).halo
     window = grown(plan.rect(*dots.tile), width)
     held = stages.Held.near(neighbours, grown(bounds(dots.xy), width))
-    xy = stages.hard_core(stages.stage_settings(job), dots.xy0, dots.xy, held)
-    done = stages.finish(stages.stage_settings(job), xy, dots.xy0, _where(*dots.tile), held, window)
+    xy = stages.hard_core(stage_settings(job), dots.xy0, dots.xy, held)
+    done = stages.finish(stage_settings(job), xy, dots.xy0, _where(*dots.tile), held, window)
     return FinalDots(done.xy, done.diameter, done.dots)
