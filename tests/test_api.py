@@ -264,7 +264,7 @@ def test_no_module_name_twice():
 
 
 #: Where a job may be taken whole: the commands, the orchestration of one process and of
-#: tiles, the job's own sections, and the one place a job becomes the stages' values.
+#: tiles (where a job becomes the stages' values), and the job's own sections.
 TAKE_THE_JOB = ("cli/", "config/", "orchestration/")
 
 
@@ -285,6 +285,24 @@ def test_below_the_orchestration_functions_take_values_not_the_job():
                 if any(a.arg == "job" for a in args):
                     bad.append(f"{rel}:{node.lineno} {node.name}")
     assert not bad, bad
+
+
+def test_the_ray_s_life_and_the_commands_stay_short():
+    """A ray's life (``_trace_rays``: born, stepped, the face decides) stays at most 80
+    lines, what a face does living in its own kernel; a command takes at most 8
+    parameters, the rest one options record."""
+    long = []
+    for f in [ROOT / "optdot/optics/trace.py", *sorted((ROOT / "optdot/cli").glob("*.py"))]:
+        for node in ast.walk(ast.parse(f.read_text())):
+            if not isinstance(node, ast.FunctionDef):
+                continue
+            if node.name == "_trace_rays" and node.end_lineno - node.lineno + 1 > 80:
+                long.append(f"{node.name}: {node.end_lineno - node.lineno + 1} lines")
+            command = any("command" in ast.unparse(d) for d in node.decorator_list)
+            count = len(node.args.args) + len(node.args.kwonlyargs)
+            if command and count > 8:
+                long.append(f"{f.name} {node.name}: {count} parameters")
+    assert not long, long
 
 
 @pytest.mark.parametrize(
