@@ -164,13 +164,33 @@ def cold(group: str) -> list[int]:
 
 
 def units(indices: list[int]) -> list[list[int]]:
-    """``indices`` (into :func:`manifest`) by unit (:attr:`Kernel.unit`), the units with
-    the most compile time first (so the last to start are the shortest)."""
+    """``indices`` (into :func:`manifest`) by unit (:attr:`Kernel.unit`), units that share
+    a function (two signatures of one kernel, or a kernel both call) joined into one, the
+    units with the most compile time first (so the last to start are the shortest).
+
+    One process compiles all of a function's signatures: numba numbers the cache files
+    of a function's signatures from the index it read, so two processes writing two
+    signatures of one function at once may each take the same file, and the index then
+    names one signature's machine code for the other's (a run loading it fails: "can't
+    unbox array")."""
     kernels = manifest()
     found: dict[str, list[int]] = {}
     for i in indices:
         found.setdefault(kernels[i].unit, []).append(i)
-    return sorted(found.values(), key=lambda m: (-sum(kernels[i].seconds for i in m), m))
+    groups: list[list[int]] = []
+    owner: dict[str, int] = {}  # a function's group
+    for members in found.values():
+        names = {f"{kernels[i].module}.{kernels[i].name}" for i in members}
+        joined = sorted({owner[n] for n in names if n in owner})
+        merged = list(members)
+        for g in reversed(joined):  # fold every group sharing a function into this one
+            merged += groups[g]
+            groups[g] = []
+        groups.append(merged)
+        for i in merged:
+            owner[f"{kernels[i].module}.{kernels[i].name}"] = len(groups) - 1
+    work = [sorted(g) for g in groups if g]
+    return sorted(work, key=lambda m: (-sum(kernels[i].seconds for i in m), m))
 
 
 def compile_kernels(indices: list[int]) -> int:
