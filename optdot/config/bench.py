@@ -14,6 +14,7 @@ import numpy as np
 if TYPE_CHECKING:
     from ..geometry.density import DensityMap
     from ..geometry.domain import Domain
+    from ..geometry.orientation import Orientation
     from ..geometry.profile import DotProfile
     from ..geometry.shapes import DotShape
     from ..geometry.sizes import DotSizes
@@ -37,7 +38,9 @@ class Bench:
         design: how a map is designed (``[design]``).
         process: how the masks print, or None.
         shape: the dot's kind and size.
-        profile: the dot's 3-D profile (ink, a bump, a dimple).
+        profile: the dot's 3-D profile (ink, a bump, a dimple, a prism).
+        orientation: where the dots' long axes point (a coverage trace turns its
+            profiles so).
         sizes: how diameters vary, or None for one size.
         diameter: the (smallest) dot's diameter, mm.
         close_gap: the edge gap QA counts close pairs under, mm.
@@ -54,6 +57,7 @@ class Bench:
     process: Process | None
     shape: DotShape
     profile: DotProfile
+    orientation: Orientation
     sizes: DotSizes | None
     diameter: float
     close_gap: float

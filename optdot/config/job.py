@@ -341,6 +341,7 @@ class Job:
             process=self.process,
             shape=self.shape,
             profile=self.profile,
+            orientation=self.orientation,
             sizes=self.sizes,
             diameter=self.diameter,
             close_gap=self.qa.effective_close_gap,

@@ -33,7 +33,7 @@ from ..errors import JobError
 from ..geometry.kinds import shaped_names
 from ..geometry.limits import DIAMETER_RANGE_MM, MAX_SHAPED_FILL
 from ..geometry.orientation import Orientation, led_centres
-from ..geometry.profile import HEIGHT_KEY, PROFILES, DotProfile
+from ..geometry.profile import HEIGHT_KEY, PROFILES, DotProfile, prism_height
 from ..geometry.shapes import CIRCLE, KINDS, DotShape, Kind
 from .grids import load_grid
 
@@ -47,6 +47,8 @@ DOT_SHAPE_KEYS: dict[str, tuple[type, ...]] = {
 PROFILE_KEYS: dict[str, tuple[type, ...]] = {
     "profile": (str,),
     **{key: (int, float) for key in HEIGHT_KEY.values()},
+    "facets": (list,),
+    "cut": (bool,),
 }
 ORIENTATION_KEYS: dict[str, tuple[type, ...]] = {
     "angle": (int, float),
@@ -188,42 +190,41 @@ MIN_CAP_HEIGHT = 1e-4
 
 
 def dot_profile(dots: dict[str, Any], shape: DotShape, sizes, guide, backlight, where: str):
-    """The ``[dots]`` profile: ``profile = "ink"`` (default), ``"bump"`` with ``height``
-    or ``"dimple"`` with ``depth`` (mm), a spherical cap on the circle's footprint.
+    """The ``[dots]`` profile: ``profile = "ink"`` (default); ``"bump"`` with ``height`` or
+    ``"dimple"`` with ``depth`` (mm), a cap on a circle's or an ellipse's footprint;
+    ``"prism"`` with ``facets = [deg, deg]`` (and ``cut = true`` for one cut into the
+    face) on a rectangle's.
 
     Raises:
-        JobError: an unknown profile, its height missing, another's given, a cap taller
-            than a hemisphere, a footprint that is not a circle, dots of several sizes,
-            or a stack whose dots are printed on a film (a profile is the guide's).
+        JobError: an unknown profile, a key it needs missing or one of another's given, a
+            cap taller than a hemisphere on the footprint's short axis, facets that do not
+            close, a cut deeper than the guide, a footprint the profile does not fit,
+            dots of several sizes, or a stack whose dots are printed on a film (a profile
+            is the guide's).
     """
     name = dots.get("profile", PROFILES[0])
     if name not in PROFILES:
         raise JobError(f"{where}: dots.profile = {name!r} must be one of {', '.join(PROFILES)}")
-    key = HEIGHT_KEY.get(name)
-    for other in HEIGHT_KEY.values():
-        if other in dots and other != key:
-            whose = " or ".join(repr(p) for p, k in HEIGHT_KEY.items() if k == other)
-            raise JobError(f"{where}: dots.{other} belongs to dots.profile = {whose}, not {name!r}")
-    if key is None:
+    own = {**{p: (k,) for p, k in HEIGHT_KEY.items()}, "prism": PRISM_KEYS}
+    for other, keys in own.items():
+        for key in keys:
+            if key in dots and other != name:
+                whose = " or ".join(repr(p) for p, ks in own.items() if key in ks)
+                raise JobError(
+                    f"{where}: dots.{key} belongs to dots.profile = {whose}, not {name!r}"
+                )
+    if name == PROFILES[0]:
         return DotProfile()
-    if key not in dots:
-        raise JobError(f"{where}: dots.profile = {name!r} needs dots.{key} (mm)")
-    h = float(dots[key])
-    if not shape.kind.round:
+    if name not in shape.kind.profiles:
+        fits = [k.name for k in KINDS.values() if name in k.profiles]
         raise JobError(
-            f"{where}: dots.profile = {name!r} is a spherical cap on a circle; "
-            f"{shape.kind.name} dots take profile = 'ink'"
+            f"{where}: dots.profile = {name!r} stands on {' or '.join(fits)} footprints; "
+            f"{shape.kind.name} dots take profile = {' or '.join(map(repr, shape.kind.profiles))}"
         )
     if sizes is not None:
         raise JobError(
-            f"{where}: dots.profile = {name!r} takes dots of one size (dots.diameter a number)"
-        )
-    radius = 0.5 * shape.size[0]
-    if not (math.isfinite(h) and MIN_CAP_HEIGHT <= h <= radius):
-        raise JobError(
-            f"{where}: dots.{key} = {dots[key]!r} must be in mm, {MIN_CAP_HEIGHT:g} <= {key} "
-            f"<= {radius:g} (the radius of dots {2 * radius:g} mm across: a spherical cap is "
-            "at most a hemisphere)"
+            f"{where}: dots.profile = {name!r} takes dots of one size (dots.diameter a number, "
+            "no dots.scale)"
         )
     if guide is None or (backlight is not None and backlight.on_film):
         raise JobError(
@@ -235,7 +236,59 @@ def dot_profile(dots: dict[str, Any], shape: DotShape, sizes, guide, backlight, 
             f"{where}: light_guide.dot_scatter = {guide.dot_scatter!r} is what ink dots do; "
             f"dots.profile = {name!r} is traced as the structure it is"
         )
+    hu, hv, _ = shape.kind.profile_frame(shape.size)
+    if name == "prism":
+        return _prism(dots, 2.0 * hu, guide, where)
+    key = HEIGHT_KEY[name]
+    if key not in dots:
+        raise JobError(f"{where}: dots.profile = {name!r} needs dots.{key} (mm)")
+    h = float(dots[key])
+    if not (math.isfinite(h) and MIN_CAP_HEIGHT <= h <= hv):
+        raise JobError(
+            f"{where}: dots.{key} = {dots[key]!r} must be in mm, {MIN_CAP_HEIGHT:g} <= {key} "
+            f"<= {hv:g} (half the width of dots {2 * hv:g} mm wide: a cap is at most a "
+            "hemisphere)"
+        )
     return DotProfile(name, h)
+
+
+#: ``[dots]`` keys of a prism profile.
+PRISM_KEYS = ("facets", "cut")
+
+
+def _prism(dots: dict[str, Any], length: float, guide, where: str) -> DotProfile:
+    """A prism's profile from ``dots.facets`` (and ``dots.cut``) on a footprint ``length``
+    mm long (:func:`dot_profile`)."""
+    facets = dots.get("facets")
+    if facets is None:
+        raise JobError(
+            f"{where}: dots.profile = 'prism' needs dots.facets = [deg, deg] (each facet's "
+            "angle to the face, at the start and the end of the dot's length)"
+        )
+    ok = isinstance(facets, list) and len(facets) == 2
+    ok = ok and all(isinstance(f, int | float) and not isinstance(f, bool) for f in facets)
+    if not ok or not all(MIN_FACET <= f < 90.0 for f in facets):
+        raise JobError(
+            f"{where}: dots.facets = {facets!r} must be two angles in degrees, "
+            f"{MIN_FACET:g} <= angle < 90 (a facet at 90 degrees or more does not close the "
+            "prism over its footprint)"
+        )
+    cut = dots.get("cut", False)
+    if not isinstance(cut, bool):
+        raise JobError(f"{where}: dots.cut = {cut!r} must be true or false")
+    pair = (float(facets[0]), float(facets[1]))
+    h = prism_height(length, pair)
+    if cut and h >= guide.thickness:
+        raise JobError(
+            f"{where}: dots.facets = {facets!r} on dots {length:g} mm long cut {h:.4g} mm "
+            f"deep, through the guide ({guide.thickness:g} mm): give lower facets or "
+            "shorter dots"
+        )
+    return DotProfile("prism", h, pair, cut)
+
+
+#: The lowest facet angle, degrees (a prism flatter than this is the flat face).
+MIN_FACET = 0.5
 
 
 def shape_sizes(dots: dict[str, Any], shape: DotShape, qa_sec: dict[str, Any], qa, where: str):

@@ -20,6 +20,12 @@ def on_dot(x, y, explicit, phi, g, start, dx_, dy_, foot, cg, u):
         if ix < 0 or iy < 0 or ix >= phi.shape[1] or iy >= phi.shape[0]:
             return False
         return u < phi[iy, ix]
+    return dot_at(x, y, start, dx_, dy_, foot, cg) >= 0
+
+
+@nb.njit(cache=True, inline="always")
+def dot_at(x, y, start, dx_, dy_, foot, cg):
+    """The real dot (its index) the point (x, y) on the bottom face lies on, or -1."""
     nx, ny, rmax = int(cg[4]), int(cg[5]), cg[6]
     # the cells the disc of the largest dot radius around (x, y) overlaps (1 to 4)
     ax = int(math.floor((x - rmax - cg[0]) / cg[2]))
@@ -33,8 +39,8 @@ def on_dot(x, y, explicit, phi, g, start, dx_, dy_, foot, cg, u):
                 ddx = x - dx_[k]
                 ddy = y - dy_[k]
                 if on_packed(foot, k, ddx, ddy):
-                    return True
-    return False
+                    return k
+    return -1
 
 
 @nb.njit(cache=True, inline="always")
@@ -68,7 +74,7 @@ def marked(x, y, mark, pr, u):
     """Is there a dot of print ``mark`` (1 the job's, 2 the second map) at (x, y)? ``pr``:
     the :class:`Print`'s fields as a tuple; ``u`` a uniform draw (the coverage test). A
     cap of print 1 is ink whatever ``u``."""
-    explicit, phi, g, phi2, g2, start, dx_, dy_, foot, cg, cap_start, cap, cap_g, ring = pr
+    explicit, phi, g, phi2, g2, start, dx_, dy_, foot, cg, cap_start, cap, cap_g, ring, _ = pr
     if mark == 2:
         return on_dot(x, y, False, phi2, g2, start, dx_, dy_, foot, cg, u)
     if cap.shape[0] > 0:
@@ -76,3 +82,31 @@ def marked(x, y, mark, pr, u):
         if at >= 0:  # on a cap's ink, or clear between its rings
             return at == 1
     return on_dot(x, y, explicit, phi, g, start, dx_, dy_, foot, cg, u)
+
+
+#: What :func:`dot_frame` says where it cannot tell: the point and the angle unknown.
+NO_FRAME = (math.nan, math.nan, math.nan, math.nan)
+
+
+@nb.njit(cache=True, inline="always")
+def dot_frame(x, y, pr):
+    """Where on its dot the point (x, y) of the job's print lies, for a 3-D dot: ``(lu,
+    lv, c, s)``, on a real dot the point in the dot's own frame (mm along its long axis
+    and across it) and the cosine and sine of its angle; in the coverage, NaN for the
+    point and the cell's angle (``pr``'s ``turn``: NaN where the dot draws its own).
+    Asked only of 3-D dots, after :func:`marked` found ink there (the ink's own path
+    does not look)."""
+    explicit, phi, g, _, _, start, dx_, dy_, foot, cg, _, _, _, _, turn = pr
+    if explicit:
+        k = dot_at(x, y, start, dx_, dy_, foot, cg)
+        if k < 0:
+            return NO_FRAME
+        c, s = foot[k, 4], foot[k, 5]
+        ddx, ddy = x - dx_[k], y - dy_[k]
+        return (c * ddx + s * ddy, c * ddy - s * ddx, c, s)
+    ix = int(math.floor((x - g[0]) / g[2]))
+    iy = int(math.floor((y - g[1]) / g[3]))
+    k = iy * phi.shape[1] + ix
+    if turn.shape[0] == phi.size and 0 <= ix < phi.shape[1] and 0 <= iy < phi.shape[0]:
+        return (math.nan, math.nan, turn[k, 0], turn[k, 1])
+    return NO_FRAME

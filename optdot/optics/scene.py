@@ -24,6 +24,7 @@ from ..config.bench import Bench
 from ..config.light_guide import EDGE_FINISH, REFLECTOR_FINISH, LightGuide
 from ..errors import JobError
 from ..geometry.caps import cap_shares, no_caps
+from ..geometry.profile import INK, PRISM
 from ..geometry.shapes import packed
 from ..pattern import DotSource, caps_of
 from .tables import (
@@ -48,7 +49,12 @@ from .tables import (
     F_HAZE_SIG,
     F_KIND,
     F_PRINT,
+    F_PROF_C,
     F_PROF_K,
+    F_PROF_T1,
+    F_PROF_T2,
+    F_PROF_U,
+    F_PROF_V,
     F_PROFILE,
     F_REFL,
     F_REFL_FINISH,
@@ -142,8 +148,7 @@ def scene_of(
         sources = _edge_sources(guide, rays, box)
         layer, face = _edge_stack(guide, bl)
         if bl is None or not bl.on_film:  # the guide's dots: ink, or 3-D
-            face[0, F_PROFILE] = bench.profile.code
-            face[0, F_PROF_K] = bench.profile.aspect(0.5 * bench.diameter)
+            _profile_row(face[0], bench)
     else:
         assert bl.leds is not None
         sources = _grid_sources(bl, rays, only_led)
@@ -151,6 +156,27 @@ def scene_of(
     face[:, F_TEST] = (face[:, F_KIND] == BOTTOM_FACE) | (face[:, F_PRINT] > 0)
     stack = Stack(layer, face, walls, normals, MAX_EVENTS)
     return Scene(sources, stack, _print(bench, dots, coverage))
+
+
+def _profile_row(row: np.ndarray, bench: Bench) -> None:
+    """The guide's printed face's 3-D dots in its row of the face table (ink: all 0)."""
+    p = bench.profile
+    row[F_PROFILE] = p.code
+    if p.code == INK:
+        return
+    hu, hv, rc = bench.shape.kind.profile_frame(bench.shape.size)
+    row[F_PROF_K] = p.aspect(hv)
+    row[F_PROF_U], row[F_PROF_V], row[F_PROF_C] = hu, hv, rc
+    row[F_PROF_T1], row[F_PROF_T2] = (math.tan(math.radians(f)) for f in p.facets)
+
+
+def _turns(bench: Bench) -> bool:
+    """Whether the guide's 3-D dots look different turned (a prism, a cap on an ellipse):
+    a coverage trace then gives each the angle its dot would have."""
+    if bench.profile.code == INK:
+        return False
+    hu, hv, _ = bench.shape.kind.profile_frame(bench.shape.size)
+    return bench.profile.code >= PRISM or hu != hv
 
 
 def probe(scene: Scene, events: int) -> Scene:
@@ -417,10 +443,27 @@ def _print(bench: Bench, dots: DotSource | None, coverage: Coverage | None) -> P
         g = np.array([cov.x0, cov.y0, cov.dx, cov.dy], np.float64)
         start, x, y = np.zeros(2, np.int64), np.zeros(1), np.zeros(1)
         dots_part = (False, phi, g, start, x, y, np.zeros((1, 6)), np.ones(7))
+        turn = _coverage_turn(bench, cov) if _turns(bench) else np.full((1, 2), np.nan)
     else:
         start, x, y, foot, cg = dot_grid(dots, bench.box)
         dots_part = (True, np.zeros((1, 1)), np.ones(4), start, x, y, foot, cg)
-    return Print(*dots_part, phi2, g2, *caps_part)
+        turn = np.full((1, 2), np.nan)
+    return Print(*dots_part, phi2, g2, *caps_part, turn)
+
+
+def _coverage_turn(bench: Bench, cov: Coverage) -> np.ndarray:
+    """``[ny nx, 2]`` the cosine and sine of the angle the job's orientation gives a dot
+    at each coverage cell's centre (row ``iy nx + ix``), or ``[1, 2]`` NaN when each
+    dot's angle is its own draw (``random``: the tracer draws one a ray)."""
+    o = bench.orientation
+    if not o.follows_position:
+        return np.full((1, 2), np.nan)
+    ny, nx = cov.grid.shape
+    cx = cov.x0 + (np.arange(nx) + 0.5) * cov.dx
+    cy = cov.y0 + (np.arange(ny) + 0.5) * cov.dy
+    gx, gy = np.meshgrid(cx, cy)
+    a = o.at(np.column_stack([gx.ravel(), gy.ravel()]))
+    return np.ascontiguousarray(np.column_stack([np.cos(a), np.sin(a)]), np.float64)
 
 
 def cap_grid(caps: np.ndarray, box) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -34,7 +34,7 @@ import numpy as np
 
 from ..config.bench import Bench
 from ..errors import JobError
-from ..geometry.profile import HEIGHT_WORD
+from ..geometry.profile import DotProfile
 from ..pattern import DotSource
 from ..runtime.stop import check_interrupt
 from .angles import Angles
@@ -315,18 +315,20 @@ def traced_what(sim: Simulation) -> str:
     mode = "real dots" if sim.mode == "dots" else "map coverage"
     shaped = sim.extra.get("dot_profile")
     if shaped is not None:
-        how = HEIGHT_WORD[shaped["kind"]]
-        mode += f" ({shaped['kind']}s {shaped['height_mm'] * 1e3:.3g} µm {how})"
+        facets = tuple(shaped.get("facets_deg", (0.0, 0.0)))
+        p = DotProfile(shaped["kind"], shaped["height_mm"], facets, shaped.get("cut", False))
+        mode += f" ({p.words()})"
     return mode
 
 
 def _profile_extra(bench: Bench) -> dict:
-    """The guide's 3-D dots for the summary (``dot_profile``: kind and height, mm), or
-    nothing for ink (an ink summary is as it always was)."""
+    """The guide's 3-D dots for the summary (``dot_profile``: kind and height, mm; a
+    prism's facets and whether it is cut), or nothing for ink (an ink summary is as it
+    always was)."""
     p = bench.profile  # a job refuses a profile on a film's dots
     if p.code == 0:
         return {}
-    return {"dot_profile": {"kind": p.kind, "height_mm": p.height}}
+    return {"dot_profile": p.summary()}
 
 
 def traced(

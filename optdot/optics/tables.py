@@ -37,19 +37,20 @@ E_COLS = 17
 #: finish (0 diffuse, 1 specular, 2 absorbing), the walls' critical cosine (0 when none).
 L_Z0, L_Z1, L_N, L_ABS, L_WALL_R, L_WALL_MODE, L_WALL_COS = range(7)
 L_COLS = 7
-#: Face ``[L + 1, 16]``: kind, printed (0 no, 1 the job's print, 2 the second map), dot
+#: Face ``[L + 1, F_COLS]``: kind, printed (0 no, 1 the job's print, 2 the second map), dot
 #: R, dot T, reflector (BOTTOM), dot extract (0/1), haze (0 none, 1 Lambertian, 2
 #: Gaussian), haze sigma (rad), sheet T, sheet R, sheet spread (0 Lambertian, 1 Gaussian),
 #: its sigma (rad), critical cosine going up, going down (0 when there is none), the
 #: reflector's finish (BOTTOM: 0 diffuse, 1 specular), whether a ray meeting the face
 #: draws the print test's number (1: a printed face, and the reflector face even bare,
 #: so that a stack's rays draw their numbers in the order they always have), the dots'
-#: 3-D profile (:data:`~optdot.geometry.profile.PROFILES`' code: 0 ink) and its height
-#: over the footprint's radius.
+#: 3-D profile (:data:`~optdot.geometry.profile.INK`, ``BUMP``, ...) and a cap's height
+#: over the footprint's half width, the footprint's half length, half width and corner
+#: radius (mm, along its own axes), a prism's facets' tangents (its start's, its end's).
 (F_KIND, F_PRINT, F_DOT_R, F_DOT_T, F_REFL, F_EXTRACT, F_HAZE, F_HAZE_SIG, F_SHEET_T) = range(9)
 F_SHEET_R, F_SPREAD, F_SPREAD_SIG, F_COS_UP, F_COS_DOWN, F_REFL_FINISH, F_TEST = range(9, 16)
-F_PROFILE, F_PROF_K = 16, 17
-F_COLS = 18
+F_PROFILE, F_PROF_K, F_PROF_U, F_PROF_V, F_PROF_C, F_PROF_T1, F_PROF_T2 = range(16, 23)
+F_COLS = 23
 
 
 @nb.njit(cache=True, inline="always")
@@ -61,10 +62,11 @@ def face_row(face, fi):  # pragma: no cover - compiled
         face[fi, 0], face[fi, 1], face[fi, 2], face[fi, 3], face[fi, 4], face[fi, 5],
         face[fi, 6], face[fi, 7], face[fi, 8], face[fi, 9], face[fi, 10], face[fi, 11],
         face[fi, 12], face[fi, 13], face[fi, 14], face[fi, 15], face[fi, 16], face[fi, 17],
+        face[fi, 18], face[fi, 19], face[fi, 20], face[fi, 21], face[fi, 22],
     )  # fmt: skip
 
 
-assert F_COLS == 18, "face_row reads every column"
+assert F_COLS == 23, "face_row reads every column"
 #: Face kinds (:mod:`optdot.optics.faces`: what each does to a ray).
 BOTTOM_FACE, INTERFACE, SHEET_FACE, PRISM_FACE = 0, 1, 2, 3
 #: What a face or a wall did to a ray that goes on (a fate, ``>= 0``, ends it): turned it
@@ -126,6 +128,9 @@ class Print(NamedTuple):
         cap_ring: ``[k, 2]`` the rings each cap prints, ``(r_in^2, r_out^2)`` mm^2 about
             its centre (a solid cap: ``[[0, inf]]``; graded caps:
             :func:`optdot.geometry.caps.ring_table`).
+        turn: ``[ny nx, 2]`` the cosine and sine of the dots' angle in each cell of
+            ``phi`` (row ``iy nx + ix``; a coverage trace of turned 3-D dots), or ``[1, 2]``
+            NaN (each dot draws its own; real dots carry their own angles).
     """
 
     explicit: bool
@@ -142,6 +147,7 @@ class Print(NamedTuple):
     cap: np.ndarray
     cap_g: np.ndarray
     cap_ring: np.ndarray
+    turn: np.ndarray
 
 
 class Scene(NamedTuple):

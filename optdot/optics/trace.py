@@ -62,7 +62,7 @@ import numba as nb
 import numpy as np
 
 from .faces import meet_face, meet_wall, wall_distance
-from .marks import marked
+from .marks import NO_FRAME, dot_frame, marked
 from .rays import fresnel, last_at_most, ray_state, uniform
 from .tables import (
     BULK,
@@ -79,6 +79,7 @@ from .tables import (
     EDGE,
     EXTRACTED,
     F_PRINT,
+    F_PROFILE,
     F_TEST,
     L_ABS,
     L_N,
@@ -207,13 +208,14 @@ def _trace_rays(
             up = dz > 0  # a face: fi under the layer (going down) or over it (going up)
             fi, z, to = (li + 1, z1, li + 1) if up else (li, z0, li - 1)
             n_to = layer[to, L_N] if 0 <= to < top else 1.0
-            ink = False
+            ink, at = False, NO_FRAME
             if face[fi, F_TEST] > 0.5:  # the print test: a number drawn, the print looked up
                 state, u = uniform(state)
                 mark = int(face[fi, F_PRINT])
                 ink = mark > 0 and marked(x, y, mark, pr_arrays, u)
+                at = dot_frame(x, y, pr_arrays) if ink and face[fi, F_PROFILE] > 0.5 else at
             state, act, dxn, dyn, dz = meet_face(
-                state, face_row(face, fi), up, n, n_to, fi == top, ink, dxn, dyn, dz
+                state, face_row(face, fi), up, n, n_to, fi == top, ink, at, dxn, dyn, dz
             )
             if act >= 0 or (act == CROSS and fi == top):
                 end = act if act >= 0 else EXTRACTED
@@ -268,6 +270,7 @@ def trace(seed, first, count, scene):  # pragma: no cover - compiled
         pr.cap,
         pr.cap_g,
         pr.cap_ring,
+        pr.turn,
     )
     max_events = st.max_events
     fate = np.empty(count, np.int8)

@@ -57,6 +57,9 @@ class Kind:
     #: Words for a footprint of this kind made per job from other keys than the job's
     #: (:attr:`derived`: a polygon "of other vertices").
     made_otherwise: str = ""
+    #: The 3-D profiles (:mod:`optdot.geometry.profile`) its footprint takes: a cap on a
+    #: circle or an ellipse, a micro-prism on a rectangle; ink on any.
+    profiles: tuple[str, ...] = ("ink",)
 
     def __reduce__(self):
         """Pickled by name, so a kind sent to a worker or read in a child process comes
@@ -94,6 +97,12 @@ class Kind:
         """``[n, e]`` numbers the compiled ``inside`` reads after the packed row's six
         (:func:`~optdot.geometry.kinds.packed`), or None."""
         return None
+
+    def profile_frame(self, size: tuple[float, ...]) -> tuple[float, float, float]:
+        """``(half length, half width, corner radius)`` of a footprint of ``size`` (mm,
+        :attr:`params` in order) along its own axes, mm: the frame a 3-D profile's body
+        stands on (a kind that takes only ink has none)."""
+        raise NotImplementedError(f"a {self.name} takes no 3-D profile")
 
     def inradius(self, size: np.ndarray) -> np.ndarray:
         """``[n]`` the radius of the largest disc about the centre inside each footprint

@@ -17,6 +17,10 @@ class Circle(Kind):
     round = True
     code = 0
     curve_form = "disc"
+    profiles = ("ink", "bump", "dimple")
+
+    def profile_frame(self, size: tuple[float, ...]) -> tuple[float, float, float]:
+        return 0.5 * size[0], 0.5 * size[0], 0.0
 
     def shape_params(self, size: np.ndarray) -> np.ndarray:
         r = 0.5 * size[:, 0]

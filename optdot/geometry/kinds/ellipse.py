@@ -29,6 +29,10 @@ class Ellipse(Kind):
     params = ("length", "width")
     code = 1
     curve_form = "ellipse"
+    profiles = ("ink", "bump", "dimple")
+
+    def profile_frame(self, size: tuple[float, ...]) -> tuple[float, float, float]:
+        return 0.5 * size[0], 0.5 * size[1], 0.0
 
     def shape_params(self, size: np.ndarray) -> np.ndarray:
         return np.column_stack([0.5 * size[:, 0], 0.5 * size[:, 1], np.zeros(len(size))])

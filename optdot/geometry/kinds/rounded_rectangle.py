@@ -34,6 +34,10 @@ class RoundedRect(Kind):
     zero_params = ("corner_radius",)
     relaxation = "spheres"
     arc_param = 2
+    profiles = ("ink", "prism")
+
+    def profile_frame(self, size: tuple[float, ...]) -> tuple[float, float, float]:
+        return 0.5 * size[0], 0.5 * size[1], size[2]
 
     def shape_params(self, size: np.ndarray) -> np.ndarray:
         return np.column_stack(self._core(size))

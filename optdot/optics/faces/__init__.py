@@ -27,11 +27,12 @@ from .slab_walls import meet_wall, wall_distance
 
 
 @nb.njit(cache=True, inline="always")
-def meet_face(state, f, up, n, n_to, is_top, ink, dxn, dyn, dz):  # pragma: no cover
+def meet_face(state, f, up, n, n_to, is_top, ink, at, dxn, dyn, dz):  # pragma: no cover
     """A ray meeting a face (its row ``f``, :func:`~optdot.optics.tables.face_row`), going
     up (``up``) or down from index ``n`` toward ``n_to`` (``is_top``: the top face), on
-    the print's ink (``ink``) or not: its kind's ``meet_*``. The print test is the
-    stepping's, and a kernel takes the face's numbers as a tuple: arrays handed to a
+    the print's ink (``ink``) or not, where on its dot for a 3-D one (``at``,
+    :func:`~optdot.optics.marks.dot_frame`'s): its kind's ``meet_*``. The print test is
+    the stepping's, and a kernel takes the face's numbers as a tuple: arrays handed to a
     kernel at every event cost the tracer a third of its speed."""
     kind = int(f[F_KIND])
     if kind == SHEET_FACE:
@@ -40,7 +41,7 @@ def meet_face(state, f, up, n, n_to, is_top, ink, dxn, dyn, dz):  # pragma: no c
         return meet_prism(state, f, up, dxn, dyn, dz)
     if kind == BOTTOM_FACE:
         if ink and f[F_PROFILE] > 0.5:  # a 3-D dot, not ink
-            return meet_profile(state, f, n, dxn, dyn, dz)
+            return meet_profile(state, f, n, at, dxn, dyn, dz)
         return meet_reflector(state, f, n, ink, dxn, dyn, dz)
     return meet_interface(state, f, up, n, n_to, is_top, ink, dxn, dyn, dz)
 
