@@ -7,12 +7,13 @@
 
 Each group's work runs in a fresh process: ``generate`` the README's led sample in one
 process (written to NPZ) and QA on it, ``tiles`` the tiny tiled job a cluster's workers
-warm up with (one numba thread). Then every numba dispatcher of an
-optdot module lists its signatures. ``--write`` runs each on an empty numba cache
-(``NUMBA_CACHE_DIR`` in a temporary folder) and times every compile (numba's compile
-events; each compile's own time, without the functions compiled inside it). A function
-compiled inside a kernel's compile (called from compiled code) is listed in that kernel's
-unit; the check leaves them out: a run on a warm cache loads a kernel whole.
+warm up with (one numba thread), ``simulate`` the ellipses sample's guide traced as its
+map's coverage (the tracer is the same kernel for real dots and every stack). Then every
+numba dispatcher of an optdot module lists its signatures. ``--write`` runs each on an
+empty numba cache (``NUMBA_CACHE_DIR`` in a temporary folder) and times every compile
+(numba's compile events; each compile's own time, without the functions compiled inside
+it). A function compiled inside a kernel's compile (called from compiled code) is listed
+in that kernel's unit; the check leaves them out: a run on a warm cache loads a kernel whole.
 """
 
 from __future__ import annotations
@@ -32,7 +33,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # _common, panels
 
 ROOT = Path(__file__).resolve().parent.parent
 LED = ROOT / "samples" / "led" / "job.toml"
-GROUPS = ("generate", "tiles")
+ELLIPSES = ROOT / "samples" / "ellipses" / "job.toml"
+GROUPS = ("generate", "tiles", "simulate")
 
 
 def _work(group: str, folder: Path) -> None:
@@ -45,6 +47,10 @@ def _work(group: str, folder: Path) -> None:
         job = load_job(LED)
         generate_to(job, folder / "led.npz", tiles="off")
         qa(load_pattern(folder / "led.npz", job.box), job)
+    elif group == "simulate":
+        from optdot.optics.simulate import simulate
+
+        simulate(load_job(ELLIPSES).bench, 20_000)
     else:
         from optdot.orchestration.tiling.run import warm_up
 

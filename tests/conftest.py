@@ -11,6 +11,17 @@ SAMPLES = ROOT / "samples"
 # a checkout's kernels compile into a cache named by their sources (optdot/__init__.py:
 # numba keys a cached kernel by its own file only, and a broken kernel could pass)
 
+
+@pytest.fixture(scope="session", autouse=True)
+def _kernels_compiled_on_all_cores():
+    """On an empty kernel cache (a fresh install), the listed kernels of a run and of the
+    tracer compiled first on all cores, as a first ``generate`` does
+    (:func:`optdot.runtime.kernels.warm`); nothing when they are cached."""
+    from optdot.runtime.kernels import warm
+
+    warm(("generate", "simulate"))
+
+
 # the same examples every run (a property test that finds a case one day and not the
 # next is not a gate); tests that set their own settings keep them
 settings.register_profile("optdot", derandomize=True, database=None)

@@ -78,9 +78,11 @@ def test_manifest_installed_and_loaded():
     listed = kernels.manifest()
     assert listed, "kernels.json missing from the installed package"
     groups = {g for k in listed for g in k.groups}
-    assert groups == {"generate", "tiles"}
+    assert groups == {"generate", "tiles", "simulate"}
     names = {(k.module, k.name) for k in listed if "generate" in k.groups}
     assert ("optdot.relax.penalty", "_penalty_kernel") in names
+    traced = {(k.module, k.name) for k in listed if "simulate" in k.groups}
+    assert ("optdot.optics.trace", "trace") in traced
     doc = json.loads(kernels.MANIFEST.read_text())
     if not _recorded_with_this_numba():
         assert all(k.signature is None for k in listed)  # another numba: the list unused
@@ -222,6 +224,27 @@ def test_generate_warms_its_kernels_first(monkeypatch, tiny_job):
     md = dataclasses.replace(small, optimize=dataclasses.replace(small.optimize, method="md"))
     pipeline.generate(md)  # the MD baseline's kernels are not listed
     assert asked == ["generate"]
+
+
+def test_simulate_and_design_warm_the_tracer_first(monkeypatch, tmp_path):
+    """``simulate`` and ``design`` compile the tracer's listed kernels on all cores before
+    they trace (the ``simulate`` group), as ``generate`` does its own."""
+    from click.testing import CliRunner
+
+    from optdot.cli import main, optics
+
+    asked: list = []
+    monkeypatch.setattr(optics, "warm", lambda group, announce=None: asked.append(group))
+    job = ROOT / "samples" / "ellipses" / "job.toml"
+    r = CliRunner().invoke(main, ["simulate", str(job), "--rays", "2000", "-q"])
+    assert r.exit_code == 0, r.output
+    assert asked == ["simulate"]
+    r = CliRunner().invoke(
+        main, ["design", str(job), "-o", str(tmp_path / "m.csv"), "--rays", "4000",
+               "--iterations", "2", "-q"],
+    )  # fmt: skip
+    assert r.exit_code == 0, r.output
+    assert asked == ["simulate", "simulate"]
 
 
 def test_a_listed_signature_the_code_no_longer_takes_is_skipped(monkeypatch):

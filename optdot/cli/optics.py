@@ -10,6 +10,7 @@ from pathlib import Path
 
 import click
 
+from ..runtime.kernels import warm
 from .app import main, user_errors
 from .records import Count, Finite, record
 
@@ -128,6 +129,7 @@ def simulate(job_file, pattern, trace, bins, files, quiet):
 
         dots = _read_with_job(pattern, job)
         traced_as_made(pattern, dots, job)
+    warm("simulate")  # a first run: the tracer's kernels on all cores
     t0 = time.perf_counter()
     bench = job.bench
     sim = run(bench, rays, seed, dots=dots, bin_mm=bin_mm, spot_mm=spot_mm, border_mm=border_mm)
@@ -309,6 +311,7 @@ def design(job_file, output, png_path, job_out, rays, iterations, seed, quiet):
             f"{p.fill_range[0]:g}..{p.fill_range[1]:g}",
             err=True,
         )
+    warm("simulate", announce=None if quiet else lambda s: click.echo(s, err=True))
     t0 = time.perf_counter()
 
     def report(f: dict) -> None:

@@ -8,16 +8,16 @@ so the other cores wait.
 
 This module compiles a command's kernels on a cold cache in several processes at once.
 ``kernels.json`` lists, for each group of work (``"generate"``: a one-process run and
-its QA; ``"tiles"``: a tiled run's tasks), the kernels it calls with their signatures
-(numba types, pickled) and what each took to compile. It is recorded from real runs by
-``python benchmarks/kernels.py --write`` and a test holds it to what the code calls.
-:func:`warm` finds the group's kernels with no cache on disk and compiles them, a unit
-at a time (a kernel with the functions it calls), the longest first, in this process
-and in helpers (``python -m optdot.runtime.kernels``): each process claims the next
-unit as it finishes one (:func:`compile_claimed`), so the recorded times, which a
-process's own first compile skews, only order the work. Each writes numba's cache;
-the run then loads every kernel. The machine code is the same whoever compiled it, so
-the output's bytes are too. A tiled run does the same on its workers.
+its QA; ``"tiles"``: a tiled run's tasks; ``"simulate"``: the tracer), the kernels it
+calls with their signatures (numba types, pickled) and what each took to compile. It is
+recorded from real runs by ``python benchmarks/kernels.py --write`` and a test holds it
+to what the code calls. :func:`warm` finds the group's kernels with no cache on disk and
+compiles them, a unit at a time (a kernel with the functions it calls), the longest
+first, in this process and in helpers (``python -m optdot.runtime.kernels``): each
+process claims the next unit as it finishes one (:func:`compile_claimed`), so the
+recorded times, which a process's own first compile skews, only order the work. Each
+writes numba's cache; the run then loads every kernel. The machine code is the same
+whoever compiled it, so the output's bytes are too. A tiled run does the same on its workers.
 
 Nothing here is needed for a correct run: a kernel the list misses, a signature that
 changed, a helper that failed or another numba version (the list is then not used) all
@@ -154,12 +154,14 @@ def cached(kernel: Kernel) -> bool:
         return True
 
 
-def cold(group: str) -> list[int]:
-    """Indices into :func:`manifest` of ``group``'s kernels that numba has not cached."""
+def cold(group: str | tuple[str, ...]) -> list[int]:
+    """Indices into :func:`manifest` of ``group``'s kernels (those of any of several
+    groups) that numba has not cached."""
+    groups = (group,) if isinstance(group, str) else group
     return [
         i
         for i, k in enumerate(manifest())
-        if group in k.groups and k.signature is not None and not cached(k)
+        if set(groups) & set(k.groups) and k.signature is not None and not cached(k)
     ]
 
 
@@ -240,9 +242,9 @@ def processes_allowed() -> int:
     return min(count, MAX_PROCESSES)
 
 
-def warm(group: str, processes: int | None = None, announce=None) -> int:
-    """Compile ``group``'s uncached kernels in up to ``processes`` processes at once (this
-    one and helpers; default :func:`processes_allowed`), telling
+def warm(group: str | tuple[str, ...], processes: int | None = None, announce=None) -> int:
+    """Compile ``group``'s uncached kernels (or several groups') in up to ``processes``
+    processes at once (this one and helpers; default :func:`processes_allowed`), telling
     ``announce`` (a callable taking one line) first. Returns the kernels now cached that
     were not; 0 when all were cached or one process would do it (the run then compiles
     them on first call, as it would).
