@@ -8,7 +8,8 @@
 Each group's work runs in a fresh process: ``generate`` the README's led sample in one
 process (written to NPZ) and QA on it, ``tiles`` the tiny tiled job a cluster's workers
 warm up with (one numba thread), ``simulate`` the ellipses sample's guide traced as its
-map's coverage (the tracer is the same kernel for real dots and every stack). Then every
+map's coverage (the tracer is the same kernel for real dots and every stack), ``shapes``
+the ellipses, prisms and hexagons samples in one process and QA on each. Then every
 numba dispatcher of an optdot module lists its signatures. ``--write`` runs each on an
 empty numba cache (``NUMBA_CACHE_DIR`` in a temporary folder) and times every compile
 (numba's compile events; each compile's own time, without the functions compiled inside
@@ -34,7 +35,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # _common, panels
 ROOT = Path(__file__).resolve().parent.parent
 LED = ROOT / "samples" / "led" / "job.toml"
 ELLIPSES = ROOT / "samples" / "ellipses" / "job.toml"
-GROUPS = ("generate", "tiles", "simulate")
+#: The shaped samples whose runs make the ``shapes`` group (each kind's gap and terms).
+SHAPED = ("ellipses", "prisms", "hexagons")
+GROUPS = ("generate", "tiles", "simulate", "shapes")
 
 
 def _work(group: str, folder: Path) -> None:
@@ -47,6 +50,11 @@ def _work(group: str, folder: Path) -> None:
         job = load_job(LED)
         generate_to(job, folder / "led.npz", tiles="off")
         qa(load_pattern(folder / "led.npz", job.box), job)
+    elif group == "shapes":
+        for name in SHAPED:
+            job = load_job(ROOT / "samples" / name / "job.toml")
+            generate_to(job, folder / f"{name}.npz", tiles="off")
+            qa(load_pattern(folder / f"{name}.npz", job.box), job)
     elif group == "simulate":
         from optdot.optics.simulate import simulate
 

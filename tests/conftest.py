@@ -19,7 +19,7 @@ def _kernels_compiled_on_all_cores():
     (:func:`optdot.runtime.kernels.warm`); nothing when they are cached."""
     from optdot.runtime.kernels import warm
 
-    warm(("generate", "simulate"))
+    warm(("generate", "simulate", "shapes"))
 
 
 # the same examples every run (a property test that finds a case one day and not the

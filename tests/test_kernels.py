@@ -78,7 +78,7 @@ def test_manifest_installed_and_loaded():
     listed = kernels.manifest()
     assert listed, "kernels.json missing from the installed package"
     groups = {g for k in listed for g in k.groups}
-    assert groups == {"generate", "tiles", "simulate"}
+    assert groups == {"generate", "tiles", "simulate", "shapes"}
     names = {(k.module, k.name) for k in listed if "generate" in k.groups}
     assert ("optdot.relax.penalty", "_penalty_kernel") in names
     traced = {(k.module, k.name) for k in listed if "simulate" in k.groups}
@@ -224,6 +224,12 @@ def test_generate_warms_its_kernels_first(monkeypatch, tiny_job):
     md = dataclasses.replace(small, optimize=dataclasses.replace(small.optimize, method="md"))
     pipeline.generate(md)  # the MD baseline's kernels are not listed
     assert asked == ["generate"]
+    from optdot.config.schema import load_job
+
+    shaped = load_job(ROOT / "samples" / "ellipses" / "job.toml")
+    shaped = dataclasses.replace(shaped, optimize=dataclasses.replace(shaped.optimize, max_iter=3))
+    pipeline.generate(shaped)  # shaped dots: their own kernels too
+    assert asked == ["generate", ("generate", "shapes")]
 
 
 def test_simulate_and_design_warm_the_tracer_first(monkeypatch, tmp_path):

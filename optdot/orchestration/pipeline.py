@@ -107,7 +107,8 @@ def generate(
     timings: dict[str, float] = {}
     stage = stage or (lambda name: None)
     if opt.method != "md":
-        warm("generate", announce=stage)  # a first run: its kernels on all cores
+        groups = "generate" if job.shape.kind.round else ("generate", "shapes")
+        warm(groups, announce=stage)  # a first run: its kernels on all cores
 
     stage("throwing darts")
     settings = stage_settings(job, formulation)  # the values every stage takes

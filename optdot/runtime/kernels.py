@@ -8,7 +8,8 @@ so the other cores wait.
 
 This module compiles a command's kernels on a cold cache in several processes at once.
 ``kernels.json`` lists, for each group of work (``"generate"``: a one-process run and
-its QA; ``"tiles"``: a tiled run's tasks; ``"simulate"``: the tracer), the kernels it
+its QA; ``"tiles"``: a tiled run's tasks; ``"simulate"``: the tracer; ``"shapes"``:
+shaped dots' own), the kernels it
 calls with their signatures (numba types, pickled) and what each took to compile. It is
 recorded from real runs by ``python benchmarks/kernels.py --write`` and a test holds it
 to what the code calls. :func:`warm` finds the group's kernels with no cache on disk and
