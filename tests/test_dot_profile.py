@@ -479,6 +479,19 @@ def test_a_profile_that_cannot_be_made_is_refused_in_one_line(tmp_path, dots, sa
     assert said in str(e.value) and "\n" not in str(e.value), str(e.value)
 
 
+def test_a_dimple_deeper_than_the_guide_is_thick_is_refused(tmp_path):
+    """A dimple 23 µm deep cannot be cut into a guide 20 µm thick (nor a bump stand as
+    high as it: a 3-D dot's height is less than the guide's thickness)."""
+    np.savetxt(tmp_path / "map.csv", np.full((8, 12), 0.2), delimiter=",")
+    text = GUIDE.format(name="t", dots='profile = "dimple"\ndepth = 0.023', reflector=0.9,
+                        finish="diffuse")  # fmt: skip
+    (tmp_path / "t.toml").write_text(text.replace("thickness = 0.4", "thickness = 0.02"))
+    with pytest.raises(JobError) as e:
+        load_job(tmp_path / "t.toml")
+    said = "dots.depth = 0.023 makes dimples 0.023 mm deep, not less than the guide's thickness"
+    assert said in str(e.value) and "\n" not in str(e.value), str(e.value)
+
+
 def test_a_profile_on_a_footprint_it_does_not_fit_is_refused(tmp_path):
     """A cap stands on a circle or an ellipse, a prism on a rectangle: a cap on a
     rectangle, a prism on a circle, dots of several sizes and a stack that prints its dots
@@ -539,7 +552,11 @@ def _prism_guide(tmp_path, dots: str, orientation: str = 'toward = "leds"', name
         ('profile = "prism"\nfacets = [45, true]', "must be two angles"),
         (
             'profile = "prism"\nfacets = [85, 85]\ncut = true',
-            "cut 0.6858 mm deep, through the guide (0.4 mm)",
+            "makes prisms 0.6858 mm deep, not less than the guide's thickness (0.4 mm)",
+        ),
+        (
+            'profile = "prism"\nfacets = [89.999, 89.999]',
+            "makes prisms 3438 mm high, not less than the guide's thickness (0.4 mm)",
         ),
         ('profile = "bump"\nfacets = [45, 45]', "dots.facets belongs to dots.profile = 'prism'"),
         ("cut = true", "dots.cut belongs to dots.profile = 'prism', not 'ink'"),
@@ -547,7 +564,8 @@ def _prism_guide(tmp_path, dots: str, orientation: str = 'toward = "leds"', name
 )
 def test_a_prism_that_cannot_be_made_is_refused_in_one_line(tmp_path, dots, said):
     """Facets missing, not two, not between 0.5 and 90 degrees (a facet at 90 does not
-    close), a cut deeper than the guide, and a prism's keys under another profile."""
+    close), a prism as deep or as high as the guide is thick (3.4 m at 89.999°: its rays
+    would be caught in it), and a prism's keys under another profile."""
     with pytest.raises(JobError) as e:
         _prism_guide(tmp_path, dots)
     assert said in str(e.value) and "\n" not in str(e.value), str(e.value)

@@ -198,9 +198,9 @@ def dot_profile(dots: dict[str, Any], shape: DotShape, sizes, guide, backlight, 
     Raises:
         JobError: an unknown profile, a key it needs missing or one of another's given, a
             cap taller than a hemisphere on the footprint's short axis, facets that do not
-            close, a cut deeper than the guide, a footprint the profile does not fit,
-            dots of several sizes, or a stack whose dots are printed on a film (a profile
-            is the guide's).
+            close, a dot as deep or as high as the guide is thick, a footprint the profile
+            does not fit, dots of several sizes, or a stack whose dots are printed on a
+            film (a profile is the guide's).
     """
     name = dots.get("profile", PROFILES[0])
     if name not in PROFILES:
@@ -237,8 +237,21 @@ def dot_profile(dots: dict[str, Any], shape: DotShape, sizes, guide, backlight, 
             f"dots.profile = {name!r} is traced as the structure it is"
         )
     hu, hv, _ = shape.kind.profile_frame(shape.size)
-    if name == "prism":
-        return _prism(dots, 2.0 * hu, guide, where)
+    profile = _prism(dots, 2.0 * hu, where) if name == "prism" else _cap(dots, name, hv, where)
+    if profile.height >= guide.thickness:  # a dot as deep (or tall) as the guide is thick
+        how = "deep" if profile.kind == "dimple" or profile.cut else "high"
+        given = "dots.facets" if name == "prism" else f"dots.{HEIGHT_KEY[name]}"
+        raise JobError(
+            f"{where}: {given} = {dots[given[5:]]!r} makes {name}s {profile.height:.4g} mm "
+            f"{how}, not less than the guide's thickness ({guide.thickness:g} mm)"
+            + (": give lower facets or shorter dots" if name == "prism" else "")
+        )
+    return profile
+
+
+def _cap(dots: dict[str, Any], name: str, hv: float, where: str) -> DotProfile:
+    """A bump's or a dimple's profile on a footprint ``hv`` mm half wide
+    (:func:`dot_profile`)."""
     key = HEIGHT_KEY[name]
     if key not in dots:
         raise JobError(f"{where}: dots.profile = {name!r} needs dots.{key} (mm)")
@@ -256,7 +269,7 @@ def dot_profile(dots: dict[str, Any], shape: DotShape, sizes, guide, backlight, 
 PRISM_KEYS = ("facets", "cut")
 
 
-def _prism(dots: dict[str, Any], length: float, guide, where: str) -> DotProfile:
+def _prism(dots: dict[str, Any], length: float, where: str) -> DotProfile:
     """A prism's profile from ``dots.facets`` (and ``dots.cut``) on a footprint ``length``
     mm long (:func:`dot_profile`)."""
     facets = dots.get("facets")
@@ -277,14 +290,7 @@ def _prism(dots: dict[str, Any], length: float, guide, where: str) -> DotProfile
     if not isinstance(cut, bool):
         raise JobError(f"{where}: dots.cut = {cut!r} must be true or false")
     pair = (float(facets[0]), float(facets[1]))
-    h = prism_height(length, pair)
-    if cut and h >= guide.thickness:
-        raise JobError(
-            f"{where}: dots.facets = {facets!r} on dots {length:g} mm long cut {h:.4g} mm "
-            f"deep, through the guide ({guide.thickness:g} mm): give lower facets or "
-            "shorter dots"
-        )
-    return DotProfile("prism", h, pair, cut)
+    return DotProfile("prism", prism_height(length, pair), pair, cut)
 
 
 #: The lowest facet angle, degrees (a prism flatter than this is the flat face).
