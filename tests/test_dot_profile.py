@@ -494,8 +494,8 @@ def test_a_dimple_deeper_than_the_guide_is_thick_is_refused(tmp_path):
 
 def test_a_profile_on_a_footprint_it_does_not_fit_is_refused(tmp_path):
     """A cap stands on a circle or an ellipse, a prism on a rectangle: a cap on a
-    rectangle, a prism on a circle, dots of several sizes and a stack that prints its dots
-    on a film are refused."""
+    rectangle, a prism on a circle, a cap taller than the smallest of several sizes'
+    half width, and a stack that prints its dots on a film are refused."""
     np.savetxt(tmp_path / "map.csv", np.full((8, 12), 0.2), delimiter=",")
     rect = GUIDE.replace(
         "diameter = 0.046\n{dots}",
@@ -504,13 +504,14 @@ def test_a_profile_on_a_footprint_it_does_not_fit_is_refused(tmp_path):
     )
     prism = GUIDE.replace("{dots}", 'profile = "prism"\nfacets = [45, 45]')
     sizes = GUIDE.replace(
-        "diameter = 0.046\n{dots}", 'diameter = [0.046, 0.08]\nprofile = "bump"\nheight = 0.01'
+        "diameter = 0.046\n{dots}", 'diameter = [0.046, 0.08]\nprofile = "bump"\nheight = 0.03'
     )
     for text, said in (
         (rect, "'bump' stands on circle or ellipse footprints; rounded_rectangle dots take "
          "profile = 'ink' or 'prism'"),
         (prism, "'prism' stands on rounded_rectangle footprints; circle dots take"),
-        (sizes, "one size"),
+        (sizes, "dots.height = 0.03 must be in mm, 0.0001 <= height <= 0.023 (half the "
+         "width of the (smallest) dots, 0.046 mm wide"),
     ):  # fmt: skip
         path = tmp_path / "j.toml"
         path.write_text(text.format(name="x", dots="", reflector=0.9, finish="diffuse"))
@@ -670,14 +671,96 @@ def test_a_turned_dot_meets_a_ray_as_the_unturned_dot_meets_the_ray_turned_back(
         row[t.F_PROFILE], row[t.F_PROF_K] = code, 0.6
         row[[t.F_PROF_U, t.F_PROF_V, t.F_PROF_C, t.F_PROF_T1, t.F_PROF_T2]] = body
         f = tuple(float(v) for v in row)
-        turned = _meet(f, (-0.01, 0.004, c, s), d, 9)
-        plain = _meet(f, (-0.01, 0.004, 1.0, 0.0), back, 9)
+        turned = _meet(f, (-0.01, 0.004, c, s, math.nan), d, 9)
+        plain = _meet(f, (-0.01, 0.004, 1.0, 0.0, math.nan), back, 9)
         same = turned[:, 0] == plain[:, 0]
         assert same.mean() > 0.99
         x, y = plain[same, 1], plain[same, 2]
         assert np.allclose(turned[same, 1], c * x - s * y, atol=1e-9)
         assert np.allclose(turned[same, 2], s * x + c * y, atol=1e-9)
         assert np.allclose(turned[same, 3], plain[same, 3], atol=1e-9)
+
+
+def test_a_dot_of_another_size_is_its_footprint_scaled_under_the_same_height():
+    """Met on a dot 1.5 times as wide as its row's (the half width the frame gives), a
+    bump meets rays as a row of that size whose cap has the same height (a lower
+    aspect), and a prism as one 1.5 times as long, wide and high (its facets keep their
+    angles); the size changes what they do."""
+    from optdot.geometry.profile import BUMP as BUMP_CODE
+    from optdot.geometry.profile import PRISM_CUT
+    from optdot.optics import tables as t
+
+    g = np.random.default_rng(3)
+    s_, p = np.sqrt(g.random(2000)), 2 * np.pi * g.random(2000)
+    d = np.column_stack([s_ * np.cos(p), s_ * np.sin(p), -np.sqrt(1 - s_ * s_)])
+    t30 = math.tan(math.radians(30))
+    for code, k, small, big in (
+        (BUMP_CODE, 0.6, (0.02, 0.02, 0.0), (0.03, 0.03, 0.0)),
+        (PRISM_CUT, 0.0, (0.06, 0.015, 0.005), (0.09, 0.0225, 0.0075)),
+    ):
+        rows = []
+        for body, aspect in ((small, k), (big, k / 1.5)):
+            row = np.zeros(t.F_COLS)
+            row[t.F_KIND], row[t.F_REFL], row[t.F_REFL_FINISH] = t.BOTTOM_FACE, 0.9, 1.0
+            row[t.F_PROFILE], row[t.F_PROF_K] = code, aspect
+            row[[t.F_PROF_U, t.F_PROF_V, t.F_PROF_C, t.F_PROF_T1, t.F_PROF_T2]] = (*body, 1.0, t30)
+            rows.append(tuple(float(v) for v in row))
+        scaled = _meet(rows[0], (-0.012, 0.005, 1.0, 0.0, big[1]), d, 5)
+        own = _meet(rows[1], (-0.012, 0.005, 1.0, 0.0, math.nan), d, 5)
+        same = scaled[:, 0] == own[:, 0]
+        assert same.mean() > 0.99
+        assert np.allclose(scaled[same, 1:], own[same, 1:], atol=1e-9)
+        unscaled = _meet(rows[0], (-0.012, 0.005, 1.0, 0.0, math.nan), d, 5)
+        assert (np.abs(unscaled[:, 1:] - own[:, 1:]).max(axis=1) > 1e-6).mean() > 0.05
+
+
+def test_bumps_of_several_sizes_trace_as_their_coverage(tmp_path):
+    """Bumps 12 um high on dots 30-120 um wide (a hybrid pitch rule over a map from 0.08
+    to 0.45): traced through the real dots (each its own size, read off its footprint)
+    and as the map's coverage (each cell's dots at the size the rule gives its fill),
+    the guide extracts the same and sends the same on axis."""
+    from optdot.orchestration.pipeline import generate
+
+    fill = np.repeat(np.linspace(0.08, 0.45, 8)[:, None], 12, axis=1)
+    np.savetxt(tmp_path / "map.csv", fill, delimiter=",")
+    dots = 'profile = "bump"\nheight = 0.012\nspacing = 0.15'
+    text = GUIDE.format(name="z", dots=dots, reflector=0.95, finish="diffuse")
+    path = tmp_path / "z.toml"
+    path.write_text(text.replace("diameter = 0.046", "diameter = [0.03, 0.12]"))
+    job = load_job(path)
+    pattern = generate(job)
+    assert np.ptp(pattern.diameter) > 0.05
+    rays = 400_000
+    cover, real = simulate(job.bench, rays, 3), simulate(job.bench, rays, 3, dots=pattern)
+    a, b = cover.summary(), real.summary()
+    assert abs(a["efficiency"] - b["efficiency"]) < 0.006, (a["efficiency"], b["efficiency"])
+    a, b = a["angles"], b["angles"]
+    assert abs(a["on_axis"] - b["on_axis"]) < 4 * math.hypot(a["on_axis_sigma"], b["on_axis_sigma"])
+
+
+def test_prisms_of_several_sizes_are_as_high_as_their_largest_allows(tmp_path):
+    """Prisms scaled up to 4 times: the largest's height must stay under the guide's
+    thickness (60° facets on 0.48 mm stand 0.416 mm in a 0.4 mm guide); up to 3 times
+    they stand 0.312 mm and are traced."""
+    np.savetxt(tmp_path / "map.csv", np.full((8, 12), 0.2), delimiter=",")
+    for top, ok in ((3.0, True), (4.0, False)):
+        text = PRISM_GUIDE.format(
+            name="s", dots=f'profile = "prism"\nfacets = [60, 60]\nscale = [1.0, {top}]',
+            reflector=0.95, finish="diffuse",
+        )  # fmt: skip
+        path = tmp_path / "s.toml"
+        path.write_text(
+            text.replace("[light_guide]", "[orientation]\nrandom = true\n[light_guide]")
+        )
+        if ok:
+            job = load_job(path)
+            assert job.profile.height == pytest.approx(0.36 * math.tan(math.radians(60)) / 2)
+            assert job.profile.words() == "prisms up to 312 µm high, facets 60° / 60°"
+            sim = simulate(job.bench, 20_000, 1)
+            assert sum(sim.fates.values()) == 20_000 and sim.fates["absorbed_dots"] == 0
+        else:
+            with pytest.raises(JobError, match="makes prisms 0.4157 mm high, not less than"):
+                load_job(path)
 
 
 def test_ink_s_scatter_rule_is_refused_beside_a_profile(tmp_path):

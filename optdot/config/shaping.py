@@ -24,6 +24,7 @@ With ``toward`` or ``map``, ``angle`` is added to the field (a turn of every dot
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -193,14 +194,15 @@ def dot_profile(dots: dict[str, Any], shape: DotShape, sizes, guide, backlight, 
     """The ``[dots]`` profile: ``profile = "ink"`` (default); ``"bump"`` with ``height`` or
     ``"dimple"`` with ``depth`` (mm), a cap on a circle's or an ellipse's footprint;
     ``"prism"`` with ``facets = [deg, deg]`` (and ``cut = true`` for one cut into the
-    face) on a rectangle's.
+    face) on a rectangle's. On dots of several sizes (``sizes``) every cap has the same
+    height, and a prism its facets' angles (the longer, the higher).
 
     Raises:
         JobError: an unknown profile, a key it needs missing or one of another's given, a
-            cap taller than a hemisphere on the footprint's short axis, facets that do not
-            close, a dot as deep or as high as the guide is thick, a footprint the profile
-            does not fit, dots of several sizes, or a stack whose dots are printed on a
-            film (a profile is the guide's).
+            cap taller than a hemisphere on the (smallest) footprint's short axis, facets
+            that do not close, a dot as deep or as high as the guide is thick (the
+            largest), a footprint the profile does not fit, or a stack whose dots are
+            printed on a film (a profile is the guide's).
     """
     name = dots.get("profile", PROFILES[0])
     if name not in PROFILES:
@@ -221,11 +223,6 @@ def dot_profile(dots: dict[str, Any], shape: DotShape, sizes, guide, backlight, 
             f"{where}: dots.profile = {name!r} stands on {' or '.join(fits)} footprints; "
             f"{shape.kind.name} dots take profile = {' or '.join(map(repr, shape.kind.profiles))}"
         )
-    if sizes is not None:
-        raise JobError(
-            f"{where}: dots.profile = {name!r} takes dots of one size (dots.diameter a number, "
-            "no dots.scale)"
-        )
     if guide is None or (backlight is not None and backlight.on_film):
         raise JobError(
             f"{where}: dots.profile = {name!r} shapes dots in a light guide's face; this job "
@@ -237,7 +234,13 @@ def dot_profile(dots: dict[str, Any], shape: DotShape, sizes, guide, backlight, 
             f"dots.profile = {name!r} is traced as the structure it is"
         )
     hu, hv, _ = shape.kind.profile_frame(shape.size)
-    profile = _prism(dots, 2.0 * hu, where) if name == "prism" else _cap(dots, name, hv, where)
+    if sizes is not None:  # the smallest dot bounds a cap, the largest a prism's height
+        low, high = shape.scale_of(np.array([sizes.low, sizes.high]))
+        hu, hv = hu * high, hv * low
+    if name == "prism":
+        profile = replace(_prism(dots, 2.0 * hu, where), sized=sizes is not None)
+    else:
+        profile = _cap(dots, name, hv, where)
     if profile.height >= guide.thickness:  # a dot as deep (or tall) as the guide is thick
         how = "deep" if profile.kind == "dimple" or profile.cut else "high"
         given = "dots.facets" if name == "prism" else f"dots.{HEIGHT_KEY[name]}"
@@ -259,8 +262,8 @@ def _cap(dots: dict[str, Any], name: str, hv: float, where: str) -> DotProfile:
     if not (math.isfinite(h) and MIN_CAP_HEIGHT <= h <= hv):
         raise JobError(
             f"{where}: dots.{key} = {dots[key]!r} must be in mm, {MIN_CAP_HEIGHT:g} <= {key} "
-            f"<= {hv:g} (half the width of dots {2 * hv:g} mm wide: a cap is at most a "
-            "hemisphere)"
+            f"<= {hv:g} (half the width of the (smallest) dots, {2 * hv:g} mm wide: a cap is "
+            "at most a hemisphere)"
         )
     return DotProfile(name, h)
 

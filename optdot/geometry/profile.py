@@ -37,12 +37,15 @@ class DotProfile:
             length, degrees (``(0, 0)`` for the others).
         cut: a prism cut into the face (air in it), not standing out of it (only a
             prism's).
+        sized: the dots vary in size: a prism's :attr:`height` is the largest one's (its
+            facets keep their angles; a cap's height is every cap's).
     """
 
     kind: str = "ink"
     height: float = 0.0
     facets: tuple[float, float] = (0.0, 0.0)
     cut: bool = False
+    sized: bool = False
 
     @property
     def code(self) -> int:
@@ -57,7 +60,7 @@ class DotProfile:
     def words(self) -> str:
         """The dots in words: ``bumps 10 µm high``, ``prisms cut 12 µm deep, facets 45° /
         30°``."""
-        um = f"{self.height * 1e3:.3g} µm"
+        um = f"{'up to ' if self.sized else ''}{self.height * 1e3:.3g} µm"
         if self.code >= PRISM:
             a, b = (f"{f:g}°" for f in self.facets)
             how = f"cut {um} deep" if self.cut else f"{um} high"
@@ -69,6 +72,8 @@ class DotProfile:
         out = {"kind": self.kind, "height_mm": self.height}
         if self.code >= PRISM:
             out.update(facets_deg=list(self.facets), cut=self.cut)
+            if self.sized:
+                out["height_of"] = "the largest dot"
         return out
 
 

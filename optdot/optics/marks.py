@@ -8,7 +8,7 @@ import math
 
 import numba as nb
 
-from ..geometry.shapes import on_packed
+from ..geometry.shapes import half_width_packed, on_packed
 
 
 @nb.njit(cache=True, inline="always")
@@ -84,18 +84,20 @@ def marked(x, y, mark, pr, u):
     return on_dot(x, y, explicit, phi, g, start, dx_, dy_, foot, cg, u)
 
 
-#: What :func:`dot_frame` says where it cannot tell: the point and the angle unknown.
-NO_FRAME = (math.nan, math.nan, math.nan, math.nan)
+#: What :func:`dot_frame` says where it cannot tell: the point, the angle and the size
+#: unknown.
+NO_FRAME = (math.nan, math.nan, math.nan, math.nan, math.nan)
 
 
 @nb.njit(cache=True, inline="always")
 def dot_frame(x, y, pr):
     """Where on its dot the point (x, y) of the job's print lies, for a 3-D dot: ``(lu,
-    lv, c, s)``, on a real dot the point in the dot's own frame (mm along its long axis
-    and across it) and the cosine and sine of its angle; in the coverage, NaN for the
-    point and the cell's angle (``pr``'s ``turn``: NaN where the dot draws its own).
-    Asked only of 3-D dots, after :func:`marked` found ink there (the ink's own path
-    does not look)."""
+    lv, c, s, w)``, on a real dot the point in the dot's own frame (mm along its long
+    axis and across it), the cosine and sine of its angle and its half width (mm); in
+    the coverage, NaN for the point and the cell's angle and half width (``pr``'s
+    ``turn``: NaN where the dot draws its angle, or has the job's one size). Asked only
+    of 3-D dots, after :func:`marked` found ink there (the ink's own path does not
+    look)."""
     explicit, phi, g, _, _, start, dx_, dy_, foot, cg, _, _, _, _, turn = pr
     if explicit:
         k = dot_at(x, y, start, dx_, dy_, foot, cg)
@@ -103,10 +105,10 @@ def dot_frame(x, y, pr):
             return NO_FRAME
         c, s = foot[k, 4], foot[k, 5]
         ddx, ddy = x - dx_[k], y - dy_[k]
-        return (c * ddx + s * ddy, c * ddy - s * ddx, c, s)
+        return (c * ddx + s * ddy, c * ddy - s * ddx, c, s, half_width_packed(foot, k))
     ix = int(math.floor((x - g[0]) / g[2]))
     iy = int(math.floor((y - g[1]) / g[3]))
     k = iy * phi.shape[1] + ix
     if turn.shape[0] == phi.size and 0 <= ix < phi.shape[1] and 0 <= iy < phi.shape[0]:
-        return (math.nan, math.nan, turn[k, 0], turn[k, 1])
+        return (math.nan, math.nan, turn[k, 0], turn[k, 1], turn[k, 2])
     return NO_FRAME

@@ -171,12 +171,13 @@ def _profile_row(row: np.ndarray, bench: Bench) -> None:
 
 
 def _turns(bench: Bench) -> bool:
-    """Whether the guide's 3-D dots look different turned (a prism, a cap on an ellipse):
-    a coverage trace then gives each the angle its dot would have."""
+    """Whether the guide's 3-D dots look different turned (a prism, a cap on an ellipse)
+    or vary in size: a coverage trace then gives each the angle and the size its dot
+    would have."""
     if bench.profile.code == INK:
         return False
     hu, hv, _ = bench.shape.kind.profile_frame(bench.shape.size)
-    return bench.profile.code >= PRISM or hu != hv
+    return bench.profile.code >= PRISM or hu != hv or bench.sizes is not None
 
 
 def probe(scene: Scene, events: int) -> Scene:
@@ -443,27 +444,52 @@ def _print(bench: Bench, dots: DotSource | None, coverage: Coverage | None) -> P
         g = np.array([cov.x0, cov.y0, cov.dx, cov.dy], np.float64)
         start, x, y = np.zeros(2, np.int64), np.zeros(1), np.zeros(1)
         dots_part = (False, phi, g, start, x, y, np.zeros((1, 6)), np.ones(7))
-        turn = _coverage_turn(bench, cov) if _turns(bench) else np.full((1, 2), np.nan)
+        turn = _coverage_frame(bench, cov) if _turns(bench) else np.full((1, 3), np.nan)
     else:
         start, x, y, foot, cg = dot_grid(dots, bench.box)
         dots_part = (True, np.zeros((1, 1)), np.ones(4), start, x, y, foot, cg)
-        turn = np.full((1, 2), np.nan)
+        turn = np.full((1, 3), np.nan)
     return Print(*dots_part, phi2, g2, *caps_part, turn)
 
 
-def _coverage_turn(bench: Bench, cov: Coverage) -> np.ndarray:
-    """``[ny nx, 2]`` the cosine and sine of the angle the job's orientation gives a dot
-    at each coverage cell's centre (row ``iy nx + ix``), or ``[1, 2]`` NaN when each
-    dot's angle is its own draw (``random``: the tracer draws one a ray)."""
-    o = bench.orientation
-    if not o.follows_position:
-        return np.full((1, 2), np.nan)
+def _coverage_frame(bench: Bench, cov: Coverage) -> np.ndarray:
+    """``[ny nx, 3]`` per coverage cell (row ``iy nx + ix``) the cosine and sine of the
+    angle the job's orientation gives a dot at its centre (NaN when each dot's angle is
+    its own draw, ``random``: the tracer draws one a ray) and the half width of the dot
+    its fill gives (mm; NaN for one size), or ``[1, 3]`` NaN when neither varies."""
+    o, sizes = bench.orientation, bench.sizes
+    if not o.follows_position and sizes is None:
+        return np.full((1, 3), np.nan)
     ny, nx = cov.grid.shape
-    cx = cov.x0 + (np.arange(nx) + 0.5) * cov.dx
-    cy = cov.y0 + (np.arange(ny) + 0.5) * cov.dy
-    gx, gy = np.meshgrid(cx, cy)
-    a = o.at(np.column_stack([gx.ravel(), gy.ravel()]))
-    return np.ascontiguousarray(np.column_stack([np.cos(a), np.sin(a)]), np.float64)
+    frame = np.full((ny * nx, 3), np.nan)
+    if o.follows_position:
+        cx = cov.x0 + (np.arange(nx) + 0.5) * cov.dx
+        cy = cov.y0 + (np.arange(ny) + 0.5) * cov.dy
+        gx, gy = np.meshgrid(cx, cy)
+        a = o.at(np.column_stack([gx.ravel(), gy.ravel()]))
+        frame[:, 0], frame[:, 1] = np.cos(a), np.sin(a)
+    if sizes is not None:
+        shape = bench.shape
+        d = _cell_diameters(sizes, bench.density, cov)
+        frame[:, 2] = shape.kind.profile_frame(shape.size)[1] * shape.scale_of(d.ravel())
+    return np.ascontiguousarray(frame, np.float64)
+
+
+def _cell_diameters(sizes, density, cov: Coverage) -> np.ndarray:
+    """``[ny, nx]`` the (area-equivalent) diameter of the dots of each coverage cell, mm:
+    the size rule's on the map's own cells, else at the fill the coverage gives (a map
+    ``design`` is making) or the explicit grid at the cells' centres."""
+    if cov.grid.shape == density.grid.shape:
+        return sizes.cell_diameters(density)
+    if sizes.grid is None:
+        fill = cov.grid
+        return sizes.quantise(np.where(fill > 0, sizes.raw(fill), sizes.low))
+    my, mx = sizes.grid.shape
+    ny, nx = cov.grid.shape
+    fx = (cov.x0 + (np.arange(nx) + 0.5) * cov.dx - density.x0) / density.width
+    fy = (cov.y0 + (np.arange(ny) + 0.5) * cov.dy - density.y0) / density.height
+    ix, iy = np.floor(fx * mx).astype(np.int64), np.floor(fy * my).astype(np.int64)
+    return sizes.quantise(sizes.grid[np.ix_(np.clip(iy, 0, my - 1), np.clip(ix, 0, mx - 1))])
 
 
 def cap_grid(caps: np.ndarray, box) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -13,6 +13,8 @@ the tests compile into a cache named by the kernels' sources (``tests/conftest.p
 
 from __future__ import annotations
 
+import math
+
 import numba as nb
 import numpy as np
 
@@ -117,6 +119,21 @@ def contains_packed(f, p):  # pragma: no cover - compiled
     for k in range(p.shape[0]):
         out[k] = on_packed(f, k, p[k, 0], p[k, 1])
     return out
+
+
+@nb.njit(cache=True, inline="always")
+def half_width_packed(f, k):  # pragma: no cover - compiled
+    """Packed footprint ``f[k]``'s half width across its long axis, mm (the frame a 3-D
+    profile stands on, :meth:`Kind.profile_frame`'s second; NaN for a kind that takes
+    only ink)."""
+    code = f[k, 0]
+    if code == 0.0:
+        return circle.half_width(f, k)
+    if code == 1.0:
+        return ellipse.half_width(f, k)
+    if code == 2.0:
+        return rounded_rectangle.half_width(f, k)
+    return math.nan
 
 
 @nb.njit(cache=True, inline="always")

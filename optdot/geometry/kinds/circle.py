@@ -3,6 +3,8 @@ that does not name one."""
 
 from __future__ import annotations
 
+import math
+
 import numba as nb
 import numpy as np
 
@@ -117,6 +119,12 @@ def inside(f, k, dx, dy):  # pragma: no cover - compiled
     """Whether ``(dx, dy)`` (mm, from the centre) lies on packed disc ``f[k]`` (``f[k,
     1]``: its radius squared; closed)."""
     return dx * dx + dy * dy <= f[k, 1]
+
+
+@nb.njit(cache=True, inline="always")
+def half_width(f, k):  # pragma: no cover - compiled
+    """Packed disc ``f[k]``'s half width: its radius, mm."""
+    return math.sqrt(f[k, 1])
 
 
 @nb.njit(cache=True, inline="always")

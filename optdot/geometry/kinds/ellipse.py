@@ -337,6 +337,12 @@ def inside(f, k, dx, dy):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, inline="always")
+def half_width(f, k):  # pragma: no cover - compiled
+    """Packed ellipse ``f[k]``'s half width: its short half axis, mm."""
+    return f[k, 2]
+
+
+@nb.njit(cache=True, inline="always")
 def support_bound(c, s, a, b, cp, sp):  # pragma: no cover - compiled
     """The support (exact) of an ellipse of half axes ``a``, ``b`` turned by the angle of
     cosine ``cp`` and sine ``sp``, in the direction ``(c, s)``."""

@@ -274,6 +274,13 @@ def inside(f, k, dx, dy):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, inline="always")
+def half_width(f, k):  # pragma: no cover - compiled
+    """Packed rounded rectangle ``f[k]``'s half width (its inner half side plus the
+    corner radius), mm."""
+    return f[k, 2] + f[k, 3]
+
+
+@nb.njit(cache=True, inline="always")
 def support_bound(c, s, a, b, cp, sp):  # pragma: no cover - compiled
     """The support of the box of half sides ``a``, ``b`` (at least the rounded
     rectangle's, so a separation it gives bounds the gap from below) turned by the angle

@@ -263,12 +263,17 @@ def _on_footprint(state, code, hu, hv, rc):  # pragma: no cover - compiled
 def meet_profile(state, f, n, at, dxn, dyn, dz):  # pragma: no cover - compiled
     """A ray going down onto a dot of the bottom face (its row ``f``: the profile's code,
     its body, the reflector) from the guide of index ``n``, where the print test found it
-    (``at``, :func:`~optdot.optics.marks.dot_frame`'s: the point in the dot's frame and
-    its angle, NaN where unknown): ``(state, act, dx, dy, dz)``, ``NEW_LEG`` back into the
-    guide or a fate (``BOTTOM`` absorbed under it, ``DOT`` caught in the dot)."""
+    (``at``, :func:`~optdot.optics.marks.dot_frame`'s: the point in the dot's frame, its
+    angle and its half width, NaN where unknown): ``(state, act, dx, dy, dz)``,
+    ``NEW_LEG`` back into the guide or a fate (``BOTTOM`` absorbed under it, ``DOT``
+    caught in the dot). A dot of another size than the row's is its footprint scaled,
+    under a cap of the same height (a prism's facets keep their angles)."""
     code = int(f[F_PROFILE])
-    hu, hv, rc = f[F_PROF_U], f[F_PROF_V], f[F_PROF_C]
-    lu, lv, c, s = at
+    hu, hv, rc, k = f[F_PROF_U], f[F_PROF_V], f[F_PROF_C], f[F_PROF_K]
+    lu, lv, c, s, w = at
+    if w == w and w != hv:  # this dot's size
+        m = w / hv
+        hu, hv, rc, k = hu * m, w, rc * m, k / m
     turned = code >= PRISM or hu != hv  # the dot looks different turned
     if turned and c != c:  # a random angle, drawn
         state, w = uniform(state)
@@ -285,7 +290,7 @@ def meet_profile(state, f, n, at, dxn, dyn, dz):  # pragma: no cover - compiled
         )  # fmt: skip
     else:
         state, where, du, dv, dz = trace_cap(
-            state, code, f[F_PROF_K], hu / hv, n, lu / hv, lv / hv, du, dv, dz
+            state, code, k, hu / hv, n, lu / hv, lv / hv, du, dv, dz
         )
     dxn, dyn = c * du - s * dv, s * du + c * dv
     if where == INTO_GUIDE:
