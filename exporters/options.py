@@ -42,6 +42,9 @@ class ExportOptions:
             per job (a polygon, whose vertices only the job knows), or None.
         labels: each panel's label on the sheet, row by row
             (:func:`optdot.printing.sheet.label_text`).
+        fixed_depth: the job's 3-D dots stand (or sink) the same height whatever their
+            size (``[dots] profile = "bump"`` or ``"dimple"``): a Speos mapping scales its
+            elements' z by 1, not by their diameter.
     """
 
     tolerance_um: float = 0.01
@@ -60,6 +63,7 @@ class ExportOptions:
     sheet: Sheet | None = None
     kind: Kind | None = None
     labels: tuple[str, ...] = ()
+    fixed_depth: bool = False
 
     def __post_init__(self) -> None:
         if not 1e-4 <= self.tolerance_um <= 10:

@@ -10,11 +10,12 @@ optdot writes, per dot: its centre in mm with z = 0, X = (cos a, sin a, 0) and Y
 axes), and the scale ``d_i / reference`` on all three axes, ``reference`` being
 the diameter the Speos pattern element was drawn at (default: the pattern's nominal
 diameter, so fixed-size dots all have scale 1). Scaling z too keeps the element's shape
-(a moulded micro-dot's depth follows its diameter); a texture whose depth is fixed edits
-that column. Caps over LEDs (:mod:`optdot.geometry.caps`) follow the dots, each a disc
-element scaled to its diameter. Numbers have 6 decimals (1 nm in position). The file is
-written part by part (a dataset streams tile by tile) and verified by size before it
-replaces anything.
+(a moulded micro-dot's depth follows its diameter); for a job whose caps have one height
+whatever their size (``[dots] profile = "bump"`` or ``"dimple"``,
+:attr:`ExportOptions.fixed_depth`) z is 1. Caps over LEDs (:mod:`optdot.geometry.caps`)
+follow the dots, each a disc element scaled to its diameter. Numbers have 6 decimals (1
+nm in position). The file is written part by part (a dataset streams tile by tile) and
+verified by size before it replaces anything.
 """
 
 from __future__ import annotations
@@ -66,6 +67,8 @@ def write_speos(pattern: DotSource, path: str | Path, opts: ExportOptions) -> No
         rows[:, 3], rows[:, 4] = c, s  # X direction
         rows[:, 6], rows[:, 7] = 0.0 - s, c  # Y direction (0 - s: no "-0.000000")
         rows[:, 9:] = (d / ref)[:, None]
+        if opts.fixed_depth:  # caps of one height on dots of any size
+            rows[:, 11] = 1.0
         return format_fixed6(rows).replace(b",", b" ")
 
     head = f"{pattern.n + len(caps)}\n".encode("ascii")

@@ -25,7 +25,7 @@ from optdot.optics.faces.dot_profile import (
     trace_prism,
 )
 from optdot.optics.rays import ray_state
-from optdot.optics.simulate import simulate
+from optdot.optics.simulate import simulate, traced_what
 
 N = 1.49  # PMMA
 #: Normal-incidence Fresnel reflectance of PMMA in air.
@@ -738,6 +738,53 @@ def test_bumps_of_several_sizes_trace_as_their_coverage(tmp_path):
     assert abs(a["on_axis"] - b["on_axis"]) < 4 * math.hypot(a["on_axis_sigma"], b["on_axis_sigma"])
 
 
+def test_a_map_being_designed_sizes_its_bumps_by_its_own_fill(tmp_path):
+    """``design`` traces the coverage of the map it is making over the job's map: bumps of
+    several sizes there have the size the rule gives that map's fill, not the job map's,
+    also when both maps have the same cells (the coverage of 0.4 over a job whose map is
+    0.05 traces as the job whose map is 0.4)."""
+    from optdot.optics.scene import Coverage
+
+    jobs = []
+    for fill in (0.05, 0.4):
+        np.savetxt(tmp_path / f"m{fill}.csv", np.full((8, 12), fill), delimiter=",")
+        dots = 'profile = "bump"\nheight = 0.012\nspacing = 0.15'
+        text = GUIDE.format(name="m", dots=dots, reflector=0.95, finish="diffuse")
+        text = text.replace("diameter = 0.046", "diameter = [0.03, 0.12]")
+        (tmp_path / "m.toml").write_text(text.replace("map.csv", f"m{fill}.csv"))
+        jobs.append(load_job(tmp_path / "m.toml"))
+    phi = np.full((8, 12), 0.4)
+    designing = simulate(jobs[0].bench, 50_000, 2, coverage=Coverage(phi, 0, 0, 1, 1, phi))
+    assert designing.fates == simulate(jobs[1].bench, 50_000, 2).fates
+
+
+@pytest.mark.slow  # over 1.5 s: a pattern generated, gated and exported
+def test_a_speos_mapping_keeps_the_caps_height_on_dots_of_several_sizes(tmp_path):
+    """Bumps of one height on dots of several sizes: the Speos mapping scales each element
+    by its diameter across and by 1 in depth (prisms and ink scale all three)."""
+    from optdot.orchestration.pipeline import export, generate
+
+    from .test_speos import parse
+
+    fill = np.repeat(np.linspace(0.08, 0.45, 8)[:, None], 12, axis=1)
+    np.savetxt(tmp_path / "map.csv", fill, delimiter=",")
+    text = GUIDE.format(name="b", dots='profile = "bump"\nheight = 0.012\nspacing = 0.15',
+                        reflector=0.95, finish="diffuse")  # fmt: skip
+    path = tmp_path / "b.toml"
+    path.write_text(text.replace("diameter = 0.046", "diameter = [0.03, 0.12]"))
+    job = load_job(path)
+    pattern = generate(job)
+    export(pattern, {"speos": tmp_path / "b.OPT3DMapping"}, job, force=True)
+    _, _, scale = parse(tmp_path / "b.OPT3DMapping")
+    across = pattern.diameter / pattern.nominal_diameter
+    np.testing.assert_allclose(scale[:, :2], np.repeat(across[:, None], 2, axis=1), atol=5e-7)
+    assert np.ptp(scale[:, 0]) > 0.3 and np.all(scale[:, 2] == 1.0)
+    assert (
+        job.profile.keeps_height
+        and not _prism_guide(tmp_path, 'profile = "prism"\nfacets = [45, 45]').profile.keeps_height
+    )
+
+
 def test_prisms_of_several_sizes_are_as_high_as_their_largest_allows(tmp_path):
     """Prisms scaled up to 4 times: the largest's height must stay under the guide's
     thickness (60° facets on 0.48 mm stand 0.416 mm in a 0.4 mm guide); up to 3 times
@@ -758,6 +805,7 @@ def test_prisms_of_several_sizes_are_as_high_as_their_largest_allows(tmp_path):
             assert job.profile.words() == "prisms up to 312 µm high, facets 60° / 60°"
             sim = simulate(job.bench, 20_000, 1)
             assert sum(sim.fates.values()) == 20_000 and sim.fates["absorbed_dots"] == 0
+            assert traced_what(sim) == "map coverage (prisms up to 312 µm high, facets 60° / 60°)"
         else:
             with pytest.raises(JobError, match="makes prisms 0.4157 mm high, not less than"):
                 load_job(path)

@@ -52,6 +52,12 @@ class DotProfile:
         """The profile's code in the tracer's face table."""
         return PRISM_CUT if self.cut else PROFILES.index(self.kind)
 
+    @property
+    def keeps_height(self) -> bool:
+        """Every dot's cap stands (or sinks) the job's height whatever its size: a bump
+        or a dimple (a prism's grows with its length; ink has none)."""
+        return self.code in (BUMP, DIMPLE)
+
     def aspect(self, radius: float) -> float:
         """A cap's height over the footprint's (short) half axis ``radius`` (mm): 1 a
         hemisphere."""

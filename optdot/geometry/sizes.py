@@ -107,12 +107,18 @@ class DotSizes:
         """``[ny, nx]`` diameter of each density cell's dots, mm (cells of zero fill get
         ``low``; they hold no dots)."""
         if self.grid is not None:
-            d = _sample_at_centres(self.grid, density)
+            d = self.quantise(
+                np.where(density.grid > 0, _sample_at_centres(self.grid, density), self.low)
+            )
         else:
-            d = self.raw(density.grid)
-        d = self.quantise(np.where(density.grid > 0, d, self.low))
+            d = self.at_fill(density.grid)
         d.setflags(write=False)
         return d
+
+    def at_fill(self, rho: np.ndarray) -> np.ndarray:
+        """``[...]`` the diameter the fill rule gives dots at fill ``rho`` (``[...]``),
+        quantised, mm (``low`` where the fill is 0: no dots there)."""
+        return self.quantise(np.where(rho > 0, self.raw(rho), self.low))
 
 
 def _sample_at_centres(grid: np.ndarray, density: DensityMap) -> np.ndarray:

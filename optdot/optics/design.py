@@ -312,7 +312,7 @@ def design(
     for it in range(n_iter):
         last = it == n_iter - 1 or finishing
         n_rays = total if last else min(total, max(1000, total // 16) * 2**it)
-        cov = Coverage(phi * inside, x0, y0, dx, dy)
+        cov = Coverage(phi * inside, x0, y0, dx, dy, phi)
         now = bench if grades is None else grades.printing(bench)
         sim = simulate(now, n_rays, seed + 7919 * it, coverage=cov, bins=(nx, ny))
         if sim.fates["extracted"] == 0:  # no luminance to design from

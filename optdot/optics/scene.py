@@ -88,13 +88,15 @@ PROFILE_SAMPLES = 2049
 @dataclass(frozen=True)
 class Coverage:
     """A coverage raster: ``grid [ny, nx]`` (0..1) over cells of ``(dx, dy)`` mm from
-    ``(x0, y0)``."""
+    ``(x0, y0)``; ``fill [ny, nx]`` the map's fill before the share of each cell inside
+    the panel (what sizes the dots of several sizes), or None (``grid``)."""
 
     grid: np.ndarray
     x0: float
     y0: float
     dx: float
     dy: float
+    fill: np.ndarray | None = None
 
 
 def coverage_of(bench: Bench) -> Coverage:
@@ -106,7 +108,7 @@ def coverage_of(bench: Bench) -> Coverage:
     if w is not None:
         g = g * w
     dx, dy = d.cell_size
-    return Coverage(np.clip(g, 0, 1), d.x0, d.y0, dx, dy)
+    return Coverage(np.clip(g, 0, 1), d.x0, d.y0, dx, dy, d.grid)
 
 
 def is_direct(bench: Bench) -> bool:
@@ -476,14 +478,12 @@ def _coverage_frame(bench: Bench, cov: Coverage) -> np.ndarray:
 
 
 def _cell_diameters(sizes, density, cov: Coverage) -> np.ndarray:
-    """``[ny, nx]`` the (area-equivalent) diameter of the dots of each coverage cell, mm:
-    the size rule's on the map's own cells, else at the fill the coverage gives (a map
-    ``design`` is making) or the explicit grid at the cells' centres."""
-    if cov.grid.shape == density.grid.shape:
-        return sizes.cell_diameters(density)
+    """``[ny, nx]`` the (area-equivalent) diameter of the dots of each coverage cell, mm,
+    as :meth:`~optdot.geometry.sizes.DotSizes.cell_diameters` gives ``generate``'s: the
+    size rule's at the cell's fill (the job's map, or the one ``design`` is making), or
+    the explicit grid (over the job map's box) at the cell's centre."""
     if sizes.grid is None:
-        fill = cov.grid
-        return sizes.quantise(np.where(fill > 0, sizes.raw(fill), sizes.low))
+        return sizes.at_fill(cov.grid if cov.fill is None else cov.fill)
     my, mx = sizes.grid.shape
     ny, nx = cov.grid.shape
     fx = (cov.x0 + (np.arange(nx) + 0.5) * cov.dx - density.x0) / density.width

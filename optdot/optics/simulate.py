@@ -316,7 +316,8 @@ def traced_what(sim: Simulation) -> str:
     shaped = sim.extra.get("dot_profile")
     if shaped is not None:
         facets = tuple(shaped.get("facets_deg", (0.0, 0.0)))
-        p = DotProfile(shaped["kind"], shaped["height_mm"], facets, shaped.get("cut", False))
+        cut, sized = shaped.get("cut", False), "height_of" in shaped
+        p = DotProfile(shaped["kind"], shaped["height_mm"], facets, cut, sized)
         mode += f" ({p.words()})"
     return mode
 

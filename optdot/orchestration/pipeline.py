@@ -535,6 +535,7 @@ def export(
         provenance=mask_lines(result.provenance),
         process=job.process if job is not None else None,
         laser=job.laser if job is not None else None,
+        fixed_depth=job is not None and job.profile.keeps_height,
     )
     if job is not None and job.sheet is not None:
         options = replace(options, sheet=job.sheet, labels=sheet_labels(job, result.provenance))
