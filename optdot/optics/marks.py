@@ -95,7 +95,8 @@ def dot_frame(x, y, pr):
     lv, c, s, w)``, on a real dot the point in the dot's own frame (mm along its long
     axis and across it), the cosine and sine of its angle and its half width (mm); in
     the coverage, NaN for the point and the cell's angle and half width (``pr``'s
-    ``turn``: NaN where the dot draws its angle, or has the job's one size). Asked only
+    ``turn``, over the coverage's cells split ``f`` × ``f``: NaN where the dot draws its
+    angle, or has the job's one size). Asked only
     of 3-D dots, after :func:`marked` found ink there (the ink's own path does not
     look)."""
     explicit, phi, g, _, _, start, dx_, dy_, foot, cg, _, _, _, _, turn = pr
@@ -106,9 +107,11 @@ def dot_frame(x, y, pr):
         c, s = foot[k, 4], foot[k, 5]
         ddx, ddy = x - dx_[k], y - dy_[k]
         return (c * ddx + s * ddy, c * ddy - s * ddx, c, s, half_width_packed(foot, k))
-    ix = int(math.floor((x - g[0]) / g[2]))
-    iy = int(math.floor((y - g[1]) / g[3]))
-    k = iy * phi.shape[1] + ix
-    if turn.shape[0] == phi.size and 0 <= ix < phi.shape[1] and 0 <= iy < phi.shape[0]:
+    f = int(math.sqrt(turn.shape[0] // phi.size) + 0.5)  # finer cells a coverage cell's side
+    nx, ny = phi.shape[1] * f, phi.shape[0] * f
+    ix = int(math.floor((x - g[0]) / g[2] * f))
+    iy = int(math.floor((y - g[1]) / g[3] * f))
+    if turn.shape[0] == nx * ny and 0 <= ix < nx and 0 <= iy < ny:
+        k = iy * nx + ix
         return (math.nan, math.nan, turn[k, 0], turn[k, 1], turn[k, 2])
     return NO_FRAME

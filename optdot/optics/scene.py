@@ -83,6 +83,11 @@ from .tables import (
 
 #: Samples of a profile's cumulative distribution over 0..90 degrees.
 PROFILE_SAMPLES = 2049
+#: The finest cell a coverage trace takes its dots' angles on, mm: the angle toward an
+#: LED turns fast near it, faster than a map's cell.
+TURN_CELL = 0.1
+#: At most this many angle cells (24 MB).
+TURN_CELLS = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -455,25 +460,33 @@ def _print(bench: Bench, dots: DotSource | None, coverage: Coverage | None) -> P
 
 
 def _coverage_frame(bench: Bench, cov: Coverage) -> np.ndarray:
-    """``[ny nx, 3]`` per coverage cell (row ``iy nx + ix``) the cosine and sine of the
-    angle the job's orientation gives a dot at its centre (NaN when each dot's angle is
-    its own draw, ``random``: the tracer draws one a ray) and the half width of the dot
-    its fill gives (mm; NaN for one size), or ``[1, 3]`` NaN when neither varies."""
+    """``[ny f nx f, 3]``, each coverage cell split ``f`` × ``f`` (row ``iy nx f + ix``
+    over the finer cells): the cosine and sine of the angle the job's orientation gives a
+    dot at the finer cell's centre (NaN when each dot's angle is its own draw,
+    ``random``: the tracer draws one a ray) and the half width of the dot the coverage
+    cell's fill gives (mm; NaN for one size); or ``[1, 3]`` NaN when neither varies.
+    ``f`` makes the finer cells :data:`TURN_CELL` wide where the angle follows the
+    position, at most :data:`TURN_CELLS` of them (1 otherwise)."""
     o, sizes = bench.orientation, bench.sizes
     if not o.follows_position and sizes is None:
         return np.full((1, 3), np.nan)
     ny, nx = cov.grid.shape
-    frame = np.full((ny * nx, 3), np.nan)
+    f = 1
     if o.follows_position:
-        cx = cov.x0 + (np.arange(nx) + 0.5) * cov.dx
-        cy = cov.y0 + (np.arange(ny) + 0.5) * cov.dy
+        f = math.ceil(max(cov.dx, cov.dy) / TURN_CELL - 1e-9)
+        f = max(1, min(f, math.isqrt(TURN_CELLS // (nx * ny))))
+    frame = np.full((ny * f * nx * f, 3), np.nan)
+    if o.follows_position:
+        cx = cov.x0 + (np.arange(nx * f) + 0.5) * (cov.dx / f)
+        cy = cov.y0 + (np.arange(ny * f) + 0.5) * (cov.dy / f)
         gx, gy = np.meshgrid(cx, cy)
         a = o.at(np.column_stack([gx.ravel(), gy.ravel()]))
         frame[:, 0], frame[:, 1] = np.cos(a), np.sin(a)
     if sizes is not None:
         shape = bench.shape
         d = _cell_diameters(sizes, bench.density, cov)
-        frame[:, 2] = shape.kind.profile_frame(shape.size)[1] * shape.scale_of(d.ravel())
+        w = shape.kind.profile_frame(shape.size)[1] * shape.scale_of(d.ravel())
+        frame[:, 2] = np.repeat(np.repeat(w.reshape(ny, nx), f, axis=0), f, axis=1).ravel()
     return np.ascontiguousarray(frame, np.float64)
 
 

@@ -128,11 +128,12 @@ class Print(NamedTuple):
         cap_ring: ``[k, 2]`` the rings each cap prints, ``(r_in^2, r_out^2)`` mm^2 about
             its centre (a solid cap: ``[[0, inf]]``; graded caps:
             :func:`optdot.geometry.caps.ring_table`).
-        turn: ``[ny nx, 3]`` the cosine and sine of the dots' angle in each cell of
-            ``phi`` and their half width, mm (row ``iy nx + ix``; a coverage trace of
-            turned 3-D dots, or of dots of several sizes; NaN where each dot draws its
-            angle, or all have the job's one size), or ``[1, 3]`` NaN (the same
-            everywhere; real dots carry their own angles and sizes).
+        turn: ``[ny f nx f, 3]`` the cosine and sine of the dots' angle and their half
+            width, mm, in each cell of ``phi`` split ``f`` × ``f`` (row ``iy nx f + ix``
+            over the finer cells; a coverage trace of turned 3-D dots, or of dots of
+            several sizes; NaN where each dot draws its angle, or all have the job's one
+            size), or ``[1, 3]`` NaN (the same everywhere; real dots carry their own
+            angles and sizes).
     """
 
     explicit: bool
