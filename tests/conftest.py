@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -109,6 +110,32 @@ def one_error(args, code: int, *words: str) -> str:
     for w in words:
         assert w in err[0], (w, err[0])
     return err[0]
+
+
+def bare_guide(w: float, h: float, t: float, n: float, dots: dict, y: float, width: float) -> dict:
+    """The job (a raw dict) of a ``w`` x ``h`` x ``t`` mm guide of index ``n`` that the
+    pvtrace comparisons trace: ``dots`` its ``[dots]``, no absorption, white dots,
+    nothing under it, bare edges, one LED ``width`` mm wide at ``y`` on the left edge."""
+    guide = {"thickness": t, "refractive_index": n, "absorption": 0.0, "dot_albedo": 1.0}
+    guide |= {"reflector": 0.0, "edge_reflectance": 0.0}
+    guide["leds"] = [{"edge": "left", "positions": [y], "width": width}]
+    return {"domain": {"width": w, "height": h}, "dots": dots, "light_guide": guide}
+
+
+def pvtrace_left_led(pv, world, y: float, width: float, thickness: float) -> None:
+    """A Lambertian LED ``width`` mm wide centred at ``y`` on the left edge (``x = 0``) of
+    a guide ``thickness`` mm thick, 0.1 um outside it: a node of pvtrace's ``world``
+    (``pv``: :func:`load_pvtrace`'s module; draws from ``np.random``)."""
+
+    def position():
+        return (-1e-4, y + (np.random.uniform() - 0.5) * width, np.random.uniform() * thickness)
+
+    def direction():
+        u, v = np.random.uniform(), np.random.uniform()
+        s = math.sqrt(u)
+        return (math.sqrt(1 - u), s * math.cos(2 * math.pi * v), s * math.sin(2 * math.pi * v))
+
+    pv.Node(name="led", light=pv.Light(position=position, direction=direction), parent=world)
 
 
 def load_pvtrace():

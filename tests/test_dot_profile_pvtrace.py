@@ -42,7 +42,7 @@ from optdot.geometry.shapes import Footprints
 from optdot.optics.simulate import simulate
 from optdot.pattern import Pattern
 
-from .conftest import load_pvtrace
+from .conftest import bare_guide, load_pvtrace, pvtrace_left_led
 
 W, H, T, N = 3.0, 3.0, 0.3, 1.49
 PITCH, D, HEIGHT = 0.6, 0.3, 0.075
@@ -175,16 +175,7 @@ def _pvtrace(
         cm = mesh.center_mass.copy()  # pvtrace centres a mesh on its centre of mass
         node = pv.Node(name=f"dot{k}", geometry=ExactMesh(mesh, pv.Material(N)), parent=world)
         node.location = (x + cm[0], y + cm[1], cm[2])
-
-    def position():
-        return (-1e-4, H / 2 + (np.random.uniform() - 0.5), np.random.uniform() * T)
-
-    def direction():
-        u, v = np.random.uniform(), np.random.uniform()
-        s = math.sqrt(u)
-        return (math.sqrt(1 - u), s * math.cos(2 * math.pi * v), s * math.sin(2 * math.pi * v))
-
-    pv.Node(name="led", light=pv.Light(position=position, direction=direction), parent=world)
+    pvtrace_left_led(pv, world, H / 2, 1.0, T)
     scene = pv.Scene(world)
     np.random.seed(1)
     fates = dict.fromkeys((*FATES, "not_coupled", "other", "neighbour"), 0)
@@ -217,19 +208,7 @@ def _pvtrace(
 
 def _optdot(dots: dict, pattern: Pattern, rays: int = 1_000_000):
     """optdot's trace of the guide with ``dots`` (the job's ``[dots]``) at ``pattern``."""
-    raw = {
-        "domain": {"width": W, "height": H},
-        "dots": dots,
-        "light_guide": {
-            "thickness": T,
-            "refractive_index": N,
-            "absorption": 0.0,
-            "dot_albedo": 1.0,
-            "reflector": 0.0,
-            "edge_reflectance": 0.0,
-            "leds": [{"edge": "left", "positions": [H / 2], "width": 1.0}],
-        },
-    }
+    raw = bare_guide(W, H, T, N, dots, H / 2, 1.0)
     if dots.get("shape"):
         raw["orientation"] = {"random": True}
     return simulate(job_from_dict(raw, need_map=False).bench, rays, seed=3, dots=pattern)

@@ -17,7 +17,7 @@ from optdot.config.schema import job_from_dict
 from optdot.optics.simulate import simulate
 from optdot.pattern import Pattern
 
-from .conftest import load_pvtrace
+from .conftest import bare_guide, load_pvtrace, pvtrace_left_led
 
 W, H, T, N, D, FILL = 10.0, 10.0, 1.0, 1.49, 0.2, 0.3
 RAYS = 4000
@@ -67,16 +67,7 @@ def _pvtrace(centres: np.ndarray, rays: int) -> dict[str, int]:
         parent=world,
     )
     guide.location = (W / 2, H / 2, T / 2)
-
-    def position():
-        return (-1e-4, 5.0 + (np.random.uniform() - 0.5) * 2.0, np.random.uniform() * T)
-
-    def direction():
-        u, v = np.random.uniform(), np.random.uniform()
-        s = math.sqrt(u)
-        return (math.sqrt(1 - u), s * math.cos(2 * math.pi * v), s * math.sin(2 * math.pi * v))
-
-    pv.Node(name="led", light=pv.Light(position=position, direction=direction), parent=world)
+    pvtrace_left_led(pv, world, 5.0, 2.0, T)
     scene = pv.Scene(world)
     np.random.seed(1)
     fates = {"extracted": 0, "lost_bottom": 0, "lost_edges": 0, "not_coupled": 0, "missed": 0}
@@ -106,19 +97,7 @@ def _pvtrace(centres: np.ndarray, rays: int) -> dict[str, int]:
 @pytest.mark.slow
 def test_pvtrace_agrees_on_extraction_and_losses():
     centres = _dots()
-    raw = {
-        "domain": {"width": W, "height": H},
-        "dots": {"diameter": D},
-        "light_guide": {
-            "thickness": T,
-            "refractive_index": N,
-            "absorption": 0.0,
-            "dot_albedo": 1.0,
-            "reflector": 0.0,
-            "edge_reflectance": 0.0,
-            "leds": [{"edge": "left", "positions": [5.0], "width": 2.0}],
-        },
-    }
+    raw = bare_guide(W, H, T, N, {"diameter": D}, 5.0, 2.0)
     job = job_from_dict(raw, need_map=False)
     ours = simulate(job.bench, 1_000_000, seed=3, dots=Pattern(centres, D, (0.0, 0.0, W, H)))
     theirs = _pvtrace(centres, RAYS)
