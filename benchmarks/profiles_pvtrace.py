@@ -10,7 +10,8 @@ Run: python benchmarks/profiles_pvtrace.py [--rays 2000] [--pitch 0.5] [--diamet
 
 Printed per tracer: extracted, lost under the guide, lost at the edges (shares of the
 injected rays), each optdot share's distance from pvtrace's in pvtrace's sigma, and the
-polar histogram (15° bins) of the extracted, per injected ray; then seconds.
+polar histogram (15° bins) of the extracted, per injected ray; then seconds; at the end
+the peak memory.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
-from _common import machine  # noqa: E402
+from _common import machine, peak_rss_mb  # noqa: E402
 
 from optdot.pattern import Pattern  # noqa: E402
 from tests.test_dot_profile_pvtrace import (  # noqa: E402
@@ -83,6 +84,7 @@ def main() -> None:
             f"  rays meeting a neighbour from the air: {fates['neighbour']} "
             f"({fates['neighbour'] / n:.1%} of the injected), unfinished {fates['other']}"
         )
+    print(f"peak {peak_rss_mb():.0f} MB (one process)")
 
 
 if __name__ == "__main__":

@@ -96,9 +96,8 @@ def dot_frame(x, y, pr):
     axis and across it), the cosine and sine of its angle and its half width (mm); in
     the coverage, NaN for the point and the cell's angle and half width (``pr``'s
     ``turn``, over the coverage's cells split ``f`` × ``f``: NaN where the dot draws its
-    angle, or has the job's one size). Asked only
-    of 3-D dots, after :func:`marked` found ink there (the ink's own path does not
-    look)."""
+    angle, or has the job's one size). Asked only of 3-D dots, after :func:`marked` found
+    ink there (the ink's own path does not look)."""
     explicit, phi, g, _, _, start, dx_, dy_, foot, cg, _, _, _, _, turn = pr
     if explicit:
         k = dot_at(x, y, start, dx_, dy_, foot, cg)

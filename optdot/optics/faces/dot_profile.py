@@ -270,10 +270,10 @@ def meet_profile(state, f, n, at, dxn, dyn, dz):  # pragma: no cover - compiled
     under a cap of the same height (a prism's facets keep their angles)."""
     code = int(f[F_PROFILE])
     hu, hv, rc, k = f[F_PROF_U], f[F_PROF_V], f[F_PROF_C], f[F_PROF_K]
-    lu, lv, c, s, w = at
-    if w == w and w != hv:  # this dot's size
-        m = w / hv
-        hu, hv, rc, k = hu * m, w, rc * m, k / m
+    lu, lv, c, s, half = at
+    if half == half and half != hv:  # this dot's size
+        m = half / hv
+        hu, hv, rc, k = hu * m, half, rc * m, k / m
     turned = code >= PRISM or hu != hv  # the dot looks different turned
     if turned and c != c:  # a random angle, drawn
         state, w = uniform(state)
