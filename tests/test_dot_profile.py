@@ -28,6 +28,15 @@ from optdot.optics.rays import ray_state
 from optdot.optics.simulate import simulate, traced_what
 
 N = 1.49  # PMMA
+#: No walls: a dot's ray is moved freely.
+NO_WALLS = np.zeros((0, 4))
+#: A print with no real dots and no fill, as ``meet_profile`` takes the print's tables
+#: (the coverage and its cells at 1, 2; cells, centres, footprints, grid at 5 .. 9): a ray
+#: leaving a dot meets no other.
+NO_PRINT = (
+    0, np.zeros((1, 1)), np.ones(4), 0, 0, np.zeros(2, np.int64), np.zeros(0), np.zeros(0),
+    np.zeros((0, 6)), np.array([0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0]),
+)  # fmt: skip
 #: Normal-incidence Fresnel reflectance of PMMA in air.
 R0 = ((N - 1) / (N + 1)) ** 2
 
@@ -38,7 +47,7 @@ def _caps(code, k, n, px, py, d, e=1.0):  # pragma: no cover - compiled
     ``e`` times longer than wide): ``[m, 4]`` (where, dx, dy, dz)."""
     out = np.zeros((len(px), 4))
     for i in range(len(px)):
-        _, w, a, b, c = trace_cap(
+        _, w, _, _, _, a, b, c = trace_cap(
             ray_state(5, i), code, k, e, n, px[i], py[i], d[i, 0], d[i, 1], d[i, 2]
         )
         out[i, 0], out[i, 1], out[i, 2], out[i, 3] = w, a, b, c
@@ -202,7 +211,7 @@ def _prisms(cut, hu, hv, rc, t1, t2, n, pu, pv, d):  # pragma: no cover - compil
     ``[m, 4]`` (where, du, dv, dz)."""
     out = np.zeros((len(pu), 4))
     for i in range(len(pu)):
-        _, w, a, b, c = trace_prism(
+        _, w, _, _, _, a, b, c = trace_prism(
             ray_state(7, i), cut, hu, hv, rc, t1, t2, n, pu[i], pv[i], d[i, 0], d[i, 1],
             d[i, 2],
         )  # fmt: skip
@@ -689,7 +698,9 @@ def _meet(f, at, d, seed):  # pragma: no cover - compiled
     """``meet_profile`` for rays ``i`` going ``d[i]``: ``[m, 4]`` (act, dx, dy, dz)."""
     out = np.zeros((len(d), 4))
     for i in range(len(d)):
-        _, act, a, b, c = meet_profile(ray_state(seed, i), f, N, at, d[i, 0], d[i, 1], d[i, 2])
+        _, act, _, _, a, b, c = meet_profile(
+            ray_state(seed, i), f, N, at, 0.0, 0.0, NO_PRINT, NO_WALLS, d[i, 0], d[i, 1], d[i, 2]
+        )
         out[i, 0], out[i, 1], out[i, 2], out[i, 3] = act, a, b, c
     return out
 

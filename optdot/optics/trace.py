@@ -61,8 +61,8 @@ import math
 import numba as nb
 import numpy as np
 
-from .faces import meet_face, meet_wall, wall_distance
-from .marks import NO_FRAME, dot_frame, marked
+from .faces import meet_dots, meet_face, meet_wall, wall_distance
+from .marks import marked
 from .rays import fresnel, last_at_most, ray_state, uniform
 from .tables import (
     BULK,
@@ -149,6 +149,16 @@ def _birth(state, k, emit, layer, prof_theta, prof_cdf, prof_mode):  # pragma: n
     return state, True, li, x, y, z, dxn, dyn, dz
 
 
+@nb.njit(cache=True, inline="always")
+def _enter_layer(layer, li, up, tau):  # pragma: no cover - compiled
+    """A ray entering layer ``li`` going up (``up``) or down with optical depth ``tau``
+    left to travel: ``(z, z0, z1, n, absorb, budget)``, the face it enters at, the
+    layer's faces, index and absorption, and the path (mm) the depth lasts in it."""
+    z0, z1, n, absorb = layer[li, L_Z0], layer[li, L_Z1], layer[li, L_N], layer[li, L_ABS]
+    budget = tau / absorb if absorb > 0 else np.inf
+    return (z0 if up else z1), z0, z1, n, absorb, budget
+
+
 @nb.njit(cache=True)
 def _trace_rays(
     seed, first, lo, hi, emit, emit_start, prof_theta, prof_cdf, prof_mode, layer, face,
@@ -172,10 +182,9 @@ def _trace_rays(
         fate[j], ex[j], ey[j] = UNCOUPLED, x, y
         if not coupled:
             continue
-        z0, z1, n, absorb = layer[li, L_Z0], layer[li, L_Z1], layer[li, L_N], layer[li, L_ABS]
         state, u = uniform(state)
         tau = -math.log(1.0 - u)  # optical depth the ray will travel
-        budget = tau / absorb if absorb > 0 else np.inf  # in mm, in this layer
+        _, z0, z1, n, absorb, budget = _enter_layer(layer, li, True, tau)
         end, new_leg, s_wall, wall, h, ux, uy = UNFINISHED, True, np.inf, -1, 1.0, 0.0, 0.0
         for _ in range(max_events):
             if new_leg:  # the horizontal course changed: the wall ahead
@@ -208,15 +217,18 @@ def _trace_rays(
             up = dz > 0  # a face: fi under the layer (going down) or over it (going up)
             fi, z, to = (li + 1, z1, li + 1) if up else (li, z0, li - 1)
             n_to = layer[to, L_N] if 0 <= to < top else 1.0
-            ink, at = False, NO_FRAME
+            ink = False
             if face[fi, F_TEST] > 0.5:  # the print test: a number drawn, the print looked up
                 state, u = uniform(state)
-                mark = int(face[fi, F_PRINT])
-                ink = mark > 0 and marked(x, y, mark, pr_arrays, u)
-                at = dot_frame(x, y, pr_arrays) if ink and face[fi, F_PROFILE] > 0.5 else at
-            state, act, dxn, dyn, dz = meet_face(
-                state, face_row(face, fi), up, n, n_to, fi == top, ink, at, dxn, dyn, dz
-            )
+                ink = face[fi, F_PRINT] > 0.5 and marked(x, y, int(face[fi, F_PRINT]), pr_arrays, u)
+            if face[fi, F_PROFILE] > 0.5:  # 3-D dots: they need the print, and move the ray
+                state, act, x, y, dxn, dyn, dz = meet_dots(
+                    state, face_row(face, fi), n, ink, x, y, pr_arrays, walls, dxn, dyn, dz
+                )
+            else:
+                state, act, dxn, dyn, dz = meet_face(
+                    state, face_row(face, fi), up, n, n_to, fi == top, ink, dxn, dyn, dz
+                )
             if act >= 0 or (act == CROSS and fi == top):
                 end = act if act >= 0 else EXTRACTED
                 break
@@ -225,10 +237,8 @@ def _trace_rays(
                 continue
             if absorb > 0:  # through the face into the layer on the other side
                 tau = budget * absorb
-            li = to
-            z0, z1, n, absorb = layer[li, L_Z0], layer[li, L_Z1], layer[li, L_N], layer[li, L_ABS]
-            budget = tau / absorb if absorb > 0 else np.inf
-            z, new_leg = (z0 if up else z1), True
+            li, new_leg = to, True
+            z, z0, z1, n, absorb, budget = _enter_layer(layer, li, up, tau)
         fate[j], ex[j], ey[j], ed[j, 0], ed[j, 1], ed[j, 2] = end, x, y, dxn, dyn, dz
 
 

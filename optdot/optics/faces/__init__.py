@@ -1,9 +1,10 @@
 """What the faces and walls of a traced stack do to a ray: each kind of face one module
 (:mod:`.reflector`, :mod:`.interface`, :mod:`.diffuser_sheet`, :mod:`.prism_sheet`; the
-walls :mod:`.slab_walls`; the 3-D dots of the bottom face :mod:`.dot_profile`), each
-with its compiled ``meet_*`` kernel, and :func:`meet_face` dispatching on the face's
-kind (:data:`optdot.optics.tables.BOTTOM_FACE`, ...). A kernel returns ``(state, act,
-dx, dy, dz)``: a fate (``>= 0``) that ends the ray, or what it goes on with
+walls :mod:`.slab_walls`; the 3-D dots of the bottom face :mod:`.dot_profile`, met
+through :func:`meet_dots`), each with its compiled ``meet_*`` kernel, and
+:func:`meet_face` dispatching on the face's kind
+(:data:`optdot.optics.tables.BOTTOM_FACE`, ...). A kernel returns ``(state, act, dx, dy,
+dz)``: a fate (``>= 0``) that ends the ray, or what it goes on with
 (:data:`~optdot.optics.tables.SAME_LEG`, ``NEW_LEG``, ``CROSS``). A new kind of face is
 one module, one code in the tables and one line here.
 
@@ -17,9 +18,10 @@ from __future__ import annotations
 
 import numba as nb
 
+from ..marks import dot_frame
 from ..tables import BOTTOM_FACE, F_KIND, F_PROFILE, PRISM_FACE, SHEET_FACE
 from .diffuser_sheet import meet_sheet
-from .dot_profile import meet_profile
+from .dot_profile import BUMP, PRISM, leave_between, meet_profile
 from .interface import meet_interface
 from .prism_sheet import meet_prism
 from .reflector import meet_reflector
@@ -27,23 +29,44 @@ from .slab_walls import meet_wall, wall_distance
 
 
 @nb.njit(cache=True, inline="always")
-def meet_face(state, f, up, n, n_to, is_top, ink, at, dxn, dyn, dz):  # pragma: no cover
+def meet_face(state, f, up, n, n_to, is_top, ink, dxn, dyn, dz):  # pragma: no cover
     """A ray meeting a face (its row ``f``, :func:`~optdot.optics.tables.face_row`), going
     up (``up``) or down from index ``n`` toward ``n_to`` (``is_top``: the top face), on
-    the print's ink (``ink``) or not, where on its dot for a 3-D one (``at``,
-    :func:`~optdot.optics.marks.dot_frame`'s): its kind's ``meet_*``. The print test is
-    the stepping's, and a kernel takes the face's numbers as a tuple: arrays handed to a
-    kernel at every event cost the tracer a third of its speed."""
+    the print's ink (``ink``) or not: its kind's ``meet_*`` (a face of 3-D dots:
+    :func:`meet_dots`). The print test is the stepping's, and a kernel takes the face's
+    numbers as a tuple: arrays handed to a kernel at every event cost the tracer a third
+    of its speed."""
     kind = int(f[F_KIND])
     if kind == SHEET_FACE:
         return meet_sheet(state, f, up, dxn, dyn, dz)
     if kind == PRISM_FACE:
         return meet_prism(state, f, up, dxn, dyn, dz)
     if kind == BOTTOM_FACE:
-        if ink and f[F_PROFILE] > 0.5:  # a 3-D dot, not ink
-            return meet_profile(state, f, n, at, dxn, dyn, dz)
         return meet_reflector(state, f, n, ink, dxn, dyn, dz)
     return meet_interface(state, f, up, n, n_to, is_top, ink, dxn, dyn, dz)
 
 
-__all__ = ["meet_face", "meet_wall", "wall_distance"]
+@nb.njit(cache=True, inline="always")
+def meet_dots(state, f, n, ink, x, y, pr, walls, dxn, dyn, dz):  # pragma: no cover
+    """A ray going down onto the bottom face of 3-D dots (its row ``f``) from the guide of
+    index ``n`` at ``(x, y)`` (mm), on a dot (``ink``) or not, with
+    the print's tables ``pr`` and the panel's ``walls``: a dot's ``meet_profile``, the
+    face between raised dots (``leave_between``), or the bare face beside cut ones:
+    ``(state, act, x, y, dx, dy, dz)``, and where the ray goes on from (a dot moves it).
+    Kept apart from :func:`meet_face`: arrays handed to it at every
+    event cost the tracer half its speed."""
+    profile = f[F_PROFILE]
+    x2, y2 = x, y
+    if ink:  # on a dot: where on it (a real one), or the coverage cell's angle and size
+        at = dot_frame(x, y, pr)
+        state, act, x2, y2, dxn, dyn, dz = meet_profile(
+            state, f, n, at, x, y, pr, walls, dxn, dyn, dz
+        )
+    elif profile == BUMP or profile == PRISM:
+        state, act, x2, y2, dxn, dyn, dz = leave_between(state, f, n, x, y, pr, walls, dxn, dyn, dz)
+    else:
+        state, act, dxn, dyn, dz = meet_reflector(state, f, n, False, dxn, dyn, dz)
+    return state, act, x2, y2, dxn, dyn, dz
+
+
+__all__ = ["meet_dots", "meet_face", "meet_wall", "wall_distance"]

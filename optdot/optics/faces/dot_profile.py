@@ -17,10 +17,17 @@ the flat face (:mod:`.reflector`); light going up there meets the flat face. Eve
 is convex: light reflected off one from outside does not meet it again.
 
 On real dots the ray meets the dot where the stepping found it, in the dot's own frame
-(turned by its angle); in a coverage trace the point is drawn uniformly over the
-footprint and the angle is the orientation's at that cell (drawn, for random angles).
-What moves a ray sideways inside a dot (at most its length) is left out, as is light
-leaving one structure into another.
+(turned by its angle), and goes on in the guide from where it comes back through the
+face; in a coverage trace the point is drawn uniformly over the footprint, the angle is
+the orientation's at that cell (drawn, for random angles), and the ray goes on from
+where it met the dot.
+
+Light out in the air under the guide, from a raised dot or through the bare face between
+raised dots, meets the raised dots beside it (:func:`among_dots`: the real dots, found
+along its course by :func:`next_dot`; :func:`among_twins`: the coverage's twins on a
+hexagonal lattice of the cell's fill), each met from outside by Fresnel, and entered,
+as many as it reaches, before it goes on to the reflector or up onto the face. A cut
+dot's light is not traced into the cavities beside it.
 
 Cap coordinates: the footprint's half width 1, the face's plane ``z = 0``, the guide
 above; a cap of height ``k`` (its height over the half width, at most 1: a hemisphere
@@ -42,10 +49,14 @@ import numba as nb
 import numpy as np
 
 from ...geometry.profile import BUMP, DIMPLE, PRISM, PRISM_CUT
-from ..rays import fresnel, mirrored, refract, uniform
+from ...geometry.shapes import half_width_packed
+from ..marks import dot_frame
+from ..rays import _M1, _M2, fresnel, mirrored, mix, refract, uniform
 from ..tables import (
     BOTTOM,
     DOT,
+    EDGE,
+    F_COS_DOWN,
     F_PROF_C,
     F_PROF_K,
     F_PROF_T1,
@@ -59,6 +70,7 @@ from ..tables import (
     SAME_LEG,
 )
 from .reflector import meet_reflector, sheet_return
+from .slab_walls import wall_distance
 
 __all__ = ["BUMP", "DIMPLE", "PRISM", "PRISM_CUT", "meet_profile", "trace_cap", "trace_prism"]
 
@@ -71,6 +83,11 @@ INTO_GUIDE, INTO_AIR, CAUGHT, ONTO_FACE = 0, 1, 2, 3
 #: twice its grazing angle a meeting, until it reaches the face's plane: 4,096 meetings
 #: let out a ray grazing at 0.02° (2 in 10⁶ Lambertian rays outlived 64).
 MAX_BOUNCES = 4096
+#: Dots a ray leaving one raised dot may meet in turn before it counts as absorbed.
+MAX_DOTS = 256
+#: The least distance a ray goes before it meets a dot it is leaving, in the dot's units:
+#: a ray reflected off a dot, or leaving it, starts on its surface.
+EPS = 1e-12
 
 
 @nb.njit(cache=True, inline="always")
@@ -96,8 +113,9 @@ def trace_cap(state, code, k, e, n, px, py, dx, dy, dz):  # pragma: no cover - c
     """A ray going down (``dz < 0``) in the guide of index ``n`` whose path crosses the
     face's plane at ``(px, py)`` (the footprint's half width 1, ``x`` along its long
     axis) on a cap of profile ``code``, height ``k`` and elongation ``e``: ``(state,
-    where, dx, dy, dz)``, ``where`` one of :data:`INTO_GUIDE`, :data:`INTO_AIR`,
-    :data:`CAUGHT`, :data:`ONTO_FACE`, with the direction it goes on in."""
+    where, px, py, pz, dx, dy, dz)``, ``where`` one of :data:`INTO_GUIDE`,
+    :data:`INTO_AIR`, :data:`CAUGHT`, :data:`ONTO_FACE`, the point it leaves the dot at
+    (cap coordinates) and the direction it goes on in."""
     r_s = (1.0 + k * k) / (2.0 * k)
     q = 1.0 / (e * e)
     bump = code == BUMP
@@ -113,15 +131,25 @@ def trace_cap(state, code, k, e, n, px, py, dx, dy, dz):  # pragma: no cover - c
         state, u = uniform(state)
         if u < fresnel(cos_i, n, 1.0):  # reflected back into the guide
             dx, dy, dz = dx + 2.0 * cos_i * mx, dy + 2.0 * cos_i * my, dz + 2.0 * cos_i * mz
-            return state, (INTO_GUIDE if dz > 0 else ONTO_FACE), dx, dy, dz
+            return state, (INTO_GUIDE if dz > 0 else ONTO_FACE), px, py, pz, dx, dy, dz
         dx, dy, dz = _through(dx, dy, dz, -mx, -my, -mz, n, 1.0)
+    return _cap_walk(state, bump, q, r_s, cz, n_in, n_out, px, py, pz, dx, dy, dz)
+
+
+@nb.njit(cache=True)
+def _cap_walk(state, bump, q, r_s, cz, n_in, n_out, px, py, pz, dx, dy, dz):  # pragma: no cover
+    """A ray inside a cap's body (the guide's material in a bump, air in a dimple; cap
+    coordinates, the sphere's radius ``r_s`` and centre height ``cz``, ``q = 1/e²``) at
+    ``p`` going ``d``, followed through the cap's surface until it leaves: as
+    :func:`trace_cap`'s."""
     for _ in range(MAX_BOUNCES):
         leaves = dz > 0 if bump else dz < 0
         t_plane = -pz / dz if leaves else 1e300
         a, b, c = _quadric(q, px, py, pz - cz, dx, dy, dz, r_s)
         t_cap = (-b + math.sqrt(max(b * b - a * c, 0.0))) / a
         if t_plane <= t_cap:  # out through the face's plane
-            return state, (INTO_GUIDE if bump else INTO_AIR), dx, dy, dz
+            px, py = px + t_plane * dx, py + t_plane * dy
+            return state, (INTO_GUIDE if bump else INTO_AIR), px, py, 0.0, dx, dy, dz
         px, py, pz = px + t_cap * dx, py + t_cap * dy, pz + t_cap * dz
         mx, my, mz = _normal(q, px, py, pz - cz)
         cos_i = dx * mx + dy * my + dz * mz
@@ -131,9 +159,9 @@ def trace_cap(state, code, k, e, n, px, py, dx, dy, dz):  # pragma: no cover - c
             continue
         dx, dy, dz = _through(dx, dy, dz, mx, my, mz, n_in, n_out)
         if bump:
-            return state, INTO_AIR, dx, dy, dz
-        return state, (INTO_GUIDE if dz > 0 else ONTO_FACE), dx, dy, dz
-    return state, CAUGHT, dx, dy, dz
+            return state, INTO_AIR, px, py, pz, dx, dy, dz
+        return state, (INTO_GUIDE if dz > 0 else ONTO_FACE), px, py, pz, dx, dy, dz
+    return state, CAUGHT, px, py, pz, dx, dy, dz
 
 
 @nb.njit(cache=True)
@@ -197,7 +225,8 @@ def trace_prism(state, cut, hu, hv, rc, t1, t2, n, pu, pv, du, dv, dz):  # pragm
     """A ray going down (``dz < 0``) in the guide of index ``n`` whose path crosses the
     face's plane at ``(pu, pv)`` (mm, the dot's frame: ``u`` along its length) on a prism
     (half length ``hu``, half width ``hv``, corner radius ``rc``, facet slopes ``t1``,
-    ``t2``), raised or ``cut``: ``(state, where, du, dv, dz)`` as :func:`trace_cap`'s."""
+    ``t2``), raised or ``cut``: ``(state, where, pu, pv, pz, du, dv, dz)`` as
+    :func:`trace_cap`'s (``pz`` mm, up from the face's plane)."""
     ds = dz if cut else -dz  # prism coordinates: s from the face into the structure
     ps = 0.0
     n_in, n_out = (1.0, n) if cut else (n, 1.0)
@@ -208,12 +237,26 @@ def trace_prism(state, cut, hu, hv, rc, t1, t2, n, pu, pv, du, dv, dz):  # pragm
         state, x = uniform(state)
         if x < fresnel(cos_i, n, 1.0):  # reflected back into the guide
             du, dv, ds = du + 2.0 * cos_i * mu, dv + 2.0 * cos_i * mv, ds + 2.0 * cos_i * ms
-            return state, (INTO_GUIDE if ds > 0 else ONTO_FACE), du, dv, ds
+            return state, (INTO_GUIDE if ds > 0 else ONTO_FACE), pu, pv, ps, du, dv, ds
         du, dv, ds = _through(du, dv, ds, -mu, -mv, -ms, n, 1.0)
+    state, where, pu, pv, ps, du, dv, ds = _prism_walk(
+        state, cut, hu, hv, rc, t1, t2, n_in, n_out, pu, pv, ps, du, dv, ds
+    )
+    return state, where, pu, pv, (ps if cut else -ps), du, dv, (ds if cut else -ds)
+
+
+@nb.njit(cache=True)
+def _prism_walk(
+    state, cut, hu, hv, rc, t1, t2, n_in, n_out, pu, pv, ps, du, dv, ds
+):  # pragma: no cover
+    """A ray inside a prism's body (prism coordinates) at ``p`` going ``d``, followed
+    through its surfaces until it leaves: ``(state, where, pu, pv, ps, du, dv, ds)`` as
+    :func:`trace_cap`'s, in prism coordinates."""
     for _ in range(MAX_BOUNCES):
         t, mu, mv, ms, base = prism_exit(pu, pv, ps, du, dv, ds, hu, hv, rc, t1, t2)
         if base:  # out through the face's plane
-            return state, (INTO_AIR if cut else INTO_GUIDE), du, dv, (ds if cut else -ds)
+            pu, pv = pu + t * du, pv + t * dv
+            return state, (INTO_AIR if cut else INTO_GUIDE), pu, pv, 0.0, du, dv, ds
         pu, pv, ps = pu + t * du, pv + t * dv, ps + t * ds
         cos_i = du * mu + dv * mv + ds * ms
         state, x = uniform(state)
@@ -222,9 +265,9 @@ def trace_prism(state, cut, hu, hv, rc, t1, t2, n, pu, pv, du, dv, dz):  # pragm
             continue
         du, dv, ds = _through(du, dv, ds, mu, mv, ms, n_in, n_out)
         if not cut:
-            return state, INTO_AIR, du, dv, -ds
-        return state, (INTO_GUIDE if ds > 0 else ONTO_FACE), du, dv, ds
-    return state, CAUGHT, du, dv, (ds if cut else -ds)
+            return state, INTO_AIR, pu, pv, ps, du, dv, ds
+        return state, (INTO_GUIDE if ds > 0 else ONTO_FACE), pu, pv, ps, du, dv, ds
+    return state, CAUGHT, pu, pv, ps, du, dv, ds
 
 
 @nb.njit(cache=True, inline="always")
@@ -259,57 +302,536 @@ def _on_footprint(state, code, hu, hv, rc):  # pragma: no cover - compiled
     return state, 0.0, 0.0
 
 
+@nb.njit(cache=True, inline="always")
+def _sized(hu, hv, rc, k, half):  # pragma: no cover - compiled
+    """A row's dot frame ``(hu, hv, rc, k)`` for a dot of half width ``half`` (mm; NaN:
+    the row's size): the footprint scaled, under a cap of the same height."""
+    if half == half and half != hv:
+        m = half / hv
+        return hu * m, half, rc * m, k / m
+    return hu, hv, rc, k
+
+
 @nb.njit(cache=True)
-def meet_profile(state, f, n, at, dxn, dyn, dz):  # pragma: no cover - compiled
+def footprint_span(pu, pv, du, dv, hu, hv, rc):  # pragma: no cover - compiled
+    """Where the line through ``(pu, pv)`` going ``(du, dv)`` (horizontal parts, not
+    unit) is over a rounded rectangle of half sides ``hu``, ``hv`` and corner radius
+    ``rc`` (mm, about the origin): ``(t_in, t_out, mu, mv)``, its parameters in and out
+    (``t_in >= t_out`` when it misses; ``-inf``, ``inf`` for a vertical line over it)
+    and the edge's outward unit normal where it comes in."""
+    t_in, t_out, mu, mv = -np.inf, np.inf, 0.0, 0.0
+    if du != 0:
+        a, b = (-hu - pu) / du, (hu - pu) / du
+        t_in, t_out, mu = min(a, b), max(a, b), (-1.0 if du > 0 else 1.0)
+    elif abs(pu) > hu:
+        return np.inf, -np.inf, 0.0, 0.0
+    if dv != 0:
+        a, b = (-hv - pv) / dv, (hv - pv) / dv
+        if min(a, b) > t_in:
+            t_in, mu, mv = min(a, b), 0.0, (-1.0 if dv > 0 else 1.0)
+        t_out = min(t_out, max(a, b))
+    elif abs(pv) > hv:
+        return np.inf, -np.inf, 0.0, 0.0
+    if t_in >= t_out or rc <= 0 or t_in == -np.inf:
+        return t_in, t_out, mu, mv
+    cu, cv = hu - rc, hv - rc
+    for end in range(2):  # a corner's square where it comes in, or goes out: its arc
+        t = t_in if end == 0 else t_out
+        qu, qv = pu + t * du, pv + t * dv
+        if abs(qu) > cu and abs(qv) > cv:
+            ou, ov = pu - math.copysign(cu, qu), pv - math.copysign(cv, qv)
+            a = du * du + dv * dv
+            b = ou * du + ov * dv
+            disc = b * b - a * (ou * ou + ov * ov - rc * rc)
+            if disc <= 0:  # past the corner's arc: off the footprint
+                return np.inf, -np.inf, 0.0, 0.0
+            if end == 0:
+                t_in = (-b - math.sqrt(disc)) / a
+                mu, mv = (ou + t_in * du) / rc, (ov + t_in * dv) / rc
+            else:
+                t_out = (-b + math.sqrt(disc)) / a
+    return t_in, t_out, mu, mv
+
+
+@nb.njit(cache=True)
+def enter_prism(hu, hv, rc, t1, t2, pu, pv, ps, du, dv, ds):  # pragma: no cover - compiled
+    """Where a ray from outside a raised prism's body (prism coordinates, ``s > 0`` below
+    the face) first meets it: ``(t, mu, mv, ms)``, its parameter (inf if it misses) and
+    the surface's outward unit normal there."""
+    t_in, t_out, mu, mv = footprint_span(pu, pv, du, dv, hu, hv, rc)
+    ms = 0.0
+    for i in range(3):  # the face's plane s >= 0 and the two facets, as a . p <= b
+        au, a_s = (0.0, -1.0) if i == 0 else ((-t1, 1.0) if i == 1 else (t2, 1.0))
+        b = 0.0 if i == 0 else (t1 * hu if i == 1 else t2 * hu)
+        ad, ap = au * du + a_s * ds, au * pu + a_s * ps
+        if ad == 0:
+            if ap > b:
+                return np.inf, 0.0, 0.0, 0.0
+            continue
+        t = (b - ap) / ad
+        if ad > 0:
+            t_out = min(t_out, t)
+        elif t > t_in:
+            g = 1.0 / math.sqrt(au * au + a_s * a_s)
+            t_in, mu, mv, ms = t, au * g, 0.0, a_s * g
+    if t_in >= t_out or t_in <= EPS:
+        return np.inf, 0.0, 0.0, 0.0
+    return t_in, mu, mv, ms
+
+
+@nb.njit(cache=True)
+def enter_cap(k, e, ox, oy, oz, dx, dy, dz):  # pragma: no cover - compiled
+    """Where a ray from outside a bump (cap coordinates: ``o`` its start under the face,
+    ``d`` unit) first meets it: ``(t, mx, my, mz)``, its parameter (inf if it misses)
+    and the cap's outward unit normal there."""
+    r_s = (1.0 + k * k) / (2.0 * k)
+    q = 1.0 / (e * e)
+    cz = r_s - k
+    a, b, c = _quadric(q, ox, oy, oz - cz, dx, dy, dz, r_s)
+    disc = b * b - a * c
+    if disc <= 0:
+        return np.inf, 0.0, 0.0, 0.0
+    t = (-b - math.sqrt(disc)) / a
+    if t <= EPS or oz + t * dz > 0:  # behind, or the sphere over the face: not the cap
+        return np.inf, 0.0, 0.0, 0.0
+    mx, my, mz = _normal(q, ox + t * dx, oy + t * dy, oz + t * dz - cz)
+    return t, mx, my, mz
+
+
+@nb.njit(cache=True, inline="always")
+def _meet_body(f, hu, hv, rc, k, c, s, rx, ry, z, dx, dy, dz):  # pragma: no cover
+    """Where a ray from outside a raised dot of row ``f``'s profile (its frame ``hu``,
+    ``hv``, ``rc``, ``k``, turned by ``(c, s)``) first meets it: from ``(rx, ry, z)`` (mm,
+    from its centre) going ``d``, both in the frame it stands turned in: ``(t, mx, my,
+    mz)``, the distance (mm, inf if it misses) and the outward unit normal there."""
+    ru, rv = c * rx + s * ry, c * ry - s * rx
+    du, dv = c * dx + s * dy, c * dy - s * dx
+    if int(f[F_PROFILE]) >= PRISM:
+        t, mu, mv, ms = enter_prism(hu, hv, rc, f[F_PROF_T1], f[F_PROF_T2], ru, rv, -z, du, dv, -dz)
+        mz = -ms
+    else:
+        t, mu, mv, mz = enter_cap(k, hu / hv, ru / hv, rv / hv, z / hv, du, dv, dz)
+        t *= hv
+    return t, c * mu - s * mv, s * mu + c * mv, mz
+
+
+@nb.njit(cache=True)
+def _into_body(
+    state, f, n, hu, hv, rc, k, c, s, rx, ry, z, dx, dy, dz, mx, my, mz
+):  # pragma: no cover
+    """A ray in the air meeting a raised dot (as :func:`_meet_body`'s, at ``(rx, ry, z)``
+    from its centre where the normal is ``m``): Fresnel's reflection off it, or in and
+    through it as a ray from the guide goes: ``(state, where, rx, ry, z, dx, dy, dz)``,
+    :data:`INTO_AIR` (reflected, or out through its surface: where it leaves),
+    :data:`INTO_GUIDE` up through its base, or :data:`CAUGHT`."""
+    cos_i = -(dx * mx + dy * my + dz * mz)
+    state, u = uniform(state)
+    if u < fresnel(cos_i, 1.0, n):  # reflected off it, on in the air
+        dx, dy, dz = dx + 2.0 * cos_i * mx, dy + 2.0 * cos_i * my, dz + 2.0 * cos_i * mz
+        return state, INTO_AIR, rx, ry, z, dx, dy, dz
+    dx, dy, dz = _through(dx, dy, dz, -mx, -my, -mz, 1.0, n)
+    pu, pv = c * rx + s * ry, c * ry - s * rx
+    du, dv = c * dx + s * dy, c * dy - s * dx
+    if int(f[F_PROFILE]) >= PRISM:
+        state, where, pu, pv, ps, du, dv, ds = _prism_walk(
+            state, False, hu, hv, rc, f[F_PROF_T1], f[F_PROF_T2], n, 1.0, pu, pv, -z, du, dv,
+            -dz,
+        )  # fmt: skip
+        z, dz = -ps, -ds
+    else:
+        r_s = (1.0 + k * k) / (2.0 * k)
+        state, where, pu, pv, pz, du, dv, dz = _cap_walk(
+            state, True, (hv / hu) ** 2, r_s, r_s - k, n, 1.0, pu / hv, pv / hv, z / hv, du,
+            dv, dz,
+        )  # fmt: skip
+        pu, pv, z = pu * hv, pv * hv, pz * hv
+    rx, ry = c * pu - s * pv, s * pu + c * pv
+    return state, where, rx, ry, min(z, 0.0), c * du - s * dv, s * du + c * dv, dz
+
+
+@nb.njit(cache=True, inline="always")
+def _layer_end(f, hu, hv, k, z, dz):  # pragma: no cover - compiled
+    """How far a ray at height ``z`` (mm, under the face) going up or down by ``dz`` (a
+    unit direction's) goes before it leaves the layer of raised dots whose tallest has
+    half length ``hu`` (a prism's) or cap ``k`` on half width ``hv`` (mm)."""
+    if int(f[F_PROFILE]) >= PRISM:
+        t1, t2 = f[F_PROF_T1], f[F_PROF_T2]
+        tall = 2.0 * hu * t1 * t2 / (t1 + t2)
+    else:
+        tall = k * hv
+    return (-tall - z) / dz if dz < 0 else (-z / dz if dz > 0 else np.inf)
+
+
+@nb.njit(cache=True)
+def next_dot(f, start, dx_, dy_, foot, cg, x, y, z, dx, dy, dz):  # pragma: no cover
+    """The first of the real raised dots (row ``f``'s profile; the print's cells ``start``,
+    centres ``dx_``, ``dy_``, footprints ``foot``, grid ``cg``) a ray in the air under
+    the face meets, from ``(x, y, z)`` (mm, ``z <= 0``) going ``d`` (unit), before it
+    leaves their layer: ``(k, t, mx, my, mz)``, the dot (-1 for none), the distance to
+    it (mm) and its surface's outward unit normal there. The cells are walked along the
+    ray's course a cell at a time, each widened by the largest dot's extent."""
+    hu0, hv0, rc0, k0 = f[F_PROF_U], f[F_PROF_V], f[F_PROF_C], f[F_PROF_K]
+    x0, y0, cell, nx, ny, rmax = cg[0], cg[1], cg[2], int(cg[4]), int(cg[5]), cg[6]
+    t_end = _layer_end(f, rmax, hv0, k0, z, dz)  # a prism no longer than the largest extent
+    hs = math.sqrt(dx * dx + dy * dy)
+    step = cell / hs if hs > 1e-12 else np.inf
+    best, bk, bx, by, bz = t_end, -1, 0.0, 0.0, 0.0
+    ta = 0.0
+    for _ in range(2 * (nx + ny) + 4):
+        tb = min(ta + step, t_end)
+        xa, xb = x + ta * dx, x + (tb if tb < np.inf else ta) * dx
+        ya, yb = y + ta * dy, y + (tb if tb < np.inf else ta) * dy
+        ax = int(math.floor((min(xa, xb) - rmax - x0) / cell))
+        bx_ = int(math.floor((max(xa, xb) + rmax - x0) / cell))
+        ay = int(math.floor((min(ya, yb) - rmax - y0) / cell))
+        by_ = int(math.floor((max(ya, yb) + rmax - y0) / cell))
+        if bx_ < 0 or by_ < 0 or ax >= nx or ay >= ny:  # past the grid: no dots ahead
+            break
+        for jy in range(max(ay, 0), min(by_ + 1, ny)):
+            for jx in range(max(ax, 0), min(bx_ + 1, nx)):
+                cc = jy * nx + jx
+                for j in range(start[cc], start[cc + 1]):
+                    hu, hv, rc, kk = _sized(hu0, hv0, rc0, k0, half_width_packed(foot, j))
+                    t, mx, my, mz = _meet_body(
+                        f, hu, hv, rc, kk, foot[j, 4], foot[j, 5], x - dx_[j], y - dy_[j], z,
+                        dx, dy, dz,
+                    )  # fmt: skip
+                    if t < best:
+                        best, bk, bx, by, bz = t, j, mx, my, mz
+        if best <= tb or tb >= t_end:
+            break
+        ta = tb
+    return bk, best, bx, by, bz
+
+
+@nb.njit(cache=True)
+def among_dots(state, f, n, pr, x, y, z, dxn, dyn, dz):  # pragma: no cover - compiled
+    """A ray that left a real raised dot (or the bare face between them) into the air
+    under the guide at ``(x, y, z)`` (mm) going ``d``, followed among the dots
+    (:func:`next_dot`, :func:`_into_body`): ``(state, where, x, y, z, dxn, dyn, dz)``,
+    :data:`INTO_GUIDE` up through a dot's base (there), :data:`CAUGHT`, or
+    :data:`INTO_AIR` out of the dots' layer (down to the reflector, or up onto the bare
+    face), from the point it last left a dot at (or its start)."""
+    start, dx_, dy_, foot, cg = pr[5], pr[6], pr[7], pr[8], pr[9]
+    for _ in range(MAX_DOTS):
+        k, t, mx, my, mz = next_dot(f, start, dx_, dy_, foot, cg, x, y, z, dxn, dyn, dz)
+        if k < 0:
+            return state, INTO_AIR, x, y, z, dxn, dyn, dz
+        hu, hv, rc, kk = _sized(
+            f[F_PROF_U], f[F_PROF_V], f[F_PROF_C], f[F_PROF_K], half_width_packed(foot, k)
+        )
+        rx, ry, z = x + t * dxn - dx_[k], y + t * dyn - dy_[k], min(z + t * dz, 0.0)
+        state, where, rx, ry, z, dxn, dyn, dz = _into_body(
+            state, f, n, hu, hv, rc, kk, foot[k, 4], foot[k, 5], rx, ry, z, dxn, dyn, dz, mx,
+            my, mz,
+        )  # fmt: skip
+        x, y = dx_[k] + rx, dy_[k] + ry
+        if where != INTO_AIR:
+            return state, where, x, y, z, dxn, dyn, dz
+    return state, CAUGHT, x, y, z, dxn, dyn, dz
+
+
+@nb.njit(cache=True, inline="always")
+def _fill_at(x, y, phi, g):  # pragma: no cover - compiled
+    """The coverage's fill at ``(x, y)`` (mm; ``phi`` over cells of ``g``), 0 off it."""
+    ix = int(math.floor((x - g[0]) / g[2]))
+    iy = int(math.floor((y - g[1]) / g[3]))
+    if ix < 0 or iy < 0 or ix >= phi.shape[1] or iy >= phi.shape[0]:
+        return 0.0
+    return phi[iy, ix]
+
+
+@nb.njit(cache=True, inline="always")
+def _site_angle(key, i, j):  # pragma: no cover - compiled
+    """A twin's own angle (rad, ``0 .. pi``) at lattice site ``(i, j)`` of the ray whose
+    draw is ``key``: the same every time the ray meets the site."""
+    z = mix(key ^ (np.uint64(i + (1 << 31)) * _M1 + np.uint64(j + (1 << 31)) * _M2))
+    return math.pi * float(z >> np.uint64(11)) * 2.0**-53
+
+
+@nb.njit(cache=True, inline="always")
+def _site(lat, i, j):  # pragma: no cover - compiled
+    """Lattice ``lat``'s site ``(i, j)``: its centre ``(cu, cv)`` (mm, the dot's frame)
+    and its twin's angle ``(c, s)`` in that frame."""
+    e, _, b1u, b1v, b2u, b2v, key, aligned, _ = lat
+    c, s = 1.0, 0.0
+    if not aligned:
+        g = _site_angle(key, i, j)
+        c, s = math.cos(g), math.sin(g)
+    return (i * b1u + j * b2u) * e, i * b1v + j * b2v, c, s
+
+
+@nb.njit(cache=True)
+def twin_lattice(state, hu, hv, rc, prism, aligned, fill):  # pragma: no cover - compiled
+    """The twins of a coverage dot (half sides ``hu``, ``hv``, corner ``rc``, mm) where
+    the cell's ``fill`` (> 0) puts them: a hexagonal lattice of the fill's density turned
+    at random, stretched along ``u`` by the dot's elongation when the twins stand at its
+    angle (``aligned``), each at its own angle otherwise (:func:`_site_angle`):
+    ``(state, lat)``, ``lat = (e, a, b1u, b1v, b2u, b2v, key, aligned, m)``, the
+    stretch, the spacing (mm), the basis (mm, stretched coordinates ``u / e, v``), the
+    sites' key, and how many sites about the nearest one a twin over a point may
+    stand."""
+    area = 4.0 * hu * hv - (4.0 - math.pi) * rc * rc if prism else math.pi * hu * hv
+    e = hu / hv if aligned else 1.0
+    a = math.sqrt(2.0 * area / (e * math.sqrt(3.0) * min(fill, 1.0)))
+    state, w = uniform(state)
+    state, key_u = uniform(state)
+    ca, sa = math.cos(math.pi / 3.0 * w), math.sin(math.pi / 3.0 * w)
+    h = 0.8660254037844386  # sin 60°
+    reach = math.sqrt(hu * hu + hv * hv) / e  # a twin's extent, stretched coordinates
+    m = int(math.ceil(reach / (h * a))) + 2
+    lat = (
+        e, a, a * ca, a * sa, a * (0.5 * ca - h * sa), a * (0.5 * sa + h * ca),
+        np.uint64(key_u * 2.0**53), aligned, m,
+    )  # fmt: skip
+    return state, lat
+
+
+@nb.njit(cache=True, inline="always")
+def _nearest_site(lat, pu, pv):  # pragma: no cover - compiled
+    """The lattice site nearest ``(pu, pv)`` (mm, the dot's frame) in the basis's
+    coordinates (rounded)."""
+    e, _, b1u, b1v, b2u, b2v, _, _, _ = lat
+    det = b1u * b2v - b1v * b2u
+    qu = pu / e
+    fi = (qu * b2v - pv * b2u) / det
+    fj = (b1u * pv - b1v * qu) / det
+    return int(math.floor(fi + 0.5)), int(math.floor(fj + 0.5))
+
+
+@nb.njit(cache=True)
+def next_twin(f, hu, hv, rc, k, lat, skip0, pu, pv, pz, du, dv, dz):  # pragma: no cover
+    """:func:`next_dot` over lattice ``lat``'s twins (the dot at site ``(0, 0)`` left
+    out when ``skip0``): ``(i, j, t, mu, mv, mz)``, the site (``t`` inf for none), the
+    distance (mm) and the normal, in the dot's frame."""
+    a, m = lat[1], lat[8]
+    t_end = _layer_end(f, hu, hv, k, pz, dz)
+    hs = math.sqrt(du * du + dv * dv)
+    step = 0.5 * a * min(lat[0], 1.0) / hs if hs > 1e-12 else np.inf
+    best, bi, bj, bu, bv, bz = t_end, 0, 0, 0.0, 0.0, 0.0
+    ta = 0.0
+    for _ in range(4096):
+        tm = ta + 0.5 * step if step < np.inf else ta  # the step's middle
+        i0, j0 = _nearest_site(lat, pu + tm * du, pv + tm * dv)
+        for i in range(i0 - m, i0 + m + 1):
+            for j in range(j0 - m, j0 + m + 1):
+                if skip0 and i == 0 and j == 0:
+                    continue  # the dot the ray left
+                cu, cv, c, s = _site(lat, i, j)
+                t, mu, mv, mz = _meet_body(f, hu, hv, rc, k, c, s, pu - cu, pv - cv, pz, du, dv, dz)
+                if t < best:
+                    best, bi, bj, bu, bv, bz = t, i, j, mu, mv, mz
+        tb = ta + step
+        if best <= tb or tb >= t_end:
+            break
+        ta = tb
+    return bi, bj, (best if best < t_end else np.inf), bu, bv, bz
+
+
+@nb.njit(cache=True)
+def _on_twin(lat, hu, hv, rc, pu, pv):  # pragma: no cover - compiled
+    """Whether ``(pu, pv)`` (mm, the dot's frame) lies on a twin's footprint (an ellipse
+    for ``rc < 0``)."""
+    i0, j0 = _nearest_site(lat, pu, pv)
+    for i in range(i0 - lat[8], i0 + lat[8] + 1):
+        for j in range(j0 - lat[8], j0 + lat[8] + 1):
+            cu, cv, c, s = _site(lat, i, j)
+            ru, rv = c * (pu - cu) + s * (pv - cv), c * (pv - cv) - s * (pu - cu)
+            if rc < 0:
+                if (ru / hu) ** 2 + (rv / hv) ** 2 <= 1.0:
+                    return True
+            elif abs(ru) <= hu and abs(rv) <= hv:
+                qu, qv = abs(ru) - (hu - rc), abs(rv) - (hv - rc)
+                if qu <= 0 or qv <= 0 or qu * qu + qv * qv <= rc * rc:
+                    return True
+    return False
+
+
+@nb.njit(cache=True)
+def among_twins(
+    state, f, n, hu, hv, rc, k, aligned, fill, from_dot, pu, pv, pz, du, dv, dz
+):  # pragma: no cover
+    """The coverage's counterpart of :func:`among_dots`: a ray that left a raised dot of
+    the coverage (its frame: half sides ``hu``, ``hv``, corner ``rc``, cap height ``k``)
+    into the air at ``(pu, pv, pz)`` (mm, the dot's frame) going ``d`` meets the dot's
+    twins about it (:func:`twin_lattice`, :func:`next_twin`). The relaxed patterns
+    ``generate`` makes place a dot's neighbours about the hexagonal spacing of the local
+    fill apart, so the twins stand about where the real dots' nearest neighbours do. A
+    ray out through the bare face between them (not ``from_dot``) starts at a point
+    drawn uniformly over the lattice's cell off the twins' footprints (``p`` ignored).
+    ``(state, where, su, sv, pu, pv, pz, du, dv, dz)``, where as :func:`among_dots`',
+    the point it started from, the one it last left a twin at (or its start) and the
+    direction, in the dot's frame (mm)."""
+    su, sv = pu, pv
+    if fill <= 0:
+        return state, INTO_AIR, su, sv, pu, pv, pz, du, dv, dz
+    prism = int(f[F_PROFILE]) >= PRISM
+    state, lat = twin_lattice(state, hu, hv, rc, prism, aligned, fill)
+    if not from_dot:  # a point of the bare face, drawn
+        e, _, b1u, b1v, b2u, b2v, _, _, _ = lat
+        for _ in range(64):
+            state, wa = uniform(state)
+            state, wb = uniform(state)
+            pu, pv, pz = (wa * b1u + wb * b2u) * e, wa * b1v + wb * b2v, 0.0
+            if not _on_twin(lat, hu, hv, rc if prism else -1.0, pu, pv):
+                break
+        su, sv = pu, pv
+    for _ in range(MAX_DOTS):
+        i, j, t, mu, mv, mz = next_twin(f, hu, hv, rc, k, lat, from_dot, pu, pv, pz, du, dv, dz)
+        if t == np.inf:
+            return state, INTO_AIR, su, sv, pu, pv, pz, du, dv, dz
+        cu, cv, c, s = _site(lat, i, j)
+        ru, rv, pz = pu + t * du - cu, pv + t * dv - cv, min(pz + t * dz, 0.0)
+        state, where, ru, rv, pz, du, dv, dz = _into_body(
+            state, f, n, hu, hv, rc, k, c, s, ru, rv, pz, du, dv, dz, mu, mv, mz
+        )
+        pu, pv = cu + ru, cv + rv
+        if where != INTO_AIR:
+            return state, where, su, sv, pu, pv, pz, du, dv, dz
+        from_dot = False  # the lattice's own dot may be met now
+    return state, CAUGHT, su, sv, pu, pv, pz, du, dv, dz
+
+
+@nb.njit(cache=True)
+def meet_profile(state, f, n, at, x, y, pr, walls, dxn, dyn, dz):  # pragma: no cover - compiled
     """A ray going down onto a dot of the bottom face (its row ``f``: the profile's code,
     its body, the reflector) from the guide of index ``n``, where the print test found it
     (``at``, :func:`~optdot.optics.marks.dot_frame`'s: the point in the dot's frame, its
-    angle and its half width, NaN where unknown): ``(state, act, dx, dy, dz)``,
-    ``NEW_LEG`` back into the guide or a fate (``BOTTOM`` absorbed under it, ``DOT``
-    caught in the dot). A dot of another size than the row's is its footprint scaled,
-    under a cap of the same height (a prism's facets keep their angles)."""
+    angle and its half width, NaN where unknown; ``(x, y)`` the point, mm; ``pr`` the
+    print's tables as :func:`~optdot.optics.marks.marked` takes them): ``(state, act, x,
+    y, dx, dy, dz)``, ``NEW_LEG`` back into the guide (from where it leaves the dot's
+    base, or the base of the dot it passed into, or meets the face coming up; the
+    reflector returns it at ``(x, y)``) or a fate (``BOTTOM`` absorbed under it, ``DOT``
+    caught in a dot). A dot of another size than the row's is its footprint scaled,
+    under a cap of the same height (a prism's facets keep their angles). Light leaving a
+    raised dot into the air meets the dots beside it (:func:`among_dots`, or the
+    coverage's twins, :func:`among_twins`)."""
     code = int(f[F_PROFILE])
-    hu, hv, rc, k = f[F_PROF_U], f[F_PROF_V], f[F_PROF_C], f[F_PROF_K]
     lu, lv, c, s, half = at
-    if half == half and half != hv:  # this dot's size
-        m = half / hv
-        hu, hv, rc, k = hu * m, half, rc * m, k / m
+    hu, hv, rc, k = _sized(f[F_PROF_U], f[F_PROF_V], f[F_PROF_C], f[F_PROF_K], half)
     turned = code >= PRISM or hu != hv  # the dot looks different turned
+    aligned = c == c or not turned  # the twins at its angle (a disc's: any)
     if turned and c != c:  # a random angle, drawn
         state, w = uniform(state)
         c, s = math.cos(math.pi * w), math.sin(math.pi * w)
     if c != c:
         c, s = 1.0, 0.0
     du, dv = c * dxn + s * dyn, c * dyn - s * dxn
-    if lu != lu:  # where on the dot, drawn
+    real = lu == lu
+    if not real:  # where on the dot, drawn
         state, lu, lv = _on_footprint(state, code, hu, hv, rc)
     if code >= PRISM:
-        state, where, du, dv, dz = trace_prism(
+        state, where, pu, pv, pz, du, dv, dz = trace_prism(
             state, code == PRISM_CUT, hu, hv, rc, f[F_PROF_T1], f[F_PROF_T2], n, lu, lv,
             du, dv, dz,
         )  # fmt: skip
     else:
-        state, where, du, dv, dz = trace_cap(
+        state, where, pu, pv, pz, du, dv, dz = trace_cap(
             state, code, k, hu / hv, n, lu / hv, lv / hv, du, dv, dz
         )
+        pu, pv, pz = pu * hv, pv * hv, pz * hv
+    raised = code == BUMP or code == PRISM
+    ez = min(pz, 0.0)
+    if where == INTO_AIR and raised and not real:  # among the coverage's twins
+        fill = _fill_at(x, y, pr[1], pr[2])
+        state, where, _, _, pu, pv, ez, du, dv, dz = among_twins(
+            state, f, n, hu, hv, rc, k, aligned, fill, True, pu, pv, ez, du, dv, dz
+        )
     dxn, dyn = c * du - s * dv, s * du + c * dv
+    ex, ey = x, y  # where it goes on
+    if where == INTO_GUIDE or where == INTO_AIR:  # where it left the dot (or a twin)
+        ex = x + c * (pu - lu) - s * (pv - lv)
+        ey = y + s * (pu - lu) + c * (pv - lv)
+    if where == INTO_AIR and raised and real:  # among the dots
+        state, where, ex, ey, ez, dxn, dyn, dz = among_dots(
+            state, f, n, pr, ex, ey, ez, dxn, dyn, dz
+        )
     if where == INTO_GUIDE:
-        return state, NEW_LEG, dxn, dyn, dz
+        if _past_wall(x, y, ex, ey, walls):  # a dot over the panel's edge: where it met it
+            ex, ey = x, y
+        return state, NEW_LEG, ex, ey, dxn, dyn, dz
     if where == CAUGHT:
-        return state, DOT, dxn, dyn, dz
+        return state, DOT, x, y, dxn, dyn, dz
     if where == ONTO_FACE:  # the bare face beside the dot
         state, act, dxn, dyn, dz = meet_reflector(state, f, n, False, dxn, dyn, dz)
-        return state, (NEW_LEG if act == SAME_LEG else act), dxn, dyn, dz
-    if dz > 0:  # in the air under the guide, up onto its flat face
+        return state, (NEW_LEG if act == SAME_LEG else act), x, y, dxn, dyn, dz
+    return _under_guide(state, f, n, x, y, ex, ey, ez, walls, dxn, dyn, dz)
+
+
+@nb.njit(cache=True, inline="always")
+def _past_wall(x, y, x2, y2, walls):  # pragma: no cover - compiled
+    """Whether the step from ``(x, y)`` to ``(x2, y2)`` (mm) crosses one of the panel's
+    ``walls``: a coverage dot drawn over the edge, or light out of a dot by the edge that
+    comes up past the guide's side."""
+    gx, gy = x2 - x, y2 - y
+    g = math.sqrt(gx * gx + gy * gy)
+    return g > 0 and wall_distance(x, y, gx / g, gy / g, walls)[0] < g
+
+
+@nb.njit(cache=True)
+def _under_guide(state, f, n, x, y, ax, ay, az, walls, dxn, dyn, dz):  # pragma: no cover - compiled
+    """A ray in the air under the guide at ``(ax, ay, az)`` (mm), clear of its dots,
+    having met the face at ``(x, y)``: up onto the flat face (Fresnel: back into the
+    guide where it meets it, or down again), then down to the reflector, which returns
+    it into the guide (at ``(x, y)``) or absorbs it: ``(state, NEW_LEG or BOTTOM, x, y,
+    dx, dy, dz)``; a ray that would come up past the panel's ``walls`` went past the
+    guide's side (``EDGE``)."""
+    if dz > 0:  # up onto the guide's flat face
         state, u = uniform(state)
         if u >= fresnel(dz, 1.0, n):
+            fx, fy = ax - az / dz * dxn, ay - az / dz * dyn  # where it meets the face
+            if _past_wall(x, y, fx, fy, walls):  # up past the guide's side
+                return state, EDGE, x, y, dxn, dyn, dz
             dxn, dyn, dz = refract(dxn, dyn, dz, 1.0, n)
-            return state, NEW_LEG, dxn, dyn, dz
+            return state, NEW_LEG, fx, fy, dxn, dyn, dz
         dz = -dz
     if f[F_REFL_FINISH] > 0.5:  # a mirror: back up at the angle it came, through the face
         state, back = mirrored(state, f[F_REFL], fresnel(-dz, 1.0, n))
         if not back:
-            return state, BOTTOM, dxn, dyn, dz
+            return state, BOTTOM, x, y, dxn, dyn, dz
         dxn, dyn, dz = refract(dxn, dyn, -dz, 1.0, n)
-        return state, NEW_LEG, dxn, dyn, dz
-    return sheet_return(state, f[F_REFL], n, dxn, dyn, dz)
+        return state, NEW_LEG, x, y, dxn, dyn, dz
+    state, act, dxn, dyn, dz = sheet_return(state, f[F_REFL], n, dxn, dyn, dz)
+    return state, act, x, y, dxn, dyn, dz
+
+
+@nb.njit(cache=True)
+def leave_between(state, f, n, x, y, pr, walls, dxn, dyn, dz):  # pragma: no cover - compiled
+    """A ray going down onto the bare face between raised dots (row ``f``) from the
+    guide of index ``n`` at ``(x, y)`` (mm; ``pr`` the print's tables): totally
+    reflected outside the escape cone, else Fresnel; what goes out into the air meets
+    the dots beside it (the real ones, :func:`among_dots`, or the coverage's twins at
+    the cell's angle and size, :func:`among_twins`) before the reflector under them:
+    ``(state, act, x, y, dx, dy, dz)`` as :func:`meet_profile`'s, or ``SAME_LEG``
+    reflected at the face."""
+    if -dz <= f[F_COS_DOWN]:
+        return state, SAME_LEG, x, y, dxn, dyn, -dz
+    state, u = uniform(state)
+    if u < fresnel(-dz, n, 1.0):
+        return state, SAME_LEG, x, y, dxn, dyn, -dz
+    dxn, dyn, dz = refract(dxn, dyn, dz, n, 1.0)
+    ex, ey, ez = x, y, 0.0
+    if pr[0]:  # real dots
+        state, where, ex, ey, ez, dxn, dyn, dz = among_dots(
+            state, f, n, pr, x, y, 0.0, dxn, dyn, dz
+        )
+    else:  # the coverage cell's angle and size
+        _, _, c, s, half = dot_frame(x, y, pr)
+        hu, hv, rc, k = _sized(f[F_PROF_U], f[F_PROF_V], f[F_PROF_C], f[F_PROF_K], half)
+        aligned = c == c or (int(f[F_PROFILE]) < PRISM and hu == hv)
+        if c != c:
+            c, s = 1.0, 0.0
+        du, dv = c * dxn + s * dyn, c * dyn - s * dxn
+        fill = _fill_at(x, y, pr[1], pr[2])
+        state, where, su, sv, pu, pv, ez, du, dv, dz = among_twins(
+            state, f, n, hu, hv, rc, k, aligned, fill, False, 0.0, 0.0, 0.0, du, dv, dz
+        )
+        dxn, dyn = c * du - s * dv, s * du + c * dv
+        ex, ey = x + c * (pu - su) - s * (pv - sv), y + s * (pu - su) + c * (pv - sv)
+    if where == INTO_GUIDE:
+        if _past_wall(x, y, ex, ey, walls):
+            ex, ey = x, y
+        return state, NEW_LEG, ex, ey, dxn, dyn, dz
+    if where == CAUGHT:
+        return state, DOT, x, y, dxn, dyn, dz
+    return _under_guide(state, f, n, x, y, ex, ey, ez, walls, dxn, dyn, dz)
