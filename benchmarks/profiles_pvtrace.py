@@ -2,8 +2,8 @@
 ``tests/test_dot_profile_pvtrace.py`` with bumps of any size, height and spacing, traced by
 pvtrace (float64 meshes, the material across a surface found by what holds the point past
 it) and by optdot, fate by fate, with pvtrace's noise; and how many rays pvtrace sent from
-one raised dot into a neighbour (optdot leaves that out), then pvtrace again with those
-rays lost under the guide as optdot loses them.
+one raised dot into a neighbour (optdot follows them too, since session 40), then pvtrace
+again with those rays lost under the guide, as optdot lost them before.
 
 Run: python benchmarks/profiles_pvtrace.py [--rays 2000] [--pitch 0.5] [--diameter 0.4]
      [--height 0.1]

@@ -112,6 +112,43 @@ def one_error(args, code: int, *words: str) -> str:
     return err[0]
 
 
+def graded_guide(
+    tmp: Path,
+    fill: tuple[float, float],
+    dots: str,
+    more: str = "",
+    thickness: float = 0.4,
+    optimize: str = "",
+) -> Path:
+    """A 10 x 8 mm guide ``thickness`` mm thick, lit by two LEDs 1 mm wide at x = 2.5 and
+    7.5 mm on its bottom edge, its map graded along y from ``fill[0]`` to ``fill[1]`` (8 x
+    10 cells): ``dots`` the ``[dots]`` lines, ``more`` whole sections after them (an
+    ``[orientation]``), ``optimize`` keys after ``seed = 1``. Written into ``tmp``; the
+    job's path."""
+    grid = np.repeat(np.linspace(fill[0], fill[1], 8)[:, None], 10, axis=1)
+    np.savetxt(tmp / "grad.csv", grid, delimiter=",")
+    text = f"""[domain]
+width = 10.0
+height = 8.0
+[density]
+grid = "grad.csv"
+[dots]
+{dots}
+{more}
+[optimize]
+seed = 1
+{optimize}
+[light_guide]
+thickness = {thickness}
+[[light_guide.leds]]
+edge = "bottom"
+positions = [2.5, 7.5]
+width = 1.0
+"""
+    (tmp / "job.toml").write_text(text)
+    return tmp / "job.toml"
+
+
 def bare_guide(w: float, h: float, t: float, n: float, dots: dict, y: float, width: float) -> dict:
     """The job (a raw dict) of a ``w`` x ``h`` x ``t`` mm guide of index ``n`` that the
     pvtrace comparisons trace: ``dots`` its ``[dots]``, no absorption, white dots,

@@ -33,6 +33,8 @@ from optdot.optics.rays import ray_state
 from optdot.optics.scene import dot_grid
 from optdot.pattern import Pattern
 
+from .conftest import graded_guide
+
 N = 1.49
 R0 = ((N - 1) / (N + 1)) ** 2
 BOX = (0.0, 0.0, 3.0, 2.0)
@@ -270,27 +272,6 @@ def _layer_end_py(f, hu, hv, k, z, dz) -> float:
     return float(_layer_end(f, hu, hv, k, z, dz))
 
 
-DENSE_BUMPS = """
-[domain]
-width = 10.0
-height = 8.0
-[density]
-grid = "grad.csv"
-[dots]
-diameter = 0.2
-profile = "bump"
-height = 0.08
-[optimize]
-seed = 1
-[light_guide]
-thickness = 0.6
-[[light_guide.leds]]
-edge = "bottom"
-positions = [2.5, 7.5]
-width = 1.0
-"""
-
-
 def test_the_coverage_s_twins_trace_as_real_close_tall_bumps(tmp_path):
     """Bumps 80 µm high on 200 µm dots, filling 0.1 to 0.6 of a guide: light leaving one
     meets its neighbours (efficiency 83.7 % when it does not, 81.1 % through the real
@@ -302,10 +283,8 @@ def test_the_coverage_s_twins_trace_as_real_close_tall_bumps(tmp_path):
     from optdot.optics.simulate import simulate
     from optdot.orchestration.pipeline import generate
 
-    fill = np.repeat(np.linspace(0.1, 0.6, 8)[:, None], 10, axis=1)
-    np.savetxt(tmp_path / "grad.csv", fill, delimiter=",")
-    (tmp_path / "b.toml").write_text(DENSE_BUMPS)
-    job = load_job(tmp_path / "b.toml")
+    dots = 'diameter = 0.2\nprofile = "bump"\nheight = 0.08'
+    job = load_job(graded_guide(tmp_path, (0.1, 0.6), dots, thickness=0.6))
     rays = 400_000
     cover = simulate(job.bench, rays, 3).summary()
     real = simulate(job.bench, rays, 3, dots=generate(job)).summary()

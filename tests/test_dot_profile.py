@@ -27,6 +27,8 @@ from optdot.optics.faces.dot_profile import (
 from optdot.optics.rays import ray_state
 from optdot.optics.simulate import simulate, traced_what
 
+from .conftest import graded_guide
+
 N = 1.49  # PMMA
 #: No walls: a dot's ray is moved freely.
 NO_WALLS = np.zeros((0, 4))
@@ -627,37 +629,11 @@ def test_prisms_turned_toward_close_leds_trace_as_their_coverage_on_a_coarse_map
     rays; one angle per 1 mm cell gave 1.369, 7 sigma off)."""
     from optdot.orchestration.pipeline import generate
 
-    fill = np.repeat(np.linspace(0.10, 0.42, 8)[:, None], 10, axis=1)
-    np.savetxt(tmp_path / "grad.csv", fill, delimiter=",")
-    text = """
-[domain]
-width = 10.0
-height = 8.0
-[density]
-grid = "grad.csv"
-[dots]
-shape = "rounded_rectangle"
-length = 0.120
-width = 0.030
-corner_radius = 0.005
-profile = "prism"
-facets = [45, 45]
-cut = true
-[orientation]
-toward = "leds"
-relative = "parallel"
-[optimize]
-seed = 1
-gap = 0.005
-[light_guide]
-thickness = 0.4
-[[light_guide.leds]]
-edge = "bottom"
-positions = [2.5, 7.5]
-width = 1.0
-"""
-    (tmp_path / "p.toml").write_text(text)
-    job = load_job(tmp_path / "p.toml")
+    dots = 'shape = "rounded_rectangle"\nlength = 0.120\nwidth = 0.030\ncorner_radius = 0.005'
+    dots += '\nprofile = "prism"\nfacets = [45, 45]\ncut = true'
+    more = '[orientation]\ntoward = "leds"\nrelative = "parallel"'
+    path = graded_guide(tmp_path, (0.10, 0.42), dots, more, optimize="gap = 0.005")
+    job = load_job(path)
     rays = 2_000_000
     cover = simulate(job.bench, rays, 3).summary()["angles"]
     real = simulate(job.bench, rays, 3, dots=generate(job)).summary()["angles"]
