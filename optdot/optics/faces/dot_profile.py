@@ -600,10 +600,14 @@ def _nearest_site(lat, pu, pv):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True)
-def next_twin(f, hu, hv, rc, k, lat, skip0, pu, pv, pz, du, dv, dz):  # pragma: no cover
+def next_twin(f, hu, hv, rc, k, lat, skip0, place, pu, pv, pz, du, dv, dz):  # pragma: no cover
     """:func:`next_dot` over lattice ``lat``'s twins (the dot at site ``(0, 0)`` left
     out when ``skip0``): ``(i, j, t, mu, mv, mz)``, the site (``t`` inf for none), the
-    distance (mm) and the normal, in the dot's frame."""
+    distance (mm) and the normal, in the dot's frame. A twin stands only where the
+    coverage has dots (``place``: the frame's origin and turn on the face, ``(ox, oy,
+    c, s)`` mm, and the coverage ``phi`` over cells ``g``): none past the panel's edge
+    or in its holes."""
+    ox, oy, c0, s0, phi, g = place
     a, m = lat[1], lat[8]
     t_end = _layer_end(f, hu, hv, k, pz, dz)
     hs = math.sqrt(du * du + dv * dv)
@@ -618,6 +622,8 @@ def next_twin(f, hu, hv, rc, k, lat, skip0, pu, pv, pz, du, dv, dz):  # pragma: 
                 if skip0 and i == 0 and j == 0:
                     continue  # the dot the ray left
                 cu, cv, c, s = _site(lat, i, j)
+                if _fill_at(ox + c0 * cu - s0 * cv, oy + s0 * cu + c0 * cv, phi, g) <= 0:
+                    continue  # no dots there
                 t, mu, mv, mz = _meet_body(f, hu, hv, rc, k, c, s, pu - cu, pv - cv, pz, du, dv, dz)
                 if t < best:
                     best, bi, bj, bu, bv, bz = t, i, j, mu, mv, mz
@@ -649,7 +655,7 @@ def _on_twin(lat, hu, hv, rc, pu, pv):  # pragma: no cover - compiled
 
 @nb.njit(cache=True)
 def among_twins(
-    state, f, n, hu, hv, rc, k, aligned, fill, from_dot, pu, pv, pz, du, dv, dz
+    state, f, n, hu, hv, rc, k, aligned, fill, from_dot, place, pu, pv, pz, du, dv, dz
 ):  # pragma: no cover
     """The coverage's counterpart of :func:`among_dots`: a ray that left a raised dot of
     the coverage (its frame: half sides ``hu``, ``hv``, corner ``rc``, cap height ``k``)
@@ -659,9 +665,10 @@ def among_twins(
     fill apart, so the twins stand about where the real dots' nearest neighbours do. A
     ray out through the bare face between them (not ``from_dot``) starts at a point
     drawn uniformly over the lattice's cell off the twins' footprints (``p`` ignored).
-    ``(state, where, su, sv, pu, pv, pz, du, dv, dz)``, where as :func:`among_dots`',
-    the point it started from, the one it last left a twin at (or its start) and the
-    direction, in the dot's frame (mm)."""
+    ``place`` as :func:`next_twin`'s, its origin the dot's centre (the ray's point on the
+    face when not ``from_dot``). ``(state, where, su, sv, pu, pv, pz, du, dv, dz)``,
+    where as :func:`among_dots`', the point it started from, the one it last left a twin
+    at (or its start) and the direction, in the dot's frame (mm)."""
     su, sv = pu, pv
     if fill <= 0:
         return state, INTO_AIR, su, sv, pu, pv, pz, du, dv, dz
@@ -676,8 +683,12 @@ def among_twins(
             if not _on_twin(lat, hu, hv, rc if prism else -1.0, pu, pv):
                 break
         su, sv = pu, pv
+        ox, oy, c, s, phi, g = place  # the lattice's origin: the ray's point less the draw
+        place = (ox - c * su + s * sv, oy - s * su - c * sv, c, s, phi, g)
     for _ in range(MAX_DOTS):
-        i, j, t, mu, mv, mz = next_twin(f, hu, hv, rc, k, lat, from_dot, pu, pv, pz, du, dv, dz)
+        i, j, t, mu, mv, mz = next_twin(
+            f, hu, hv, rc, k, lat, from_dot, place, pu, pv, pz, du, dv, dz
+        )
         if t == np.inf:
             return state, INTO_AIR, su, sv, pu, pv, pz, du, dv, dz
         cu, cv, c, s = _site(lat, i, j)
@@ -734,9 +745,11 @@ def meet_profile(state, f, n, at, x, y, pr, walls, dxn, dyn, dz):  # pragma: no 
     ez = min(pz, 0.0)
     if where == INTO_AIR and raised and not real:  # among the coverage's twins
         fill = _fill_at(x, y, pr[1], pr[2])
+        ox, oy = x - c * lu + s * lv, y - s * lu - c * lv  # the dot's centre
         state, where, _, _, pu, pv, ez, du, dv, dz = among_twins(
-            state, f, n, hu, hv, rc, k, aligned, fill, True, pu, pv, ez, du, dv, dz
-        )
+            state, f, n, hu, hv, rc, k, aligned, fill, True, (ox, oy, c, s, pr[1], pr[2]),
+            pu, pv, ez, du, dv, dz,
+        )  # fmt: skip
     dxn, dyn = c * du - s * dv, s * du + c * dv
     ex, ey = x, y  # where it goes on
     if where == INTO_GUIDE or where == INTO_AIR:  # where it left the dot (or a twin)
@@ -824,8 +837,9 @@ def leave_between(state, f, n, x, y, pr, walls, dxn, dyn, dz):  # pragma: no cov
         du, dv = c * dxn + s * dyn, c * dyn - s * dxn
         fill = _fill_at(x, y, pr[1], pr[2])
         state, where, su, sv, pu, pv, ez, du, dv, dz = among_twins(
-            state, f, n, hu, hv, rc, k, aligned, fill, False, 0.0, 0.0, 0.0, du, dv, dz
-        )
+            state, f, n, hu, hv, rc, k, aligned, fill, False, (x, y, c, s, pr[1], pr[2]),
+            0.0, 0.0, 0.0, du, dv, dz,
+        )  # fmt: skip
         dxn, dyn = c * du - s * dv, s * du + c * dv
         ex, ey = x + c * (pu - su) - s * (pv - sv), y + s * (pu - su) + c * (pv - sv)
     if where == INTO_GUIDE:
