@@ -119,17 +119,20 @@ def graded_guide(
     more: str = "",
     thickness: float = 0.4,
     optimize: str = "",
+    guide: str = "",
+    domain: str = "",
 ) -> Path:
     """A 10 x 8 mm guide ``thickness`` mm thick, lit by two LEDs 1 mm wide at x = 2.5 and
     7.5 mm on its bottom edge, its map graded along y from ``fill[0]`` to ``fill[1]`` (8 x
     10 cells): ``dots`` the ``[dots]`` lines, ``more`` whole sections after them (an
-    ``[orientation]``), ``optimize`` keys after ``seed = 1``. Written into ``tmp``; the
-    job's path."""
+    ``[orientation]``), ``optimize``, ``guide`` and ``domain`` more keys of those
+    sections. Written into ``tmp``; the job's path."""
     grid = np.repeat(np.linspace(fill[0], fill[1], 8)[:, None], 10, axis=1)
     np.savetxt(tmp / "grad.csv", grid, delimiter=",")
     text = f"""[domain]
 width = 10.0
 height = 8.0
+{domain}
 [density]
 grid = "grad.csv"
 [dots]
@@ -140,6 +143,7 @@ seed = 1
 {optimize}
 [light_guide]
 thickness = {thickness}
+{guide}
 [[light_guide.leds]]
 edge = "bottom"
 positions = [2.5, 7.5]
