@@ -28,8 +28,9 @@ from optdot.optics.faces.dot_profile import (  # the twins' private helpers, to 
     next_dot,
     next_twin,
     twin_lattice,
+    under_dots,
 )
-from optdot.optics.rays import ray_state
+from optdot.optics.rays import fresnel, ray_state
 from optdot.optics.scene import dot_grid
 from optdot.pattern import Pattern
 
@@ -218,6 +219,54 @@ def test_a_ray_meeting_a_hemisphere_head_on_passes_into_the_guide_as_fresnel_say
 
 
 @nb.njit
+def _under(f, n, pr, walls, x, y, d, rays):  # pragma: no cover - compiled
+    """``under_dots`` among real dots for ``rays`` rays leaving the bare face at ``(x,
+    y)`` going ``d`` (in the air): ``[rays, 6]`` (act, x, y, dx, dy, dz)."""
+    out = np.zeros((rays, 6))
+    lat = (1.0, 1.0, 1.0, 0.0, 0.0, 1.0, np.uint64(0), True, 0)
+    place = (0.0, 0.0, 1.0, 0.0, pr[1], pr[2])
+    for i in range(rays):
+        _, act, ex, ey, a, b, c = under_dots(
+            ray_state(13, i), f, n, True, pr, walls, x, y, (0.0, 0.0, 0.0, 0.0), lat, False,
+            place, x, y, 0.0, d[0], d[1], d[2],
+        )  # fmt: skip
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3], out[i, 4], out[i, 5] = act, ex, ey, a, b, c
+    return out
+
+
+def test_a_mirror_on_the_tips_of_hemispheres_sends_light_up_into_the_one_it_aims_at():
+    """The reflector sheet lies on the raised dots' tips: light out of the bare face at
+    45° toward a hemisphere (radius 0.1 mm, its tip 0.1 mm under the face) misses it on
+    the way down, and a mirror there sends it up through the hemisphere's centre. So
+    ``1 - R0`` goes in at normal incidence and on up through its base (the guide's
+    own material) at the centre, unturned; the ``R0`` it reflects goes back down the
+    way it came, up onto the face where it left, and in there (Fresnel at 45°), or on
+    away from the dot, 0.2 mm a round trip to the mirror. Had the mirror lain against
+    the face, every ray would go in where it left."""
+    r = 0.1
+    p = Pattern(np.array([[1.5, 1.0]]), 2 * r, BOX)
+    pr = (1, np.ones((1, 1)), np.array([0.0, 0.0, 3.0, 2.0]), 0, 0, *dot_grid(p, p.box))
+    row = np.array(_row(BUMP, r, r, 0.0, 1.0))
+    row[[t.F_REFL, t.F_REFL_FINISH, t.F_PROF_H]] = 1.0, 1.0, r
+    f = tuple(float(v) for v in row)
+    h = math.sqrt(0.5)
+    rays = 20_000
+    out = _under(f, N, pr, np.zeros((0, 4)), 1.3, 1.0, np.array([h, 0.0, -h]), rays)
+    assert set(np.unique(out[:, 0])) == {t.NEW_LEG}
+    assert np.allclose(out[:, 2], 1.0, atol=1e-9)
+    trips = (1.3 - out[:, 1]) / 0.2  # -1 for the dot, 0 where it left, 1, 2, ... beyond
+    assert np.allclose(trips, np.round(trips), atol=1e-9) and round(trips.min()) == -1
+    rf = fresnel(h, 1.0, N)
+    for k, share in ((-1, 1 - R0), (0, R0 * (1 - rf)), (1, R0 * rf * (1 - rf))):
+        seen = np.isclose(trips, k).mean()
+        assert abs(seen - share) < 4 * math.sqrt(share * (1 - share) / rays) + 1e-4, (k, seen)
+    dot, face = trips < -0.5, trips > -0.5
+    inside = math.sqrt(1 - 0.5 / N**2)  # refracted through a flat face at 45°
+    assert np.allclose(out[dot, 3:], [h, 0.0, h], atol=1e-9)
+    assert np.allclose(out[face, 3:], [-h / N, 0.0, inside], atol=1e-9)
+
+
+@nb.njit
 def _first_twin(f, hu, hv, rc, k, lat, skip0, p, d, sites):  # pragma: no cover - compiled
     """The first twin of ``lat`` a ray meets, every site within ``sites`` tried."""
     best, bi, bj = _layer_end(f, hu, hv, k, p[2], d[2]), 0, 0
@@ -270,6 +319,51 @@ def test_the_first_twin_along_a_ray_is_the_one_a_search_of_every_site_finds(code
     assert hits > 100
 
 
+def test_twins_stand_only_where_the_coverage_has_dots():
+    """:func:`next_twin` reads the coverage's fill under each twin: a ray crossing from
+    cells with dots into cells with none (the panel's outside, a hole) meets the twins
+    on the first side only, the ones a search of every site finds there."""
+    f = _row(BUMP, 0.1, 0.1, 0.0, 0.8)
+    hu = hv = 0.1
+    k = 0.8
+    half = (0.0, 0.0, 1.0, 0.0, np.array([[1.0, 0.0]]), np.array([-10.0, -10.0, 10.0, 20.0]))
+    g = np.random.default_rng(9)
+    hits = {True: 0, False: 0}
+    for i in range(600):
+        _, lat = twin_lattice(np.uint64(ray_state(4, i)), hu, hv, 0.0, False, True, 0.5)
+        p = np.array([g.uniform(-0.3, 0.3), g.uniform(-0.3, 0.3), -0.07])
+        a = g.uniform(0, 2 * math.pi)
+        d = np.array([math.cos(a), math.sin(a), 0.05])  # out of the layer within 1.4 mm
+        d /= np.linalg.norm(d)
+        gi, gj, gt = next_twin(f, hu, hv, 0.0, k, lat, False, half, *p, *d)[:3]
+        bi, bj, tt = _first_twin_where(f, hu, hv, 0.0, k, lat, p, d, 40, half)
+        assert math.isfinite(gt) == math.isfinite(tt)
+        if math.isfinite(gt):
+            assert (gi, gj) == (bi, bj) and gt == pytest.approx(tt, abs=1e-12)
+            cu = _site(lat, gi, gj)[0]
+            assert cu < 0  # on the side with dots
+            hits[d[0] > 0] += 1
+    assert min(hits.values()) > 20 and sum(hits.values()) > 200  # going either way
+
+
+def _first_twin_where(f, hu, hv, rc, k, lat, p, d, sites, place):
+    """The first twin of ``lat`` a ray meets among every site within ``sites`` whose
+    centre has dots in ``place``'s coverage (``(i, j, t)``, ``t`` inf for none)."""
+    best, bi, bj = math.inf, 0, 0
+    end = _layer_end_py(f, hu, hv, k, p[2], d[2])
+    phi, gr = place[4], place[5]
+    for i in range(-sites, sites + 1):
+        for j in range(-sites, sites + 1):
+            cu, cv, c, s = _site(lat, i, j)
+            ix, iy = int(math.floor((cu - gr[0]) / gr[2])), int(math.floor((cv - gr[1]) / gr[3]))
+            if not (0 <= ix < phi.shape[1] and 0 <= iy < phi.shape[0]) or phi[iy, ix] <= 0:
+                continue
+            tt = _meet_body(f, hu, hv, rc, k, c, s, p[0] - cu, p[1] - cv, p[2], d[0], d[1], d[2])[0]
+            if tt < best and tt < end:
+                best, bi, bj = tt, i, j
+    return bi, bj, best
+
+
 def _layer_end_py(f, hu, hv, k, z, dz) -> float:
     return float(_layer_end(f, hu, hv, k, z, dz))
 
@@ -297,12 +391,16 @@ def test_the_coverage_s_twins_trace_as_real_close_tall_bumps(tmp_path):
         assert sim["efficiency"] < 0.826 and sim["angles"]["on_axis"] < 1.0
 
 
-def test_the_coverage_s_twins_stop_at_the_panel_s_walls(tmp_path):
-    """Hemispheres at fill 0.7 up to black edges: the coverage's twins stand only where the
-    coverage has dots, so light near a wall meets no twin past it (real dots have none
-    there). With the lattice running on past the walls the coverage extracted 1.6 points
-    less than the real dots, and its far row 0.63 of their light (a hostile tester's
-    guide, 2·10⁶ rays)."""
+def test_the_coverage_traces_as_real_hemispheres_packed_up_to_black_edges(tmp_path):
+    """Hemispheres at fill 0.7 up to black edges (a hostile tester's guide): the coverage
+    and the real dots extract within 1.2 points of each other, and their far rows within
+    8 %. The twins stand on a lattice of the local fill (0.228 mm apart here), where the
+    relaxed dots at this fill nearly touch their nearest neighbours (0.201 mm): since
+    what the reflector returns comes up among the dots, that makes the coverage extract
+    0.7 points (1.9 %) less than the real dots (10⁶ rays). With twins standing past
+    the walls too, the far rows read 0.63 of the real dots' light before the reflector
+    lay on the dots' tips, about 0.96 now (the test of :func:`next_twin`'s fill above
+    catches it)."""
     from optdot.config.schema import load_job
     from optdot.optics.simulate import simulate
     from optdot.orchestration.pipeline import generate
@@ -316,6 +414,6 @@ def test_the_coverage_s_twins_stop_at_the_panel_s_walls(tmp_path):
     rays = 250_000
     cover = simulate(job.bench, rays, 3)
     real = simulate(job.bench, rays, 3, dots=generate(job))
-    assert abs(cover.summary()["efficiency"] - real.summary()["efficiency"]) < 0.006
+    assert abs(cover.summary()["efficiency"] - real.summary()["efficiency"]) < 0.012
     far = [np.asarray(s.counts, float)[-3:].sum() for s in (cover, real)]  # the far rows
     assert abs(far[0] / far[1] - 1) < 0.08, far

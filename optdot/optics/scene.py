@@ -24,7 +24,7 @@ from ..config.bench import Bench
 from ..config.light_guide import EDGE_FINISH, REFLECTOR_FINISH, LightGuide
 from ..errors import JobError
 from ..geometry.caps import cap_shares, no_caps
-from ..geometry.profile import INK, PRISM
+from ..geometry.profile import BUMP, INK, PRISM
 from ..geometry.shapes import packed
 from ..pattern import DotSource, caps_of
 from .tables import (
@@ -50,6 +50,7 @@ from .tables import (
     F_KIND,
     F_PRINT,
     F_PROF_C,
+    F_PROF_H,
     F_PROF_K,
     F_PROF_T1,
     F_PROF_T2,
@@ -175,6 +176,8 @@ def _profile_row(row: np.ndarray, bench: Bench) -> None:
     row[F_PROF_K] = p.aspect(hv)
     row[F_PROF_U], row[F_PROF_V], row[F_PROF_C] = hu, hv, rc
     row[F_PROF_T1], row[F_PROF_T2] = (math.tan(math.radians(f)) for f in p.facets)
+    if p.code in (BUMP, PRISM):  # the reflector sheet lies on the tallest raised dots
+        row[F_PROF_H] = p.height
 
 
 def _turns(bench: Bench) -> bool:

@@ -46,11 +46,14 @@ L_COLS = 7
 #: so that a stack's rays draw their numbers in the order they always have), the dots'
 #: 3-D profile (:data:`~optdot.geometry.profile.INK`, ``BUMP``, ...) and a cap's height
 #: over the footprint's half width, the footprint's half length, half width and corner
-#: radius (mm, along its own axes), a prism's facets' tangents (its start's, its end's).
+#: radius (mm, along its own axes), a prism's facets' tangents (its start's, its end's),
+#: and how far the tallest raised dot stands out of the face (mm: where the reflector
+#: sheet lies under raised dots; 0 for the others).
 (F_KIND, F_PRINT, F_DOT_R, F_DOT_T, F_REFL, F_EXTRACT, F_HAZE, F_HAZE_SIG, F_SHEET_T) = range(9)
 F_SHEET_R, F_SPREAD, F_SPREAD_SIG, F_COS_UP, F_COS_DOWN, F_REFL_FINISH, F_TEST = range(9, 16)
 F_PROFILE, F_PROF_K, F_PROF_U, F_PROF_V, F_PROF_C, F_PROF_T1, F_PROF_T2 = range(16, 23)
-F_COLS = 23
+F_PROF_H = 23
+F_COLS = 24
 
 
 @nb.njit(cache=True, inline="always")
@@ -62,11 +65,11 @@ def face_row(face, fi):  # pragma: no cover - compiled
         face[fi, 0], face[fi, 1], face[fi, 2], face[fi, 3], face[fi, 4], face[fi, 5],
         face[fi, 6], face[fi, 7], face[fi, 8], face[fi, 9], face[fi, 10], face[fi, 11],
         face[fi, 12], face[fi, 13], face[fi, 14], face[fi, 15], face[fi, 16], face[fi, 17],
-        face[fi, 18], face[fi, 19], face[fi, 20], face[fi, 21], face[fi, 22],
+        face[fi, 18], face[fi, 19], face[fi, 20], face[fi, 21], face[fi, 22], face[fi, 23],
     )  # fmt: skip
 
 
-assert F_COLS == 23, "face_row reads every column"
+assert F_COLS == 24, "face_row reads every column"
 #: Face kinds (:mod:`optdot.optics.faces`: what each does to a ray).
 BOTTOM_FACE, INTERFACE, SHEET_FACE, PRISM_FACE = 0, 1, 2, 3
 #: What a face or a wall did to a ray that goes on (a fate, ``>= 0``, ends it): turned it

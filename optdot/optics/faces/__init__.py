@@ -19,7 +19,7 @@ from __future__ import annotations
 import numba as nb
 
 from ..marks import dot_frame
-from ..tables import BOTTOM_FACE, F_KIND, F_PROFILE, PRISM_FACE, SHEET_FACE
+from ..tables import BOTTOM_FACE, F_COS_DOWN, F_KIND, F_PROFILE, PRISM_FACE, SAME_LEG, SHEET_FACE
 from .diffuser_sheet import meet_sheet
 from .dot_profile import BUMP, PRISM, leave_between, meet_profile
 from .interface import meet_interface
@@ -62,8 +62,10 @@ def meet_dots(state, f, n, ink, x, y, pr, walls, dxn, dyn, dz):  # pragma: no co
         state, act, x2, y2, dxn, dyn, dz = meet_profile(
             state, f, n, at, x, y, pr, walls, dxn, dyn, dz
         )
-    elif profile == BUMP or profile == PRISM:
+    elif (profile == BUMP or profile == PRISM) and -dz > f[F_COS_DOWN]:  # out between them
         state, act, x2, y2, dxn, dyn, dz = leave_between(state, f, n, x, y, pr, walls, dxn, dyn, dz)
+    elif profile == BUMP or profile == PRISM:  # total internal reflection, kept inline
+        act, dz = SAME_LEG, -dz
     else:
         state, act, dxn, dyn, dz = meet_reflector(state, f, n, False, dxn, dyn, dz)
     return state, act, x2, y2, dxn, dyn, dz

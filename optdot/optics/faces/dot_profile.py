@@ -12,9 +12,9 @@ plane (into the guide) or out through its surface (into the air under the guide)
 dot's ray meets the cavity's surface on its way down (where its path enters the cavity,
 behind the plane's crossing); through it, it crosses the cavity's air and leaves through
 the surface (back into the guide) or down through the cavity's open base (into the air
-under the guide). Under the guide, the reflector returns it as it returns light out of
-the flat face (:mod:`.reflector`); light going up there meets the flat face. Every dot
-is convex: light reflected off one from outside does not meet it again.
+under the guide), where the reflector returns it as it returns light out of the flat
+face (:mod:`.reflector`). Every dot is convex: light reflected off one from outside does
+not meet it again.
 
 On real dots the ray meets the dot where the stepping found it, in the dot's own frame
 (turned by its angle), and goes on in the guide from where it comes back through the
@@ -26,8 +26,11 @@ Light out in the air under the guide, from a raised dot or through the bare face
 raised dots, meets the raised dots beside it (:func:`among_dots`: the real dots, found
 along its course by :func:`next_dot`; :func:`among_twins`: the coverage's twins on a
 hexagonal lattice of the cell's fill), each met from outside by Fresnel, and entered,
-as many as it reaches, before it goes on to the reflector or up onto the face. A cut
-dot's light is not traced into the cavities beside it.
+as many as it reaches, before it goes on up onto the bare face or down to the
+reflector. The reflector sheet lies on the tallest raised dots' tips (``F_PROF_H`` under
+the face), and what it returns comes up among the dots again (:func:`under_dots`):
+into them from the air, or onto the bare face between them. A cut dot's light is not
+traced into the cavities beside it.
 
 Cap coordinates: the footprint's half width 1, the face's plane ``z = 0``, the guide
 above; a cap of height ``k`` (its height over the half width, at most 1: a hemisphere
@@ -51,13 +54,14 @@ import numpy as np
 from ...geometry.profile import BUMP, DIMPLE, PRISM, PRISM_CUT
 from ...geometry.shapes import half_width_packed
 from ..marks import dot_frame
-from ..rays import _M1, _M2, fresnel, mirrored, mix, refract, uniform
+from ..rays import _M1, _M2, fresnel, lambert, mirrored, mix, refract, uniform
 from ..tables import (
     BOTTOM,
     DOT,
     EDGE,
     F_COS_DOWN,
     F_PROF_C,
+    F_PROF_H,
     F_PROF_K,
     F_PROF_T1,
     F_PROF_T2,
@@ -462,6 +466,16 @@ def _layer_end(f, hu, hv, k, z, dz):  # pragma: no cover - compiled
     return (-tall - z) / dz if dz < 0 else (-z / dz if dz > 0 else np.inf)
 
 
+@nb.njit(cache=True, inline="always")
+def _off_line(rx, ry, ux, uy, reach):  # pragma: no cover - compiled
+    """Whether a dot centred ``(rx, ry)`` (mm) from a ray's start lies farther than
+    ``reach`` (its extent, mm) from the ray's course, whose horizontal unit direction is
+    ``(ux, uy)`` (``(0, 0)`` for a vertical ray): the ray cannot meet it."""
+    if ux == 0.0 and uy == 0.0:
+        return rx * rx + ry * ry > reach * reach
+    return abs(rx * uy - ry * ux) > reach
+
+
 @nb.njit(cache=True)
 def next_dot(f, start, dx_, dy_, foot, cg, x, y, z, dx, dy, dz):  # pragma: no cover
     """The first of the real raised dots (row ``f``'s profile; the print's cells ``start``,
@@ -475,6 +489,7 @@ def next_dot(f, start, dx_, dy_, foot, cg, x, y, z, dx, dy, dz):  # pragma: no c
     t_end = _layer_end(f, rmax, hv0, k0, z, dz)  # a prism no longer than the largest extent
     hs = math.sqrt(dx * dx + dy * dy)
     step = cell / hs if hs > 1e-12 else np.inf
+    ux, uy = (dx / hs, dy / hs) if hs > 1e-12 else (0.0, 0.0)
     best, bk, bx, by, bz = t_end, -1, 0.0, 0.0, 0.0
     ta = 0.0
     for _ in range(2 * (nx + ny) + 4):
@@ -491,6 +506,8 @@ def next_dot(f, start, dx_, dy_, foot, cg, x, y, z, dx, dy, dz):  # pragma: no c
             for jx in range(max(ax, 0), min(bx_ + 1, nx)):
                 cc = jy * nx + jx
                 for j in range(start[cc], start[cc + 1]):
+                    if _off_line(dx_[j] - x, dy_[j] - y, ux, uy, rmax):
+                        continue
                     hu, hv, rc, kk = _sized(hu0, hv0, rc0, k0, half_width_packed(foot, j))
                     t, mx, my, mz = _meet_body(
                         f, hu, hv, rc, kk, foot[j, 4], foot[j, 5], x - dx_[j], y - dy_[j], z,
@@ -612,6 +629,9 @@ def next_twin(f, hu, hv, rc, k, lat, skip0, place, pu, pv, pz, du, dv, dz):  # p
     t_end = _layer_end(f, hu, hv, k, pz, dz)
     hs = math.sqrt(du * du + dv * dv)
     step = 0.5 * a * min(lat[0], 1.0) / hs if hs > 1e-12 else np.inf
+    ux, uy = (du / hs, dv / hs) if hs > 1e-12 else (0.0, 0.0)
+    e, b1u, b1v, b2u, b2v = lat[0], lat[2], lat[3], lat[4], lat[5]
+    reach = math.sqrt(hu * hu + hv * hv)  # a twin's extent
     best, bi, bj, bu, bv, bz = t_end, 0, 0, 0.0, 0.0, 0.0
     ta = 0.0
     for _ in range(4096):
@@ -621,6 +641,8 @@ def next_twin(f, hu, hv, rc, k, lat, skip0, place, pu, pv, pz, du, dv, dz):  # p
             for j in range(j0 - m, j0 + m + 1):
                 if skip0 and i == 0 and j == 0:
                     continue  # the dot the ray left
+                if _off_line((i * b1u + j * b2u) * e - pu, i * b1v + j * b2v - pv, ux, uy, reach):
+                    continue
                 cu, cv, c, s = _site(lat, i, j)
                 if _fill_at(ox + c0 * cu - s0 * cv, oy + s0 * cu + c0 * cv, phi, g) <= 0:
                     continue  # no dots there
@@ -654,43 +676,39 @@ def _on_twin(lat, hu, hv, rc, pu, pv):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True)
+def bare_point(state, lat, hu, hv, rc, prism):  # pragma: no cover - compiled
+    """A point drawn uniformly over lattice ``lat``'s cell off its twins' footprints
+    (half sides ``hu``, ``hv``, corner ``rc``; ellipses unless ``prism``): ``(state, pu,
+    pv)``, mm in the dot's frame: where a ray out through the bare face between the
+    coverage's raised dots leaves it."""
+    e, _, b1u, b1v, b2u, b2v, _, _, _ = lat
+    pu = pv = 0.0
+    for _ in range(64):
+        state, wa = uniform(state)
+        state, wb = uniform(state)
+        pu, pv = (wa * b1u + wb * b2u) * e, wa * b1v + wb * b2v
+        if not _on_twin(lat, hu, hv, rc if prism else -1.0, pu, pv):
+            break
+    return state, pu, pv
+
+
+@nb.njit(cache=True)
 def among_twins(
-    state, f, n, hu, hv, rc, k, aligned, fill, from_dot, place, pu, pv, pz, du, dv, dz
+    state, f, n, hu, hv, rc, k, lat, skip0, place, pu, pv, pz, du, dv, dz
 ):  # pragma: no cover
-    """The coverage's counterpart of :func:`among_dots`: a ray that left a raised dot of
-    the coverage (its frame: half sides ``hu``, ``hv``, corner ``rc``, cap height ``k``)
-    into the air at ``(pu, pv, pz)`` (mm, the dot's frame) going ``d`` meets the dot's
-    twins about it (:func:`twin_lattice`, :func:`next_twin`). The relaxed patterns
-    ``generate`` makes place a dot's neighbours about the hexagonal spacing of the local
-    fill apart, so the twins stand about where the real dots' nearest neighbours do. A
-    ray out through the bare face between them (not ``from_dot``) starts at a point
-    drawn uniformly over the lattice's cell off the twins' footprints (``p`` ignored).
-    ``place`` as :func:`next_twin`'s, its origin the dot's centre (the ray's point on the
-    face when not ``from_dot``). ``(state, where, su, sv, pu, pv, pz, du, dv, dz)``,
-    where as :func:`among_dots`', the point it started from, the one it last left a twin
-    at (or its start) and the direction, in the dot's frame (mm)."""
-    su, sv = pu, pv
-    if fill <= 0:
-        return state, INTO_AIR, su, sv, pu, pv, pz, du, dv, dz
-    prism = int(f[F_PROFILE]) >= PRISM
-    state, lat = twin_lattice(state, hu, hv, rc, prism, aligned, fill)
-    if not from_dot:  # a point of the bare face, drawn
-        e, _, b1u, b1v, b2u, b2v, _, _, _ = lat
-        for _ in range(64):
-            state, wa = uniform(state)
-            state, wb = uniform(state)
-            pu, pv, pz = (wa * b1u + wb * b2u) * e, wa * b1v + wb * b2v, 0.0
-            if not _on_twin(lat, hu, hv, rc if prism else -1.0, pu, pv):
-                break
-        su, sv = pu, pv
-        ox, oy, c, s, phi, g = place  # the lattice's origin: the ray's point less the draw
-        place = (ox - c * su + s * sv, oy - s * su - c * sv, c, s, phi, g)
+    """The coverage's counterpart of :func:`among_dots`: a ray in the air under the face
+    at ``(pu, pv, pz)`` (mm, a coverage dot's frame: half sides ``hu``, ``hv``, corner
+    ``rc``, cap height ``k``) going ``d`` meets the dot's twins (lattice ``lat``,
+    :func:`twin_lattice`; the dot itself at site ``(0, 0)`` left out when ``skip0``:
+    the ray has just left it), found by :func:`next_twin` (``place`` its). The relaxed
+    patterns ``generate`` makes place a dot's neighbours about the hexagonal spacing of
+    the local fill apart, so the twins stand about where the real dots' nearest
+    neighbours do. ``(state, where, pu, pv, pz, du, dv, dz)`` as :func:`among_dots`', in
+    the dot's frame."""
     for _ in range(MAX_DOTS):
-        i, j, t, mu, mv, mz = next_twin(
-            f, hu, hv, rc, k, lat, from_dot, place, pu, pv, pz, du, dv, dz
-        )
+        i, j, t, mu, mv, mz = next_twin(f, hu, hv, rc, k, lat, skip0, place, pu, pv, pz, du, dv, dz)
         if t == np.inf:
-            return state, INTO_AIR, su, sv, pu, pv, pz, du, dv, dz
+            return state, INTO_AIR, pu, pv, pz, du, dv, dz
         cu, cv, c, s = _site(lat, i, j)
         ru, rv, pz = pu + t * du - cu, pv + t * dv - cv, min(pz + t * dz, 0.0)
         state, where, ru, rv, pz, du, dv, dz = _into_body(
@@ -698,9 +716,79 @@ def among_twins(
         )
         pu, pv = cu + ru, cv + rv
         if where != INTO_AIR:
-            return state, where, su, sv, pu, pv, pz, du, dv, dz
-        from_dot = False  # the lattice's own dot may be met now
-    return state, CAUGHT, su, sv, pu, pv, pz, du, dv, dz
+            return state, where, pu, pv, pz, du, dv, dz
+        skip0 = False  # the lattice's own dot may be met now
+    return state, CAUGHT, pu, pv, pz, du, dv, dz
+
+
+@nb.njit(cache=True, inline="always")
+def _no_lattice():  # pragma: no cover - compiled
+    """The lattice :func:`under_dots` takes among real dots (unused there)."""
+    return (1.0, 1.0, 1.0, 0.0, 0.0, 1.0, np.uint64(0), True, 0)
+
+
+@nb.njit(cache=True)
+def under_dots(
+    state, f, n, real, pr, walls, x, y, frame, lat, skip0, place, pu, pv, pz, du, dv, dz
+):  # pragma: no cover
+    """A ray in the air under a face of raised dots (row ``f``; the guide's index ``n``)
+    that met the face at ``(x, y)`` (mm), now at ``(pu, pv, pz)`` going ``d``: among the
+    real dots (``real``: :func:`among_dots`, the print's tables ``pr``, face coordinates)
+    or the coverage's twins (:func:`among_twins` over ``lat`` in the dot's frame,
+    ``frame = (hu, hv, rc, k)``, ``skip0`` as its; ``place``'s origin and turn take the
+    frame to the face), up onto the bare face between them (Fresnel: into the guide, or
+    down again) and down to the reflector sheet, which lies on the tallest dots
+    (``F_PROF_H`` under the face) and returns ``F_REFL`` of the light up among them again
+    (Lambertian in air, or at the angle it came for a mirror), until the ray is back in
+    the guide: ``(state, act, x, y, dx, dy, dz)``, ``NEW_LEG`` from where it comes in
+    (through a dot's base, or the bare face), or the fate ``BOTTOM`` (the reflector
+    absorbed it), ``DOT`` (caught in a dot, or after :data:`MAX_DOTS` passes) or
+    ``EDGE`` (out past the panel's ``walls`` under the guide: beside it). A dot hanging
+    over the panel's edge (a coverage dot drawn there) lets its light in where the ray
+    met it."""
+    hu, hv, rc, k = frame
+    ox, oy, c, s, _, _ = place
+    floor = f[F_PROF_H]
+    for _ in range(MAX_DOTS):
+        if real:
+            state, where, pu, pv, pz, du, dv, dz = among_dots(
+                state, f, n, pr, pu, pv, pz, du, dv, dz
+            )
+        else:
+            state, where, pu, pv, pz, du, dv, dz = among_twins(
+                state, f, n, hu, hv, rc, k, lat, skip0, place, pu, pv, pz, du, dv, dz
+            )
+        skip0 = False
+        if where == CAUGHT:
+            break
+        bare = where == INTO_AIR
+        if bare:  # out of the dots' layer: down to the reflector, or up onto the bare face
+            if dz == 0:
+                break
+            t = (-floor - pz) / dz if dz < 0 else -pz / dz
+            pu, pv, pz = pu + t * du, pv + t * dv, (-floor if dz < 0 else 0.0)
+            ex, ey = ox + c * pu - s * pv, oy + s * pu + c * pv
+            if _past_wall(x, y, ex, ey, walls):  # out sideways, beside the guide
+                return state, EDGE, x, y, c * du - s * dv, s * du + c * dv, dz
+            state, u = uniform(state)
+            if dz < 0:  # the reflector sheet
+                if u >= f[F_REFL]:
+                    return state, BOTTOM, x, y, c * du - s * dv, s * du + c * dv, dz
+                if f[F_REFL_FINISH] > 0.5:  # a mirror: back up at the angle it came
+                    dz = -dz
+                else:
+                    state, du, dv, dz = lambert(state, True)
+                continue
+            if u < fresnel(dz, 1.0, n):  # the face: Fresnel, into the guide or down again
+                dz = -dz
+                continue
+            du, dv, dz = refract(du, dv, dz, 1.0, n)
+            return state, NEW_LEG, ex, ey, c * du - s * dv, s * du + c * dv, dz
+        ex, ey = ox + c * pu - s * pv, oy + s * pu + c * pv  # in through a dot's base
+        if _past_wall(x, y, ex, ey, walls):  # a dot over the panel's edge: where it met it
+            ex, ey = x, y
+        return state, NEW_LEG, ex, ey, c * du - s * dv, s * du + c * dv, dz
+    return state, DOT, x, y, c * du - s * dv, s * du + c * dv, dz
 
 
 @nb.njit(cache=True)
@@ -712,11 +800,12 @@ def meet_profile(state, f, n, at, x, y, pr, walls, dxn, dyn, dz):  # pragma: no 
     print's tables as :func:`~optdot.optics.marks.marked` takes them): ``(state, act, x,
     y, dx, dy, dz)``, ``NEW_LEG`` back into the guide (from where it leaves the dot's
     base, or the base of the dot it passed into, or meets the face coming up; the
-    reflector returns it at ``(x, y)``) or a fate (``BOTTOM`` absorbed under it, ``DOT``
-    caught in a dot). A dot of another size than the row's is its footprint scaled,
-    under a cap of the same height (a prism's facets keep their angles). Light leaving a
-    raised dot into the air meets the dots beside it (:func:`among_dots`, or the
-    coverage's twins, :func:`among_twins`)."""
+    reflector under a cut dot returns it at ``(x, y)``) or a fate (``BOTTOM`` absorbed
+    under it, ``DOT`` caught in a dot, ``EDGE`` out past the panel's ``walls``). A dot of
+    another size than the row's is its footprint scaled, under a cap of the same height
+    (a prism's facets keep their angles). Light leaving a raised dot into the air meets
+    the dots beside it, and what the reflector returns meets them again
+    (:func:`under_dots`: the real dots, or the coverage's twins)."""
     code = int(f[F_PROFILE])
     lu, lv, c, s, half = at
     hu, hv, rc, k = _sized(f[F_PROF_U], f[F_PROF_V], f[F_PROF_C], f[F_PROF_K], half)
@@ -741,25 +830,25 @@ def meet_profile(state, f, n, at, x, y, pr, walls, dxn, dyn, dz):  # pragma: no 
             state, code, k, hu / hv, n, lu / hv, lv / hv, du, dv, dz
         )
         pu, pv, pz = pu * hv, pv * hv, pz * hv
-    raised = code == BUMP or code == PRISM
-    ez = min(pz, 0.0)
-    if where == INTO_AIR and raised and not real:  # among the coverage's twins
+    ox, oy = x - c * lu + s * lv, y - s * lu - c * lv  # the dot's centre
+    if where == INTO_AIR and (code == BUMP or code == PRISM):  # among the raised dots
+        frame = (hu, hv, rc, k)
+        if real:
+            return under_dots(
+                state, f, n, True, pr, walls, x, y, frame, _no_lattice(), False,
+                (0.0, 0.0, 1.0, 0.0, pr[1], pr[2]), ox + c * pu - s * pv, oy + s * pu + c * pv,
+                min(pz, 0.0), c * du - s * dv, s * du + c * dv, dz,
+            )  # fmt: skip
         fill = _fill_at(x, y, pr[1], pr[2])
-        ox, oy = x - c * lu + s * lv, y - s * lu - c * lv  # the dot's centre
-        state, where, _, _, pu, pv, ez, du, dv, dz = among_twins(
-            state, f, n, hu, hv, rc, k, aligned, fill, True, (ox, oy, c, s, pr[1], pr[2]),
-            pu, pv, ez, du, dv, dz,
+        state, lat = twin_lattice(state, hu, hv, rc, code == PRISM, aligned, max(fill, 1e-9))
+        return under_dots(
+            state, f, n, False, pr, walls, x, y, frame, lat, True,
+            (ox, oy, c, s, pr[1], pr[2]), pu, pv, min(pz, 0.0), du, dv, dz,
         )  # fmt: skip
     dxn, dyn = c * du - s * dv, s * du + c * dv
-    ex, ey = x, y  # where it goes on
-    if where == INTO_GUIDE or where == INTO_AIR:  # where it left the dot (or a twin)
+    if where == INTO_GUIDE:  # on from where it left the dot
         ex = x + c * (pu - lu) - s * (pv - lv)
         ey = y + s * (pu - lu) + c * (pv - lv)
-    if where == INTO_AIR and raised and real:  # among the dots
-        state, where, ex, ey, ez, dxn, dyn, dz = among_dots(
-            state, f, n, pr, ex, ey, ez, dxn, dyn, dz
-        )
-    if where == INTO_GUIDE:
         if _past_wall(x, y, ex, ey, walls):  # a dot over the panel's edge: where it met it
             ex, ey = x, y
         return state, NEW_LEG, ex, ey, dxn, dyn, dz
@@ -768,7 +857,7 @@ def meet_profile(state, f, n, at, x, y, pr, walls, dxn, dyn, dz):  # pragma: no 
     if where == ONTO_FACE:  # the bare face beside the dot
         state, act, dxn, dyn, dz = meet_reflector(state, f, n, False, dxn, dyn, dz)
         return state, (NEW_LEG if act == SAME_LEG else act), x, y, dxn, dyn, dz
-    return _under_guide(state, f, n, x, y, ex, ey, ez, walls, dxn, dyn, dz)
+    return _under_guide(state, f, n, x, y, dxn, dyn, dz)
 
 
 @nb.njit(cache=True, inline="always")
@@ -782,22 +871,11 @@ def _past_wall(x, y, x2, y2, walls):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True)
-def _under_guide(state, f, n, x, y, ax, ay, az, walls, dxn, dyn, dz):  # pragma: no cover - compiled
-    """A ray in the air under the guide at ``(ax, ay, az)`` (mm), clear of its dots,
-    having met the face at ``(x, y)``: up onto the flat face (Fresnel: back into the
-    guide where it meets it, or down again), then down to the reflector, which returns
-    it into the guide (at ``(x, y)``) or absorbs it: ``(state, NEW_LEG or BOTTOM, x, y,
-    dx, dy, dz)``; a ray that would come up past the panel's ``walls`` went past the
-    guide's side (``EDGE``)."""
-    if dz > 0:  # up onto the guide's flat face
-        state, u = uniform(state)
-        if u >= fresnel(dz, 1.0, n):
-            fx, fy = ax - az / dz * dxn, ay - az / dz * dyn  # where it meets the face
-            if _past_wall(x, y, fx, fy, walls):  # up past the guide's side
-                return state, EDGE, x, y, dxn, dyn, dz
-            dxn, dyn, dz = refract(dxn, dyn, dz, 1.0, n)
-            return state, NEW_LEG, fx, fy, dxn, dyn, dz
-        dz = -dz
+def _under_guide(state, f, n, x, y, dxn, dyn, dz):  # pragma: no cover - compiled
+    """A ray going down in the air out of a cut dot's open base at ``(x, y)`` (mm) to the
+    reflector, which returns it into the guide there (a mirror at the angle it came,
+    a white sheet Lambertian) or absorbs it: ``(state, NEW_LEG or BOTTOM, x, y, dx, dy,
+    dz)``."""
     if f[F_REFL_FINISH] > 0.5:  # a mirror: back up at the angle it came, through the face
         state, back = mirrored(state, f[F_REFL], fresnel(-dz, 1.0, n))
         if not back:
@@ -813,39 +891,32 @@ def leave_between(state, f, n, x, y, pr, walls, dxn, dyn, dz):  # pragma: no cov
     """A ray going down onto the bare face between raised dots (row ``f``) from the
     guide of index ``n`` at ``(x, y)`` (mm; ``pr`` the print's tables): totally
     reflected outside the escape cone, else Fresnel; what goes out into the air meets
-    the dots beside it (the real ones, :func:`among_dots`, or the coverage's twins at
-    the cell's angle and size, :func:`among_twins`) before the reflector under them:
-    ``(state, act, x, y, dx, dy, dz)`` as :func:`meet_profile`'s, or ``SAME_LEG``
-    reflected at the face."""
+    the dots beside it, the reflector under them, and the dots again
+    (:func:`under_dots`: the real ones, or the coverage's twins at the cell's angle and
+    size from a point drawn off them, :func:`bare_point`): ``(state, act, x, y, dx, dy,
+    dz)`` as :func:`meet_profile`'s, or ``SAME_LEG`` reflected at the face."""
     if -dz <= f[F_COS_DOWN]:
         return state, SAME_LEG, x, y, dxn, dyn, -dz
     state, u = uniform(state)
     if u < fresnel(-dz, n, 1.0):
         return state, SAME_LEG, x, y, dxn, dyn, -dz
     dxn, dyn, dz = refract(dxn, dyn, dz, n, 1.0)
-    ex, ey, ez = x, y, 0.0
     if pr[0]:  # real dots
-        state, where, ex, ey, ez, dxn, dyn, dz = among_dots(
-            state, f, n, pr, x, y, 0.0, dxn, dyn, dz
-        )
-    else:  # the coverage cell's angle and size
-        _, _, c, s, half = dot_frame(x, y, pr)
-        hu, hv, rc, k = _sized(f[F_PROF_U], f[F_PROF_V], f[F_PROF_C], f[F_PROF_K], half)
-        aligned = c == c or (int(f[F_PROFILE]) < PRISM and hu == hv)
-        if c != c:
-            c, s = 1.0, 0.0
-        du, dv = c * dxn + s * dyn, c * dyn - s * dxn
-        fill = _fill_at(x, y, pr[1], pr[2])
-        state, where, su, sv, pu, pv, ez, du, dv, dz = among_twins(
-            state, f, n, hu, hv, rc, k, aligned, fill, False, (x, y, c, s, pr[1], pr[2]),
-            0.0, 0.0, 0.0, du, dv, dz,
+        return under_dots(
+            state, f, n, True, pr, walls, x, y, (0.0, 0.0, 0.0, 0.0), _no_lattice(), False,
+            (0.0, 0.0, 1.0, 0.0, pr[1], pr[2]), x, y, 0.0, dxn, dyn, dz,
         )  # fmt: skip
-        dxn, dyn = c * du - s * dv, s * du + c * dv
-        ex, ey = x + c * (pu - su) - s * (pv - sv), y + s * (pu - su) + c * (pv - sv)
-    if where == INTO_GUIDE:
-        if _past_wall(x, y, ex, ey, walls):
-            ex, ey = x, y
-        return state, NEW_LEG, ex, ey, dxn, dyn, dz
-    if where == CAUGHT:
-        return state, DOT, x, y, dxn, dyn, dz
-    return _under_guide(state, f, n, x, y, ex, ey, ez, walls, dxn, dyn, dz)
+    _, _, c, s, half = dot_frame(x, y, pr)  # the coverage cell's angle and size
+    hu, hv, rc, k = _sized(f[F_PROF_U], f[F_PROF_V], f[F_PROF_C], f[F_PROF_K], half)
+    prism = int(f[F_PROFILE]) >= PRISM
+    aligned = c == c or (not prism and hu == hv)
+    if c != c:
+        c, s = 1.0, 0.0
+    fill = _fill_at(x, y, pr[1], pr[2])
+    state, lat = twin_lattice(state, hu, hv, rc, prism, aligned, max(fill, 1e-9))
+    state, pu, pv = bare_point(state, lat, hu, hv, rc, prism)
+    ox, oy = x - c * pu + s * pv, y - s * pu - c * pv  # the lattice's origin on the face
+    return under_dots(
+        state, f, n, False, pr, walls, x, y, (hu, hv, rc, k), lat, False,
+        (ox, oy, c, s, pr[1], pr[2]), pu, pv, 0.0, c * dxn + s * dyn, c * dyn - s * dxn, dz,
+    )  # fmt: skip
