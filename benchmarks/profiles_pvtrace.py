@@ -3,10 +3,12 @@
 pvtrace (float64 meshes, the material across a surface found by what holds the point past
 it) and by optdot, fate by fate, with pvtrace's noise; and how many rays pvtrace sent from
 one raised dot into a neighbour (optdot follows them too, since session 40), then pvtrace
-again with those rays lost under the guide, as optdot lost them before.
+again with those rays lost under the guide, as optdot lost them before. With
+``--mirror``, both trace the guide over a perfect mirror lying on the bumps' tips (optdot
+since session 41: what the mirror returns comes up among the bumps), pvtrace once.
 
 Run: python benchmarks/profiles_pvtrace.py [--rays 2000] [--pitch 0.5] [--diameter 0.4]
-     [--height 0.1]
+     [--height 0.1] [--mirror]
 
 Printed per tracer: extracted, lost under the guide, lost at the edges (shares of the
 injected rays), each optdot share's distance from pvtrace's in pvtrace's sigma, and the
@@ -56,21 +58,26 @@ def main() -> None:
     ap.add_argument("--pitch", type=float, default=0.5, help="grid pitch, mm")
     ap.add_argument("--diameter", type=float, default=0.4, help="bump diameter, mm")
     ap.add_argument("--height", type=float, default=0.1, help="bump height, mm")
+    ap.add_argument("--mirror", action="store_true", help="a perfect mirror on the tips")
     a = ap.parse_args()
     print(machine())
     xy, _ = _layout(a.pitch)
-    print(f"{len(xy)} bumps {a.diameter} mm across, {a.height} mm high, {a.pitch} mm apart")
+    under = f", over a mirror {a.height} mm under the face" if a.mirror else ""
+    print(f"{len(xy)} bumps {a.diameter} mm across, {a.height} mm high, {a.pitch} mm apart{under}")
     t = time.time()
     dots = {"diameter": a.diameter, "profile": "bump", "height": a.height}
-    ours = _optdot(dots, Pattern(xy, a.diameter, (0.0, 0.0, W, H)))
+    ours = _optdot(dots, Pattern(xy, a.diameter, (0.0, 0.0, W, H)), mirror=a.mirror)
     injected = ours.rays - ours.fates["not_coupled"]
     mine = np.add.reduceat(ours.angles.counts.sum(axis=1), np.arange(0, 18, 3)) / injected
     _row("optdot (10^6 rays)", ours.summary()["shares"], None, mine, time.time() - t)
-    for lose in (False, True):
+    for lose in (False,) if a.mirror else (False, True):
         t = time.time()
         with pytest.MonkeyPatch.context() as mp:
             meshes = [_cap_mesh(a.diameter / 2, a.height) for _ in xy]
-            fates, polar = _pvtrace(meshes, xy, mp.setattr, a.rays, lose_neighbours=lose)
+            fates, polar = _pvtrace(
+                meshes, xy, mp.setattr, a.rays, lose_neighbours=lose,
+                mirror=a.height if a.mirror else None,
+            )  # fmt: skip
         n = sum(fates[k] for k in FATES)
         shares = {k: fates[k] / n for k in FATES}
         z = {

@@ -369,12 +369,13 @@ def _layer_end_py(f, hu, hv, k, z, dz) -> float:
 
 
 def test_the_coverage_s_twins_trace_as_real_close_tall_bumps(tmp_path):
-    """Bumps 80 µm high on 200 µm dots, filling 0.1 to 0.6 of a guide: light leaving one
-    meets its neighbours (efficiency 83.7 % when it does not, 81.1 % through the real
-    dots when it does, 81.2 % as the coverage's twins, 2·10⁶ rays, BENCHMARKS.md). The
-    coverage and the real dots extract the same within 0.6 points and send the same on
-    axis, and both differ from what neither neighbour model gives by far more than their
-    noise."""
+    """Bumps 80 µm high on 200 µm dots, filling 0.1 to 0.6 of a guide over a white
+    sheet: light leaving one meets its neighbours, and what the sheet returns meets them
+    again (efficiency 83.7 % and 1.06 on axis when neither happens; 81.1 % with the
+    neighbours only; 73.2 % both through the real dots and as the coverage's twins,
+    0.92 on axis, 2·10⁶ rays, BENCHMARKS.md). The coverage and the real dots extract
+    the same within 0.6 points and send the same on axis, and both differ from what
+    neither model gives by far more than their noise."""
     from optdot.config.schema import load_job
     from optdot.optics.simulate import simulate
     from optdot.orchestration.pipeline import generate
@@ -387,8 +388,8 @@ def test_the_coverage_s_twins_trace_as_real_close_tall_bumps(tmp_path):
     assert abs(cover["efficiency"] - real["efficiency"]) < 0.006
     a, b = cover["angles"], real["angles"]
     assert abs(a["on_axis"] - b["on_axis"]) < 3 * math.hypot(a["on_axis_sigma"], b["on_axis_sigma"])
-    for sim in (cover, real):  # neighbours met: 83.7 % and 1.06 on axis without them
-        assert sim["efficiency"] < 0.826 and sim["angles"]["on_axis"] < 1.0
+    for sim in (cover, real):  # 83.7 % and 1.06 on axis with neither
+        assert sim["efficiency"] < 0.80 and sim["angles"]["on_axis"] < 1.0
 
 
 def test_the_coverage_traces_as_real_hemispheres_packed_up_to_black_edges(tmp_path):
