@@ -389,7 +389,7 @@ def test_the_coverage_s_twins_trace_as_real_close_tall_bumps(tmp_path):
     a, b = cover["angles"], real["angles"]
     assert abs(a["on_axis"] - b["on_axis"]) < 3 * math.hypot(a["on_axis_sigma"], b["on_axis_sigma"])
     for sim in (cover, real):  # 83.7 % and 1.06 on axis with neither
-        assert sim["efficiency"] < 0.80 and sim["angles"]["on_axis"] < 1.0
+        assert sim["efficiency"] < 0.77 and sim["angles"]["on_axis"] < 1.0
 
 
 def test_the_coverage_traces_as_real_hemispheres_packed_up_to_black_edges(tmp_path):
