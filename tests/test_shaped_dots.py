@@ -229,6 +229,58 @@ def test_orientation_fields():
     np.testing.assert_allclose(got, [-45.0, 45.0])
 
 
+def test_a_prism_whose_facets_differ_points_a_direction_not_an_axis(tmp_path):
+    """Turned half a turn, a prism with facets of 60° and 25° is another dot: its field
+    gives directions (modulo 2π). Toward the LEDs, every prism's first facet faces its
+    nearest LED on both sides of the line through it (an axis flipped them where the
+    direction crossed 90°); random ones point every way; a map blends directions (179°
+    and -179° meet at 180°). Prisms of equal facets keep axes."""
+    two = 2 * math.pi
+    led = Orientation("leds", 0.0, leds=np.array([[2.5, 0.0]]), period=two)
+    got = np.degrees(led.at(np.array([[2.4, 3.0], [2.6, 3.0], [1.0, -1.0]])))
+    want = np.degrees(np.arctan2([3.0, 3.0, -1.0], [-0.1, 0.1, -1.5]))
+    np.testing.assert_allclose(got, want, atol=1e-9)
+    a = np.degrees(
+        Orientation("random", seed=7, period=two).at(
+            np.random.default_rng(1).uniform(0, 5, (600, 2))
+        )
+    )
+    assert np.histogram(a, bins=6, range=(-180, 180))[0].min() > 60
+    grid = np.radians(np.array([[179.0, -179.0]]))
+    f = Orientation("map", 0.0, grid=grid, box=(0.0, 0.0, 2.0, 1.0), period=two)
+    assert abs(abs(math.degrees(f.at(np.array([[1.0, 0.5]]))[0])) - 180.0) < 1e-9
+    for facets, period in (("[60, 25]", two), ("[45, 45]", math.pi)):
+        text = PRISM_JOB.replace("FACETS", facets)
+        (tmp_path / "j.toml").write_text(text)
+        np.savetxt(tmp_path / "m.csv", np.full((4, 6), 0.2), delimiter=",")
+        assert load_job(tmp_path / "j.toml").orientation.period == period
+
+
+#: A guide of raised prisms toward its LEDs (facets given), for the direction test.
+PRISM_JOB = """[domain]
+width = 6.0
+height = 4.0
+[density]
+grid = "m.csv"
+[dots]
+shape = "rounded_rectangle"
+length = 0.12
+width = 0.04
+corner_radius = 0.005
+profile = "prism"
+facets = FACETS
+[orientation]
+toward = "leds"
+relative = "parallel"
+[light_guide]
+thickness = 0.4
+[[light_guide.leds]]
+edge = "bottom"
+positions = [1.5, 4.5]
+width = 1.0
+"""
+
+
 @pytest.mark.parametrize(
     ("dots", "orientation", "words"),
     [

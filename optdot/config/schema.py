@@ -21,6 +21,7 @@ from ..files import input_problem
 from ..geometry.density import INTERPOLATIONS, DensityMap
 from ..geometry.domain import DEFAULT_TOLERANCE, Domain, orient_all
 from ..geometry.outline_io import keep_out_is_wkt, load_outline, parse_keep_out
+from ..geometry.profile import PRISM
 from ..geometry.shapes import DotShape
 from ..geometry.sizes import DEFAULT_STEP, DotSizes
 from .backlight import BACKLIGHT_KEYS, backlight_from, check_leds_inside, led_caps
@@ -307,6 +308,7 @@ def job_from_dict(
         base,
         opt.seed,
         where,
+        directed=profile.code >= PRISM and profile.facets[0] != profile.facets[1],
     )
     return Job(
         domain=domain,

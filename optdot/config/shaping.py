@@ -363,16 +363,20 @@ def orientation(
     base: Path,
     seed: int,
     where: str,
+    directed: bool = False,
 ) -> Orientation:
-    """The ``[orientation]`` field (default: every dot at 0°).
+    """The ``[orientation]`` field (default: every dot at 0°); ``directed``: the dots
+    look different turned half a turn (prisms whose facets differ), so the field gives
+    directions (modulo 2π), not axes.
 
     Raises:
         JobError: a section for round dots, two ways given, an unknown ``toward`` or
             ``relative``, ``toward = "leds"`` without LEDs, a non-finite angle, an angle
             map that cannot be read or holds NaN.
     """
+    period = 2.0 * math.pi if directed else math.pi
     if not sec:
-        return Orientation()
+        return Orientation(period=period)
     if shape.kind.round:
         raise JobError(
             f"{where}: [orientation] turns shaped dots; circles have no long axis "
@@ -389,7 +393,7 @@ def orientation(
     if sec.get("random"):
         if "angle" in sec:
             raise JobError(f"{where}: orientation.random and orientation.angle exclude each other")
-        return Orientation("random", seed=seed)
+        return Orientation("random", seed=seed, period=period)
     if "toward" in sec:
         if sec["toward"] != "leds":
             raise JobError(f'{where}: orientation.toward = {sec["toward"]!r} must be "leds"')
@@ -403,7 +407,9 @@ def orientation(
                 f'{where}: orientation.toward = "leds" needs a [light_guide] with its LEDs'
             )
         turn = 0.5 * math.pi if rel == "perpendicular" else 0.0
-        return Orientation("leds", math.radians(angle) + turn, leds=led_centres(guide, box))
+        return Orientation(
+            "leds", math.radians(angle) + turn, leds=led_centres(guide, box), period=period
+        )
     if "map" in sec:
         path = base / sec["map"]
         grid = load_grid(path, "orientation.map")
@@ -414,8 +420,10 @@ def orientation(
                 f"{path}: orientation.map: row {iy + 1}, column {ix + 1} = "
                 f"{float(grid[iy, ix])!r} is not an angle in degrees, -360..360"
             )
-        return Orientation("map", math.radians(angle), grid=np.radians(grid), box=box)
-    return Orientation("constant", math.radians(angle))
+        return Orientation(
+            "map", math.radians(angle), grid=np.radians(grid), box=box, period=period
+        )
+    return Orientation("constant", math.radians(angle), period=period)
 
 
 def check_shaped_fill(job, fill: float, where: str, at: str = "") -> None:

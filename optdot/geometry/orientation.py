@@ -1,7 +1,10 @@
 """Where each dot's long axis points: the orientation field of a job's ``[orientation]``.
 
 A field gives an angle (rad, counter-clockwise from +x, an axis: taken modulo π) at any
-point of the panel, so a dot's orientation follows it wherever the dot ends up:
+point of the panel, so a dot's orientation follows it wherever the dot ends up. A dot
+that looks different turned half a turn (a micro-prism whose two facets differ) takes a
+direction instead, modulo 2π (``period``): which end faces the LED, which way a random
+one points.
 
 - ``constant``: one angle everywhere;
 - ``leds``: along (``parallel``) or across (``perpendicular``) the direction from the
@@ -35,6 +38,8 @@ class Orientation:
         grid: ``[ny, nx]`` angles, rad (``map``).
         box: ``(x0, y0, x1, y1)`` the grid covers, mm (``map``).
         seed: the hash's seed (``random``).
+        period: the turn that maps a dot onto itself, rad: π for an axis (a footprint,
+            a symmetric profile), 2π for a direction (a prism whose facets differ).
     """
 
     mode: str = "constant"
@@ -43,6 +48,7 @@ class Orientation:
     grid: np.ndarray | None = None
     box: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0)
     seed: int = 0
+    period: float = np.pi
 
     @property
     def follows_position(self) -> bool:
@@ -50,17 +56,17 @@ class Orientation:
         return self.mode != "random"
 
     def at(self, xy: np.ndarray, thrown: np.ndarray | None = None) -> np.ndarray:
-        """``[n]`` angles (rad, in ``(-π/2, π/2]``) of dots centred at ``xy`` (``[n, 2]``
-        mm), thrown at ``thrown`` (``[n, 2]`` mm; ``random`` draws from it, default
-        ``xy``)."""
-        n = len(xy)
+        """``[n]`` angles (rad, in ``(-period/2, period/2]``) of dots centred at ``xy``
+        (``[n, 2]`` mm), thrown at ``thrown`` (``[n, 2]`` mm; ``random`` draws from it,
+        default ``xy``)."""
+        n, p = len(xy), self.period
         if self.mode == "constant":
-            return axis(np.full(n, self.angle))
+            return axis(np.full(n, self.angle), p)
         if self.mode == "random":
-            return axis(np.pi * _unit_hash(xy if thrown is None else thrown, self.seed))
+            return axis(p * _unit_hash(xy if thrown is None else thrown, self.seed), p)
         if self.mode == "leds":
-            return axis(self._from_leds(xy) + self.angle)
-        return axis(self._from_map(xy) + self.angle)
+            return axis(self._from_leds(xy) + self.angle, p)
+        return axis(self._from_map(xy) + self.angle, p)
 
     def _from_leds(self, xy: np.ndarray) -> np.ndarray:
         """Direction from the nearest LED, rad."""
@@ -71,7 +77,8 @@ class Orientation:
         return np.arctan2(d[:, 1], d[:, 0])
 
     def _from_map(self, xy: np.ndarray) -> np.ndarray:
-        """The grid's angle, interpolated as an axis between cell centres, rad."""
+        """The grid's angle, interpolated between cell centres as an axis (a direction,
+        for a ``period`` of 2π), rad."""
         from scipy.interpolate import RegularGridInterpolator
 
         g = self.grid
@@ -81,15 +88,16 @@ class Orientation:
         ys = y0 + (np.arange(ny) + 0.5) * (y1 - y0) / ny
         p = np.column_stack([np.clip(xy[:, 1], ys[0], ys[-1]), np.clip(xy[:, 0], xs[0], xs[-1])])
         parts = []
+        m = 2.0 * np.pi / self.period  # 2: the doubled angle's unit vector, for an axis
         for f in (np.cos, np.sin):
-            v = f(2.0 * g)
+            v = f(m * g)
             if ny == 1 or nx == 1:  # one row or column: interpolate along the other
                 axis_ = ys if nx == 1 else xs
                 col = p[:, 0] if nx == 1 else p[:, 1]
                 parts.append(np.interp(col, axis_, v.ravel()))
             else:
                 parts.append(RegularGridInterpolator((ys, xs), v)(p))
-        return 0.5 * np.arctan2(parts[1], parts[0])
+        return np.arctan2(parts[1], parts[0]) / m
 
 
 def axis(angle: np.ndarray, period: float = np.pi) -> np.ndarray:

@@ -559,37 +559,46 @@ def _fill_at(x, y, phi, g):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, inline="always")
-def _site_angle(key, i, j):  # pragma: no cover - compiled
-    """A twin's own angle (rad, ``0 .. pi``) at lattice site ``(i, j)`` of the ray whose
+def _site_angle(key, i, j, turn):  # pragma: no cover - compiled
+    """A twin's own angle (rad, ``0 .. turn``) at lattice site ``(i, j)`` of the ray whose
     draw is ``key``: the same every time the ray meets the site."""
     z = mix(key ^ (np.uint64(i + (1 << 31)) * _M1 + np.uint64(j + (1 << 31)) * _M2))
-    return math.pi * float(z >> np.uint64(11)) * 2.0**-53
+    return turn * float(z >> np.uint64(11)) * 2.0**-53
+
+
+@nb.njit(cache=True, inline="always")
+def _turn(f):  # pragma: no cover - compiled
+    """The turn a random angle of row ``f``'s dots is drawn over (rad): π, or 2π for a
+    prism whose facets differ (turned half a turn, it is another dot)."""
+    if int(f[F_PROFILE]) >= PRISM and f[F_PROF_T1] != f[F_PROF_T2]:
+        return 2.0 * math.pi
+    return math.pi
 
 
 @nb.njit(cache=True, inline="always")
 def _site(lat, i, j):  # pragma: no cover - compiled
     """Lattice ``lat``'s site ``(i, j)``: its centre ``(cu, cv)`` (mm, the dot's frame)
     and its twin's angle ``(c, s)`` in that frame."""
-    e, _, b1u, b1v, b2u, b2v, key, aligned, _ = lat
+    e, _, b1u, b1v, b2u, b2v, key, turn, _ = lat
     c, s = 1.0, 0.0
-    if not aligned:
-        g = _site_angle(key, i, j)
+    if turn > 0:
+        g = _site_angle(key, i, j, turn)
         c, s = math.cos(g), math.sin(g)
     return (i * b1u + j * b2u) * e, i * b1v + j * b2v, c, s
 
 
 @nb.njit(cache=True)
-def twin_lattice(state, hu, hv, rc, prism, aligned, fill):  # pragma: no cover - compiled
+def twin_lattice(state, hu, hv, rc, prism, turn, fill):  # pragma: no cover - compiled
     """The twins of a coverage dot (half sides ``hu``, ``hv``, corner ``rc``, mm) where
     the cell's ``fill`` (> 0) puts them: a hexagonal lattice of the fill's density turned
     at random, stretched along ``u`` by the dot's elongation when the twins stand at its
-    angle (``aligned``), each at its own angle otherwise (:func:`_site_angle`):
-    ``(state, lat)``, ``lat = (e, a, b1u, b1v, b2u, b2v, key, aligned, m)``, the
-    stretch, the spacing (mm), the basis (mm, stretched coordinates ``u / e, v``), the
-    sites' key, and how many sites about the nearest one a twin over a point may
-    stand."""
+    angle (``turn`` 0), each at its own angle otherwise, drawn over ``turn`` (π, or 2π
+    for a prism whose facets differ; :func:`_site_angle`): ``(state, lat)``, ``lat = (e,
+    a, b1u, b1v, b2u, b2v, key, turn, m)``, the stretch, the spacing (mm), the basis (mm,
+    stretched coordinates ``u / e, v``), the sites' key, and how many sites about the
+    nearest one a twin over a point may stand."""
     area = 4.0 * hu * hv - (4.0 - math.pi) * rc * rc if prism else math.pi * hu * hv
-    e = hu / hv if aligned else 1.0
+    e = hu / hv if turn == 0 else 1.0
     a = math.sqrt(2.0 * area / (e * math.sqrt(3.0) * min(fill, 1.0)))
     state, w = uniform(state)
     state, key_u = uniform(state)
@@ -599,7 +608,7 @@ def twin_lattice(state, hu, hv, rc, prism, aligned, fill):  # pragma: no cover -
     m = int(math.ceil(reach / (h * a))) + 2
     lat = (
         e, a, a * ca, a * sa, a * (0.5 * ca - h * sa), a * (0.5 * sa + h * ca),
-        np.uint64(key_u * 2.0**53), aligned, m,
+        np.uint64(key_u * 2.0**53), turn, m,
     )  # fmt: skip
     return state, lat
 
@@ -724,7 +733,7 @@ def among_twins(
 @nb.njit(cache=True, inline="always")
 def _no_lattice():  # pragma: no cover - compiled
     """The lattice :func:`under_dots` takes among real dots (unused there)."""
-    return (1.0, 1.0, 1.0, 0.0, 0.0, 1.0, np.uint64(0), True, 0)
+    return (1.0, 1.0, 1.0, 0.0, 0.0, 1.0, np.uint64(0), 0.0, 0)
 
 
 @nb.njit(cache=True)
@@ -768,12 +777,12 @@ def under_dots(
             t = (-floor - pz) / dz if dz < 0 else -pz / dz
             pu, pv, pz = pu + t * du, pv + t * dv, (-floor if dz < 0 else 0.0)
             ex, ey = ox + c * pu - s * pv, oy + s * pu + c * pv
+            state, u = uniform(state)
+            if dz < 0 and u >= f[F_REFL]:  # into the sheet, or out of the guide's bottom
+                return state, BOTTOM, x, y, c * du - s * dv, s * du + c * dv, dz
             if _past_wall(x, y, ex, ey, walls):  # out sideways, beside the guide
                 return state, EDGE, x, y, c * du - s * dv, s * du + c * dv, dz
-            state, u = uniform(state)
-            if dz < 0:  # the reflector sheet
-                if u >= f[F_REFL]:
-                    return state, BOTTOM, x, y, c * du - s * dv, s * du + c * dv, dz
+            if dz < 0:  # the reflector sheet returns it
                 if f[F_REFL_FINISH] > 0.5:  # a mirror: back up at the angle it came
                     dz = -dz
                 else:
@@ -811,9 +820,10 @@ def meet_profile(state, f, n, at, x, y, pr, walls, dxn, dyn, dz):  # pragma: no 
     hu, hv, rc, k = _sized(f[F_PROF_U], f[F_PROF_V], f[F_PROF_C], f[F_PROF_K], half)
     turned = code >= PRISM or hu != hv  # the dot looks different turned
     aligned = c == c or not turned  # the twins at its angle (a disc's: any)
+    turn = _turn(f)
     if turned and c != c:  # a random angle, drawn
         state, w = uniform(state)
-        c, s = math.cos(math.pi * w), math.sin(math.pi * w)
+        c, s = math.cos(turn * w), math.sin(turn * w)
     if c != c:
         c, s = 1.0, 0.0
     du, dv = c * dxn + s * dyn, c * dyn - s * dxn
@@ -840,7 +850,9 @@ def meet_profile(state, f, n, at, x, y, pr, walls, dxn, dyn, dz):  # pragma: no 
                 min(pz, 0.0), c * du - s * dv, s * du + c * dv, dz,
             )  # fmt: skip
         fill = _fill_at(x, y, pr[1], pr[2])
-        state, lat = twin_lattice(state, hu, hv, rc, code == PRISM, aligned, max(fill, 1e-9))
+        state, lat = twin_lattice(
+            state, hu, hv, rc, code == PRISM, 0.0 if aligned else turn, max(fill, 1e-9)
+        )
         return under_dots(
             state, f, n, False, pr, walls, x, y, frame, lat, True,
             (ox, oy, c, s, pr[1], pr[2]), pu, pv, min(pz, 0.0), du, dv, dz,
@@ -913,7 +925,9 @@ def leave_between(state, f, n, x, y, pr, walls, dxn, dyn, dz):  # pragma: no cov
     if c != c:
         c, s = 1.0, 0.0
     fill = _fill_at(x, y, pr[1], pr[2])
-    state, lat = twin_lattice(state, hu, hv, rc, prism, aligned, max(fill, 1e-9))
+    state, lat = twin_lattice(
+        state, hu, hv, rc, prism, 0.0 if aligned else _turn(f), max(fill, 1e-9)
+    )
     state, pu, pv = bare_point(state, lat, hu, hv, rc, prism)
     ox, oy = x - c * pu + s * pv, y - s * pu - c * pv  # the lattice's origin on the face
     return under_dots(
