@@ -203,7 +203,7 @@ def test_a_ray_meeting_a_hemisphere_head_on_passes_into_the_guide_as_fresnel_say
     the guide unturned; ``R0`` come straight back, out of the dots' layer."""
     r = 0.1
     p = Pattern(np.array([[1.5, 1.0]]), 2 * r, BOX)
-    pr = (0, 0, 0, 0, 0, *dot_grid(p, p.box))
+    pr = (0, 0, 0, *dot_grid(p, p.box), 0)  # the print's dot_tables
     f = _row(BUMP, r, r, 0.0, 1.0)
     src = np.array([1.2, 0.9, -0.05])
     d = np.array([1.5, 1.0, 0.0]) - src
@@ -245,7 +245,7 @@ def test_a_mirror_on_the_tips_of_hemispheres_sends_light_up_into_the_one_it_aims
     the face, every ray would go in where it left."""
     r = 0.1
     p = Pattern(np.array([[1.5, 1.0]]), 2 * r, BOX)
-    pr = (1, np.ones((1, 1)), np.array([0.0, 0.0, 3.0, 2.0]), 0, 0, *dot_grid(p, p.box))
+    pr = (1, np.ones((1, 1)), np.array([0.0, 0.0, 3.0, 2.0]), *dot_grid(p, p.box), 0)
     row = np.array(_row(BUMP, r, r, 0.0, 1.0))
     row[[t.F_REFL, t.F_REFL_FINISH, t.F_PROF_H]] = 1.0, 1.0, r
     f = tuple(float(v) for v in row)

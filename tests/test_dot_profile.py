@@ -33,11 +33,11 @@ N = 1.49  # PMMA
 #: No walls: a dot's ray is moved freely.
 NO_WALLS = np.zeros((0, 4))
 #: A print with no real dots and no fill, as ``meet_profile`` takes the print's tables
-#: (the coverage and its cells at 1, 2; cells, centres, footprints, grid at 5 .. 9): a ray
-#: leaving a dot meets no other.
+#: (``marks.dot_tables``: the coverage and its cells at 1, 2; cells, centres, footprints,
+#: grid at 3 .. 7; the cells' angles at 8): a ray leaving a dot meets no other.
 NO_PRINT = (
-    0, np.zeros((1, 1)), np.ones(4), 0, 0, np.zeros(2, np.int64), np.zeros(0), np.zeros(0),
-    np.zeros((0, 6)), np.array([0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0]),
+    0, np.zeros((1, 1)), np.ones(4), np.zeros(2, np.int64), np.zeros(0), np.zeros(0),
+    np.zeros((0, 6)), np.array([0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0]), np.full((1, 3), np.nan),
 )  # fmt: skip
 #: Normal-incidence Fresnel reflectance of PMMA in air.
 R0 = ((N - 1) / (N + 1)) ** 2

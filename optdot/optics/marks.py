@@ -69,19 +69,38 @@ def on_cap(x, y, cap_start, cap, cap_g, cap_ring):
     return -1
 
 
+#: What :func:`printed` says where print 1 or 2 has no ink.
+BARE = -1
+#: What :func:`printed` says where there is ink but no real dot of the job's to name: the
+#: coverage's draw, a cap's ring, the second map.
+INK = -2
+
+
 @nb.njit(cache=True, inline="always")
-def marked(x, y, mark, pr, u):
-    """Is there a dot of print ``mark`` (1 the job's, 2 the second map) at (x, y)? ``pr``:
-    the :class:`Print`'s fields as a tuple; ``u`` a uniform draw (the coverage test). A
-    cap of print 1 is ink whatever ``u``."""
+def printed(x, y, mark, pr, u):
+    """What of print ``mark`` (1 the job's, 2 the second map) lies at (x, y): the index
+    of the job's real dot there, :data:`INK` (the coverage's, a cap's or the second
+    map's ink) or :data:`BARE`. ``pr``: the :class:`Print`'s fields as a tuple; ``u`` a
+    uniform draw (the coverage test). A cap of print 1 is ink whatever ``u``."""
     explicit, phi, g, phi2, g2, start, dx_, dy_, foot, cg, cap_start, cap, cap_g, ring, _ = pr
     if mark == 2:
-        return on_dot(x, y, False, phi2, g2, start, dx_, dy_, foot, cg, u)
+        return INK if on_dot(x, y, False, phi2, g2, start, dx_, dy_, foot, cg, u) else BARE
     if cap.shape[0] > 0:
         at = on_cap(x, y, cap_start, cap, cap_g, ring)
         if at >= 0:  # on a cap's ink, or clear between its rings
-            return at == 1
-    return on_dot(x, y, explicit, phi, g, start, dx_, dy_, foot, cg, u)
+            return INK if at == 1 else BARE
+    if explicit:
+        return dot_at(x, y, start, dx_, dy_, foot, cg)
+    return INK if on_dot(x, y, False, phi, g, start, dx_, dy_, foot, cg, u) else BARE
+
+
+@nb.njit(cache=True, inline="always")
+def dot_tables(pr):
+    """The print's tables a face of 3-D dots reads, out of the :class:`Print` tuple
+    ``pr``: ``(explicit, phi, g, start, x, y, foot, cg, turn)``, as :class:`Print` has
+    them. Fewer arrays than the print's to hand down a dot's kernels: numba counts a
+    reference to every array of a tuple at each call it is passed to."""
+    return (pr[0], pr[1], pr[2], pr[5], pr[6], pr[7], pr[8], pr[9], pr[14])
 
 
 #: What :func:`dot_frame` says where it cannot tell: the point, the angle and the size
@@ -90,17 +109,18 @@ NO_FRAME = (math.nan, math.nan, math.nan, math.nan, math.nan)
 
 
 @nb.njit(cache=True, inline="always")
-def dot_frame(x, y, pr):
-    """Where on its dot the point (x, y) of the job's print lies, for a 3-D dot: ``(lu,
+def dot_frame(x, y, k, dots):
+    """Where on its dot the point (x, y) of the job's print lies, for a 3-D dot (``k``:
+    :func:`printed`'s there, the real dot's index or :data:`INK`; ``dots``: the print's
+    :func:`dot_tables`): ``(lu,
     lv, c, s, w)``, on a real dot the point in the dot's own frame (mm along its long
     axis and across it), the cosine and sine of its angle and its half width (mm); in
     the coverage, NaN for the point and the cell's angle and half width (``pr``'s
     ``turn``, over the coverage's cells split ``f`` × ``f``: NaN where the dot draws its
-    angle, or has the job's one size). Asked only of 3-D dots, after :func:`marked` found
-    ink there (the ink's own path does not look)."""
-    explicit, phi, g, _, _, start, dx_, dy_, foot, cg, _, _, _, _, turn = pr
+    angle, or has the job's one size). Asked only of 3-D dots, where :func:`printed` found
+    ink (the ink's own path does not look)."""
+    explicit, phi, g, _, dx_, dy_, foot, _, turn = dots
     if explicit:
-        k = dot_at(x, y, start, dx_, dy_, foot, cg)
         if k < 0:
             return NO_FRAME
         c, s = foot[k, 4], foot[k, 5]

@@ -62,7 +62,7 @@ import numba as nb
 import numpy as np
 
 from .faces import meet_dots, meet_face, meet_wall, wall_distance
-from .marks import marked
+from .marks import BARE, dot_tables, printed
 from .rays import fresnel, last_at_most, ray_state, uniform
 from .tables import (
     BULK,
@@ -173,6 +173,7 @@ def _trace_rays(
     parallel passes analyse a ``prange`` loop's whole body, which a ray's whole life
     makes compile several times longer (the same results: rays draw their own numbers)."""
     top = layer.shape[0]  # the top face's index
+    dots = dot_tables(pr_arrays)
     for j in range(lo, hi):
         state = ray_state(seed, first + j)
         k = last_at_most(emit_start, first + j, emit.shape[0])
@@ -217,13 +218,15 @@ def _trace_rays(
             up = dz > 0  # a face: fi under the layer (going down) or over it (going up)
             fi, z, to = (li + 1, z1, li + 1) if up else (li, z0, li - 1)
             n_to = layer[to, L_N] if 0 <= to < top else 1.0
-            ink = False
+            on = BARE
             if face[fi, F_TEST] > 0.5:  # the print test: a number drawn, the print looked up
                 state, u = uniform(state)
-                ink = face[fi, F_PRINT] > 0.5 and marked(x, y, int(face[fi, F_PRINT]), pr_arrays, u)
+                if face[fi, F_PRINT] > 0.5:
+                    on = printed(x, y, int(face[fi, F_PRINT]), pr_arrays, u)
+            ink = on != BARE
             if face[fi, F_PROFILE] > 0.5:  # 3-D dots: they need the print, and move the ray
                 state, act, x, y, dxn, dyn, dz = meet_dots(
-                    state, face_row(face, fi), n, ink, x, y, pr_arrays, walls, dxn, dyn, dz
+                    state, face_row(face, fi), n, on, x, y, dots, walls, dxn, dyn, dz
                 )
             else:
                 state, act, dxn, dyn, dz = meet_face(

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numba as nb
 
-from ..marks import dot_frame
+from ..marks import BARE, dot_frame
 from ..tables import BOTTOM_FACE, F_COS_DOWN, F_KIND, F_PROFILE, PRISM_FACE, SAME_LEG, SHEET_FACE
 from .diffuser_sheet import meet_sheet
 from .dot_profile import BUMP, PRISM, leave_between, meet_profile
@@ -47,18 +47,20 @@ def meet_face(state, f, up, n, n_to, is_top, ink, dxn, dyn, dz):  # pragma: no c
 
 
 @nb.njit(cache=True, inline="always")
-def meet_dots(state, f, n, ink, x, y, pr, walls, dxn, dyn, dz):  # pragma: no cover
+def meet_dots(state, f, n, on, x, y, pr, walls, dxn, dyn, dz):  # pragma: no cover
     """A ray going down onto the bottom face of 3-D dots (its row ``f``) from the guide of
-    index ``n`` at ``(x, y)`` (mm), on a dot (``ink``) or not, with the print's tables
-    ``pr`` and the panel's ``walls``: a dot's ``meet_profile``, the face between raised
-    dots (``leave_between``), or the bare face beside cut ones: ``(state, act, x, y, dx,
-    dy, dz)``, and where the ray goes on from (a dot moves it). Kept apart from
+    index ``n`` at ``(x, y)`` (mm), on a dot or not (``on``: what
+    :func:`~optdot.optics.marks.printed` found there), with the print's
+    :func:`~optdot.optics.marks.dot_tables` ``pr`` and the panel's ``walls``: a dot's
+    ``meet_profile``, the face between raised dots (``leave_between``), or the bare face
+    beside cut ones: ``(state, act, x, y, dx, dy, dz)``, and where the ray goes on from
+    (a dot moves it). Kept apart from
     :func:`meet_face`: the print's arrays handed to every face's kernel at every event
     cost the tracer half its speed."""
     profile = f[F_PROFILE]
     x2, y2 = x, y
-    if ink:  # on a dot: where on it (a real one), or the coverage cell's angle and size
-        at = dot_frame(x, y, pr)
+    if on != BARE:  # on a dot: where on it (a real one), or the coverage cell's angle and size
+        at = dot_frame(x, y, on, pr)
         state, act, x2, y2, dxn, dyn, dz = meet_profile(
             state, f, n, at, x, y, pr, walls, dxn, dyn, dz
         )

@@ -53,7 +53,7 @@ import numpy as np
 
 from ...geometry.profile import BUMP, DIMPLE, PRISM, PRISM_CUT
 from ...geometry.shapes import half_width_packed
-from ..marks import dot_frame
+from ..marks import INK, dot_frame
 from ..rays import _M1, _M2, fresnel, lambert, mirrored, mix, refract, uniform
 from ..tables import (
     BOTTOM,
@@ -528,8 +528,9 @@ def among_dots(state, f, n, pr, x, y, z, dxn, dyn, dz):  # pragma: no cover - co
     (:func:`next_dot`, :func:`_into_body`): ``(state, where, x, y, z, dxn, dyn, dz)``,
     :data:`INTO_GUIDE` up through a dot's base (there), :data:`CAUGHT`, or
     :data:`INTO_AIR` out of the dots' layer (down to the reflector, or up onto the bare
-    face), from the point it last left a dot at (or its start)."""
-    start, dx_, dy_, foot, cg = pr[5], pr[6], pr[7], pr[8], pr[9]
+    face), from the point it last left a dot at (or its start). ``pr``: the print's
+    :func:`~optdot.optics.marks.dot_tables`."""
+    start, dx_, dy_, foot, cg = pr[3], pr[4], pr[5], pr[6], pr[7]
     for _ in range(MAX_DOTS):
         k, t, mx, my, mz = next_dot(f, start, dx_, dy_, foot, cg, x, y, z, dxn, dyn, dz)
         if k < 0:
@@ -742,7 +743,7 @@ def under_dots(
 ):  # pragma: no cover
     """A ray in the air under a face of raised dots (row ``f``; the guide's index ``n``)
     that met the face at ``(x, y)`` (mm), now at ``(pu, pv, pz)`` going ``d``: among the
-    real dots (``real``: :func:`among_dots`, the print's tables ``pr``, face coordinates)
+    real dots (``real``: :func:`among_dots`, the print's ``dot_tables`` ``pr``, face coordinates)
     or the coverage's twins (:func:`among_twins` over ``lat`` in the dot's frame,
     ``frame = (hu, hv, rc, k)``, ``skip0`` as its; ``place``'s origin and turn take the
     frame to the face), up onto the bare face between them (Fresnel: into the guide, or
@@ -800,13 +801,15 @@ def under_dots(
     return state, DOT, x, y, c * du - s * dv, s * du + c * dv, dz
 
 
-@nb.njit(cache=True)
+# inlined into the tracer's loop: numba counts a reference to each of the print's
+# tables at every call they are handed to (a tenth of a raised dot's time)
+@nb.njit(cache=True, inline="always")
 def meet_profile(state, f, n, at, x, y, pr, walls, dxn, dyn, dz):  # pragma: no cover - compiled
     """A ray going down onto a dot of the bottom face (its row ``f``: the profile's code,
     its body, the reflector) from the guide of index ``n``, where the print test found it
     (``at``, :func:`~optdot.optics.marks.dot_frame`'s: the point in the dot's frame, its
     angle and its half width, NaN where unknown; ``(x, y)`` the point, mm; ``pr`` the
-    print's tables as :func:`~optdot.optics.marks.marked` takes them): ``(state, act, x,
+    print's :func:`~optdot.optics.marks.dot_tables`): ``(state, act, x,
     y, dx, dy, dz)``, ``NEW_LEG`` back into the guide (from where it leaves the dot's
     base, or the base of the dot it passed into, or meets the face coming up; the
     reflector under a cut dot returns it at ``(x, y)``) or a fate (``BOTTOM`` absorbed
@@ -898,10 +901,12 @@ def _under_guide(state, f, n, x, y, dxn, dyn, dz):  # pragma: no cover - compile
     return state, act, x, y, dxn, dyn, dz
 
 
-@nb.njit(cache=True)
+# inlined into the tracer's loop: numba counts a reference to each of the print's
+# tables at every call they are handed to (a tenth of a raised dot's time)
+@nb.njit(cache=True, inline="always")
 def leave_between(state, f, n, x, y, pr, walls, dxn, dyn, dz):  # pragma: no cover - compiled
     """A ray going down onto the bare face between raised dots (row ``f``) from the
-    guide of index ``n`` at ``(x, y)`` (mm; ``pr`` the print's tables): totally
+    guide of index ``n`` at ``(x, y)`` (mm; ``pr`` the print's ``dot_tables``): totally
     reflected outside the escape cone, else Fresnel; what goes out into the air meets
     the dots beside it, the reflector under them, and the dots again
     (:func:`under_dots`: the real ones, or the coverage's twins at the cell's angle and
@@ -918,7 +923,7 @@ def leave_between(state, f, n, x, y, pr, walls, dxn, dyn, dz):  # pragma: no cov
             state, f, n, True, pr, walls, x, y, (0.0, 0.0, 0.0, 0.0), _no_lattice(), False,
             (0.0, 0.0, 1.0, 0.0, pr[1], pr[2]), x, y, 0.0, dxn, dyn, dz,
         )  # fmt: skip
-    _, _, c, s, half = dot_frame(x, y, pr)  # the coverage cell's angle and size
+    _, _, c, s, half = dot_frame(x, y, INK, pr)  # the coverage cell's angle and size
     hu, hv, rc, k = _sized(f[F_PROF_U], f[F_PROF_V], f[F_PROF_C], f[F_PROF_K], half)
     prism = int(f[F_PROFILE]) >= PRISM
     aligned = c == c or (not prism and hu == hv)
