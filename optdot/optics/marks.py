@@ -78,11 +78,13 @@ INK = -2
 
 @nb.njit(cache=True, inline="always")
 def printed(x, y, mark, pr, u):
-    """What of print ``mark`` (1 the job's, 2 the second map) lies at (x, y): the index
+    """What of print ``mark`` (1 the job's, 2 the second map, 0 none) lies at (x, y): the index
     of the job's real dot there, :data:`INK` (the coverage's, a cap's or the second
     map's ink) or :data:`BARE`. ``pr``: the :class:`Print`'s fields as a tuple; ``u`` a
     uniform draw (the coverage test). A cap of print 1 is ink whatever ``u``."""
     explicit, phi, g, phi2, g2, start, dx_, dy_, foot, cg, cap_start, cap, cap_g, ring, _ = pr
+    if mark == 0:  # a face with no print
+        return BARE
     if mark == 2:
         return INK if on_dot(x, y, False, phi2, g2, start, dx_, dy_, foot, cg, u) else BARE
     if cap.shape[0] > 0:

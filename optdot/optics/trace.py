@@ -162,18 +162,17 @@ def _enter_layer(layer, li, up, tau):  # pragma: no cover - compiled
 @nb.njit(cache=True)
 def _trace_rays(
     seed, first, lo, hi, emit, emit_start, prof_theta, prof_cdf, prof_mode, layer, face,
-    walls, normals, pr_arrays, max_events, fate, ex, ey, ed,
+    walls, normals, pr_arrays, dots, max_events, fate, ex, ey, ed,
 ):  # pragma: no cover - compiled  # fmt: skip
-    """Rays ``first + lo .. first + hi - 1`` (:func:`trace`'s tables unpacked,
-    ``pr_arrays`` the :class:`~optdot.optics.tables.Print` as a tuple), each one's fate,
-    end and direction (not for rays turned back at birth) at ``lo .. hi - 1`` of ``fate``,
-    ``ex``, ``ey``, ``ed``: born, then stepped leg by leg to the next wall or face.
+    """Rays ``first + lo .. first + hi - 1`` (:func:`trace`'s tables unpacked, ``pr_arrays``
+    the :class:`~optdot.optics.tables.Print` as a tuple, ``dots`` its ``dot_tables``), each
+    one's fate, end and direction (not for rays turned back at birth) at ``lo .. hi - 1``
+    of ``fate``, ``ex``, ``ey``, ``ed``: born, then stepped leg by leg to a wall or face.
 
     A serial loop of its own, which :func:`trace` runs in parallel over chunks: numba's
     parallel passes analyse a ``prange`` loop's whole body, which a ray's whole life
     makes compile several times longer (the same results: rays draw their own numbers)."""
     top = layer.shape[0]  # the top face's index
-    dots = dot_tables(pr_arrays)
     for j in range(lo, hi):
         state = ray_state(seed, first + j)
         k = last_at_most(emit_start, first + j, emit.shape[0])
@@ -221,16 +220,14 @@ def _trace_rays(
             on = BARE
             if face[fi, F_TEST] > 0.5:  # the print test: a number drawn, the print looked up
                 state, u = uniform(state)
-                if face[fi, F_PRINT] > 0.5:
-                    on = printed(x, y, int(face[fi, F_PRINT]), pr_arrays, u)
-            ink = on != BARE
+                on = printed(x, y, int(face[fi, F_PRINT]), pr_arrays, u)
             if face[fi, F_PROFILE] > 0.5:  # 3-D dots: they need the print, and move the ray
                 state, act, x, y, dxn, dyn, dz = meet_dots(
                     state, face_row(face, fi), n, on, x, y, dots, walls, dxn, dyn, dz
                 )
             else:
                 state, act, dxn, dyn, dz = meet_face(
-                    state, face_row(face, fi), up, n, n_to, fi == top, ink, dxn, dyn, dz
+                    state, face_row(face, fi), up, n, n_to, fi == top, on != BARE, dxn, dyn, dz
                 )
             if act >= 0 or (act == CROSS and fi == top):
                 end = act if act >= 0 else EXTRACTED
@@ -285,6 +282,7 @@ def trace(seed, first, count, scene):  # pragma: no cover - compiled
         pr.cap_ring,
         pr.turn,
     )
+    dots = dot_tables(pr_arrays)  # what a face of 3-D dots reads of it
     max_events = st.max_events
     fate = np.empty(count, np.int8)
     ex = np.empty(count, np.float32)
@@ -293,7 +291,7 @@ def trace(seed, first, count, scene):  # pragma: no cover - compiled
     for c in nb.prange((count + RAY_CHUNK - 1) // RAY_CHUNK):
         _trace_rays(
             seed, first, c * RAY_CHUNK, min(count, (c + 1) * RAY_CHUNK), emit, emit_start,
-            prof_theta, prof_cdf, prof_mode, layer, face, walls, normals, pr_arrays,
+            prof_theta, prof_cdf, prof_mode, layer, face, walls, normals, pr_arrays, dots,
             max_events, fate, ex, ey, ed,
         )  # fmt: skip
     return fate, ex, ey, ed
