@@ -349,3 +349,37 @@ def test_caps_keep_the_led_grid_s_symmetry_for_the_design(tmp_path):
     assert period_classes(job.bench, *design_grid(job.bench)) is not None
     other = direct_job(tmp_path, 10.0, 10.0, None, leds={"pitch": [5.0, 5.0], "size": 0.2})
     assert period_classes(load_job(other, need_map=False), *design_grid(job.bench)) is not None
+
+
+def test_the_print_names_the_real_dot_under_a_cap_s_ink_and_ink_elsewhere_on_the_cap():
+    """``marks.printed`` on print 1 with caps (rows ``(x, y, diameter)``) over real dots:
+    on a cap's ink over a dot, that dot's index (a 3-D dot's frame is read from it); on
+    its ink off every dot, ``INK``; between a graded cap's rings, ``BARE`` whatever lies
+    under it; off the caps, the dots alone."""
+    from optdot.geometry.shapes import KINDS, Footprints
+    from optdot.optics.marks import BARE, INK, printed
+    from optdot.optics.scene import dot_grid
+    from optdot.pattern import Pattern
+
+    box = (0.0, 0.0, 4.0, 3.0)
+    xy = np.array([[1.0, 1.0], [1.3, 1.0], [3.0, 2.0]])
+    p = Pattern(xy, 0.0, box, dots=Footprints(KINDS["circle"], np.full((3, 3), 0.1), np.zeros(3)))
+    start, x, y, foot, cg = dot_grid(p, box)
+    caps = np.array([[1.0, 1.0, 1.0]])  # over the first two dots, 0.5 mm in radius
+    c_start, cap, c_g = cap_grid(caps, box)
+
+    def at(px, py, rings):
+        pr = (True, np.zeros((1, 1)), np.ones(4), np.zeros((1, 1)), np.ones(4), start, x, y)
+        pr += (foot, cg, c_start, cap, c_g, np.array(rings), np.full((1, 3), np.nan))
+        return printed.py_func(px, py, 1, pr, 0.5)
+
+    def centre(k):
+        return (float(x[k]), float(y[k])) if k >= 0 else k
+
+    solid = [[0.0, np.inf]]
+    assert centre(at(1.02, 1.01, solid)) == (1.0, 1.0)
+    assert centre(at(1.31, 0.99, solid)) == (1.3, 1.0)
+    assert at(1.0, 1.3, solid) == INK
+    assert centre(at(3.0, 2.03, solid)) == (3.0, 2.0)
+    assert at(2.0, 2.0, solid) == BARE
+    assert at(1.02, 1.01, [[0.04, 0.09]]) == BARE  # between the rings (0.2-0.3 mm out)

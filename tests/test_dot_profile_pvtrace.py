@@ -272,8 +272,8 @@ def _pvtrace(
                 and mirror is None
                 and last.direction[2] <= 0
             ):
-                fates["lost_bottom"] += 1  # (going up from under the face: out beside the guide)
-            else:
+                fates["lost_bottom"] += 1
+            else:  # out of a side, or up from under the face: out beside the guide
                 fates["lost_edges"] += 1
     return fates, np.array(polar)
 

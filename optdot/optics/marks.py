@@ -89,8 +89,11 @@ def printed(x, y, mark, pr, u):
         return INK if on_dot(x, y, False, phi2, g2, start, dx_, dy_, foot, cg, u) else BARE
     if cap.shape[0] > 0:
         at = on_cap(x, y, cap_start, cap, cap_g, ring)
-        if at >= 0:  # on a cap's ink, or clear between its rings
-            return INK if at == 1 else BARE
+        if at == 0:  # within a cap, clear between its rings
+            return BARE
+        if at == 1:  # on a cap's ink (over a real dot, that dot's frame)
+            k = dot_at(x, y, start, dx_, dy_, foot, cg) if explicit else -1
+            return k if k >= 0 else INK
     if explicit:
         return dot_at(x, y, start, dx_, dy_, foot, cg)
     return INK if on_dot(x, y, False, phi, g, start, dx_, dy_, foot, cg, u) else BARE
@@ -117,7 +120,7 @@ def dot_frame(x, y, k, dots):
     :func:`dot_tables`): ``(lu,
     lv, c, s, w)``, on a real dot the point in the dot's own frame (mm along its long
     axis and across it), the cosine and sine of its angle and its half width (mm); in
-    the coverage, NaN for the point and the cell's angle and half width (``pr``'s
+    the coverage, NaN for the point and the cell's angle and half width (``dots``'s
     ``turn``, over the coverage's cells split ``f`` × ``f``: NaN where the dot draws its
     angle, or has the job's one size). Asked only of 3-D dots, where :func:`printed` found
     ink (the ink's own path does not look)."""
