@@ -1,8 +1,9 @@
 """Light from one raised 3-D dot into its neighbours (issue 60): the coverage's twins (what
 ``design`` traces) against the real dots ``generate`` makes, where bumps and prisms stand
-tall and close; and the time a ray through real bumps against ink's on the same dots.
+tall and close; and the time a ray through real bumps and dimples against ink's on the
+same dots.
 
-Run: python benchmarks/neighbours.py [--rays 2e6] [--speed-rays 2e6]
+Run: python benchmarks/neighbours.py [--rays 2e6] [--speed-rays 2e6] [--speed-only]
 
 Each case is a 10 x 8 mm guide 0.6 mm thick (PMMA, a white reflector 0.95 under it), two
 LEDs 1 mm wide on its bottom edge, and a map graded along y: traced as the coverage and
@@ -11,9 +12,9 @@ per trace the efficiency (share of the injected light out of the top), the share
 under the guide and at the edges, the on-axis luminance (over a Lambertian's of the same
 flux) with its 1-sigma noise, seconds and rays/s. Then the speed: the lgp sample's guide
 (30 x 20 mm) with a map graded 0.1 to 0.4 of 46 µm dots, traced through the same real
-dots as white ink and as 12 µm bumps (ten runs of each in turn, after a first that
-compiles; the CPU seconds summed), rays per CPU second and the bumps' time a ray over
-ink's. At the end the peak memory.
+dots as white ink, as 12 µm bumps and as 12 µm dimples (ten runs of each in turn, after
+a first that compiles; the CPU seconds summed), rays per CPU second and each 3-D dot's
+time a ray over ink's. At the end the peak memory.
 """
 
 from __future__ import annotations
@@ -82,6 +83,8 @@ def _speed(root: Path, rays: int) -> None:
     (root / "ink.toml").write_text(job_text)
     bump = 'diameter = 0.046   # mm\nprofile = "bump"\nheight = 0.012\n'
     (root / "bump.toml").write_text(job_text.replace("diameter = 0.046   # mm\n", bump))
+    dimple = 'diameter = 0.046   # mm\nprofile = "dimple"\ndepth = 0.012\n'
+    (root / "dimple.toml").write_text(job_text.replace("diameter = 0.046   # mm\n", dimple))
     ink, bumps = load_job(root / "ink.toml"), load_job(root / "bump.toml")
     pattern = generate(ink)
     rounds = 10
@@ -92,6 +95,7 @@ def _speed(root: Path, rays: int) -> None:
     )
     scenes = {"ink": scene_of(ink.bench, rays, pattern)}
     scenes["bumps 12 µm"] = scene_of(bumps.bench, rays, pattern)
+    scenes["dimples 12 µm"] = scene_of(load_job(root / "dimple.toml").bench, rays, pattern)
     for scene in scenes.values():
         trace(0, 0, 1000, scene)  # compiled
     cpu = dict.fromkeys(scenes, 0.0)
@@ -102,18 +106,20 @@ def _speed(root: Path, rays: int) -> None:
             cpu[name] += time.process_time() - t
     for name, sec in cpu.items():
         print(f"  {name:<12} {sec:.2f} CPU s  {rays / sec / 1e6:.2f} M rays per CPU s")
-    print(f"  bumps / ink, time a ray: {cpu['bumps 12 µm'] / cpu['ink']:.2f}")
+    for name in ("bumps 12 µm", "dimples 12 µm"):
+        print(f"  {name.split()[0]} / ink, time a ray: {cpu[name] / cpu['ink']:.2f}")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--rays", type=float, default=2e6, help="rays a trace of each case")
     ap.add_argument("--speed-rays", type=float, default=2e6, help="rays a timed trace")
+    ap.add_argument("--speed-only", action="store_true", help="only the time a ray")
     a = ap.parse_args()
     print(machine())
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
-        for name, fill, dots, orientation in CASES:
+        for name, fill, dots, orientation in () if a.speed_only else CASES:
             _case(root, name, fill, dots, orientation, int(a.rays))
         _speed(root, int(a.speed_rays))
     print(f"peak {peak_rss_mb():.0f} MB (one process)")

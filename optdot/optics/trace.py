@@ -61,7 +61,7 @@ import math
 import numba as nb
 import numpy as np
 
-from .faces import meet_dots, meet_face, meet_wall, wall_distance
+from .faces import born_among_dots, meet_dots, meet_face, meet_wall, wall_distance
 from .marks import BARE, dot_tables, printed
 from .rays import fresnel, last_at_most, ray_state, uniform
 from .tables import (
@@ -159,6 +159,44 @@ def _enter_layer(layer, li, up, tau):  # pragma: no cover - compiled
     return (z0 if up else z1), z0, z1, n, absorb, budget
 
 
+@nb.njit(cache=True, inline="always")
+def _born_among(state, li, face, n, x, y, z, z0, dots, walls, dxn, dyn, dz):  # pragma: no cover
+    """A ray just born (or sent back off a wall) in layer ``li`` at ``(x, y, z)`` (mm; the
+    layer's bottom face at ``z0``, its index ``n``) going ``d``: among the cavities of a
+    guide's cut dots when it starts in their layer going up
+    (:func:`~.faces.born_among_dots`): ``(state, end, x, y, z, dx, dy, dz)``, ``end`` a fate
+    or ``UNFINISHED``."""
+    if li != 0 or face[0, F_PROFILE] < 0.5:
+        return state, UNFINISHED, x, y, z, dxn, dyn, dz
+    state, act, x, y, zc, dxn, dyn, dz = born_among_dots(
+        state, face_row(face, 0), n, x, y, z - z0, dots, walls, dxn, dyn, dz
+    )
+    return state, (act if act >= 0 else UNFINISHED), x, y, z0 + zc, dxn, dyn, dz
+
+
+@nb.njit(cache=True, inline="always")
+def _off_wall(
+    state, layer, li, face, normal, n, x, y, z, dots, walls, dxn, dyn, dz
+):  # pragma: no cover - compiled
+    """A ray meeting a wall of layer ``li`` (index ``n``) at ``(x, y, z)`` (mm; ``normal``
+    the wall's into the layer) going ``d``: :func:`~.faces.meet_wall`, and a ray sent
+    back in going up among the cavities of a guide's cut dots, when in their layer
+    (:func:`_born_among`): ``(state, end, x, y, z, dx, dy, dz)``, ``end`` a fate or
+    ``UNFINISHED``."""
+    z0 = layer[li, L_Z0]
+    z = min(max(z, z0), layer[li, L_Z1])
+    nx_, ny_ = normal[0], normal[1]
+    cover = (layer[li, L_WALL_MODE], layer[li, L_WALL_COS], layer[li, L_WALL_R])
+    state, end, dxn, dyn, dz = meet_wall(state, cover, nx_, ny_, n, dxn, dyn, dz)
+    if end >= 0:
+        return state, end, x, y, z, dxn, dyn, dz
+    x, y = x + nx_ * 1e-9, y + ny_ * 1e-9
+    return _born_among(state, li, face, n, x, y, z, z0, dots, walls, dxn, dyn, dz)
+
+
+# A serial loop of its own, which :func:`trace` runs in parallel over chunks: numba's
+# parallel passes analyse a ``prange`` loop's whole body, which a ray's whole life makes
+# compile several times longer (the same results: rays draw their own numbers).
 @nb.njit(cache=True)
 def _trace_rays(
     seed, first, lo, hi, emit, emit_start, prof_theta, prof_cdf, prof_mode, layer, face,
@@ -167,11 +205,7 @@ def _trace_rays(
     """Rays ``first + lo .. first + hi - 1`` (:func:`trace`'s tables unpacked, ``pr_arrays``
     the :class:`~optdot.optics.tables.Print` as a tuple, ``dots`` its ``dot_tables``), each
     one's fate, end and direction (not for rays turned back at birth) at ``lo .. hi - 1``
-    of ``fate``, ``ex``, ``ey``, ``ed``: born, then stepped leg by leg to a wall or face.
-
-    A serial loop of its own, which :func:`trace` runs in parallel over chunks: numba's
-    parallel passes analyse a ``prange`` loop's whole body, which a ray's whole life
-    makes compile several times longer (the same results: rays draw their own numbers)."""
+    of ``fate``, ``ex``, ``ey``, ``ed``: born, then stepped leg by leg to a wall or face."""
     top = layer.shape[0]  # the top face's index
     for j in range(lo, hi):
         state = ray_state(seed, first + j)
@@ -185,8 +219,11 @@ def _trace_rays(
         state, u = uniform(state)
         tau = -math.log(1.0 - u)  # optical depth the ray will travel
         _, z0, z1, n, absorb, budget = _enter_layer(layer, li, True, tau)
-        end, new_leg, s_wall, wall, h, ux, uy = UNFINISHED, True, np.inf, -1, 1.0, 0.0, 0.0
-        for _ in range(max_events):
+        state, end, x, y, z, dxn, dyn, dz = _born_among(
+            state, li, face, n, x, y, z, z0, dots, walls, dxn, dyn, dz
+        )
+        new_leg, s_wall, wall, h, ux, uy = True, np.inf, -1, 1.0, 0.0, 0.0
+        for _ in range(max_events if end == UNFINISHED else 0):
             if new_leg:  # the horizontal course changed: the wall ahead
                 h = math.sqrt(dxn * dxn + dyn * dyn)
                 ux, uy = (dxn / h, dyn / h) if h > 1e-12 else (0.0, 0.0)
@@ -206,13 +243,13 @@ def _trace_rays(
             budget -= path
             x, y, s_wall = x + ux * s, y + uy * s, s_wall - s
             if at_wall:
-                z = min(max(z + dz * path, z0), z1)
-                nx_, ny_ = normals[wall, 0], normals[wall, 1]
-                cover = (layer[li, L_WALL_MODE], layer[li, L_WALL_COS], layer[li, L_WALL_R])
-                state, end, dxn, dyn, dz = meet_wall(state, cover, nx_, ny_, n, dxn, dyn, dz)
-                if end >= 0:
+                state, end, x, y, z, dxn, dyn, dz = _off_wall(
+                    state, layer, li, face, normals[wall], n, x, y, z + dz * path, dots, walls,
+                    dxn, dyn, dz,
+                )  # fmt: skip
+                if end != UNFINISHED:
                     break
-                x, y, new_leg, end = x + nx_ * 1e-9, y + ny_ * 1e-9, True, UNFINISHED
+                new_leg = True
                 continue
             up = dz > 0  # a face: fi under the layer (going down) or over it (going up)
             fi, z, to = (li + 1, z1, li + 1) if up else (li, z0, li - 1)
@@ -222,9 +259,10 @@ def _trace_rays(
                 state, u = uniform(state)
                 on = printed(x, y, int(face[fi, F_PRINT]), pr_arrays, u)
             if face[fi, F_PROFILE] > 0.5:  # 3-D dots: they need the print, and move the ray
-                state, act, x, y, dxn, dyn, dz = meet_dots(
+                state, act, x, y, zc, dxn, dyn, dz = meet_dots(
                     state, face_row(face, fi), n, on, x, y, dots, walls, dxn, dyn, dz
                 )
+                z += zc
             else:
                 state, act, dxn, dyn, dz = meet_face(
                     state, face_row(face, fi), up, n, n_to, fi == top, on != BARE, dxn, dyn, dz

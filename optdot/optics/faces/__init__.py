@@ -20,8 +20,9 @@ import numba as nb
 
 from ..marks import BARE, dot_frame
 from ..tables import BOTTOM_FACE, F_COS_DOWN, F_KIND, F_PROFILE, PRISM_FACE, SAME_LEG, SHEET_FACE
+from .cavities import meet_cut
 from .diffuser_sheet import meet_sheet
-from .dot_profile import BUMP, PRISM, leave_between, meet_profile
+from .dot_profile import BUMP, DIMPLE, PRISM, PRISM_CUT, leave_between, meet_profile
 from .interface import meet_interface
 from .prism_sheet import meet_prism
 from .reflector import meet_reflector
@@ -52,25 +53,40 @@ def meet_dots(state, f, n, on, x, y, pr, walls, dxn, dyn, dz):  # pragma: no cov
     index ``n`` at ``(x, y)`` (mm), on a dot or not (``on``: what
     :func:`~optdot.optics.marks.printed` found there), with the print's
     :func:`~optdot.optics.marks.dot_tables` ``pr`` and the panel's ``walls``: a dot's
-    ``meet_profile``, the face between raised dots (``leave_between``), or the bare face
-    beside cut ones: ``(state, act, x, y, dx, dy, dz)``, and where the ray goes on from
-    (a dot moves it). Kept apart from
-    :func:`meet_face`: the print's arrays handed to every face's kernel at every event
-    cost the tracer half its speed."""
+    ``meet_profile``, the face between raised dots (``leave_between``), or the cut dots'
+    cavities its path passes (``meet_cut``): ``(state, act, x, y, z, dx, dy, dz)``, and
+    where the ray goes on from (a dot moves it; ``z`` mm over the face). Kept apart from
+    :func:`meet_face`: the print's arrays handed to every face's kernel at every event cost
+    the tracer half its speed."""
     profile = f[F_PROFILE]
-    x2, y2 = x, y
-    if on != BARE:  # on a dot: where on it (a real one), or the coverage cell's angle and size
+    x2, y2, z2 = x, y, 0.0
+    if profile == DIMPLE or profile == PRISM_CUT:  # among the cavities its path passes
+        state, act, x2, y2, z2, dxn, dyn, dz = meet_cut(
+            state, f, n, on, x, y, 0.0, pr, walls, dxn, dyn, dz
+        )
+    elif on != BARE:  # on a dot: where on it (a real one), or the coverage cell's angle and size
         at = dot_frame(x, y, on, pr)
         state, act, x2, y2, dxn, dyn, dz = meet_profile(
             state, f, n, at, x, y, pr, walls, dxn, dyn, dz
         )
     elif (profile == BUMP or profile == PRISM) and -dz > f[F_COS_DOWN]:  # out between them
         state, act, x2, y2, dxn, dyn, dz = leave_between(state, f, n, x, y, pr, walls, dxn, dyn, dz)
-    elif profile == BUMP or profile == PRISM:  # total internal reflection, kept inline
+    else:  # total internal reflection between raised dots, kept inline
         act, dz = SAME_LEG, -dz
-    else:
-        state, act, dxn, dyn, dz = meet_reflector(state, f, n, False, dxn, dyn, dz)
-    return state, act, x2, y2, dxn, dyn, dz
+    return state, act, x2, y2, z2, dxn, dyn, dz
 
 
-__all__ = ["meet_dots", "meet_face", "meet_wall", "wall_distance"]
+@nb.njit(cache=True, inline="always")
+def born_among_dots(state, f, n, x, y, z, pr, walls, dxn, dyn, dz):  # pragma: no cover
+    """A ray born in the guide (or sent back off its wall) at ``(x, y)``, ``z`` mm over its
+    bottom face of 3-D dots (row ``f``; index ``n``; ``pr`` and ``walls`` as
+    :func:`meet_dots`'), going up: a cut dot's cavities it passes before it leaves their
+    layer (``meet_cut``), as ``(state, act, x, y, z, dx, dy, dz)``; any other ray as it came
+    (``SAME_LEG``)."""
+    profile = f[F_PROFILE]
+    if (profile == DIMPLE or profile == PRISM_CUT) and dz > 0:
+        return meet_cut(state, f, n, BARE, x, y, z, pr, walls, dxn, dyn, dz)
+    return state, SAME_LEG, x, y, z, dxn, dyn, dz
+
+
+__all__ = ["born_among_dots", "meet_dots", "meet_face", "meet_wall", "wall_distance"]

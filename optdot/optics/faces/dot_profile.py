@@ -12,9 +12,9 @@ plane (into the guide) or out through its surface (into the air under the guide)
 dot's ray meets the cavity's surface on its way down (where its path enters the cavity,
 behind the plane's crossing); through it, it crosses the cavity's air and leaves through
 the surface (back into the guide) or down through the cavity's open base (into the air
-under the guide), where the reflector returns it as it returns light out of the flat
-face (:mod:`.reflector`). Every dot is convex: light reflected off one from outside does
-not meet it again.
+under the guide); :mod:`.cavities` follows a cut dot's light among the cavities its
+path passes and the reflector under them. Every dot is convex: light reflected off one
+from outside does not meet it again.
 
 On real dots the ray meets the dot where the stepping found it, in the dot's own frame
 (turned by its angle), and goes on in the guide from where it comes back through the
@@ -29,8 +29,7 @@ hexagonal lattice of the cell's fill), each met from outside by Fresnel, and ent
 as many as it reaches, before it goes on up onto the bare face or down to the
 reflector. The reflector sheet lies on the tallest raised dots' tips (``F_PROF_H`` under
 the face), and what it returns comes up among the dots again (:func:`under_dots`):
-into them from the air, or onto the bare face between them. A cut dot's light is not
-traced into the cavities beside it.
+into them from the air, or onto the bare face between them.
 
 Cap coordinates: the footprint's half width 1, the face's plane ``z = 0``, the guide
 above; a cap of height ``k`` (its height over the half width, at most 1: a hemisphere
@@ -54,7 +53,7 @@ import numpy as np
 from ...geometry.profile import BUMP, DIMPLE, PRISM, PRISM_CUT
 from ...geometry.shapes import half_width_packed
 from ..marks import INK, dot_frame
-from ..rays import _M1, _M2, fresnel, lambert, mirrored, mix, refract, uniform
+from ..rays import _M1, _M2, fresnel, lambert, mix, refract, uniform
 from ..tables import (
     BOTTOM,
     DOT,
@@ -73,7 +72,6 @@ from ..tables import (
     NEW_LEG,
     SAME_LEG,
 )
-from .reflector import meet_reflector, sheet_return
 from .slab_walls import wall_distance
 
 __all__ = ["BUMP", "DIMPLE", "PRISM", "PRISM_CUT", "meet_profile", "trace_cap", "trace_prism"]
@@ -423,34 +421,67 @@ def _meet_body(f, hu, hv, rc, k, c, s, rx, ry, z, dx, dy, dz):  # pragma: no cov
 def _into_body(
     state, f, n, hu, hv, rc, k, c, s, rx, ry, z, dx, dy, dz, mx, my, mz
 ):  # pragma: no cover
-    """A ray in the air meeting a raised dot (as :func:`_meet_body`'s, at ``(rx, ry, z)``
-    from its centre where the normal is ``m``): Fresnel's reflection off it, or in and
-    through it as a ray from the guide goes: ``(state, where, rx, ry, z, dx, dy, dz)``,
-    :data:`INTO_AIR` (reflected, or out through its surface: where it leaves),
-    :data:`INTO_GUIDE` up through its base, or :data:`CAUGHT`."""
+    """A ray meeting a dot from outside (a raised dot from the air under the face, a cut
+    one's cavity from the glass; as :func:`_meet_body`'s, at ``(rx, ry, z)`` from its
+    centre where the normal is ``m``): Fresnel's reflection off it, or in and through it
+    (:func:`_walk_body`): ``(state, where, rx, ry, z, dx, dy, dz)``. Reflected, a raised
+    dot's ray is :data:`INTO_AIR` again, a cut dot's in the glass (:data:`INTO_GUIDE`
+    going up, :data:`ONTO_FACE` down)."""
+    code = int(f[F_PROFILE])
+    cut = code == DIMPLE or code == PRISM_CUT
+    n_out, n_in = (n, 1.0) if cut else (1.0, n)  # the media outside the dot and in it
     cos_i = -(dx * mx + dy * my + dz * mz)
     state, u = uniform(state)
-    if u < fresnel(cos_i, 1.0, n):  # reflected off it, on in the air
+    if u < fresnel(cos_i, n_out, n_in):  # reflected off it, on outside it
         dx, dy, dz = dx + 2.0 * cos_i * mx, dy + 2.0 * cos_i * my, dz + 2.0 * cos_i * mz
-        return state, INTO_AIR, rx, ry, z, dx, dy, dz
-    dx, dy, dz = _through(dx, dy, dz, -mx, -my, -mz, 1.0, n)
+        where = (INTO_GUIDE if dz > 0 else ONTO_FACE) if cut else INTO_AIR
+        return state, where, rx, ry, z, dx, dy, dz
+    dx, dy, dz = _through(dx, dy, dz, -mx, -my, -mz, n_out, n_in)
+    return _walk_body(state, f, n, hu, hv, rc, k, c, s, rx, ry, z, dx, dy, dz)
+
+
+@nb.njit(cache=True)
+def _walk_body(state, f, n, hu, hv, rc, k, c, s, rx, ry, z, dx, dy, dz):  # pragma: no cover
+    """A ray inside a dot of row ``f``'s profile (its frame ``hu``, ``hv``, ``rc``, ``k``,
+    turned by ``(c, s)``) at ``(rx, ry, z)`` (mm from its centre, ``z`` up from the
+    face's plane) going ``d``, followed through its surfaces until it leaves:
+    ``(state, where, rx, ry, z, dx, dy, dz)``, where and how it leaves
+    (:func:`trace_cap`'s ``where``: a raised dot's :data:`INTO_AIR` out through its
+    surface or :data:`INTO_GUIDE` up through its base; a cut dot's :data:`INTO_GUIDE` or
+    :data:`ONTO_FACE` out through its surface, :data:`INTO_AIR` down through its open
+    base), or :data:`CAUGHT`."""
+    code = int(f[F_PROFILE])
+    cut = code == DIMPLE or code == PRISM_CUT
+    n_in, n_out = (1.0, n) if cut else (n, 1.0)
     pu, pv = c * rx + s * ry, c * ry - s * rx
     du, dv = c * dx + s * dy, c * dy - s * dx
-    if int(f[F_PROFILE]) >= PRISM:
+    if code >= PRISM:
+        sg = 1.0 if cut else -1.0  # prism coordinates: s into the structure from the face
         state, where, pu, pv, ps, du, dv, ds = _prism_walk(
-            state, False, hu, hv, rc, f[F_PROF_T1], f[F_PROF_T2], n, 1.0, pu, pv, -z, du, dv,
-            -dz,
+            state, cut, hu, hv, rc, f[F_PROF_T1], f[F_PROF_T2], n_in, n_out, pu, pv, sg * z,
+            du, dv, sg * dz,
         )  # fmt: skip
-        z, dz = -ps, -ds
+        z, dz = sg * ps, sg * ds
     else:
         r_s = (1.0 + k * k) / (2.0 * k)
         state, where, pu, pv, pz, du, dv, dz = _cap_walk(
-            state, True, (hv / hu) ** 2, r_s, r_s - k, n, 1.0, pu / hv, pv / hv, z / hv, du,
-            dv, dz,
+            state, not cut, (hv / hu) ** 2, r_s, (k - r_s) if cut else (r_s - k), n_in, n_out,
+            pu / hv, pv / hv, z / hv, du, dv, dz,
         )  # fmt: skip
         pu, pv, z = pu * hv, pv * hv, pz * hv
     rx, ry = c * pu - s * pv, s * pu + c * pv
-    return state, where, rx, ry, min(z, 0.0), c * du - s * dv, s * du + c * dv, dz
+    z = max(z, 0.0) if cut else min(z, 0.0)
+    return state, where, rx, ry, z, c * du - s * dv, s * du + c * dv, dz
+
+
+@nb.njit(cache=True, inline="always")
+def tallest(f, hu, hv, k):  # pragma: no cover - compiled
+    """How far the tallest of row ``f``'s dots stands out of the face (or sinks into it),
+    mm: a prism of half length ``hu``, a cap ``k`` on half width ``hv`` (mm)."""
+    if int(f[F_PROFILE]) >= PRISM:
+        t1, t2 = f[F_PROF_T1], f[F_PROF_T2]
+        return 2.0 * hu * t1 * t2 / (t1 + t2)
+    return k * hv
 
 
 @nb.njit(cache=True, inline="always")
@@ -458,11 +489,7 @@ def _layer_end(f, hu, hv, k, z, dz):  # pragma: no cover - compiled
     """How far a ray at height ``z`` (mm, under the face) going up or down by ``dz`` (a
     unit direction's) goes before it leaves the layer of raised dots whose tallest has
     half length ``hu`` (a prism's) or cap ``k`` on half width ``hv`` (mm)."""
-    if int(f[F_PROFILE]) >= PRISM:
-        t1, t2 = f[F_PROF_T1], f[F_PROF_T2]
-        tall = 2.0 * hu * t1 * t2 / (t1 + t2)
-    else:
-        tall = k * hv
+    tall = tallest(f, hu, hv, k)
     return (-tall - z) / dz if dz < 0 else (-z / dz if dz > 0 else np.inf)
 
 
@@ -606,7 +633,7 @@ def twin_lattice(state, hu, hv, rc, prism, turn, fill):  # pragma: no cover - co
     ca, sa = math.cos(math.pi / 3.0 * w), math.sin(math.pi / 3.0 * w)
     h = 0.8660254037844386  # sin 60°
     reach = math.sqrt(hu * hu + hv * hv) / e  # a twin's extent, stretched coordinates
-    m = int(math.ceil(reach / (h * a))) + 2
+    m = int(math.ceil(reach / (h * a) + 1.3))  # the nearest site by rounding: 0.87 a off
     lat = (
         e, a, a * ca, a * sa, a * (0.5 * ca - h * sa), a * (0.5 * sa + h * ca),
         np.uint64(key_u * 2.0**53), turn, m,
@@ -805,19 +832,18 @@ def under_dots(
 # tables at every call they are handed to (a tenth of a raised dot's time)
 @nb.njit(cache=True, inline="always")
 def meet_profile(state, f, n, at, x, y, pr, walls, dxn, dyn, dz):  # pragma: no cover - compiled
-    """A ray going down onto a dot of the bottom face (its row ``f``: the profile's code,
-    its body, the reflector) from the guide of index ``n``, where the print test found it
-    (``at``, :func:`~optdot.optics.marks.dot_frame`'s: the point in the dot's frame, its
+    """A ray going down onto a raised dot of the bottom face (its row ``f``: the profile's
+    code, its body, the reflector) from the guide of index ``n``, where the print test found
+    it (``at``, :func:`~optdot.optics.marks.dot_frame`'s: the point in the dot's frame, its
     angle and its half width, NaN where unknown; ``(x, y)`` the point, mm; ``pr`` the
-    print's :func:`~optdot.optics.marks.dot_tables`): ``(state, act, x,
-    y, dx, dy, dz)``, ``NEW_LEG`` back into the guide (from where it leaves the dot's
-    base, or the base of the dot it passed into, or meets the face coming up; the
-    reflector under a cut dot returns it at ``(x, y)``) or a fate (``BOTTOM`` absorbed
-    under it, ``DOT`` caught in a dot, ``EDGE`` out past the panel's ``walls``). A dot of
-    another size than the row's is its footprint scaled, under a cap of the same height
-    (a prism's facets keep their angles). Light leaving a raised dot into the air meets
-    the dots beside it, and what the reflector returns meets them again
-    (:func:`under_dots`: the real dots, or the coverage's twins)."""
+    print's :func:`~optdot.optics.marks.dot_tables`): ``(state, act, x, y, dx, dy, dz)``,
+    ``NEW_LEG`` back into the guide (from where it leaves the dot's base, or the base of the
+    dot it passed into, or meets the face coming up) or a fate (``BOTTOM`` absorbed under
+    it, ``DOT`` caught in a dot, ``EDGE`` out past the panel's ``walls``). A dot of another
+    size than the row's is its footprint scaled, under a cap of the same height (a prism's
+    facets keep their angles). Light leaving a raised dot into the air meets the dots beside
+    it, and what the reflector returns meets them again (:func:`under_dots`: the real dots,
+    or the coverage's twins)."""
     code = int(f[F_PROFILE])
     lu, lv, c, s, half = at
     hu, hv, rc, k = _sized(f[F_PROF_U], f[F_PROF_V], f[F_PROF_C], f[F_PROF_K], half)
@@ -867,12 +893,7 @@ def meet_profile(state, f, n, at, x, y, pr, walls, dxn, dyn, dz):  # pragma: no 
         if _past_wall(x, y, ex, ey, walls):  # a dot over the panel's edge: where it met it
             ex, ey = x, y
         return state, NEW_LEG, ex, ey, dxn, dyn, dz
-    if where == CAUGHT:
-        return state, DOT, x, y, dxn, dyn, dz
-    if where == ONTO_FACE:  # the bare face beside the dot
-        state, act, dxn, dyn, dz = meet_reflector(state, f, n, False, dxn, dyn, dz)
-        return state, (NEW_LEG if act == SAME_LEG else act), x, y, dxn, dyn, dz
-    return _under_guide(state, f, n, x, y, dxn, dyn, dz)
+    return state, DOT, x, y, dxn, dyn, dz  # caught
 
 
 @nb.njit(cache=True, inline="always")
@@ -883,22 +904,6 @@ def _past_wall(x, y, x2, y2, walls):  # pragma: no cover - compiled
     gx, gy = x2 - x, y2 - y
     g = math.sqrt(gx * gx + gy * gy)
     return g > 0 and wall_distance(x, y, gx / g, gy / g, walls)[0] < g
-
-
-@nb.njit(cache=True)
-def _under_guide(state, f, n, x, y, dxn, dyn, dz):  # pragma: no cover - compiled
-    """A ray going down in the air out of a cut dot's open base at ``(x, y)`` (mm) to the
-    reflector, which returns it into the guide there (a mirror at the angle it came,
-    a white sheet Lambertian) or absorbs it: ``(state, NEW_LEG or BOTTOM, x, y, dx, dy,
-    dz)``."""
-    if f[F_REFL_FINISH] > 0.5:  # a mirror: back up at the angle it came, through the face
-        state, back = mirrored(state, f[F_REFL], fresnel(-dz, 1.0, n))
-        if not back:
-            return state, BOTTOM, x, y, dxn, dyn, dz
-        dxn, dyn, dz = refract(dxn, dyn, -dz, 1.0, n)
-        return state, NEW_LEG, x, y, dxn, dyn, dz
-    state, act, dxn, dyn, dz = sheet_return(state, f[F_REFL], n, dxn, dyn, dz)
-    return state, act, x, y, dxn, dyn, dz
 
 
 # inlined into the tracer's loop: numba counts a reference to each of the print's

@@ -1,0 +1,221 @@
+"""Dots cut into the guide's bottom face (compiled): the light in the glass among their
+cavities (a dimple's cap of air, a cut prism), and under them.
+
+A cavity stands above its footprint, inside the glass: a ray coming down onto the face
+meets a cavity wherever its path passes through one, not only where it crosses the
+face's plane on a footprint. A ray coming down at 30° from the face passes over a
+cavity 15 µm deep along 26 µm before it crosses the plane: a shallow ray meets a dimple
+beyond its rim, and is turned by its wall. So the ray is followed from where it comes
+down into the layer of the cavities (the deepest one's depth over the face), among the
+cavities (:func:`~.dot_profile.next_dot` over the real dots, or
+:func:`~.dot_profile.next_twin` over the coverage's twins, with ``z`` turned over: a
+cavity in the glass is a raised dot in the air seen from below), through each it meets
+(:func:`~.dot_profile._into_body`: Fresnel and total internal reflection off its wall,
+or in, across the air and out through its wall or its open base), onto the bare face
+between them (Fresnel, total internal reflection, the reflector sheet under it), until
+it leaves the layer going up, into the guide. What leaves a cavity's open base goes
+down onto the reflector sheet, which lies against the face: it returns the light up
+into that cavity (Lambertian, or at the angle it came for a mirror), through the
+cavity's wall into the glass or out of its base again.
+
+In a coverage trace the cavities are the coverage's twins about the point the print test
+drew: on a dot (where on it drawn over its footprint) or on the bare face between them
+(drawn off the twins, :func:`~.dot_profile.bare_point`), on the hexagonal lattice of the
+cell's fill (:func:`~.dot_profile.twin_lattice`), so a shallow ray meets a twin beyond
+its rim as it meets a real dot.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from ...geometry.profile import PRISM
+from ...geometry.shapes import half_width_packed
+from ..marks import BARE, INK, dot_frame
+from ..rays import lambert, uniform
+from ..tables import (
+    BOTTOM,
+    DOT,
+    F_PROF_C,
+    F_PROF_K,
+    F_PROF_U,
+    F_PROF_V,
+    F_PROFILE,
+    F_REFL,
+    F_REFL_FINISH,
+    NEW_LEG,
+    SAME_LEG,
+)
+from .dot_profile import (
+    CAUGHT,
+    INTO_AIR,
+    MAX_DOTS,
+    _fill_at,
+    _into_body,
+    _no_lattice,
+    _on_footprint,
+    _past_wall,
+    _site,
+    _sized,
+    _turn,
+    _walk_body,
+    bare_point,
+    next_dot,
+    next_twin,
+    tallest,
+    twin_lattice,
+)
+from .reflector import meet_reflector
+
+__all__ = ["among_cavities", "meet_cut"]
+
+
+@nb.njit(cache=True, inline="always")
+def _sheet_back(state, f, du, dv, dz):  # pragma: no cover - compiled
+    """A ray going down out of a cavity's open base onto the reflector sheet against the
+    face (row ``f``'s ``F_REFL``, ``F_REFL_FINISH``): ``(state, back, du, dv, dz)``,
+    whether the sheet returns it and the direction it comes up in (Lambertian in air, or
+    at the angle it came for a mirror)."""
+    state, u = uniform(state)
+    if u >= f[F_REFL]:
+        return state, False, du, dv, dz
+    if f[F_REFL_FINISH] > 0.5:
+        return state, True, du, dv, -dz
+    state, du, dv, dz = lambert(state, True)
+    return state, True, du, dv, dz
+
+
+@nb.njit(cache=True)
+def among_cavities(
+    state, f, n, real, pr, walls, x, y, z0, deep, frame, lat, place, pu, pv, pz, du, dv, dz
+):  # pragma: no cover
+    """A ray in the glass of index ``n`` over a face of cut dots (row ``f``), at ``(pu, pv,
+    pz)`` going ``d`` (unit; ``pz`` mm over the face), followed among the cavities until it
+    leaves their layer going up: the real dots' (``real``: the print's
+    :func:`~optdot.optics.marks.dot_tables` ``pr``, face coordinates) or the coverage's
+    twins (lattice ``lat`` of :func:`~.dot_profile.twin_lattice`, all of them met, in the
+    frame ``place = (ox, oy, c, s, phi, g)`` puts on the face; every twin's frame ``frame =
+    (hu, hv, rc, k)``). ``(x, y, z0)``: where the ray met the face or was born (mm, ``z0``
+    over the face); ``deep``: the layer's depth (mm, the deepest cavity's). Returns
+    ``(state, act, x, y, z, dx, dy, dz)``: ``NEW_LEG`` up into the guide from where it
+    leaves the layer (face coordinates, ``z`` mm over the face), ``SAME_LEG`` from ``(x, y,
+    z0)`` when a ray coming down met nothing but the flat face, which reflected it (its
+    course the same, turned up), or the fate ``BOTTOM`` (the reflector absorbed it), ``DOT``
+    (caught in a cavity, or after :data:`~.dot_profile.MAX_DOTS` events). A ray that would
+    go on past the panel's ``walls`` goes on from ``(x, y, z0)``."""
+    ox, oy, c0, s0, _, _ = place
+    hu, hv, rc, k = frame
+    cu, cv, c, s = 0.0, 0.0, 1.0, 0.0
+    plain = dz < 0  # met nothing but the flat face, and that as a mirror, yet
+    for _ in range(MAX_DOTS):
+        if real:
+            j, t, mx, my, mz = next_dot(
+                f, pr[3], pr[4], pr[5], pr[6], pr[7], pu, pv, -pz, du, dv, -dz
+            )
+            found = j >= 0
+            if found:
+                hu, hv, rc, k = _sized(
+                    f[F_PROF_U], f[F_PROF_V], f[F_PROF_C], f[F_PROF_K], half_width_packed(pr[6], j)
+                )
+                cu, cv, c, s = pr[4][j], pr[5][j], pr[6][j, 4], pr[6][j, 5]
+        else:
+            i, j, t, mx, my, mz = next_twin(
+                f, hu, hv, rc, k, lat, False, place, pu, pv, -pz, du, dv, -dz
+            )
+            found = t < np.inf
+            if found:
+                cu, cv, c, s = _site(lat, i, j)
+        if found:  # into the cavity (z turned back: its normal out into the glass)
+            plain = False
+            rx, ry, z = pu + t * du - cu, pv + t * dv - cv, max(pz + t * dz, 0.0)
+            state, where, rx, ry, z, du, dv, dz = _into_body(
+                state, f, n, hu, hv, rc, k, c, s, rx, ry, z, du, dv, dz, mx, my, -mz
+            )
+            for _ in range(MAX_DOTS):
+                if where != INTO_AIR:
+                    break
+                state, back, du, dv, dz = _sheet_back(state, f, du, dv, dz)
+                if not back:  # out of its open base, and the sheet absorbed it
+                    return state, BOTTOM, x, y, 0.0, c0 * du - s0 * dv, s0 * du + c0 * dv, dz
+                state, where, rx, ry, z, du, dv, dz = _walk_body(
+                    state, f, n, hu, hv, rc, k, c, s, rx, ry, 0.0, du, dv, dz
+                )
+            if where == CAUGHT or where == INTO_AIR:
+                break
+            pu, pv, pz = cu + rx, cv + ry, z
+            continue
+        if dz >= 0 and plain:  # reflected by the face alone: on up from where it met it
+            return state, SAME_LEG, x, y, z0, c0 * du - s0 * dv, s0 * du + c0 * dv, dz
+        if dz >= 0:  # out of the cavities' layer, up into the guide
+            t = max(deep - pz, 0.0) / dz if dz > 0 else 0.0
+            pu, pv = pu + t * du, pv + t * dv
+            ex, ey = ox + c0 * pu - s0 * pv, oy + s0 * pu + c0 * pv
+            if _past_wall(x, y, ex, ey, walls):
+                ex, ey, pz = x, y, z0
+            else:
+                pz = max(pz, deep)
+            return state, NEW_LEG, ex, ey, pz, c0 * du - s0 * dv, s0 * du + c0 * dv, dz
+        t = -pz / dz  # onto the bare face between the cavities
+        pu, pv, pz = pu + t * du, pv + t * dv, 0.0
+        state, act, du, dv, dz = meet_reflector(state, f, n, False, du, dv, dz)
+        if act >= 0:
+            return state, act, x, y, 0.0, c0 * du - s0 * dv, s0 * du + c0 * dv, dz
+        plain = plain and act == SAME_LEG
+    return state, DOT, x, y, 0.0, c0 * du - s0 * dv, s0 * du + c0 * dv, dz
+
+
+# inlined into the tracer's loop: numba counts a reference to each of the print's
+# tables at every call they are handed to
+@nb.njit(cache=True, inline="always")
+def meet_cut(state, f, n, on, x, y, z, pr, walls, dxn, dyn, dz):  # pragma: no cover - compiled
+    """A ray in the guide of index ``n`` over a face of cut dots (row ``f``): going down,
+    its path crossing the face's plane at ``(x, y)`` (mm), on a dot or not (``on``:
+    :func:`~optdot.optics.marks.printed`'s there; the real dots are found along the path
+    whatever it says), followed from where its path comes down into the cavities' layer;
+    or going up from ``(x, y)``, ``z`` mm over the face (a ray born there), followed
+    from there if that is within the layer (else returned as it came, ``SAME_LEG``).
+    ``pr``: the print's :func:`~optdot.optics.marks.dot_tables`. Among the cavities
+    (:func:`among_cavities`): ``(state, act, x, y, z, dx, dy, dz)``, ``NEW_LEG`` back
+    into the guide from where it leaves the layer (``z`` mm over the face) or a fate."""
+    real = pr[0]
+    code = int(f[F_PROFILE])
+    hu, hv, rc, k = f[F_PROF_U], f[F_PROF_V], f[F_PROF_C], f[F_PROF_K]
+    c = s = 0.0
+    if real:
+        deep = max(tallest(f, pr[7][6], hv, k), tallest(f, hu, hv, k))
+    else:
+        _, _, c, s, half = dot_frame(x, y, INK, pr)  # the coverage cell's angle and size
+        hu, hv, rc, k = _sized(hu, hv, rc, k, half)
+        deep = tallest(f, hu, hv, k)
+    deep *= 1.0 + 1e-9  # over the deepest cavity's apex: a ray from there meets it
+    if dz >= 0 and z >= deep:  # over the cavities
+        return state, SAME_LEG, x, y, z, dxn, dyn, dz
+    back = (deep - z) / -dz if dz < 0 else 0.0  # back along the path to the layer's top
+    z0, z = z, (deep if dz < 0 else z)
+    if real:
+        return among_cavities(
+            state, f, n, True, pr, walls, x, y, z0, deep, (hu, hv, rc, k), _no_lattice(),
+            (0.0, 0.0, 1.0, 0.0, pr[1], pr[2]), x - back * dxn, y - back * dyn, z, dxn, dyn,
+            dz,
+        )  # fmt: skip
+    prism = code >= PRISM
+    aligned = c == c or (not prism and hu == hv)  # the twins at one angle (a disc's: any)
+    if c != c:
+        c, s = 1.0, 0.0
+    fill = _fill_at(x, y, pr[1], pr[2])
+    state, lat = twin_lattice(
+        state, hu, hv, rc, prism, 0.0 if aligned else _turn(f), max(fill, 1e-9)
+    )
+    if on != BARE:  # on the twin at the lattice's origin: where on it, drawn
+        state, lu, lv = _on_footprint(state, code, hu, hv, rc)
+        _, _, c1, s1 = _site(lat, 0, 0)  # its own angle in the lattice's frame
+        pu, pv = c1 * lu - s1 * lv, s1 * lu + c1 * lv
+    else:
+        state, pu, pv = bare_point(state, lat, hu, hv, rc, prism)
+    ox, oy = x - c * pu + s * pv, y - s * pu - c * pv  # the lattice's origin on the face
+    du, dv = c * dxn + s * dyn, c * dyn - s * dxn
+    return among_cavities(
+        state, f, n, False, pr, walls, x, y, z0, deep, (hu, hv, rc, k), lat,
+        (ox, oy, c, s, pr[1], pr[2]), pu - back * du, pv - back * dv, z, du, dv, dz,
+    )  # fmt: skip

@@ -1,0 +1,130 @@
+"""Cut dots' cavities met wherever a ray's path passes through one
+(:mod:`optdot.optics.faces.cavities`): closed forms for a hemispherical dimple met beyond
+its rim coming down, and from beside it going up; against pvtrace in
+``tests/test_dot_profile_pvtrace.py``."""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from optdot.geometry.profile import DIMPLE
+from optdot.optics import tables as t
+from optdot.optics.faces.cavities import meet_cut
+from optdot.optics.marks import BARE
+from optdot.optics.rays import ray_state
+from optdot.optics.scene import dot_grid
+from optdot.pattern import Pattern
+
+N = 1.49
+R = 0.1  # the hemisphere's radius, mm
+CENTRE = (1.5, 1.0)
+H = math.sqrt(0.5)
+
+
+def _setup() -> tuple[tuple, tuple]:
+    """A face row of hemispherical dimples (radius :data:`R`) over a white sheet, and the
+    print's ``dot_tables`` with one real dimple at :data:`CENTRE`."""
+    row = np.zeros(t.F_COLS)
+    row[t.F_KIND], row[t.F_PROFILE], row[t.F_PROF_K] = t.BOTTOM_FACE, DIMPLE, 1.0
+    row[[t.F_PROF_U, t.F_PROF_V, t.F_PROF_C]] = R, R, 0.0
+    row[t.F_COS_DOWN], row[t.F_REFL] = math.sqrt(1 - 1 / N**2), 0.9
+    p = Pattern(np.array([CENTRE]), 2 * R, (0.0, 0.0, 3.0, 2.0))
+    pr = (1, np.ones((1, 1)), np.array([0.0, 0.0, 3.0, 2.0]), *dot_grid(p, p.box))
+    return tuple(float(v) for v in row), (*pr, np.zeros((0, 3)))
+
+
+@nb.njit
+def _meet(f, pr, x, y, z, d, rays):  # pragma: no cover - compiled
+    """``meet_cut`` for ``rays`` rays at ``(x, y, z)`` going ``d``: ``[rays, 7]`` (act,
+    x, y, z, dx, dy, dz)."""
+    out = np.zeros((rays, 7))
+    walls = np.zeros((0, 4))
+    for i in range(rays):
+        _, act, ex, ey, ez, a, b, c = meet_cut(
+            ray_state(5, i), f, N, -1, x, y, z, pr, walls, d[0], d[1], d[2]
+        )
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = act, ex, ey, ez
+        out[i, 4], out[i, 5], out[i, 6] = a, b, c
+    return out
+
+
+def _tir(m: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """``d`` reflected off a surface of unit normal ``m``."""
+    return d - 2 * (d @ m) * m
+
+
+def test_light_coming_down_beyond_a_dimple_s_rim_is_turned_by_its_wall():
+    """A ray at 45° crossing the face's plane 0.12 mm from a hemispherical cavity's
+    centre (0.02 beyond its rim) passes through the cavity first: it meets the wall at
+    the height z solving (0.12 - z)² + z² = R², 58° from its normal, over the critical
+    angle, and is sent up off it. Had the cavity been met only on its footprint, the
+    flat face would have sent it back up at 45°."""
+    assert BARE == -1
+    f, pr = _setup()
+    d = np.array([H, 0.0, -H])
+    out = _meet(f, pr, CENTRE[0] + 0.12, CENTRE[1], 0.0, d, 50)
+    z = (0.24 + math.sqrt(0.24**2 - 8 * (0.12**2 - R**2))) / 4  # the higher root
+    m = np.array([0.12 - z, 0.0, z]) / R  # out of the cavity, into the glass
+    assert math.degrees(math.acos(-(d @ m))) > math.degrees(math.asin(1 / N))
+    want = _tir(m, d)
+    assert np.all(out[:, 0] == t.NEW_LEG)
+    assert np.allclose(out[:, 4:], want, atol=1e-9)
+    assert np.allclose(out[:, 3], R)  # up out of the layer, at the deepest cavity's depth
+    back = (out[:, 3] - z) / want[2]  # back along the ray: the point it met the wall at
+    assert np.allclose(out[:, 1] - back * want[0], CENTRE[0] + 0.12 - z, atol=1e-9)
+    assert np.allclose(out[:, 2], CENTRE[1])
+
+
+def test_light_born_beside_a_dimple_going_up_meets_its_wall():
+    """The same ray turned over: from the face 0.12 mm short of the centre going up at
+    45°, it meets the cavity's wall at the lower root, totally reflected; a ray born
+    over the cavities' layer, or going up beside it and missing it, goes on as it came."""
+    f, pr = _setup()
+    d = np.array([H, 0.0, H])
+    out = _meet(f, pr, CENTRE[0] - 0.12, CENTRE[1], 1e-12, d, 50)
+    z = (0.24 - math.sqrt(0.24**2 - 8 * (0.12**2 - R**2))) / 4
+    m = np.array([z - 0.12, 0.0, z]) / R
+    assert np.all(out[:, 0] == t.NEW_LEG)
+    assert np.allclose(out[:, 4:], _tir(m, d), atol=1e-9)
+    over = _meet(f, pr, CENTRE[0] - 0.12, CENTRE[1], 0.2, d, 5)
+    assert np.all(over[:, 0] == t.SAME_LEG) and np.allclose(over[:, 1:4], [1.38, 1.0, 0.2])
+    away = _meet(f, pr, CENTRE[0] - 0.12, CENTRE[1], 1e-12, -np.array([H, 0.0, -H]), 5)
+    assert np.allclose(away[:, 4:], [-H, 0.0, H]) and np.allclose(away[:, 3], R)
+
+
+def _refract(d: np.ndarray, m: np.ndarray, n1: float, n2: float) -> np.ndarray:
+    """``d`` through a surface of unit normal ``m`` (pointing the way it goes), Snell."""
+    cos_i = d @ m
+    eta = n1 / n2
+    return eta * d + (math.sqrt(1 - eta**2 * (1 - cos_i**2)) - eta * cos_i) * m
+
+
+def test_light_down_through_a_dimple_s_open_base_comes_back_up_into_it():
+    """Straight down 0.05 mm off a hemispherical cavity's centre: the wall turns it
+    (glass into air), it leaves through the cavity's open base, a mirror against the face
+    sends it back up into the same cavity and its wall turns it again (air into glass),
+    where a flat face would have let it in at the tilt it left at. Most rays do just
+    that (no Fresnel reflection at either wall); every ray comes back up (the mirror
+    loses nothing)."""
+    f, pr = _setup()
+    row = np.array(f)
+    row[t.F_REFL], row[t.F_REFL_FINISH] = 1.0, 1.0
+    b = 0.05
+    out = _meet(tuple(row), pr, CENTRE[0] + b, CENTRE[1], 0.0, np.array([0.0, 0.0, -1.0]), 4000)
+    assert np.all(out[:, 0] == t.NEW_LEG) and np.all(out[:, 6] > 0)
+    z1 = math.sqrt(R**2 - b**2)
+    d1 = _refract(np.array([0.0, 0.0, -1.0]), -np.array([b, 0.0, z1]) / R, N, 1.0)
+    base = b + d1[0] * z1 / -d1[2]  # where it leaves the base (from the centre)
+    d2 = d1 * [1, 1, -1]  # the mirror
+    q = base * d2[0]  # up to the wall: |(base, 0, 0) + s d2| = R
+    s2 = -q + math.sqrt(q * q - (base**2 - R**2))
+    m2 = np.array([base + s2 * d2[0], 0.0, s2 * d2[2]]) / R
+    d3 = _refract(d2, m2, 1.0, N)
+    flat = _refract(d2, np.array([0.0, 0.0, 1.0]), 1.0, N)
+    assert np.linalg.norm(d3 - flat) > 0.05
+    seen = np.isclose(out[:, 4:], d3, atol=1e-9).all(axis=1).mean()
+    assert seen > 0.8, seen
+    assert not np.isclose(out[:, 4:], flat, atol=1e-6).all(axis=1).any()
