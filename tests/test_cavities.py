@@ -22,6 +22,7 @@ N = 1.49
 R = 0.1  # the hemisphere's radius, mm
 CENTRE = (1.5, 1.0)
 H = math.sqrt(0.5)
+NO_WALLS = np.zeros((0, 4))
 
 
 def _setup() -> tuple[tuple, tuple]:
@@ -37,11 +38,10 @@ def _setup() -> tuple[tuple, tuple]:
 
 
 @nb.njit
-def _meet(f, pr, x, y, z, d, rays):  # pragma: no cover - compiled
-    """``meet_cut`` for ``rays`` rays at ``(x, y, z)`` going ``d``: ``[rays, 7]`` (act,
-    x, y, z, dx, dy, dz)."""
+def _meet(f, pr, x, y, z, d, rays, walls=NO_WALLS):  # pragma: no cover - compiled
+    """``meet_cut`` for ``rays`` rays at ``(x, y, z)`` going ``d`` (the panel's ``walls``,
+    none by default): ``[rays, 7]`` (act, x, y, z, dx, dy, dz)."""
     out = np.zeros((rays, 7))
-    walls = np.zeros((0, 4))
     for i in range(rays):
         _, act, ex, ey, ez, a, b, c = meet_cut(
             ray_state(5, i), f, N, -1, x, y, z, pr, walls, d[0], d[1], d[2]
@@ -128,3 +128,25 @@ def test_light_down_through_a_dimple_s_open_base_comes_back_up_into_it():
     seen = np.isclose(out[:, 4:], d3, atol=1e-9).all(axis=1).mean()
     assert seen > 0.8, seen
     assert not np.isclose(out[:, 4:], flat, atol=1e-6).all(axis=1).any()
+
+
+def test_a_ray_coming_down_off_the_panel_s_wall_meets_the_cavity_by_the_wall():
+    """A ray sent down off the panel's left wall 0.05 mm over the face, 88° from the
+    normal, crosses the face 1.43 mm on, on the footprint of a dimple standing there (one
+    of a grid 0.3 mm apart up to it, the print's cells 0.4 mm): it
+    meets the cavity (its path began at the wall, inside the cavities' layer), and is not
+    reflected by the flat face as when its path was taken back to the layer's top, 1.4 mm
+    beyond the wall and off the print's cells (a reviewer's find)."""
+    f, pr = _setup()
+    a = math.radians(88)
+    d = np.array([math.sin(a), 0.0, -math.cos(a)])
+    x = 0.05 * math.tan(a)  # where it crosses the face, from the wall at x = 0
+    gx, gy = np.meshgrid(np.arange(x - 0.05 - 0.3 * 4, x, 0.3), np.arange(0.1, 2.0, 0.3))
+    p = Pattern(np.column_stack([gx.ravel(), gy.ravel()]), 2 * R, (0.0, 0.0, 3.0, 2.0))
+    pr = (*pr[:3], *dot_grid(p, p.box), pr[-1])
+    walls = np.array([[0.0, 0.0, 0.0, 2.0], [0.0, 2.0, 3.0, 2.0], [3.0, 2.0, 3.0, 0.0],
+                      [3.0, 0.0, 0.0, 0.0]])  # fmt: skip
+    out = _meet(f, pr, x, 1.0, 0.0, d, 200, walls)  # y = 1.0: the row of dots there
+    flat = d * [1, 1, -1]
+    assert not np.isclose(out[:, 4:], flat, atol=1e-6).all(axis=1).any()
+    assert np.isin(out[:, 0], (t.NEW_LEG, t.BOTTOM)).all()  # the sheet under its base: 0.9

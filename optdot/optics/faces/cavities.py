@@ -27,6 +27,8 @@ its rim as it meets a real dot.
 
 from __future__ import annotations
 
+import math
+
 import numba as nb
 import numpy as np
 
@@ -67,6 +69,7 @@ from .dot_profile import (
     twin_lattice,
 )
 from .reflector import meet_reflector
+from .slab_walls import wall_distance
 
 __all__ = ["among_cavities", "meet_cut"]
 
@@ -169,15 +172,16 @@ def among_cavities(
 # tables at every call they are handed to
 @nb.njit(cache=True, inline="always")
 def meet_cut(state, f, n, on, x, y, z, pr, walls, dxn, dyn, dz):  # pragma: no cover - compiled
-    """A ray in the guide of index ``n`` over a face of cut dots (row ``f``): going down,
-    its path crossing the face's plane at ``(x, y)`` (mm), on a dot or not (``on``:
+    """A ray in the guide of index ``n`` over a face of cut dots (row ``f``): going down, its
+    path crossing the face's plane at ``(x, y)`` (mm), on a dot or not (``on``:
     :func:`~optdot.optics.marks.printed`'s there; the real dots are found along the path
-    whatever it says), followed from where its path comes down into the cavities' layer;
-    or going up from ``(x, y)``, ``z`` mm over the face (a ray born there), followed
-    from there if that is within the layer (else returned as it came, ``SAME_LEG``).
-    ``pr``: the print's :func:`~optdot.optics.marks.dot_tables`. Among the cavities
-    (:func:`among_cavities`): ``(state, act, x, y, z, dx, dy, dz)``, ``NEW_LEG`` back
-    into the guide from where it leaves the layer (``z`` mm over the face) or a fate."""
+    whatever it says), followed from where its path comes down into the cavities' layer (or
+    from the panel's wall behind it, where a ray born or turned there began); or going up
+    from ``(x, y)``, ``z`` mm over the face (a ray born there), followed from there if that
+    is within the layer (else returned as it came, ``SAME_LEG``). ``pr``: the print's
+    :func:`~optdot.optics.marks.dot_tables`. Among the cavities (:func:`among_cavities`):
+    ``(state, act, x, y, z, dx, dy, dz)``, ``NEW_LEG`` back into the guide from where it
+    leaves the layer (``z`` mm over the face) or a fate."""
     real = pr[0]
     code = int(f[F_PROFILE])
     hu, hv, rc, k = f[F_PROF_U], f[F_PROF_V], f[F_PROF_C], f[F_PROF_K]
@@ -192,7 +196,10 @@ def meet_cut(state, f, n, on, x, y, z, pr, walls, dxn, dyn, dz):  # pragma: no c
     if dz >= 0 and z >= deep:  # over the cavities
         return state, SAME_LEG, x, y, z, dxn, dyn, dz
     back = (deep - z) / -dz if dz < 0 else 0.0  # back along the path to the layer's top
-    z0, z = z, (deep if dz < 0 else z)
+    hs = math.sqrt(dxn * dxn + dyn * dyn)
+    if back > 0 and hs > 1e-12:  # or to the panel's wall behind it, where its path began
+        back = min(back, wall_distance(x, y, -dxn / hs, -dyn / hs, walls)[0] / hs)
+    z0, z = z, z - back * dz
     if real:
         return among_cavities(
             state, f, n, True, pr, walls, x, y, z0, deep, (hu, hv, rc, k), _no_lattice(),
