@@ -95,6 +95,21 @@ def test_light_born_beside_a_dimple_going_up_meets_its_wall():
     assert np.allclose(away[:, 4:], [-H, 0.0, H]) and np.allclose(away[:, 3], R)
 
 
+def test_light_coming_down_short_of_a_dimple_meets_its_wall_after_the_face():
+    """A ray at 45° crossing the face 0.12 mm short of the centre, going toward the
+    cavity, meets nothing on its way down; the face reflects it totally and it meets the
+    wall going up, at the lower root, as the ray born there does (the walk down followed
+    on past the face, :func:`~optdot.optics.faces.dot_profile.next_dot`'s ``fold``). Had
+    the walk stopped at the face, the flat face alone would have sent it up at 45°."""
+    f, pr = _setup()
+    out = _meet(f, pr, CENTRE[0] - 0.12, CENTRE[1], 0.0, np.array([H, 0.0, -H]), 50)
+    z = (0.24 - math.sqrt(0.24**2 - 8 * (0.12**2 - R**2))) / 4
+    m = np.array([z - 0.12, 0.0, z]) / R
+    assert np.all(out[:, 0] == t.NEW_LEG)
+    assert np.allclose(out[:, 4:], _tir(m, np.array([H, 0.0, H])), atol=1e-9)
+    assert np.allclose(out[:, 3], R)
+
+
 def _refract(d: np.ndarray, m: np.ndarray, n1: float, n2: float) -> np.ndarray:
     """``d`` through a surface of unit normal ``m`` (pointing the way it goes), Snell."""
     cos_i = d @ m

@@ -176,16 +176,29 @@ def test_the_first_dot_along_a_ray_is_the_one_a_search_of_every_dot_finds(code):
     starts = np.column_stack(
         [g.uniform(0, 3, 4000), g.uniform(0, 2, 4000), -g.uniform(0, tall, 4000)]
     )
-    hits = 0
+    hits = folded = 0
     for o, d in zip(starts, dirs, strict=True):
         k, tt = _first_of_all(f, x_, y_, foot, o[0], o[1], o[2], d, tall)
-        got = next_dot(f, start, x_, y_, foot, cg, o[0], o[1], o[2], d[0], d[1], d[2])
+        got = next_dot(f, start, x_, y_, foot, cg, o[0], o[1], o[2], d[0], d[1], d[2], False)
+        if d[2] > 0:  # folded off the face's plane: the dot met on the way up, else after
+            fold = next_dot(f, start, x_, y_, foot, cg, o[0], o[1], o[2], *d, True)
+            if k >= 0:
+                assert fold[:2] == got[:2] and not fold[5]
+            else:
+                tf = -o[2] / d[2]
+                back = np.array([d[0], d[1], -d[2]])
+                k2, t2 = _first_of_all(
+                    f, x_, y_, foot, o[0] + tf * d[0], o[1] + tf * d[1], -0.0, back, tall
+                )
+                assert fold[5] and fold[0] == k2
+                assert k2 < 0 or fold[1] == pytest.approx(t2, abs=1e-12)
+                folded += k2 >= 0
         if k < 0:
             assert got[0] == -1
             continue
         hits += 1
         assert got[0] == k and got[1] == pytest.approx(tt, abs=1e-12)
-    assert hits > 1000
+    assert hits > 1000 and folded > 100
 
 
 @nb.njit
@@ -301,7 +314,7 @@ def test_the_first_twin_along_a_ray_is_the_one_a_search_of_every_site_finds(code
     dirs[:400, 2] *= 0.02
     dirs /= np.linalg.norm(dirs, axis=1)[:, None]
     tall = 0.08 if code == BUMP else 0.05
-    hits = 0
+    hits = folded = 0
     for i, d in enumerate(dirs):
         turn = 0.0 if aligned else math.pi
         _, lat = twin_lattice(np.uint64(ray_state(2, i)), hu, hv, rc, code == PRISM, turn, fill)
@@ -311,13 +324,60 @@ def test_the_first_twin_along_a_ray_is_the_one_a_search_of_every_site_finds(code
             continue
         sites = int((reach + 0.3) / (0.8 * lat[1])) + 3
         bi, bj, tt = _first_twin(f, hu, hv, rc, k, lat, True, p, d, sites)
-        gi, gj, gt = next_twin(f, hu, hv, rc, k, lat, True, EVERYWHERE, *p, *d)[:3]
+        gi, gj, gt = next_twin(f, hu, hv, rc, k, lat, True, EVERYWHERE, *p, *d, False)[:3]
+        if d[2] > 0:  # folded off the face's plane: the twin met on the way up, else after
+            fold = next_twin(f, hu, hv, rc, k, lat, True, EVERYWHERE, *p, *d, True)
+            if math.isfinite(gt):
+                assert fold[:3] == (gi, gj, gt) and not fold[6]
+            else:
+                tf = -p[2] / d[2]
+                q, back = p + tf * d, np.array([d[0], d[1], -d[2]])
+                q[2] = -0.0
+                far = reach + _layer_end_py(f, hu, hv, k, -0.0, -d[2]) * math.hypot(d[0], d[1])
+                wide = int((far + 0.3) / (0.8 * lat[1])) + 3
+                bi2, bj2, tt2 = _first_twin(f, hu, hv, rc, k, lat, True, q, back, wide)
+                assert fold[6]
+                if math.isfinite(fold[2]):
+                    assert fold[:2] == (bi2, bj2) and fold[2] == pytest.approx(tt2, abs=1e-12)
+                    folded += 1
+                else:
+                    assert tt2 >= _layer_end_py(f, hu, hv, k, -0.0, -d[2]) - 1e-12
         if not math.isfinite(gt):
             assert tt >= _layer_end_py(f, hu, hv, k, p[2], d[2]) - 1e-12
             continue
         hits += 1
         assert (gi, gj) == (bi, bj) and gt == pytest.approx(tt, abs=1e-12)
-    assert hits > 100
+    assert hits > 100 and folded > 20
+
+
+@pytest.mark.parametrize(
+    ("aligned", "fill"), [(True, 0.8), (False, 0.7)], ids=["aligned", "turned"]
+)
+def test_the_walk_over_close_long_twins_misses_none_a_step_ahead(aligned, fill):
+    """:func:`next_twin` tries each site once, in the step its centre lies along, and stops
+    only when no twin a step ahead can come first: long prisms packed close, whose ends
+    reach past the next site along, met by 6,000 rays the length of several sites (a walk
+    that stopped at the first twin met within its step would miss 10 to 15 of them)."""
+    hu, hv, rc = 0.11, 0.04, 0.01
+    f = _row(PRISM, hu, hv, rc, 0.0, (40.0, 55.0))
+    g = np.random.default_rng(7)
+    hits = 0
+    for i in range(6000):
+        turn = 0.0 if aligned else math.pi
+        _, lat = twin_lattice(np.uint64(ray_state(2, i)), hu, hv, rc, True, turn, fill)
+        a, dz = g.uniform(0, 2 * math.pi), g.choice([-1, 1]) * g.uniform(0.02, 0.4)
+        h = math.sqrt(1 - dz * dz)
+        d = np.array([math.cos(a) * h, math.sin(a) * h, dz])
+        p = np.array([g.uniform(-0.2, 0.2), g.uniform(-0.2, 0.2), -g.uniform(0, 0.05)])
+        end = _layer_end_py(f, hu, hv, 0.0, p[2], d[2])
+        sites = int((end * h + 0.3) / (0.8 * lat[1])) + 3
+        bi, bj, tt = _first_twin(f, hu, hv, rc, 0.0, lat, True, p, d, sites)
+        gi, gj, gt = next_twin(f, hu, hv, rc, 0.0, lat, True, EVERYWHERE, *p, *d, False)[:3]
+        assert math.isfinite(gt) == (tt < end)
+        if math.isfinite(gt):
+            hits += 1
+            assert (gi, gj) == (bi, bj) and gt == pytest.approx(tt, abs=1e-12)
+    assert hits > 2000
 
 
 def test_twins_stand_only_where_the_coverage_has_dots():
@@ -336,7 +396,7 @@ def test_twins_stand_only_where_the_coverage_has_dots():
         a = g.uniform(0, 2 * math.pi)
         d = np.array([math.cos(a), math.sin(a), 0.05])  # out of the layer within 1.4 mm
         d /= np.linalg.norm(d)
-        gi, gj, gt = next_twin(f, hu, hv, 0.0, k, lat, False, half, *p, *d)[:3]
+        gi, gj, gt = next_twin(f, hu, hv, 0.0, k, lat, False, half, *p, *d, False)[:3]
         bi, bj, tt = _first_twin_where(f, hu, hv, 0.0, k, lat, p, d, 40, half)
         assert math.isfinite(gt) == math.isfinite(tt)
         if math.isfinite(gt):

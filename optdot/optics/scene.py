@@ -24,7 +24,7 @@ from ..config.bench import Bench
 from ..config.light_guide import EDGE_FINISH, REFLECTOR_FINISH, LightGuide
 from ..errors import JobError
 from ..geometry.caps import cap_shares, no_caps
-from ..geometry.profile import BUMP, INK, PRISM
+from ..geometry.profile import BUMP, DIMPLE, INK, PRISM, PRISM_CUT
 from ..geometry.shapes import packed
 from ..pattern import DotSource, caps_of
 from .tables import (
@@ -162,6 +162,8 @@ def scene_of(
         sources = _grid_sources(bl, rays, only_led)
         layer, face = _direct_stack(bl)
     face[:, F_TEST] = (face[:, F_KIND] == BOTTOM_FACE) | (face[:, F_PRINT] > 0)
+    if dots is not None and face[0, F_PROFILE] in (DIMPLE, PRISM_CUT):
+        face[0, F_TEST] = 0  # real cut dots are found along a ray's path, not by the test
     stack = Stack(layer, face, walls, normals, MAX_EVENTS)
     return Scene(sources, stack, _print(bench, dots, coverage))
 

@@ -39,6 +39,7 @@ from ..rays import lambert, uniform
 from ..tables import (
     BOTTOM,
     DOT,
+    F_COS_DOWN,
     F_PROF_C,
     F_PROF_K,
     F_PROF_U,
@@ -89,9 +90,33 @@ def _sheet_back(state, f, du, dv, dz):  # pragma: no cover - compiled
     return state, True, du, dv, dz
 
 
+@nb.njit(cache=True, inline="always")
+def _next_cavity(f, real, pr, frame, lat, place, pu, pv, pz, du, dv, dz):  # pragma: no cover
+    """The first cavity a ray in the glass at ``(pu, pv)``, ``pz`` mm over the face of cut
+    dots (row ``f``), going ``d`` (unit) meets before it leaves their layer: a real dot
+    (``real``: :func:`~.dot_profile.next_dot` over the print's ``pr``) or a twin
+    (:func:`~.dot_profile.next_twin` over ``lat``; ``frame``, ``place`` as
+    :func:`among_cavities`'), ``z`` turned over: ``(met, i, j, t, mx, my, mz, after)``,
+    whether it meets one, which (the dot ``i``, or the site ``(i, j)``), how far on (mm)
+    and the normal there. A ray going down that the face will reflect totally is followed
+    on past it, up: ``after``, when it meets none on the way down (then the one it meets
+    after the face, ``t`` from there)."""
+    fold = dz < 0 and -dz <= f[F_COS_DOWN]
+    if real:
+        i, t, mx, my, mz, after = next_dot(
+            f, pr[3], pr[4], pr[5], pr[6], pr[7], pu, pv, -pz, du, dv, -dz, fold
+        )
+        return i >= 0, i, 0, t, mx, my, mz, after
+    hu, hv, rc, k = frame
+    i, j, t, mx, my, mz, after = next_twin(
+        f, hu, hv, rc, k, lat, False, place, pu, pv, -pz, du, dv, -dz, fold
+    )
+    return t < np.inf, i, j, t, mx, my, mz, after
+
+
 @nb.njit(cache=True)
 def among_cavities(
-    state, f, n, real, pr, walls, x, y, z0, deep, frame, lat, place, pu, pv, pz, du, dv, dz
+    state, f, n, real, pr, walls, x, y, z0, deep, frame, lat, place, pu, pv, pz, du, dv, dz, met
 ):  # pragma: no cover
     """A ray in the glass of index ``n`` over a face of cut dots (row ``f``), at ``(pu, pv,
     pz)`` going ``d`` (unit; ``pz`` mm over the face), followed among the cavities until it
@@ -106,29 +131,27 @@ def among_cavities(
     z0)`` when a ray coming down met nothing but the flat face, which reflected it (its
     course the same, turned up), or the fate ``BOTTOM`` (the reflector absorbed it), ``DOT``
     (caught in a cavity, or after :data:`~.dot_profile.MAX_DOTS` events). A ray that would
-    go on past the panel's ``walls`` goes on from ``(x, y, z0)``."""
+    go on past the panel's ``walls`` goes on from ``(x, y, z0)``. ``met``: the first cavity
+    on its path (:func:`_next_cavity`'s)."""
     ox, oy, c0, s0, _, _ = place
     hu, hv, rc, k = frame
     cu, cv, c, s = 0.0, 0.0, 1.0, 0.0
     plain = dz < 0  # met nothing but the flat face, and that as a mirror, yet
+    looked = True  # the first cavity on its path, found by the caller
     for _ in range(MAX_DOTS):
-        if real:
-            j, t, mx, my, mz = next_dot(
-                f, pr[3], pr[4], pr[5], pr[6], pr[7], pu, pv, -pz, du, dv, -dz
+        if not looked:
+            met = _next_cavity(f, real, pr, frame, lat, place, pu, pv, pz, du, dv, dz)
+        found, i, j, t, mx, my, mz, after = met
+        looked = after  # none on the way down: the one met on the way up, kept
+        met = (found, i, j, t, mx, my, mz, False)
+        found = found and not after
+        if found and real:
+            hu, hv, rc, k = _sized(
+                f[F_PROF_U], f[F_PROF_V], f[F_PROF_C], f[F_PROF_K], half_width_packed(pr[6], i)
             )
-            found = j >= 0
-            if found:
-                hu, hv, rc, k = _sized(
-                    f[F_PROF_U], f[F_PROF_V], f[F_PROF_C], f[F_PROF_K], half_width_packed(pr[6], j)
-                )
-                cu, cv, c, s = pr[4][j], pr[5][j], pr[6][j, 4], pr[6][j, 5]
-        else:
-            i, j, t, mx, my, mz = next_twin(
-                f, hu, hv, rc, k, lat, False, place, pu, pv, -pz, du, dv, -dz
-            )
-            found = t < np.inf
-            if found:
-                cu, cv, c, s = _site(lat, i, j)
+            cu, cv, c, s = pr[4][i], pr[5][i], pr[6][i, 4], pr[6][i, 5]
+        elif found:
+            cu, cv, c, s = _site(lat, i, j)
         if found:  # into the cavity (z turned back: its normal out into the glass)
             plain = False
             rx, ry, z = pu + t * du - cu, pv + t * dv - cv, max(pz + t * dz, 0.0)
@@ -200,29 +223,31 @@ def meet_cut(state, f, n, on, x, y, z, pr, walls, dxn, dyn, dz):  # pragma: no c
     if back > 0 and hs > 1e-12:  # or to the panel's wall behind it, where its path began
         back = min(back, wall_distance(x, y, -dxn / hs, -dyn / hs, walls)[0] / hs)
     z0, z = z, z - back * dz
-    if real:
-        return among_cavities(
-            state, f, n, True, pr, walls, x, y, z0, deep, (hu, hv, rc, k), _no_lattice(),
-            (0.0, 0.0, 1.0, 0.0, pr[1], pr[2]), x - back * dxn, y - back * dyn, z, dxn, dyn,
-            dz,
-        )  # fmt: skip
-    prism = code >= PRISM
-    aligned = c == c or (not prism and hu == hv)  # the twins at one angle (a disc's: any)
-    if c != c:
-        c, s = 1.0, 0.0
-    fill = _fill_at(x, y, pr[1], pr[2])
-    state, lat = twin_lattice(
-        state, hu, hv, rc, prism, 0.0 if aligned else _turn(f), max(fill, 1e-9)
-    )
-    if on != BARE:  # on the twin at the lattice's origin: where on it, drawn
-        state, lu, lv = _on_footprint(state, code, hu, hv, rc)
-        _, _, c1, s1 = _site(lat, 0, 0)  # its own angle in the lattice's frame
-        pu, pv = c1 * lu - s1 * lv, s1 * lu + c1 * lv
-    else:
-        state, pu, pv = bare_point(state, lat, hu, hv, rc, prism)
-    ox, oy = x - c * pu + s * pv, y - s * pu - c * pv  # the lattice's origin on the face
+    if real:  # face coordinates
+        lat, c, s, ox, oy, pu, pv = _no_lattice(), 1.0, 0.0, 0.0, 0.0, x, y
+    else:  # the coverage's twins, in the frame of the dot drawn at the lattice's origin
+        prism = code >= PRISM
+        aligned = c == c or (not prism and hu == hv)  # the twins at one angle (a disc's: any)
+        if c != c:
+            c, s = 1.0, 0.0
+        fill = _fill_at(x, y, pr[1], pr[2])
+        state, lat = twin_lattice(
+            state, hu, hv, rc, prism, 0.0 if aligned else _turn(f), max(fill, 1e-9)
+        )
+        if on != BARE:  # on the twin at the lattice's origin: where on it, drawn
+            state, lu, lv = _on_footprint(state, code, hu, hv, rc)
+            _, _, c1, s1 = _site(lat, 0, 0)  # its own angle in the lattice's frame
+            pu, pv = c1 * lu - s1 * lv, s1 * lu + c1 * lv
+        else:
+            state, pu, pv = bare_point(state, lat, hu, hv, rc, prism)
+        ox, oy = x - c * pu + s * pv, y - s * pu - c * pv  # the lattice's origin on the face
     du, dv = c * dxn + s * dyn, c * dyn - s * dxn
+    pu, pv = pu - back * du, pv - back * dv
+    frame, place = (hu, hv, rc, k), (ox, oy, c, s, pr[1], pr[2])
+    met = _next_cavity(f, real, pr, frame, lat, place, pu, pv, z, du, dv, dz)
+    if not met[0] and met[7]:  # no cavity on its path down to the face and back up, which
+        return state, SAME_LEG, x, y, z0, c * du - s * dv, s * du + c * dv, -dz  # reflects it
     return among_cavities(
-        state, f, n, False, pr, walls, x, y, z0, deep, (hu, hv, rc, k), lat,
-        (ox, oy, c, s, pr[1], pr[2]), pu - back * du, pv - back * dv, z, du, dv, dz,
+        state, f, n, real, pr, walls, x, y, z0, deep, frame, lat, place, pu, pv, z, du, dv, dz,
+        met,
     )  # fmt: skip

@@ -504,23 +504,35 @@ def _off_line(rx, ry, ux, uy, reach):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True)
-def next_dot(f, start, dx_, dy_, foot, cg, x, y, z, dx, dy, dz):  # pragma: no cover
+def next_dot(f, start, dx_, dy_, foot, cg, x, y, z, dx, dy, dz, fold):  # pragma: no cover
     """The first of the real raised dots (row ``f``'s profile; the print's cells ``start``,
     centres ``dx_``, ``dy_``, footprints ``foot``, grid ``cg``) a ray in the air under
     the face meets, from ``(x, y, z)`` (mm, ``z <= 0``) going ``d`` (unit), before it
-    leaves their layer: ``(k, t, mx, my, mz)``, the dot (-1 for none), the distance to
-    it (mm) and its surface's outward unit normal there. The cells are walked along the
-    ray's course a cell at a time, each widened by the largest dot's extent."""
+    leaves their layer: ``(k, t, mx, my, mz, after)``, the dot (-1 for none), the distance
+    to it (mm) and its surface's outward unit normal there. The cells are walked along the
+    ray's course a cell at a time, each widened by the largest dot's extent.
+
+    With ``fold`` (a ray going up, ``dz > 0``, that the face will reflect totally), the
+    path goes on mirrored off the face's plane, down out of the layer: its horizontal
+    course is the same line, so one walk finds the dot met on either leg. A dot met
+    going up is returned with ``after`` false; else the dot met after the face (``after``
+    true, ``t`` from the point the path meets the face's plane, ``k`` -1 for none)."""
     hu0, hv0, rc0, k0 = f[F_PROF_U], f[F_PROF_V], f[F_PROF_C], f[F_PROF_K]
     x0, y0, cell, nx, ny, rmax = cg[0], cg[1], cg[2], int(cg[4]), int(cg[5]), cg[6]
     t_end = _layer_end(f, rmax, hv0, k0, z, dz)  # a prism no longer than the largest extent
+    t_face = t_end if fold else 0.0  # a rising ray's first leg ends on the face's plane
+    xf, yf = x + t_face * dx, y + t_face * dy
+    t_end2 = _layer_end(f, rmax, hv0, k0, -0.0, -dz) if fold else 0.0
+    t_all = t_face + t_end2 if fold else t_end
     hs = math.sqrt(dx * dx + dy * dy)
     step = cell / hs if hs > 1e-12 else np.inf
     ux, uy = (dx / hs, dy / hs) if hs > 1e-12 else (0.0, 0.0)
+    far = t_all * hs + rmax  # the farthest a dot met stands along its course (mm)
     best, bk, bx, by, bz = t_end, -1, 0.0, 0.0, 0.0
+    best2, bk2, bx2, by2, bz2 = t_end2, -1, 0.0, 0.0, 0.0  # after the face
     ta = 0.0
     for _ in range(2 * (nx + ny) + 4):
-        tb = min(ta + step, t_end)
+        tb = min(ta + step, t_all)
         xa, xb = x + ta * dx, x + (tb if tb < np.inf else ta) * dx
         ya, yb = y + ta * dy, y + (tb if tb < np.inf else ta) * dy
         ax = int(math.floor((min(xa, xb) - rmax - x0) / cell))
@@ -533,8 +545,9 @@ def next_dot(f, start, dx_, dy_, foot, cg, x, y, z, dx, dy, dz):  # pragma: no c
             for jx in range(max(ax, 0), min(bx_ + 1, nx)):
                 cc = jy * nx + jx
                 for j in range(start[cc], start[cc + 1]):
-                    if _off_line(dx_[j] - x, dy_[j] - y, ux, uy, rmax):
-                        continue
+                    rx, ry = dx_[j] - x, dy_[j] - y
+                    if _off_line(rx, ry, ux, uy, rmax) or not -rmax <= rx * ux + ry * uy <= far:
+                        continue  # off its course, or behind its start or past its end
                     hu, hv, rc, kk = _sized(hu0, hv0, rc0, k0, half_width_packed(foot, j))
                     t, mx, my, mz = _meet_body(
                         f, hu, hv, rc, kk, foot[j, 4], foot[j, 5], x - dx_[j], y - dy_[j], z,
@@ -542,10 +555,19 @@ def next_dot(f, start, dx_, dy_, foot, cg, x, y, z, dx, dy, dz):  # pragma: no c
                     )  # fmt: skip
                     if t < best:
                         best, bk, bx, by, bz = t, j, mx, my, mz
-        if best <= tb or tb >= t_end:
+                    if fold and bk < 0:  # on the leg after the face
+                        t, mx, my, mz = _meet_body(
+                            f, hu, hv, rc, kk, foot[j, 4], foot[j, 5], xf - dx_[j],
+                            yf - dy_[j], -0.0, dx, dy, -dz,
+                        )  # fmt: skip
+                        if t < best2:
+                            best2, bk2, bx2, by2, bz2 = t, j, mx, my, mz
+        if (bk >= 0 and best <= tb) or tb >= t_all or (fold and bk < 0 and t_face + best2 <= tb):
             break
         ta = tb
-    return bk, best, bx, by, bz
+    if fold and bk < 0:
+        return bk2, best2, bx2, by2, bz2, True
+    return bk, best, bx, by, bz, False
 
 
 @nb.njit(cache=True)
@@ -559,7 +581,7 @@ def among_dots(state, f, n, pr, x, y, z, dxn, dyn, dz):  # pragma: no cover - co
     :func:`~optdot.optics.marks.dot_tables`."""
     start, dx_, dy_, foot, cg = pr[3], pr[4], pr[5], pr[6], pr[7]
     for _ in range(MAX_DOTS):
-        k, t, mx, my, mz = next_dot(f, start, dx_, dy_, foot, cg, x, y, z, dxn, dyn, dz)
+        k, t, mx, my, mz, _ = next_dot(f, start, dx_, dy_, foot, cg, x, y, z, dxn, dyn, dz, False)
         if k < 0:
             return state, INTO_AIR, x, y, z, dxn, dyn, dz
         hu, hv, rc, kk = _sized(
@@ -642,55 +664,90 @@ def twin_lattice(state, hu, hv, rc, prism, turn, fill):  # pragma: no cover - co
 
 
 @nb.njit(cache=True, inline="always")
-def _nearest_site(lat, pu, pv):  # pragma: no cover - compiled
-    """The lattice site nearest ``(pu, pv)`` (mm, the dot's frame) in the basis's
-    coordinates (rounded)."""
+def _lattice_at(lat, pu, pv):  # pragma: no cover - compiled
+    """``(pu, pv)`` (mm, the dot's frame) in lattice ``lat``'s basis (fractional)."""
     e, _, b1u, b1v, b2u, b2v, _, _, _ = lat
     det = b1u * b2v - b1v * b2u
     qu = pu / e
-    fi = (qu * b2v - pv * b2u) / det
-    fj = (b1u * pv - b1v * qu) / det
+    return (qu * b2v - pv * b2u) / det, (b1u * pv - b1v * qu) / det
+
+
+@nb.njit(cache=True, inline="always")
+def _nearest_site(lat, pu, pv):  # pragma: no cover - compiled
+    """The lattice site nearest ``(pu, pv)`` (mm, the dot's frame) in the basis's
+    coordinates (rounded)."""
+    fi, fj = _lattice_at(lat, pu, pv)
     return int(math.floor(fi + 0.5)), int(math.floor(fj + 0.5))
 
 
 @nb.njit(cache=True)
-def next_twin(f, hu, hv, rc, k, lat, skip0, place, pu, pv, pz, du, dv, dz):  # pragma: no cover
+def next_twin(
+    f, hu, hv, rc, k, lat, skip0, place, pu, pv, pz, du, dv, dz, fold
+):  # pragma: no cover
     """:func:`next_dot` over lattice ``lat``'s twins (the dot at site ``(0, 0)`` left
-    out when ``skip0``): ``(i, j, t, mu, mv, mz)``, the site (``t`` inf for none), the
-    distance (mm) and the normal, in the dot's frame. A twin stands only where the
-    coverage has dots (``place``: the frame's origin and turn on the face, ``(ox, oy,
-    c, s)`` mm, and the coverage ``phi`` over cells ``g``): none past the panel's edge
-    or in its holes."""
+    out when ``skip0``; ``fold`` as :func:`next_dot`'s): ``(i, j, t, mu, mv, mz, after)``,
+    the site (``t`` inf for none), the distance (mm) and the normal, in the dot's frame. A
+    twin stands only where the coverage has dots (``place``: the frame's origin and turn
+    on the face, ``(ox, oy, c, s)`` mm, and the coverage ``phi`` over cells ``g``): none
+    past the panel's edge or in its holes. The path is walked a spacing at a time, each
+    step trying the sites within a twin's reach of it whose centres lie along it, so
+    each site is tried once."""
     ox, oy, c0, s0, phi, g = place
-    a, m = lat[1], lat[8]
+    a = lat[1]
     t_end = _layer_end(f, hu, hv, k, pz, dz)
+    t_face = t_end if fold else 0.0  # a rising ray's first leg ends on the face's plane
+    fu, fv = pu + t_face * du, pv + t_face * dv
+    t_end2 = _layer_end(f, hu, hv, k, -0.0, -dz) if fold else 0.0
+    t_all = t_face + t_end2 if fold else t_end
     hs = math.sqrt(du * du + dv * dv)
-    step = 0.5 * a * min(lat[0], 1.0) / hs if hs > 1e-12 else np.inf
+    step = a * min(lat[0], 1.0) / hs if hs > 1e-12 else np.inf  # a spacing along
     ux, uy = (du / hs, dv / hs) if hs > 1e-12 else (0.0, 0.0)
     e, b1u, b1v, b2u, b2v = lat[0], lat[2], lat[3], lat[4], lat[5]
     reach = math.sqrt(hu * hu + hv * hv)  # a twin's extent
+    wide = reach * max(1.0, 1.0 / e) / (0.8660254037844386 * a)  # in the basis's units
+    lag = reach / hs if hs > 1e-12 else np.inf  # a twin ahead is met this much before it
+    t_scan = t_all + lag  # the twins past it are not met
     best, bi, bj, bu, bv, bz = t_end, 0, 0, 0.0, 0.0, 0.0
+    best2, bi2, bj2, bu2, bv2, bz2 = t_end2, 0, 0, 0.0, 0.0, 0.0  # after the face
     ta = 0.0
     for _ in range(4096):
-        tm = ta + 0.5 * step if step < np.inf else ta  # the step's middle
-        i0, j0 = _nearest_site(lat, pu + tm * du, pv + tm * dv)
-        for i in range(i0 - m, i0 + m + 1):
-            for j in range(j0 - m, j0 + m + 1):
+        tb = ta + step
+        last = tb >= t_scan
+        lo = ta * hs if ta > 0 else -np.inf  # the step's share of the sites along the path
+        hi = np.inf if last else tb * hs
+        tc = tb if tb < np.inf else ta
+        fi0, fj0 = _lattice_at(lat, pu + ta * du, pv + ta * dv)
+        fi1, fj1 = _lattice_at(lat, pu + tc * du, pv + tc * dv)
+        i0 = int(math.floor(min(fi0, fi1) - wide))
+        j0 = int(math.floor(min(fj0, fj1) - wide))
+        i1 = int(math.ceil(max(fi0, fi1) + wide))
+        j1 = int(math.ceil(max(fj0, fj1) + wide))
+        for i in range(i0, i1 + 1):  # the sites within a twin's reach of the step
+            for j in range(j0, j1 + 1):
                 if skip0 and i == 0 and j == 0:
                     continue  # the dot the ray left
-                if _off_line((i * b1u + j * b2u) * e - pu, i * b1v + j * b2v - pv, ux, uy, reach):
-                    continue
+                ru, rv = (i * b1u + j * b2u) * e - pu, i * b1v + j * b2v - pv
+                if not lo <= ru * ux + rv * uy < hi or _off_line(ru, rv, ux, uy, reach):
+                    continue  # another step's, or off the path
                 cu, cv, c, s = _site(lat, i, j)
                 if _fill_at(ox + c0 * cu - s0 * cv, oy + s0 * cu + c0 * cv, phi, g) <= 0:
                     continue  # no dots there
                 t, mu, mv, mz = _meet_body(f, hu, hv, rc, k, c, s, pu - cu, pv - cv, pz, du, dv, dz)
                 if t < best:
                     best, bi, bj, bu, bv, bz = t, i, j, mu, mv, mz
-        tb = ta + step
-        if best <= tb or tb >= t_end:
+                if fold and best >= t_end:  # on the leg after the face
+                    t, mu, mv, mz = _meet_body(
+                        f, hu, hv, rc, k, c, s, fu - cu, fv - cv, -0.0, du, dv, -dz
+                    )
+                    if t < best2:
+                        best2, bi2, bj2, bu2, bv2, bz2 = t, i, j, mu, mv, mz
+        met = best < t_end  # on the way up: no twin farther along can come before it
+        if last or (met and best <= tb - lag) or (fold and not met and t_face + best2 <= tb - lag):
             break
         ta = tb
-    return bi, bj, (best if best < t_end else np.inf), bu, bv, bz
+    if fold and best >= t_end:
+        return bi2, bj2, (best2 if best2 < t_end2 else np.inf), bu2, bv2, bz2, True
+    return bi, bj, (best if best < t_end else np.inf), bu, bv, bz, False
 
 
 @nb.njit(cache=True)
@@ -743,7 +800,9 @@ def among_twins(
     neighbours do. ``(state, where, pu, pv, pz, du, dv, dz)`` as :func:`among_dots`', in
     the dot's frame."""
     for _ in range(MAX_DOTS):
-        i, j, t, mu, mv, mz = next_twin(f, hu, hv, rc, k, lat, skip0, place, pu, pv, pz, du, dv, dz)
+        i, j, t, mu, mv, mz, _ = next_twin(
+            f, hu, hv, rc, k, lat, skip0, place, pu, pv, pz, du, dv, dz, False
+        )
         if t == np.inf:
             return state, INTO_AIR, pu, pv, pz, du, dv, dz
         cu, cv, c, s = _site(lat, i, j)
