@@ -38,13 +38,14 @@ def _setup() -> tuple[tuple, tuple]:
 
 
 @nb.njit
-def _meet(f, pr, x, y, z, d, rays, walls=NO_WALLS):  # pragma: no cover - compiled
+def _meet(f, pr, x, y, z, d, rays, walls=NO_WALLS, run=0.0):  # pragma: no cover - compiled
     """``meet_cut`` for ``rays`` rays at ``(x, y, z)`` going ``d`` (the panel's ``walls``,
-    none by default): ``[rays, 7]`` (act, x, y, z, dx, dy, dz)."""
+    none by default; ``run`` how far the ray came on its course, 0: not known):
+    ``[rays, 7]`` (act, x, y, z, dx, dy, dz)."""
     out = np.zeros((rays, 7))
     for i in range(rays):
         _, act, ex, ey, ez, a, b, c = meet_cut(
-            ray_state(5, i), f, N, -1, x, y, z, pr, walls, d[0], d[1], d[2]
+            ray_state(5, i), f, N, -1, x, y, z, pr, walls, d[0], d[1], d[2], run
         )
         out[i, 0], out[i, 1], out[i, 2], out[i, 3] = act, ex, ey, ez
         out[i, 4], out[i, 5], out[i, 6] = a, b, c
@@ -165,3 +166,9 @@ def test_a_ray_coming_down_off_the_panel_s_wall_meets_the_cavity_by_the_wall():
     flat = d * [1, 1, -1]
     assert not np.isclose(out[:, 4:], flat, atol=1e-6).all(axis=1).any()
     assert np.isin(out[:, 0], (t.NEW_LEG, t.BOTTOM)).all()  # the sheet under its base: 0.9
+    # told it came from the wall less far than the layer reaches back (the tracer's run:
+    # 1.43 of 2.86 mm), it looks the wall up: the same
+    np.testing.assert_array_equal(_meet(f, pr, x, 1.0, 0.0, d, 200, walls, x * 0.999), out)
+    # told it came from farther than the wall (which cannot be): taken back past it
+    beyond = _meet(f, pr, x, 1.0, 0.0, d, 200, walls, 10.0)
+    assert np.isclose(beyond[:, 4:], flat, atol=1e-6).all(axis=1).all()

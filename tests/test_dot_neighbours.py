@@ -162,14 +162,31 @@ def _pattern(code: int, g: np.random.Generator) -> tuple[Pattern, tuple, float]:
     return Pattern(xy, 0, BOX, dots=foot), row, tall
 
 
+def _fine_cells(x_, y_, foot, cg, cell: float) -> tuple:
+    """The print's cells ``dot_grid`` made, made again ``cell`` mm wide."""
+    nx, ny = int(math.ceil(BOX[2] / cell)), int(math.ceil(BOX[3] / cell))
+    key = np.clip((y_ / cell).astype(int), 0, ny - 1) * nx + np.clip(
+        (x_ / cell).astype(int), 0, nx - 1
+    )
+    o = np.argsort(key, kind="stable")
+    start = np.concatenate([[0], np.cumsum(np.bincount(key, minlength=nx * ny))])
+    grid = np.array([0.0, 0.0, cell, cell, nx, ny, cg[6]])
+    return start, x_[o], y_[o], np.ascontiguousarray(foot[o]), grid
+
+
+@pytest.mark.parametrize("fine", [False, True], ids=["cells", "fine-cells"])
 @pytest.mark.parametrize("code", [BUMP, PRISM], ids=["bumps", "prisms"])
-def test_the_first_dot_along_a_ray_is_the_one_a_search_of_every_dot_finds(code):
+def test_the_first_dot_along_a_ray_is_the_one_a_search_of_every_dot_finds(code, fine):
     """:func:`next_dot`'s walk over the print's cells finds the dot (and the distance) a
     search of every dot finds, for rays from anywhere in the dots' layer going anywhere,
-    grazing ones among them."""
+    grazing ones among them; and over cells two extents wide (``fine``), where a walk
+    takes several steps and a dot whose centre lies past a step's span is met before
+    the one met within it."""
     g = np.random.default_rng(5)
     p, f, tall = _pattern(code, g)
     start, x_, y_, foot, cg = dot_grid(p, p.box)
+    if fine:
+        start, x_, y_, foot, cg = _fine_cells(x_, y_, foot, cg, 2 * cg[6])
     dirs = _unit(g, 4000)
     dirs[:1000, 2] *= 0.02  # grazing the face
     dirs /= np.linalg.norm(dirs, axis=1)[:, None]
@@ -199,6 +216,23 @@ def test_the_first_dot_along_a_ray_is_the_one_a_search_of_every_dot_finds(code):
         hits += 1
         assert got[0] == k and got[1] == pytest.approx(tt, abs=1e-12)
     assert hits > 1000 and folded > 100
+
+
+def test_a_dot_centred_past_a_step_s_span_met_before_the_one_met_within_it_is_found():
+    """A walk in steps of one cell (0.25 mm): a ray just under the face along x grazes a
+    bump 0.12 mm wide centred 0.24 mm on (within the first step's span) at 0.229 mm,
+    but meets first, at 0.16 mm, a bump 0.2 mm wide centred 0.26 mm on, which the
+    second step owns. The walk goes on a bump's reach past the first met (red when it
+    stops at the first dot met within its step)."""
+    xy = np.array([[0.5 + 0.24, 1.059], [0.5 + 0.26, 1.0]])
+    p = Pattern(xy, np.array([0.12, 0.2]), BOX)
+    f = _row(BUMP, 0.1, 0.1, 0.0, 0.6)
+    start, x_, y_, foot, cg = _fine_cells(*dot_grid(p, p.box)[1:], 0.25)
+    d = np.array([1.0, 0.0, 0.001]) / math.hypot(1.0, 0.001)
+    k, tt = _first_of_all(f, x_, y_, foot, 0.5, 1.0, -0.001, d, 0.06)
+    assert x_[k] == pytest.approx(0.76) and tt == pytest.approx(0.16, abs=1e-3)
+    got = next_dot(f, start, x_, y_, foot, cg, 0.5, 1.0, -0.001, d[0], d[1], d[2], False)
+    assert got[0] == k and got[1] == pytest.approx(tt, abs=1e-12)
 
 
 @nb.njit

@@ -222,13 +222,13 @@ def _trace_rays(
         state, end, x, y, z, dxn, dyn, dz = _born_among(
             state, li, face, n, x, y, z, z0, dots, walls, dxn, dyn, dz
         )
-        new_leg, s_wall, wall, h, ux, uy = True, np.inf, -1, 1.0, 0.0, 0.0
+        new_leg, s_wall, wall, h, ux, uy, run = True, np.inf, -1, 1.0, 0.0, 0.0, 0.0
         for _ in range(max_events if end == UNFINISHED else 0):
             if new_leg:  # the horizontal course changed: the wall ahead
                 h = math.sqrt(dxn * dxn + dyn * dyn)
                 ux, uy = (dxn / h, dyn / h) if h > 1e-12 else (0.0, 0.0)
                 s_wall, wall = wall_distance(x, y, ux, uy, walls) if h > 1e-12 else (np.inf, -1)
-                new_leg = False
+                new_leg, run = False, 0.0  # run: how far it came on this course
             s_face = (z1 - z) / dz * h if dz > 0 else (z - z0) / (-dz) * h if dz < 0 else np.inf
             at_wall = s_wall <= s_face
             s = s_wall if at_wall else s_face
@@ -241,7 +241,7 @@ def _trace_rays(
                 x, y, end = x + ux * s * f, y + uy * s * f, BULK
                 break
             budget -= path
-            x, y, s_wall = x + ux * s, y + uy * s, s_wall - s
+            x, y, s_wall, run = x + ux * s, y + uy * s, s_wall - s, run + s
             if at_wall:
                 state, end, x, y, z, dxn, dyn, dz = _off_wall(
                     state, layer, li, face, normals[wall], n, x, y, z + dz * path, dots, walls,
@@ -260,7 +260,7 @@ def _trace_rays(
                 on = printed(x, y, int(face[fi, F_PRINT]), pr_arrays, u)
             if face[fi, F_PROFILE] > 0.5:  # 3-D dots: they need the print, and move the ray
                 state, act, x, y, zc, dxn, dyn, dz = meet_dots(
-                    state, face_row(face, fi), n, on, x, y, dots, walls, dxn, dyn, dz
+                    state, face_row(face, fi), n, on, x, y, dots, walls, run, dxn, dyn, dz
                 )
                 z += zc
             else:

@@ -48,11 +48,12 @@ def meet_face(state, f, up, n, n_to, is_top, ink, dxn, dyn, dz):  # pragma: no c
 
 
 @nb.njit(cache=True, inline="always")
-def meet_dots(state, f, n, on, x, y, pr, walls, dxn, dyn, dz):  # pragma: no cover
+def meet_dots(state, f, n, on, x, y, pr, walls, run, dxn, dyn, dz):  # pragma: no cover
     """A ray going down onto the bottom face of 3-D dots (its row ``f``) from the guide of
     index ``n`` at ``(x, y)`` (mm), on a dot or not (``on``: what
     :func:`~optdot.optics.marks.printed` found there), with the print's
-    :func:`~optdot.optics.marks.dot_tables` ``pr`` and the panel's ``walls``: a dot's
+    :func:`~optdot.optics.marks.dot_tables` ``pr`` and the panel's ``walls`` (``run``: how
+    far, mm, its course has come over the face since it last turned): a dot's
     ``meet_profile``, the face between raised dots (``leave_between``), or the cut dots'
     cavities its path passes (``meet_cut``): ``(state, act, x, y, z, dx, dy, dz)``, and
     where the ray goes on from (a dot moves it; ``z`` mm over the face). Kept apart from
@@ -62,7 +63,7 @@ def meet_dots(state, f, n, on, x, y, pr, walls, dxn, dyn, dz):  # pragma: no cov
     x2, y2, z2 = x, y, 0.0
     if profile == DIMPLE or profile == PRISM_CUT:  # among the cavities its path passes
         state, act, x2, y2, z2, dxn, dyn, dz = meet_cut(
-            state, f, n, on, x, y, 0.0, pr, walls, dxn, dyn, dz
+            state, f, n, on, x, y, 0.0, pr, walls, dxn, dyn, dz, run
         )
     elif on != BARE:  # on a dot: where on it (a real one), or the coverage cell's angle and size
         at = dot_frame(x, y, on, pr)
@@ -85,7 +86,7 @@ def born_among_dots(state, f, n, x, y, z, pr, walls, dxn, dyn, dz):  # pragma: n
     (``SAME_LEG``)."""
     profile = f[F_PROFILE]
     if (profile == DIMPLE or profile == PRISM_CUT) and dz > 0:
-        return meet_cut(state, f, n, BARE, x, y, z, pr, walls, dxn, dyn, dz)
+        return meet_cut(state, f, n, BARE, x, y, z, pr, walls, dxn, dyn, dz, 0.0)
     return state, SAME_LEG, x, y, z, dxn, dyn, dz
 
 

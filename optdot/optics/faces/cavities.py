@@ -194,14 +194,16 @@ def among_cavities(
 # inlined into the tracer's loop: numba counts a reference to each of the print's
 # tables at every call they are handed to
 @nb.njit(cache=True, inline="always")
-def meet_cut(state, f, n, on, x, y, z, pr, walls, dxn, dyn, dz):  # pragma: no cover - compiled
+def meet_cut(state, f, n, on, x, y, z, pr, walls, dxn, dyn, dz, run):  # pragma: no cover
     """A ray in the guide of index ``n`` over a face of cut dots (row ``f``): going down, its
     path crossing the face's plane at ``(x, y)`` (mm), on a dot or not (``on``:
     :func:`~optdot.optics.marks.printed`'s there; the real dots are found along the path
     whatever it says), followed from where its path comes down into the cavities' layer (or
     from the panel's wall behind it, where a ray born or turned there began); or going up
     from ``(x, y)``, ``z`` mm over the face (a ray born there), followed from there if that
-    is within the layer (else returned as it came, ``SAME_LEG``). ``pr``: the print's
+    is within the layer (else returned as it came, ``SAME_LEG``). ``run``: how far (mm)
+    its course has come over the face since it last turned (the panel's walls are
+    looked up behind it only past that; 0 if not known). ``pr``: the print's
     :func:`~optdot.optics.marks.dot_tables`. Among the cavities (:func:`among_cavities`):
     ``(state, act, x, y, z, dx, dy, dz)``, ``NEW_LEG`` back into the guide from where it
     leaves the layer (``z`` mm over the face) or a fate."""
@@ -220,7 +222,7 @@ def meet_cut(state, f, n, on, x, y, z, pr, walls, dxn, dyn, dz):  # pragma: no c
         return state, SAME_LEG, x, y, z, dxn, dyn, dz
     back = (deep - z) / -dz if dz < 0 else 0.0  # back along the path to the layer's top
     hs = math.sqrt(dxn * dxn + dyn * dyn)
-    if back > 0 and hs > 1e-12:  # or to the panel's wall behind it, where its path began
+    if back > 0 and back * hs > run:  # or to the panel's wall behind it, where its path began
         back = min(back, wall_distance(x, y, -dxn / hs, -dyn / hs, walls)[0] / hs)
     z0, z = z, z - back * dz
     if real:  # face coordinates

@@ -106,8 +106,8 @@ def _quadric(q, ox, oy, oz, dx, dy, dz, r):  # pragma: no cover - compiled
 def _normal(q, ox, oy, oz):  # pragma: no cover - compiled
     """The cap surface's outward unit normal at ``o`` (relative to its centre)."""
     gx, gy = q * ox, oy
-    g = math.sqrt(gx * gx + gy * gy + oz * oz)
-    return gx / g, gy / g, oz / g
+    g = 1.0 / math.sqrt(gx * gx + gy * gy + oz * oz)
+    return gx * g, gy * g, oz * g
 
 
 @nb.njit(cache=True)
@@ -323,12 +323,14 @@ def footprint_span(pu, pv, du, dv, hu, hv, rc):  # pragma: no cover - compiled
     and the edge's outward unit normal where it comes in."""
     t_in, t_out, mu, mv = -np.inf, np.inf, 0.0, 0.0
     if du != 0:
-        a, b = (-hu - pu) / du, (hu - pu) / du
+        iu = 1.0 / du
+        a, b = (-hu - pu) * iu, (hu - pu) * iu
         t_in, t_out, mu = min(a, b), max(a, b), (-1.0 if du > 0 else 1.0)
     elif abs(pu) > hu:
         return np.inf, -np.inf, 0.0, 0.0
     if dv != 0:
-        a, b = (-hv - pv) / dv, (hv - pv) / dv
+        iv = 1.0 / dv
+        a, b = (-hv - pv) * iv, (hv - pv) * iv
         if min(a, b) > t_in:
             t_in, mu, mv = min(a, b), 0.0, (-1.0 if dv > 0 else 1.0)
         t_out = min(t_out, max(a, b))
@@ -387,7 +389,7 @@ def enter_cap(k, e, ox, oy, oz, dx, dy, dz):  # pragma: no cover - compiled
     ``d`` unit) first meets it: ``(t, mx, my, mz)``, its parameter (inf if it misses)
     and the cap's outward unit normal there."""
     r_s = (1.0 + k * k) / (2.0 * k)
-    q = 1.0 / (e * e)
+    q = 1.0 if e == 1.0 else 1.0 / (e * e)
     cz = r_s - k
     a, b, c = _quadric(q, ox, oy, oz - cz, dx, dy, dz, r_s)
     disc = b * b - a * c
@@ -412,7 +414,8 @@ def _meet_body(f, hu, hv, rc, k, c, s, rx, ry, z, dx, dy, dz):  # pragma: no cov
         t, mu, mv, ms = enter_prism(hu, hv, rc, f[F_PROF_T1], f[F_PROF_T2], ru, rv, -z, du, dv, -dz)
         mz = -ms
     else:
-        t, mu, mv, mz = enter_cap(k, hu / hv, ru / hv, rv / hv, z / hv, du, dv, dz)
+        ih = 1.0 / hv
+        t, mu, mv, mz = enter_cap(k, hu * ih, ru * ih, rv * ih, z * ih, du, dv, dz)
         t *= hv
     return t, c * mu - s * mv, s * mu + c * mv, mz
 
@@ -510,7 +513,10 @@ def next_dot(f, start, dx_, dy_, foot, cg, x, y, z, dx, dy, dz, fold):  # pragma
     the face meets, from ``(x, y, z)`` (mm, ``z <= 0``) going ``d`` (unit), before it
     leaves their layer: ``(k, t, mx, my, mz, after)``, the dot (-1 for none), the distance
     to it (mm) and its surface's outward unit normal there. The cells are walked along the
-    ray's course a cell at a time, each widened by the largest dot's extent.
+    ray's course a cell at a time, each widened by the largest dot's extent; a step tries
+    the dots whose centres project onto its own span of the course (each dot once), within
+    the largest extent of the course, and a long footprint only where the course passes
+    within its own support across it.
 
     With ``fold`` (a ray going up, ``dz > 0``, that the face will reflect totally), the
     path goes on mirrored off the face's plane, down out of the layer: its horizontal
@@ -525,20 +531,26 @@ def next_dot(f, start, dx_, dy_, foot, cg, x, y, z, dx, dy, dz, fold):  # pragma
     t_end2 = _layer_end(f, rmax, hv0, k0, -0.0, -dz) if fold else 0.0
     t_all = t_face + t_end2 if fold else t_end
     hs = math.sqrt(dx * dx + dy * dy)
-    step = cell / hs if hs > 1e-12 else np.inf
-    ux, uy = (dx / hs, dy / hs) if hs > 1e-12 else (0.0, 0.0)
+    flat = hs > 1e-12  # a course over the face (not a vertical ray)
+    ih = 1.0 / hs if flat else np.inf
+    step, lag, inv = cell * ih, rmax * ih, 1.0 / cell  # lag: a dot met before its span
+    ux, uy = (dx * ih, dy * ih) if flat else (0.0, 0.0)
+    lean = flat and hu0 != hv0  # long footprints: their support across the course
+    r2 = rmax * rmax if flat else np.inf  # (a vertical ray: every dot in its cells tried)
     far = t_all * hs + rmax  # the farthest a dot met stands along its course (mm)
     best, bk, bx, by, bz = t_end, -1, 0.0, 0.0, 0.0
     best2, bk2, bx2, by2, bz2 = t_end2, -1, 0.0, 0.0, 0.0  # after the face
     ta = 0.0
     for _ in range(2 * (nx + ny) + 4):
         tb = min(ta + step, t_all)
+        last = tb >= t_all
+        lo, hi = (ta * hs if ta > 0 else -rmax), (far if last else tb * hs)  # its span
         xa, xb = x + ta * dx, x + (tb if tb < np.inf else ta) * dx
         ya, yb = y + ta * dy, y + (tb if tb < np.inf else ta) * dy
-        ax = int(math.floor((min(xa, xb) - rmax - x0) / cell))
-        bx_ = int(math.floor((max(xa, xb) + rmax - x0) / cell))
-        ay = int(math.floor((min(ya, yb) - rmax - y0) / cell))
-        by_ = int(math.floor((max(ya, yb) + rmax - y0) / cell))
+        ax = int(math.floor((min(xa, xb) - rmax - x0) * inv))
+        bx_ = int(math.floor((max(xa, xb) + rmax - x0) * inv))
+        ay = int(math.floor((min(ya, yb) - rmax - y0) * inv))
+        by_ = int(math.floor((max(ya, yb) + rmax - y0) * inv))
         if bx_ < 0 or by_ < 0 or ax >= nx or ay >= ny:  # past the grid: no dots ahead
             break
         for jy in range(max(ay, 0), min(by_ + 1, ny)):
@@ -546,23 +558,29 @@ def next_dot(f, start, dx_, dy_, foot, cg, x, y, z, dx, dy, dz, fold):  # pragma
                 cc = jy * nx + jx
                 for j in range(start[cc], start[cc + 1]):
                     rx, ry = dx_[j] - x, dy_[j] - y
-                    if _off_line(rx, ry, ux, uy, rmax) or not -rmax <= rx * ux + ry * uy <= far:
-                        continue  # off its course, or behind its start or past its end
+                    p, q = rx * ux + ry * uy, rx * uy - ry * ux  # along its course, across
+                    if (q * q > r2) | (p < lo) | (p > hi):  # one branch: bitwise, not or
+                        continue  # off its course, or not over this step's span of it
                     hu, hv, rc, kk = _sized(hu0, hv0, rc0, k0, half_width_packed(foot, j))
+                    c, s = foot[j, 4], foot[j, 5]
+                    if lean:  # its support across the course: hu |sin| + hv |cos| of its turn
+                        across = hu * abs(ux * s - uy * c) + hv * abs(ux * c + uy * s)
+                        if abs(q) > across * (1.0 + 1e-9):
+                            continue  # its course passes beside it
                     t, mx, my, mz = _meet_body(
-                        f, hu, hv, rc, kk, foot[j, 4], foot[j, 5], x - dx_[j], y - dy_[j], z,
-                        dx, dy, dz,
-                    )  # fmt: skip
+                        f, hu, hv, rc, kk, c, s, x - dx_[j], y - dy_[j], z, dx, dy, dz
+                    )
                     if t < best:
                         best, bk, bx, by, bz = t, j, mx, my, mz
                     if fold and bk < 0:  # on the leg after the face
                         t, mx, my, mz = _meet_body(
-                            f, hu, hv, rc, kk, foot[j, 4], foot[j, 5], xf - dx_[j],
-                            yf - dy_[j], -0.0, dx, dy, -dz,
-                        )  # fmt: skip
+                            f, hu, hv, rc, kk, c, s, xf - dx_[j], yf - dy_[j], -0.0, dx, dy, -dz
+                        )
                         if t < best2:
                             best2, bk2, bx2, by2, bz2 = t, j, mx, my, mz
-        if (bk >= 0 and best <= tb) or tb >= t_all or (fold and bk < 0 and t_face + best2 <= tb):
+        # every dot over the course short of tb tried: none further on is met before tb - lag
+        met = bk >= 0 and best <= tb - lag
+        if last or met or (fold and bk < 0 and t_face + best2 <= tb - lag):
             break
         ta = tb
     if fold and bk < 0:
