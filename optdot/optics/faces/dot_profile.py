@@ -514,8 +514,8 @@ def next_dot(f, start, dx_, dy_, foot, cg, x, y, z, dx, dy, dz, fold):  # pragma
     leaves their layer: ``(k, t, mx, my, mz, after)``, the dot (-1 for none), the distance
     to it (mm) and its surface's outward unit normal there. The cells are walked along the
     ray's course a cell at a time, each widened by the largest dot's extent; a step tries
-    the dots whose centres project onto its own span of the course (each dot once), within
-    the largest extent of the course, and a long footprint only where the course passes
+    the dots whose centres project onto its own span of the course (each dot once) and lie
+    within the largest extent of it, and a long footprint only where the course passes
     within its own support across it.
 
     With ``fold`` (a ray going up, ``dz > 0``, that the face will reflect totally), the
