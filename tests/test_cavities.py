@@ -172,3 +172,67 @@ def test_a_ray_coming_down_off_the_panel_s_wall_meets_the_cavity_by_the_wall():
     # told it came from farther than the wall (which cannot be): taken back past it
     beyond = _meet(f, pr, x, 1.0, 0.0, d, 200, walls, 10.0)
     assert np.isclose(beyond[:, 4:], flat, atol=1e-6).all(axis=1).all()
+
+
+def _first_on_sphere(p: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Where the path through ``p`` going ``d`` first meets the sphere of radius
+    :data:`R` about the dimple's centre on the face (coming from far behind)."""
+    c = np.array([*CENTRE, 0.0])
+    q = (p - c) @ d
+    s = -q - math.sqrt(q * q - ((p - c) @ (p - c) - R * R))
+    return p + s * d
+
+
+def test_a_ray_coming_down_onto_the_wall_meets_the_cavity_its_path_passes_first():
+    """A ray at 45° coming down onto the panel's wall 0.02 mm beyond a dimple's rim, 0.01
+    mm over the face: its path went through the cavity on the way (the wall's point is
+    not on the face; ``meet_cut`` with ``z > 0`` going down), so the cavity's wall turns
+    it, by total internal reflection at its normal there. A ray that reaches the wall
+    before any cavity goes on to the wall as it came (``SAME_LEG``, still down), though
+    its path would pass through one beyond the wall."""
+    f, pr = _setup()
+    walls = np.array([[1.62, 0.0, 1.62, 2.0]])
+    d = np.array([H, 0.0, -H])
+    out = _meet(f, pr, 1.62 - 1e-9, CENTRE[1], 0.01, d, 20, walls)
+    hit = _first_on_sphere(np.array([1.62, CENTRE[1], 0.01]), d)
+    m = (hit - [*CENTRE, 0.0]) / R  # out of the cavity, into the glass
+    assert math.degrees(math.acos(-(d @ m))) > math.degrees(math.asin(1 / N))
+    assert np.all(out[:, 0] == t.NEW_LEG)
+    assert np.allclose(out[:, 4:], _tir(m, d), atol=1e-9)
+    # short of the dimple, 0.08 mm over the face: its path would pass through the cavity
+    # 0.06 mm beyond the wall, before it reaches the face's plane
+    before = _meet(f, pr, 1.36 - 1e-9, CENTRE[1], 0.08, d, 5, np.array([[1.36, 0.0, 1.36, 2.0]]))
+    assert np.all(before[:, 0] == t.SAME_LEG)
+    assert np.allclose(before[:, 1:4], [1.36 - 1e-9, CENTRE[1], 0.08])
+    assert np.allclose(before[:, 4:], d)
+
+
+def test_the_tracer_turns_a_ray_by_the_cavity_it_passed_before_the_wall():
+    """The tracer's wall (``_off_wall``): the ray of the test above, met at the wall by
+    the tracer, is turned by the cavity its path passed through, not reflected by the
+    wall (a polished glass wall would send it back at -45°, total internal reflection);
+    the ray that reaches the wall before any cavity is."""
+    from optdot.optics.trace import _off_wall
+
+    f, pr = _setup()
+    face = np.array([f, f])
+    layer = np.zeros((1, t.L_COLS))
+    layer[0, [t.L_Z0, t.L_Z1, t.L_N]] = 0.0, 2.0, N
+    layer[0, [t.L_WALL_R, t.L_WALL_MODE, t.L_WALL_COS]] = 0.9, 0.0, math.sqrt(1 - 1 / N**2)
+
+    @nb.njit
+    def wall(x, z, d, walls):  # pragma: no cover - compiled
+        n = np.array([-1.0, 0.0])
+        _, end, ex, ey, ez, a, b, c = _off_wall(
+            ray_state(3, 0), layer, 0, face, n, N, x, CENTRE[1], z, pr, walls, 5.0, d[0], d[1],
+            d[2],
+        )  # fmt: skip
+        return end, np.array([ex, ey, ez, a, b, c])
+
+    d = np.array([H, 0.0, -H])
+    end, out = wall(1.62, 0.01, d, np.array([[1.62, 0.0, 1.62, 2.0]]))
+    hit = _first_on_sphere(np.array([1.62, CENTRE[1], 0.01]), d)
+    assert end == t.UNFINISHED
+    assert np.allclose(out[3:], _tir((hit - [*CENTRE, 0.0]) / R, d), atol=1e-9)
+    end, out = wall(1.35, 0.01, d, np.array([[1.35, 0.0, 1.35, 2.0]]))
+    assert end == t.UNFINISHED and np.allclose(out[3:], [-H, 0.0, -H])

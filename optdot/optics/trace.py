@@ -89,6 +89,7 @@ from .tables import (
     L_Z0,
     L_Z1,
     NEW_LEG,
+    SAME_LEG,
     UNCOUPLED,
     UNFINISHED,
     face_row,
@@ -160,32 +161,55 @@ def _enter_layer(layer, li, up, tau):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, inline="always")
-def _born_among(state, li, face, n, x, y, z, z0, dots, walls, dxn, dyn, dz):  # pragma: no cover
-    """A ray just born (or sent back off a wall) in layer ``li`` at ``(x, y, z)`` (mm; the
-    layer's bottom face at ``z0``, its index ``n``) going ``d``: among the cavities of a
-    guide's cut dots when it starts in their layer going up
-    (:func:`~.faces.born_among_dots`): ``(state, end, x, y, z, dx, dy, dz)``, ``end`` a fate
-    or ``UNFINISHED``."""
+def _among_dots(
+    state, li, face, n, x, y, z, z0, dots, walls, run, dxn, dyn, dz
+):  # pragma: no cover - compiled
+    """A ray in layer ``li`` at ``(x, y, z)`` (mm; the layer's bottom face at ``z0``, its
+    index ``n``) going ``d``, off the face: born (or sent back off a wall) going up, or
+    coming down onto a wall (``run``: how far, mm, it came on its course): among the
+    cavities of a guide's cut dots when in their layer
+    (:func:`~.faces.born_among_dots`): ``(state, act, x, y, z, dx, dy, dz)``, ``act`` a
+    fate, ``NEW_LEG`` or ``SAME_LEG`` (as it came)."""
     if li != 0 or face[0, F_PROFILE] < 0.5:
-        return state, UNFINISHED, x, y, z, dxn, dyn, dz
+        return state, SAME_LEG, x, y, z, dxn, dyn, dz
     state, act, x, y, zc, dxn, dyn, dz = born_among_dots(
-        state, face_row(face, 0), n, x, y, z - z0, dots, walls, dxn, dyn, dz
+        state, face_row(face, 0), n, x, y, z - z0, dots, walls, run, dxn, dyn, dz
     )
-    return state, (act if act >= 0 else UNFINISHED), x, y, z0 + zc, dxn, dyn, dz
+    return state, act, x, y, z0 + zc, dxn, dyn, dz
+
+
+@nb.njit(cache=True, inline="always")
+def _born_among(state, li, face, n, x, y, z, z0, dots, walls, dxn, dyn, dz):  # pragma: no cover
+    """A ray just born (or sent back off a wall) in layer ``li`` at ``(x, y, z)`` going
+    ``d``: :func:`_among_dots`, as ``(state, end, x, y, z, dx, dy, dz)``, ``end`` a fate
+    or ``UNFINISHED``."""
+    state, act, x, y, z, dxn, dyn, dz = _among_dots(
+        state, li, face, n, x, y, z, z0, dots, walls, 0.0, dxn, dyn, dz
+    )
+    return state, (act if act >= 0 else UNFINISHED), x, y, z, dxn, dyn, dz
 
 
 @nb.njit(cache=True, inline="always")
 def _off_wall(
-    state, layer, li, face, normal, n, x, y, z, dots, walls, dxn, dyn, dz
+    state, layer, li, face, normal, n, x, y, z, dots, walls, run, dxn, dyn, dz
 ):  # pragma: no cover - compiled
     """A ray meeting a wall of layer ``li`` (index ``n``) at ``(x, y, z)`` (mm; ``normal``
-    the wall's into the layer) going ``d``: :func:`~.faces.meet_wall`, and a ray sent
-    back in going up among the cavities of a guide's cut dots, when in their layer
+    the wall's into the layer; ``run`` how far, mm, it came on its course) going ``d``:
+    coming down in the layer of a guide's cut dots, the cavity its path passes through
+    before the wall, if any (:func:`_among_dots`); else :func:`~.faces.meet_wall`, and a
+    ray sent back in going up among the cavities, when in their layer
     (:func:`_born_among`): ``(state, end, x, y, z, dx, dy, dz)``, ``end`` a fate or
     ``UNFINISHED``."""
     z0 = layer[li, L_Z0]
     z = min(max(z, z0), layer[li, L_Z1])
     nx_, ny_ = normal[0], normal[1]
+    if dz < 0:  # down: a cavity before the wall (x, y nudged off it, into the layer)
+        state, act, x2, y2, z2, dx2, dy2, dz2 = _among_dots(
+            state, li, face, n, x + nx_ * 1e-9, y + ny_ * 1e-9, z, z0, dots, walls, run,
+            dxn, dyn, dz,
+        )  # fmt: skip
+        if act != SAME_LEG:
+            return state, (act if act >= 0 else UNFINISHED), x2, y2, z2, dx2, dy2, dz2
     cover = (layer[li, L_WALL_MODE], layer[li, L_WALL_COS], layer[li, L_WALL_R])
     state, end, dxn, dyn, dz = meet_wall(state, cover, nx_, ny_, n, dxn, dyn, dz)
     if end >= 0:
@@ -245,7 +269,7 @@ def _trace_rays(
             if at_wall:
                 state, end, x, y, z, dxn, dyn, dz = _off_wall(
                     state, layer, li, face, normals[wall], n, x, y, z + dz * path, dots, walls,
-                    dxn, dyn, dz,
+                    run, dxn, dyn, dz,
                 )  # fmt: skip
                 if end != UNFINISHED:
                     break

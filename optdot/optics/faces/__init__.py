@@ -78,15 +78,17 @@ def meet_dots(state, f, n, on, x, y, pr, walls, run, dxn, dyn, dz):  # pragma: n
 
 
 @nb.njit(cache=True, inline="always")
-def born_among_dots(state, f, n, x, y, z, pr, walls, dxn, dyn, dz):  # pragma: no cover
-    """A ray born in the guide (or sent back off its wall) at ``(x, y)``, ``z`` mm over its
-    bottom face of 3-D dots (row ``f``; index ``n``; ``pr`` and ``walls`` as
-    :func:`meet_dots`'), going up: a cut dot's cavities it passes before it leaves their
-    layer (``meet_cut``), as ``(state, act, x, y, z, dx, dy, dz)``; any other ray as it came
-    (``SAME_LEG``)."""
+def born_among_dots(state, f, n, x, y, z, pr, walls, run, dxn, dyn, dz):  # pragma: no cover
+    """A ray in the guide at ``(x, y)``, ``z`` mm over its bottom face of 3-D dots (row
+    ``f``; index ``n``; ``pr``, ``walls`` and ``run`` as :func:`meet_dots`'), off the face:
+    born there or sent back off the panel's wall going up, the cut dots' cavities it passes
+    before it leaves their layer; coming down onto the wall there (``z > 0``), the one its
+    path passes through before the wall, if any (``meet_cut``, the twins of a coverage
+    about a point off them). ``(state, act, x, y, z, dx, dy, dz)``; a ray that meets no
+    cavity as it came (``SAME_LEG``)."""
     profile = f[F_PROFILE]
-    if (profile == DIMPLE or profile == PRISM_CUT) and dz > 0:
-        return meet_cut(state, f, n, BARE, x, y, z, pr, walls, dxn, dyn, dz, 0.0)
+    if (profile == DIMPLE or profile == PRISM_CUT) and (dz > 0 or (dz < 0 and z > 0)):
+        return meet_cut(state, f, n, BARE, x, y, z, pr, walls, dxn, dyn, dz, run)
     return state, SAME_LEG, x, y, z, dxn, dyn, dz
 
 

@@ -201,7 +201,10 @@ def meet_cut(state, f, n, on, x, y, z, pr, walls, dxn, dyn, dz, run):  # pragma:
     whatever it says), followed from where its path comes down into the cavities' layer (or
     from the panel's wall behind it, where a ray born or turned there began); or going up
     from ``(x, y)``, ``z`` mm over the face (a ray born there), followed from there if that
-    is within the layer (else returned as it came, ``SAME_LEG``). ``run``: how far (mm)
+    is within the layer (else returned as it came, ``SAME_LEG``); or going down onto the
+    panel's wall at ``(x, y)``, ``z > 0`` mm over the face, followed among the cavities if
+    its path meets one before the wall (else returned as it came, ``SAME_LEG`` with ``dz``
+    still down: on to the wall). ``run``: how far (mm)
     its course has come over the face since it last turned (the panel's walls are
     looked up behind it only past that; 0 if not known). ``pr``: the print's
     :func:`~optdot.optics.marks.dot_tables`. Among the cavities (:func:`among_cavities`):
@@ -218,7 +221,8 @@ def meet_cut(state, f, n, on, x, y, z, pr, walls, dxn, dyn, dz, run):  # pragma:
         hu, hv, rc, k = _sized(hu, hv, rc, k, half)
         deep = tallest(f, hu, hv, k)
     deep *= 1.0 + 1e-9  # over the deepest cavity's apex: a ray from there meets it
-    if dz >= 0 and z >= deep:  # over the cavities
+    at_wall = dz < 0 and z > 0  # coming down onto the panel's wall over the face
+    if (dz >= 0 or at_wall) and z >= deep:  # over the cavities
         return state, SAME_LEG, x, y, z, dxn, dyn, dz
     back = (deep - z) / -dz if dz < 0 else 0.0  # back along the path to the layer's top
     hs = math.sqrt(dxn * dxn + dyn * dyn)
@@ -247,6 +251,8 @@ def meet_cut(state, f, n, on, x, y, z, pr, walls, dxn, dyn, dz, run):  # pragma:
     pu, pv = pu - back * du, pv - back * dv
     frame, place = (hu, hv, rc, k), (ox, oy, c, s, pr[1], pr[2])
     met = _next_cavity(f, real, pr, frame, lat, place, pu, pv, z, du, dv, dz)
+    if at_wall and not (met[0] and not met[7] and met[3] < back):  # none before the wall
+        return state, SAME_LEG, x, y, z0, dxn, dyn, dz
     if not met[0] and met[7]:  # no cavity on its path down to the face and back up, which
         return state, SAME_LEG, x, y, z0, c * du - s * dv, s * du + c * dv, -dz  # reflects it
     return among_cavities(
