@@ -236,3 +236,60 @@ def test_the_tracer_turns_a_ray_by_the_cavity_it_passed_before_the_wall():
     assert np.allclose(out[3:], _tir((hit - [*CENTRE, 0.0]) / R, d), atol=1e-9)
     end, out = wall(1.35, 0.01, d, np.array([[1.35, 0.0, 1.35, 2.0]]))
     assert end == t.UNFINISHED and np.allclose(out[3:], [-H, 0.0, -H])
+
+
+def test_the_tracer_looks_the_wall_up_behind_a_ray_that_turned_off_it():
+    """The tracer's ``run`` (how far a ray came on its course, the wall looked up behind
+    it only past that) starts again where its course turns. A ray born on the right wall
+    0.2 mm over the face, 2° down and 45° across, comes down 4.2 mm on onto the left
+    wall inside the cavities' layer (0.05 mm over the face; no cavity on its way), is
+    turned by it, and would cross the face 1.43 mm on, along a row of dimples (0.3 mm
+    apart, none near its first course; more far from both, the print's cells 1.1 mm).
+    Its path comes down into the layer 2.9 mm back, beyond the wall it turned off:
+    walked from the wall, it meets a dimple and is sent up at a new angle; taken back
+    past the wall (a ``run`` kept from its first course), off the print's cells, the
+    flat face alone would have turned it up. The tracer stops each ray after the two
+    events (``max_events``) and tells its direction then."""
+    from optdot.optics.tables import Print, Scene, Sources, Stack
+    from optdot.optics.trace import trace
+
+    f, _ = _setup()
+    box = (0.0, 0.0, 3.0, 5.0)
+    a = math.radians(2.0)
+    course = np.array([-H, H])  # horizontal: toward the left wall, across
+    zw = 0.05  # over the face at the left wall
+    s1 = 3.0 / H  # horizontal path to the left wall
+    y_w = 0.5 + 3.0  # where it meets the left wall
+    s2 = zw / math.tan(a)  # on to the face: 1.43 mm
+    line = np.arange(0.15, 1.2, 0.3 * H)  # dimples along its second course
+    gx, gy = np.meshgrid(np.arange(2.0, 2.9, 0.25), np.arange(3.6, 4.9, 0.25))
+    far = np.column_stack([gx.ravel(), gy.ravel()])  # far from both courses: the cells small
+    p = Pattern(np.vstack([np.column_stack([line, y_w + line]), far]), 2 * R, box)
+    row = np.array(f)
+    row[t.F_REFL] = 1.0  # the sheet under a cavity loses nothing: every ray unfinished
+    top = np.zeros(t.F_COLS)
+    top[t.F_KIND], top[t.F_COS_UP] = t.INTERFACE, math.sqrt(1 - 1 / N**2)
+    layer = np.array([[0.0, 1.0, N, 0.0, 1.0, 1.0, math.sqrt(1 - 1 / N**2)]])
+    walls = np.array([[0, 0, 3, 0], [3, 0, 3, 5], [3, 5, 0, 5], [0, 5, 0, 0]], float)
+    normals = np.array([[0, 1], [-1, 0], [0, -1], [1, 0]], float)
+    emit = np.zeros((1, t.E_COLS))
+    emit[0, t.E_C : t.E_C + 3] = 3.0, 0.5, zw + s1 * math.tan(a)
+    emit[0, t.E_A : t.E_A + 2] = course
+    emit[0, t.E_B + 2] = -1.0  # half the rays 2° down (the others up, ending elsewhere)
+    theta = math.asin(N * math.sin(a))  # in air
+    sources = Sources(
+        emit, np.array([0, 400]), np.linspace(0, 1, 3), np.ones((1, 3)), np.array([[1.0, theta]])
+    )
+    stack = Stack(layer, np.array([row, top]), walls, normals, 2)
+    start, x, y, foot, cg = dot_grid(p, box)
+    no_cap = np.zeros(2, np.int64), np.zeros((0, 3)), np.array([0, 0, 1, 1, 1, 1, 0.0])
+    pr = Print(
+        True, np.zeros((1, 1)), np.ones(4), start, x, y, foot, cg, np.zeros((1, 1)),
+        np.ones(4), *no_cap, np.array([[0.0, np.inf]]), np.full((1, 3), np.nan),
+    )  # fmt: skip
+    fate, ex, ey, d = trace(7, 0, 400, Scene(sources, stack, pr))
+    here = np.isclose(ey - ex, y_w, atol=1e-5) & (ex < s2 * H + 1e-5)  # down: its 2nd course
+    assert here.sum() > 150 and np.all(fate[here] == t.UNFINISHED)
+    flat = np.array([H * math.cos(a), H * math.cos(a), math.sin(a)])
+    assert not np.isclose(d[here], flat, atol=1e-5).all(axis=1).any()
+    assert np.all(d[here, 2] > 0)
