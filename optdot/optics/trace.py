@@ -181,8 +181,11 @@ def _among_dots(
 @nb.njit(cache=True, inline="always")
 def _born_among(state, li, face, n, x, y, z, z0, dots, walls, dxn, dyn, dz):  # pragma: no cover
     """A ray just born (or sent back off a wall) in layer ``li`` at ``(x, y, z)`` going
-    ``d``: :func:`_among_dots`, as ``(state, end, x, y, z, dx, dy, dz)``, ``end`` a fate
+    ``d``: going up, :func:`_among_dots` (going down, as it came: its path is walked where
+    it meets the face or a wall), as ``(state, end, x, y, z, dx, dy, dz)``, ``end`` a fate
     or ``UNFINISHED``."""
+    if dz <= 0:  # going down: its path is walked where it meets the face, or a wall
+        return state, UNFINISHED, x, y, z, dxn, dyn, dz
     state, act, x, y, z, dxn, dyn, dz = _among_dots(
         state, li, face, n, x, y, z, z0, dots, walls, 0.0, dxn, dyn, dz
     )

@@ -91,6 +91,21 @@ def _sheet_back(state, f, du, dv, dz):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, inline="always")
+def _at_wall(x, y, z0, lx, ly, lz, ex, ey, ez, walls):  # pragma: no cover - compiled
+    """Where a ray leaving the cavities' layer at ``(ex, ey, ez)`` (mm, face coordinates,
+    ``z`` over the face) on a straight leg from ``(lx, ly, lz)`` meets the panel's
+    ``walls`` first: ``(x, y, z)`` on that leg a nanometre short of the wall; where the
+    leg began past a wall already (seen from ``(x, y)``, where the ray met the face or the
+    wall), ``(x, y, z0)``."""
+    if _past_wall(x, y, lx, ly, walls):
+        return x, y, z0
+    gx, gy = ex - lx, ey - ly
+    g = math.sqrt(gx * gx + gy * gy)
+    f = max(wall_distance(lx, ly, gx / g, gy / g, walls)[0] - 1e-9, 0.0) / g
+    return lx + f * gx, ly + f * gy, lz + f * (ez - lz)
+
+
+@nb.njit(cache=True, inline="always")
 def _next_cavity(f, real, pr, frame, lat, place, pu, pv, pz, du, dv, dz):  # pragma: no cover
     """The first cavity a ray in the glass at ``(pu, pv)``, ``pz`` mm over the face of cut
     dots (row ``f``), going ``d`` (unit) meets before it leaves their layer: a real dot
@@ -131,8 +146,9 @@ def among_cavities(
     z0)`` when a ray coming down met nothing but the flat face, which reflected it (its
     course the same, turned up), or the fate ``BOTTOM`` (the reflector absorbed it), ``DOT``
     (caught in a cavity, or after :data:`~.dot_profile.MAX_DOTS` events). A ray that would
-    go on past the panel's ``walls`` goes on from ``(x, y, z0)``. ``met``: the first cavity
-    on its path (:func:`_next_cavity`'s)."""
+    leave the layer past the panel's ``walls`` goes on from where its last leg meets the
+    wall (:func:`_at_wall`; from ``(x, y, z0)`` when that leg began past it). ``met``: the
+    first cavity on its path (:func:`_next_cavity`'s)."""
     ox, oy, c0, s0, _, _ = place
     hu, hv, rc, k = frame
     cu, cv, c, s = 0.0, 0.0, 1.0, 0.0
@@ -175,10 +191,11 @@ def among_cavities(
             return state, SAME_LEG, x, y, z0, c0 * du - s0 * dv, s0 * du + c0 * dv, dz
         if dz >= 0:  # out of the cavities' layer, up into the guide
             t = max(deep - pz, 0.0) / dz if dz > 0 else 0.0
+            lx, ly = ox + c0 * pu - s0 * pv, oy + s0 * pu + c0 * pv  # its last leg's start
             pu, pv = pu + t * du, pv + t * dv
             ex, ey = ox + c0 * pu - s0 * pv, oy + s0 * pu + c0 * pv
             if _past_wall(x, y, ex, ey, walls):
-                ex, ey, pz = x, y, z0
+                ex, ey, pz = _at_wall(x, y, z0, lx, ly, pz, ex, ey, max(pz, deep), walls)
             else:
                 pz = max(pz, deep)
             return state, NEW_LEG, ex, ey, pz, c0 * du - s0 * dv, s0 * du + c0 * dv, dz
@@ -240,6 +257,9 @@ def meet_cut(state, f, n, on, x, y, z, pr, walls, dxn, dyn, dz, run):  # pragma:
         state, lat = twin_lattice(
             state, hu, hv, rc, prism, 0.0 if aligned else _turn(f), max(fill, 1e-9)
         )
+        if at_wall:  # the wall's point over a twin with the fill's chance, as at the face
+            state, u = uniform(state)
+            on = INK if u < fill else BARE
         if on != BARE:  # on the twin at the lattice's origin: where on it, drawn
             state, lu, lv = _on_footprint(state, code, hu, hv, rc)
             _, _, c1, s1 = _site(lat, 0, 0)  # its own angle in the lattice's frame
