@@ -17,11 +17,13 @@ from optdot.geometry.profile import BUMP, PRISM
 from optdot.geometry.shapes import KINDS, Footprints, half_width_packed
 from optdot.optics import tables as t
 from optdot.optics.faces.dot_profile import (  # the twins' private helpers, to try every site
+    FIELD,
     INTO_AIR,
     INTO_GUIDE,
     _layer_end,
     _meet_body,
     _site,
+    _twin_at,
     among_dots,
     enter_cap,
     enter_prism,
@@ -40,7 +42,9 @@ N = 1.49
 R0 = ((N - 1) / (N + 1)) ** 2
 BOX = (0.0, 0.0, 3.0, 2.0)
 #: A coverage with dots everywhere about the twins' lattice (its origin, turn, fill, cells).
-EVERYWHERE = (0.0, 0.0, 1.0, 0.0, np.ones((1, 1)), np.array([-1e3, -1e3, 2e3, 2e3]))
+EVERYWHERE = (
+    0.0, 0.0, 1.0, 0.0, np.ones((1, 1)), np.array([-1e3, -1e3, 2e3, 2e3]), np.zeros((0, 3))
+)  # fmt: skip
 
 
 def _row(code: int, hu: float, hv: float, rc: float, k: float, facets=(0.0, 0.0)) -> tuple:
@@ -250,7 +254,7 @@ def test_a_ray_meeting_a_hemisphere_head_on_passes_into_the_guide_as_fresnel_say
     the guide unturned; ``R0`` come straight back, out of the dots' layer."""
     r = 0.1
     p = Pattern(np.array([[1.5, 1.0]]), 2 * r, BOX)
-    pr = (0, 0, 0, *dot_grid(p, p.box), 0)  # the print's dot_tables
+    pr = (0, 0, 0, *dot_grid(p, p.box), np.zeros((0, 3)))  # the print's dot_tables
     f = _row(BUMP, r, r, 0.0, 1.0)
     src = np.array([1.2, 0.9, -0.05])
     d = np.array([1.5, 1.0, 0.0]) - src
@@ -271,7 +275,7 @@ def _under(f, n, pr, walls, x, y, d, rays):  # pragma: no cover - compiled
     y)`` going ``d`` (in the air): ``[rays, 6]`` (act, x, y, dx, dy, dz)."""
     out = np.zeros((rays, 6))
     lat = (1.0, 1.0, 1.0, 0.0, 0.0, 1.0, np.uint64(0), 0.0, 0)
-    place = (0.0, 0.0, 1.0, 0.0, pr[1], pr[2])
+    place = (0.0, 0.0, 1.0, 0.0, pr[1], pr[2], pr[8])
     for i in range(rays):
         _, act, ex, ey, a, b, c = under_dots(
             ray_state(13, i), f, n, True, pr, walls, x, y, (0.0, 0.0, 0.0, 0.0), lat, False,
@@ -292,7 +296,8 @@ def test_a_mirror_on_the_tips_of_hemispheres_sends_light_up_into_the_one_it_aims
     the face, every ray would go in where it left."""
     r = 0.1
     p = Pattern(np.array([[1.5, 1.0]]), 2 * r, BOX)
-    pr = (1, np.ones((1, 1)), np.array([0.0, 0.0, 3.0, 2.0]), *dot_grid(p, p.box), 0)
+    phi, g = np.ones((1, 1)), np.array([0.0, 0.0, 3.0, 2.0])
+    pr = (1, phi, g, *dot_grid(p, p.box), np.zeros((0, 3)))
     row = np.array(_row(BUMP, r, r, 0.0, 1.0))
     row[[t.F_REFL, t.F_REFL_FINISH, t.F_PROF_H]] = 1.0, 1.0, r
     f = tuple(float(v) for v in row)
@@ -313,15 +318,60 @@ def test_a_mirror_on_the_tips_of_hemispheres_sends_light_up_into_the_one_it_aims
     assert np.allclose(out[face, 3:], [-h / N, 0.0, inside], atol=1e-9)
 
 
+def _radial_field(led: tuple[float, float], frame: float) -> tuple:
+    """A ``place`` whose print turns its dots along the light of an LED at ``led`` (mm):
+    dots everywhere on a 16 mm square (cells of 4 mm, split in 32 × 32 for the angles),
+    the frame's origin at (0, 0) turned ``frame`` (rad)."""
+    phi, g, split = np.ones((4, 4)), np.array([-8.0, -8.0, 4.0, 4.0]), 32
+    n = 4 * split
+    cx = g[0] + (np.arange(n) + 0.5) * g[2] / split
+    yy, xx = np.meshgrid(cx, cx, indexing="ij")
+    a = np.arctan2(yy - led[1], xx - led[0]).ravel()
+    turn = np.stack([np.cos(a), np.sin(a), np.full(a.size, np.nan)], axis=1)
+    return 0.0, 0.0, math.cos(frame), math.sin(frame), phi, g, turn
+
+
+def test_a_twin_in_the_print_s_field_stands_at_the_angle_of_its_own_place():
+    """In a :data:`FIELD` each twin takes the print's angle in the cell its centre stands
+    in, turned into the frame (a ray's walk crosses a field that turns toward an LED
+    beside it); the twin at ``(0, 0)``, the one the ray came to, keeps the frame's angle;
+    so does a twin off the print's angle cells, and every twin of a lattice at one angle
+    or drawn ones."""
+    hu, hv, rc = 0.06, 0.015, 0.005
+    place = _radial_field((0.3, -1.2), 0.7)
+    _, _, c0, s0, _, g, turn = place
+    _, lat = twin_lattice(np.uint64(ray_state(5, 1)), hu, hv, rc, True, FIELD, 0.3)
+    assert lat[0] == pytest.approx(hu / hv)  # stretched along the frame's angle
+    turned = 0
+    for i in range(-12, 13):
+        for j in range(-12, 13):
+            cu, cv, c, s = _twin_at(lat, i, j, place)
+            x, y = c0 * cu - s0 * cv, s0 * cu + c0 * cv  # the centre on the face
+            cell = int((y - g[1]) / g[3] * 32) * 128 + int((x - g[0]) / g[2] * 32)
+            want = math.atan2(turn[cell, 1], turn[cell, 0]) - 0.7
+            if i == 0 and j == 0:
+                want = 0.0
+            assert (c, s) == pytest.approx((math.cos(want), math.sin(want)), abs=1e-12), (i, j)
+            assert (cu, cv) == _site(lat, i, j)[:2]
+            turned += abs(math.sin(want)) > 0.1
+    assert turned > 300
+    off = (1e3, 1e3, *place[2:])  # beyond the print's cells: the frame's angle
+    assert _twin_at(lat, 3, -2, off)[2:] == (1.0, 0.0)
+    for turn_ in (0.0, math.pi):
+        _, other = twin_lattice(np.uint64(ray_state(5, 1)), hu, hv, rc, True, turn_, 0.3)
+        assert all(_twin_at(other, i, 2, place) == _site(other, i, 2) for i in range(-5, 6))
+
+
 @nb.njit
-def _first_twin(f, hu, hv, rc, k, lat, skip0, p, d, sites):  # pragma: no cover - compiled
-    """The first twin of ``lat`` a ray meets, every site within ``sites`` tried."""
+def _first_twin(f, hu, hv, rc, k, lat, skip0, p, d, sites, place):  # pragma: no cover
+    """The first twin of ``lat`` a ray meets, every site within ``sites`` tried
+    (``place`` as :func:`next_twin`'s, its fill not looked at)."""
     best, bi, bj = _layer_end(f, hu, hv, k, p[2], d[2]), 0, 0
     for i in range(-sites, sites + 1):
         for j in range(-sites, sites + 1):
             if skip0 and i == 0 and j == 0:
                 continue
-            cu, cv, c, s = _site(lat, i, j)
+            cu, cv, c, s = _twin_at(lat, i, j, place)
             tt = _meet_body(f, hu, hv, rc, k, c, s, p[0] - cu, p[1] - cv, p[2], d[0], d[1], d[2])[0]
             if tt < best:
                 best, bi, bj = tt, i, j
@@ -330,14 +380,18 @@ def _first_twin(f, hu, hv, rc, k, lat, skip0, p, d, sites):  # pragma: no cover 
 
 @pytest.mark.parametrize(
     ("code", "aligned", "fill"),
-    [(BUMP, True, 0.6), (BUMP, True, 0.05), (PRISM, True, 0.4), (PRISM, False, 0.3)],
-    ids=["bumps", "sparse-bumps", "aligned-prisms", "turned-prisms"],
-)
+    [
+        (BUMP, True, 0.6), (BUMP, True, 0.05), (PRISM, True, 0.4), (PRISM, False, 0.3),
+        (PRISM, None, 0.4),
+    ],
+    ids=["bumps", "sparse-bumps", "aligned-prisms", "turned-prisms", "prisms-in-a-field"],
+)  # fmt: skip
 def test_the_first_twin_along_a_ray_is_the_one_a_search_of_every_site_finds(code, aligned, fill):
     """:func:`next_twin`'s walk over the coverage's twin lattice finds the twin (and the
     distance) a search of every site about the dot finds: twins of a bump, of a prism at
-    the dot's angle (the lattice stretched along it) and at their own angles, rays from
-    the dot's surface region out to grazing ones."""
+    the dot's angle (the lattice stretched along it), at their own angles and at the
+    angles of a field turned toward an LED half a millimetre off (``aligned`` None), rays
+    from the dot's surface region out to grazing ones."""
     if code == BUMP:
         f, hu, hv, rc, k = _row(BUMP, 0.1, 0.1, 0.0, 0.8), 0.1, 0.1, 0.0, 0.8
     else:
@@ -349,18 +403,19 @@ def test_the_first_twin_along_a_ray_is_the_one_a_search_of_every_site_finds(code
     dirs /= np.linalg.norm(dirs, axis=1)[:, None]
     tall = 0.08 if code == BUMP else 0.05
     hits = folded = 0
+    place = EVERYWHERE if aligned is not None else _radial_field((0.2, -0.5), 0.4)
     for i, d in enumerate(dirs):
-        turn = 0.0 if aligned else math.pi
+        turn = {True: 0.0, False: math.pi, None: FIELD}[aligned]
         _, lat = twin_lattice(np.uint64(ray_state(2, i)), hu, hv, rc, code == PRISM, turn, fill)
         p = np.array([g.uniform(-0.12, 0.12), g.uniform(-0.12, 0.12), -g.uniform(0, tall)])
         reach = _layer_end_py(f, hu, hv, k, p[2], d[2]) * math.hypot(d[0], d[1])
         if reach > 30 * lat[1]:  # too far to try every site on the way
             continue
         sites = int((reach + 0.3) / (0.8 * lat[1])) + 3
-        bi, bj, tt = _first_twin(f, hu, hv, rc, k, lat, True, p, d, sites)
-        gi, gj, gt = next_twin(f, hu, hv, rc, k, lat, True, EVERYWHERE, *p, *d, False)[:3]
+        bi, bj, tt = _first_twin(f, hu, hv, rc, k, lat, True, p, d, sites, place)
+        gi, gj, gt = next_twin(f, hu, hv, rc, k, lat, True, place, *p, *d, False)[:3]
         if d[2] > 0:  # folded off the face's plane: the twin met on the way up, else after
-            fold = next_twin(f, hu, hv, rc, k, lat, True, EVERYWHERE, *p, *d, True)
+            fold = next_twin(f, hu, hv, rc, k, lat, True, place, *p, *d, True)
             if math.isfinite(gt):
                 assert fold[:3] == (gi, gj, gt) and not fold[6]
             else:
@@ -369,7 +424,7 @@ def test_the_first_twin_along_a_ray_is_the_one_a_search_of_every_site_finds(code
                 q[2] = -0.0
                 far = reach + _layer_end_py(f, hu, hv, k, -0.0, -d[2]) * math.hypot(d[0], d[1])
                 wide = int((far + 0.3) / (0.8 * lat[1])) + 3
-                bi2, bj2, tt2 = _first_twin(f, hu, hv, rc, k, lat, True, q, back, wide)
+                bi2, bj2, tt2 = _first_twin(f, hu, hv, rc, k, lat, True, q, back, wide, place)
                 assert fold[6]
                 if math.isfinite(fold[2]):
                     assert fold[:2] == (bi2, bj2) and fold[2] == pytest.approx(tt2, abs=1e-12)
@@ -405,7 +460,7 @@ def test_the_walk_over_close_long_twins_misses_none_a_step_ahead(aligned, fill):
         p = np.array([g.uniform(-0.2, 0.2), g.uniform(-0.2, 0.2), -g.uniform(0, 0.05)])
         end = _layer_end_py(f, hu, hv, 0.0, p[2], d[2])
         sites = int((end * h + 0.3) / (0.8 * lat[1])) + 3
-        bi, bj, tt = _first_twin(f, hu, hv, rc, 0.0, lat, True, p, d, sites)
+        bi, bj, tt = _first_twin(f, hu, hv, rc, 0.0, lat, True, p, d, sites, EVERYWHERE)
         gi, gj, gt = next_twin(f, hu, hv, rc, 0.0, lat, True, EVERYWHERE, *p, *d, False)[:3]
         assert math.isfinite(gt) == (tt < end)
         if math.isfinite(gt):
@@ -421,7 +476,10 @@ def test_twins_stand_only_where_the_coverage_has_dots():
     f = _row(BUMP, 0.1, 0.1, 0.0, 0.8)
     hu = hv = 0.1
     k = 0.8
-    half = (0.0, 0.0, 1.0, 0.0, np.array([[1.0, 0.0]]), np.array([-10.0, -10.0, 10.0, 20.0]))
+    half = (
+        0.0, 0.0, 1.0, 0.0, np.array([[1.0, 0.0]]), np.array([-10.0, -10.0, 10.0, 20.0]),
+        np.zeros((0, 3)),
+    )  # fmt: skip
     g = np.random.default_rng(9)
     hits = {True: 0, False: 0}
     for i in range(600):

@@ -131,11 +131,21 @@ def dot_frame(x, y, k, dots):
         c, s = foot[k, 4], foot[k, 5]
         ddx, ddy = x - dx_[k], y - dy_[k]
         return (c * ddx + s * ddy, c * ddy - s * ddx, c, s, half_width_packed(foot, k))
+    c, s, w = cell_frame(x, y, phi, g, turn)
+    return (math.nan, math.nan, c, s, w)
+
+
+@nb.njit(cache=True, inline="always")
+def cell_frame(x, y, phi, g, turn):
+    """The coverage's angle and size at ``(x, y)`` (mm; ``phi`` over cells of ``g``, the
+    print's ``turn`` over those cells split ``f`` × ``f``): ``(c, s, w)``, the cosine and
+    sine of its dots' angle there and their half width (mm), NaN where the dot draws its
+    angle, has the job's one size, or off the map."""
     f = int(math.sqrt(turn.shape[0] // phi.size) + 0.5)  # finer cells a coverage cell's side
     nx, ny = phi.shape[1] * f, phi.shape[0] * f
     ix = int(math.floor((x - g[0]) / g[2] * f))
     iy = int(math.floor((y - g[1]) / g[3] * f))
     if turn.shape[0] == nx * ny and 0 <= ix < nx and 0 <= iy < ny:
         k = iy * nx + ix
-        return (math.nan, math.nan, turn[k, 0], turn[k, 1], turn[k, 2])
-    return NO_FRAME
+        return turn[k, 0], turn[k, 1], turn[k, 2]
+    return math.nan, math.nan, math.nan

@@ -61,13 +61,14 @@ from .dot_profile import (
     _past_wall,
     _site,
     _sized,
-    _turn,
+    _twin_at,
     _walk_body,
     bare_point,
     next_dot,
     next_twin,
     tallest,
     twin_lattice,
+    twins_turn,
 )
 from .reflector import meet_reflector
 from .slab_walls import wall_distance
@@ -149,7 +150,7 @@ def among_cavities(
     leave the layer past the panel's ``walls`` goes on from where its last leg meets the
     wall (:func:`_at_wall`; from ``(x, y, z0)`` when that leg began past it). ``met``: the
     first cavity on its path (:func:`_next_cavity`'s)."""
-    ox, oy, c0, s0, _, _ = place
+    ox, oy, c0, s0, _, _, _ = place
     hu, hv, rc, k = frame
     cu, cv, c, s = 0.0, 0.0, 1.0, 0.0
     plain = dz < 0  # met nothing but the flat face, and that as a mirror, yet
@@ -167,7 +168,7 @@ def among_cavities(
             )
             cu, cv, c, s = pr[4][i], pr[5][i], pr[6][i, 4], pr[6][i, 5]
         elif found:
-            cu, cv, c, s = _site(lat, i, j)
+            cu, cv, c, s = _twin_at(lat, i, j, place)
         if found:  # into the cavity (z turned back: its normal out into the glass)
             plain = False
             rx, ry, z = pu + t * du - cu, pv + t * dv - cv, max(pz + t * dz, 0.0)
@@ -249,14 +250,11 @@ def meet_cut(state, f, n, on, x, y, z, pr, walls, dxn, dyn, dz, run):  # pragma:
     if real:  # face coordinates
         lat, c, s, ox, oy, pu, pv = _no_lattice(), 1.0, 0.0, 0.0, 0.0, x, y
     else:  # the coverage's twins, in the frame of the dot drawn at the lattice's origin
-        prism = code >= PRISM
-        aligned = c == c or (not prism and hu == hv)  # the twins at one angle (a disc's: any)
+        lt = twins_turn(f, hu, hv, c)
         if c != c:
             c, s = 1.0, 0.0
         fill = _fill_at(x, y, pr[1], pr[2])
-        state, lat = twin_lattice(
-            state, hu, hv, rc, prism, 0.0 if aligned else _turn(f), max(fill, 1e-9)
-        )
+        state, lat = twin_lattice(state, hu, hv, rc, code >= PRISM, lt, max(fill, 1e-9))
         if at_wall:  # the wall's point over a twin with the fill's chance, as at the face
             state, u = uniform(state)
             on = INK if u < fill else BARE
@@ -265,11 +263,11 @@ def meet_cut(state, f, n, on, x, y, z, pr, walls, dxn, dyn, dz, run):  # pragma:
             _, _, c1, s1 = _site(lat, 0, 0)  # its own angle in the lattice's frame
             pu, pv = c1 * lu - s1 * lv, s1 * lu + c1 * lv
         else:
-            state, pu, pv = bare_point(state, lat, hu, hv, rc, prism)
+            state, pu, pv = bare_point(state, lat, hu, hv, rc, code >= PRISM)
         ox, oy = x - c * pu + s * pv, y - s * pu - c * pv  # the lattice's origin on the face
     du, dv = c * dxn + s * dyn, c * dyn - s * dxn
     pu, pv = pu - back * du, pv - back * dv
-    frame, place = (hu, hv, rc, k), (ox, oy, c, s, pr[1], pr[2])
+    frame, place = (hu, hv, rc, k), (ox, oy, c, s, pr[1], pr[2], pr[8])
     met = _next_cavity(f, real, pr, frame, lat, place, pu, pv, z, du, dv, dz)
     if at_wall and not (met[0] and not met[7] and met[3] < back):  # none before the wall
         return state, SAME_LEG, x, y, z0, dxn, dyn, dz

@@ -52,7 +52,7 @@ import numpy as np
 
 from ...geometry.profile import BUMP, DIMPLE, PRISM, PRISM_CUT
 from ...geometry.shapes import half_width_packed
-from ..marks import INK, dot_frame
+from ..marks import INK, cell_frame, dot_frame
 from ..rays import _M1, _M2, fresnel, lambert, mix, refract, uniform
 from ..tables import (
     BOTTOM,
@@ -643,10 +643,27 @@ def _turn(f):  # pragma: no cover - compiled
     return math.pi
 
 
+#: :func:`twin_lattice`'s ``turn`` for twins each at the print's angle where it stands
+#: (:func:`_twin_at`): the coverage's angles turn from cell to cell (toward the LEDs).
+FIELD = -1.0
+
+
+@nb.njit(cache=True, inline="always")
+def twins_turn(f, hu, hv, c):  # pragma: no cover - compiled
+    """How the twins of a coverage dot of row ``f`` (half sides ``hu``, ``hv``, mm) stand
+    turned where the print's cell angle has cosine ``c`` (NaN where the dot draws its
+    angle): :func:`twin_lattice`'s ``turn``, 0 for a disc (any angle), :data:`FIELD` at
+    the print's angles, else drawn (:func:`_turn`)."""
+    if int(f[F_PROFILE]) < PRISM and hu == hv:
+        return 0.0
+    return FIELD if c == c else _turn(f)
+
+
 @nb.njit(cache=True, inline="always")
 def _site(lat, i, j):  # pragma: no cover - compiled
     """Lattice ``lat``'s site ``(i, j)``: its centre ``(cu, cv)`` (mm, the dot's frame)
-    and its twin's angle ``(c, s)`` in that frame."""
+    and its twin's angle ``(c, s)`` in that frame (the frame's own in a :data:`FIELD`:
+    :func:`_twin_at` looks it up)."""
     e, _, b1u, b1v, b2u, b2v, key, turn, _ = lat
     c, s = 1.0, 0.0
     if turn > 0:
@@ -655,18 +672,38 @@ def _site(lat, i, j):  # pragma: no cover - compiled
     return (i * b1u + j * b2u) * e, i * b1v + j * b2v, c, s
 
 
+@nb.njit(cache=True, inline="always")
+def _twin_at(lat, i, j, place):  # pragma: no cover - compiled
+    """:func:`_site`'s centre and angle of lattice ``lat``'s twin ``(i, j)``, in a
+    :data:`FIELD` at the print's angle where its centre stands on the face (``place``:
+    the frame's origin and turn there, ``(ox, oy, c, s)`` mm, the coverage ``phi`` over
+    cells ``g``, the print's ``turn``; :func:`~optdot.optics.marks.cell_frame`), turned
+    into the frame: a ray's walk may cross a millimetre of a field that turns toward an
+    LED beside it. The twin at ``(0, 0)``, the one the ray came to, keeps the frame's
+    angle, as a twin where the print has none."""
+    cu, cv, c, s = _site(lat, i, j)
+    if lat[7] < 0 and (i != 0 or j != 0):
+        ox, oy, c0, s0, phi, g, turn = place
+        gc, gs, _ = cell_frame(ox + c0 * cu - s0 * cv, oy + s0 * cu + c0 * cv, phi, g, turn)
+        if gc == gc:
+            c, s = gc * c0 + gs * s0, gs * c0 - gc * s0
+    return cu, cv, c, s
+
+
 @nb.njit(cache=True)
 def twin_lattice(state, hu, hv, rc, prism, turn, fill):  # pragma: no cover - compiled
     """The twins of a coverage dot (half sides ``hu``, ``hv``, corner ``rc``, mm) where
     the cell's ``fill`` (> 0) puts them: a hexagonal lattice of the fill's density turned
     at random, stretched along ``u`` by the dot's elongation when the twins stand at its
-    angle (``turn`` 0), each at its own angle otherwise, drawn over ``turn`` (π, or 2π
-    for a prism whose facets differ; :func:`_site_angle`): ``(state, lat)``, ``lat = (e,
+    angle (``turn`` 0) or at the print's angles where they stand (:data:`FIELD`, which
+    turns slowly from one twin to the next: :func:`_twin_at`), each at its own angle
+    otherwise, drawn over ``turn`` (π, or 2π for a prism whose facets differ;
+    :func:`_site_angle`): ``(state, lat)``, ``lat = (e,
     a, b1u, b1v, b2u, b2v, key, turn, m)``, the stretch, the spacing (mm), the basis (mm,
     stretched coordinates ``u / e, v``), the sites' key, and how many sites about the
     nearest one a twin over a point may stand."""
     area = 4.0 * hu * hv - (4.0 - math.pi) * rc * rc if prism else math.pi * hu * hv
-    e = hu / hv if turn == 0 else 1.0
+    e = hu / hv if turn <= 0 else 1.0
     a = math.sqrt(2.0 * area / (e * math.sqrt(3.0) * min(fill, 1.0)))
     state, w = uniform(state)
     state, key_u = uniform(state)
@@ -710,7 +747,7 @@ def next_twin(
     past the panel's edge or in its holes. The path is walked a spacing at a time, each
     step trying the sites within a twin's reach of it whose centres lie along it, so
     each site is tried once."""
-    ox, oy, c0, s0, phi, g = place
+    ox, oy, c0, s0, phi, g, _ = place
     a = lat[1]
     t_end = _layer_end(f, hu, hv, k, pz, dz)
     t_face = t_end if fold else 0.0  # a rising ray's first leg ends on the face's plane
@@ -747,7 +784,7 @@ def next_twin(
                 ru, rv = (i * b1u + j * b2u) * e - pu, i * b1v + j * b2v - pv
                 if not lo <= ru * ux + rv * uy < hi or _off_line(ru, rv, ux, uy, reach):
                     continue  # another step's, or off the path
-                cu, cv, c, s = _site(lat, i, j)
+                cu, cv, c, s = _twin_at(lat, i, j, place)
                 if _fill_at(ox + c0 * cu - s0 * cv, oy + s0 * cu + c0 * cv, phi, g) <= 0:
                     continue  # no dots there
                 t, mu, mv, mz = _meet_body(f, hu, hv, rc, k, c, s, pu - cu, pv - cv, pz, du, dv, dz)
@@ -823,7 +860,7 @@ def among_twins(
         )
         if t == np.inf:
             return state, INTO_AIR, pu, pv, pz, du, dv, dz
-        cu, cv, c, s = _site(lat, i, j)
+        cu, cv, c, s = _twin_at(lat, i, j, place)
         ru, rv, pz = pu + t * du - cu, pv + t * dv - cv, min(pz + t * dz, 0.0)
         state, where, ru, rv, pz, du, dv, dz = _into_body(
             state, f, n, hu, hv, rc, k, c, s, ru, rv, pz, du, dv, dz, mu, mv, mz
@@ -861,7 +898,7 @@ def under_dots(
     over the panel's edge (a coverage dot drawn there) lets its light in where the ray
     met it."""
     hu, hv, rc, k = frame
-    ox, oy, c, s, _, _ = place
+    ox, oy, c, s, _, _, _ = place
     floor = f[F_PROF_H]
     for _ in range(MAX_DOTS):
         if real:
@@ -924,12 +961,10 @@ def meet_profile(state, f, n, at, x, y, pr, walls, dxn, dyn, dz):  # pragma: no 
     code = int(f[F_PROFILE])
     lu, lv, c, s, half = at
     hu, hv, rc, k = _sized(f[F_PROF_U], f[F_PROF_V], f[F_PROF_C], f[F_PROF_K], half)
-    turned = code >= PRISM or hu != hv  # the dot looks different turned
-    aligned = c == c or not turned  # the twins at its angle (a disc's: any)
-    turn = _turn(f)
-    if turned and c != c:  # a random angle, drawn
+    lt = twins_turn(f, hu, hv, c)
+    if lt > 0:  # a random angle, drawn
         state, w = uniform(state)
-        c, s = math.cos(turn * w), math.sin(turn * w)
+        c, s = math.cos(lt * w), math.sin(lt * w)
     if c != c:
         c, s = 1.0, 0.0
     du, dv = c * dxn + s * dyn, c * dyn - s * dxn
@@ -952,16 +987,14 @@ def meet_profile(state, f, n, at, x, y, pr, walls, dxn, dyn, dz):  # pragma: no 
         if real:
             return under_dots(
                 state, f, n, True, pr, walls, x, y, frame, _no_lattice(), False,
-                (0.0, 0.0, 1.0, 0.0, pr[1], pr[2]), ox + c * pu - s * pv, oy + s * pu + c * pv,
-                min(pz, 0.0), c * du - s * dv, s * du + c * dv, dz,
+                (0.0, 0.0, 1.0, 0.0, pr[1], pr[2], pr[8]), ox + c * pu - s * pv,
+                oy + s * pu + c * pv, min(pz, 0.0), c * du - s * dv, s * du + c * dv, dz,
             )  # fmt: skip
         fill = _fill_at(x, y, pr[1], pr[2])
-        state, lat = twin_lattice(
-            state, hu, hv, rc, code == PRISM, 0.0 if aligned else turn, max(fill, 1e-9)
-        )
+        state, lat = twin_lattice(state, hu, hv, rc, code == PRISM, lt, max(fill, 1e-9))
         return under_dots(
             state, f, n, False, pr, walls, x, y, frame, lat, True,
-            (ox, oy, c, s, pr[1], pr[2]), pu, pv, min(pz, 0.0), du, dv, dz,
+            (ox, oy, c, s, pr[1], pr[2], pr[8]), pu, pv, min(pz, 0.0), du, dv, dz,
         )  # fmt: skip
     dxn, dyn = c * du - s * dv, s * du + c * dv
     if where == INTO_GUIDE:  # on from where it left the dot
@@ -1003,21 +1036,19 @@ def leave_between(state, f, n, x, y, pr, walls, dxn, dyn, dz):  # pragma: no cov
     if pr[0]:  # real dots
         return under_dots(
             state, f, n, True, pr, walls, x, y, (0.0, 0.0, 0.0, 0.0), _no_lattice(), False,
-            (0.0, 0.0, 1.0, 0.0, pr[1], pr[2]), x, y, 0.0, dxn, dyn, dz,
+            (0.0, 0.0, 1.0, 0.0, pr[1], pr[2], pr[8]), x, y, 0.0, dxn, dyn, dz,
         )  # fmt: skip
     _, _, c, s, half = dot_frame(x, y, INK, pr)  # the coverage cell's angle and size
     hu, hv, rc, k = _sized(f[F_PROF_U], f[F_PROF_V], f[F_PROF_C], f[F_PROF_K], half)
     prism = int(f[F_PROFILE]) >= PRISM
-    aligned = c == c or (not prism and hu == hv)
+    lt = twins_turn(f, hu, hv, c)
     if c != c:
         c, s = 1.0, 0.0
     fill = _fill_at(x, y, pr[1], pr[2])
-    state, lat = twin_lattice(
-        state, hu, hv, rc, prism, 0.0 if aligned else _turn(f), max(fill, 1e-9)
-    )
+    state, lat = twin_lattice(state, hu, hv, rc, prism, lt, max(fill, 1e-9))
     state, pu, pv = bare_point(state, lat, hu, hv, rc, prism)
     ox, oy = x - c * pu + s * pv, y - s * pu - c * pv  # the lattice's origin on the face
     return under_dots(
         state, f, n, False, pr, walls, x, y, (hu, hv, rc, k), lat, False,
-        (ox, oy, c, s, pr[1], pr[2]), pu, pv, 0.0, c * dxn + s * dyn, c * dyn - s * dxn, dz,
+        (ox, oy, c, s, pr[1], pr[2], pr[8]), pu, pv, 0.0, c * dxn + s * dyn, c * dyn - s * dxn, dz,
     )  # fmt: skip
