@@ -213,6 +213,88 @@ def test_a_ray_coming_down_onto_the_wall_meets_the_cavity_its_path_passes_first(
     assert np.allclose(before[:, 4:], d)
 
 
+def _turned_down_toward_the_wall() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A ray at 45° that meets the dimple 30° from its top on the far side (incidence 75°:
+    total internal reflection): where it meets it, its course, and where that turns it:
+    15° down toward +x."""
+    phi = math.radians(30)
+    hit = np.array([CENTRE[0] + R * math.sin(phi), CENTRE[1], R * math.cos(phi)])
+    d = np.array([H, 0.0, -H])
+    m = (hit - [*CENTRE, 0.0]) / R
+    return hit, d, _tir(m, d)
+
+
+def test_a_ray_turned_down_toward_the_panel_s_wall_meets_it_before_the_face():
+    """The ray of :func:`_turned_down_toward_the_wall` crosses the face's plane 0.017 mm
+    short of the panel's wall at x = 1.7; the cavity turns it down at 15° toward the
+    wall, which it meets 0.046 mm over the face (``AT_WALL``, on the same course), before
+    the face it would come down onto 0.17 mm beyond the wall (where it was reflected, and
+    went on from where it crossed the face's plane)."""
+    f, pr = _setup()
+    hit, d, turned = _turned_down_toward_the_wall()
+    at = hit + hit[2] / H * d  # where it crosses the face's plane
+    assert turned[2] < 0 and at[0] < 1.7
+    out = _meet(f, pr, at[0], at[1], 0.0, d, 20, np.array([[1.7, 0.0, 1.7, 2.0]]))
+    z_wall = hit[2] + (1.7 - hit[0]) / turned[0] * turned[2]
+    assert np.all(out[:, 0] == t.AT_WALL)
+    assert np.allclose(out[:, 1:4], [1.7, CENTRE[1], z_wall], atol=1e-8), out[0]
+    assert np.allclose(out[:, 4:], turned, atol=1e-9)
+    assert 0.04 < z_wall < 0.05
+    # with the wall beyond where it comes down (x = 1.9): reflected by the face (TIR)
+    out = _meet(f, pr, at[0], at[1], 0.0, d, 20, np.array([[1.9, 0.0, 1.9, 2.0]]))
+    assert np.all(out[:, 0] == t.NEW_LEG) and np.allclose(out[:, 4:], turned * [1, 1, -1])
+
+
+def test_the_tracer_turns_a_ray_its_walk_brought_onto_the_wall_off_that_wall():
+    """The tracer's side of ``AT_WALL``: an LED on the left wall sends rays 40° down onto
+    a dimple by a black right wall (x = 1.7, in optical contact: it takes all it meets);
+    the dimple turns each 20° down toward the wall (total internal reflection 30° from its
+    top), which the ray meets before the face, and takes. Its end is there, on its
+    turned course; had the tracer asked for a cavity before the wall (as for a ray that
+    came down onto the wall on its own), its path, walked back into the dimple that
+    turned it, would have been turned again. The other half of the rays go up, and meet
+    the wall after the top face reflects them (or are reflected at birth)."""
+    from optdot.optics.tables import Print, Scene, Sources, Stack
+    from optdot.optics.trace import trace
+
+    f, _ = _setup()
+    a, phi = math.radians(40), math.radians(30)
+    d = np.array([math.cos(a), 0.0, -math.sin(a)])
+    hit = np.array([CENTRE[0] + R * math.sin(phi), CENTRE[1], R * math.cos(phi)])
+    m = (hit - [*CENTRE, 0.0]) / R
+    turned = _tir(m, d)
+    assert -(d @ m) < math.sqrt(1 - 1 / N**2) and turned[2] < 0  # beyond the critical angle
+    assert hit[0] + hit[2] / math.tan(a) < 1.7 < hit[0] - hit[2] / turned[2] * turned[0]
+    layer = np.zeros((1, t.L_COLS))
+    layer[0, [t.L_Z0, t.L_Z1, t.L_N, t.L_WALL_MODE]] = 0.0, 2.0, N, 2.0  # black walls
+    top = np.zeros(t.F_COLS)
+    top[t.F_KIND], top[t.F_COS_UP] = t.INTERFACE, math.sqrt(1 - 1 / N**2)
+    box = (0.0, 0.0, 1.7, 2.0)
+    walls = np.array([[0, 0, 1.7, 0], [1.7, 0, 1.7, 2], [1.7, 2, 0, 2], [0, 2, 0, 0]], float)
+    normals = np.array([[0, 1], [-1, 0], [0, -1], [1, 0]], float)
+    emit = np.zeros((1, t.E_COLS))
+    emit[0, t.E_C : t.E_C + 3] = 0.0, CENTRE[1], hit[2] + hit[0] * math.tan(a)
+    emit[0, t.E_A], emit[0, t.E_B + 2] = 1.0, -1.0  # along +x, half down at 40°
+    theta = math.asin(N * math.sin(a))  # in air
+    sources = Sources(
+        emit, np.array([0, 400]), np.linspace(0, 1, 3), np.ones((1, 3)), np.array([[1.0, theta]])
+    )
+    stack = Stack(layer, np.array([f, top]), walls, normals, 4)
+    p = Pattern(np.array([CENTRE]), 2 * R, box)
+    no_cap = np.zeros(2, np.int64), np.zeros((0, 3)), np.array([0, 0, 1, 1, 1, 1, 0.0])
+    pr = Print(
+        True, np.zeros((1, 1)), np.ones(4), *dot_grid(p, box), np.zeros((1, 1)), np.ones(4),
+        *no_cap, np.array([[0.0, np.inf]]), np.full((1, 3), np.nan),
+    )  # fmt: skip
+    fate, ex, ey, ed = trace(7, 0, 400, Scene(sources, stack, pr))
+    mine = np.isclose(ed, turned, atol=1e-6).all(axis=1)
+    assert 150 < mine.sum() < 250, mine.sum()
+    assert np.all(fate[mine] == t.EDGE)
+    assert np.allclose(ex[mine], 1.7, atol=1e-6) and np.allclose(ey[mine], CENTRE[1], atol=1e-6)
+    edge = fate == t.EDGE  # the others: up, or reflected back at birth (not coupled)
+    assert np.all(fate[~edge] == t.UNCOUPLED) and np.isclose(ed[edge & ~mine], d, atol=1e-6).all()
+
+
 def test_the_tracer_turns_a_ray_by_the_cavity_it_passed_before_the_wall():
     """The tracer's wall (``_off_wall``): the ray of the test above, met at the wall by
     the tracer, is turned by the cavity its path passed through, not reflected by the
@@ -227,21 +309,24 @@ def test_the_tracer_turns_a_ray_by_the_cavity_it_passed_before_the_wall():
     layer[0, [t.L_WALL_R, t.L_WALL_MODE, t.L_WALL_COS]] = 0.9, 0.0, math.sqrt(1 - 1 / N**2)
 
     @nb.njit
-    def wall(x, z, d, walls):  # pragma: no cover - compiled
+    def wall(x, z, d, walls, ask=True):  # pragma: no cover - compiled
         n = np.array([-1.0, 0.0])
         _, end, ex, ey, ez, a, b, c = _off_wall(
-            ray_state(3, 0), layer, 0, face, n, N, x, CENTRE[1], z, pr, walls, 5.0, d[0], d[1],
-            d[2],
+            ray_state(3, 0), layer, 0, face, n, N, x, CENTRE[1], z, pr, walls, 5.0, ask, d[0],
+            d[1], d[2],
         )  # fmt: skip
         return end, np.array([ex, ey, ez, a, b, c])
 
     d = np.array([H, 0.0, -H])
     end, out = wall(1.62, 0.01, d, np.array([[1.62, 0.0, 1.62, 2.0]]))
     hit = _first_on_sphere(np.array([1.62, CENTRE[1], 0.01]), d)
-    assert end == t.UNFINISHED
+    assert end == t.NEW_LEG
     assert np.allclose(out[3:], _tir((hit - [*CENTRE, 0.0]) / R, d), atol=1e-9)
     end, out = wall(1.35, 0.01, d, np.array([[1.35, 0.0, 1.35, 2.0]]))
-    assert end == t.UNFINISHED and np.allclose(out[3:], [-H, 0.0, -H])
+    assert end == t.NEW_LEG and np.allclose(out[3:], [-H, 0.0, -H])
+    # brought onto the wall by its walk among the cavities (not asked): the wall's own
+    end, out = wall(1.62, 0.01, d, np.array([[1.62, 0.0, 1.62, 2.0]]), False)
+    assert end == t.NEW_LEG and np.allclose(out[3:], [-H, 0.0, -H])
 
 
 def test_the_tracer_looks_the_wall_up_behind_a_ray_that_turned_off_it():

@@ -74,8 +74,9 @@ assert F_COLS == 24, "face_row reads every column"
 BOTTOM_FACE, INTERFACE, SHEET_FACE, PRISM_FACE = 0, 1, 2, 3
 #: What a face or a wall did to a ray that goes on (a fate, ``>= 0``, ends it): turned it
 #: back without changing its horizontal course, sent it on a new course in the same layer,
-#: or let it through into the layer on the other side.
-SAME_LEG, NEW_LEG, CROSS = -1, -2, -3
+#: let it through into the layer on the other side, or (cut dots) brought it, inside their
+#: layer, onto the panel's wall where it now stands (the tracer turns it off the wall).
+SAME_LEG, NEW_LEG, CROSS, AT_WALL = -1, -2, -3, -4
 
 
 class Sources(NamedTuple):

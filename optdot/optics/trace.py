@@ -65,6 +65,7 @@ from .faces import born_among_dots, meet_dots, meet_face, meet_wall, wall_distan
 from .marks import BARE, dot_tables, printed
 from .rays import fresnel, last_at_most, ray_state, uniform
 from .tables import (
+    AT_WALL,
     BULK,
     CROSS,
     E_A,
@@ -182,37 +183,38 @@ def _among_dots(
 def _born_among(state, li, face, n, x, y, z, z0, dots, walls, dxn, dyn, dz):  # pragma: no cover
     """A ray just born (or sent back off a wall) in layer ``li`` at ``(x, y, z)`` going
     ``d``: going up, :func:`_among_dots` (going down, as it came: its path is walked where
-    it meets the face or a wall), as ``(state, end, x, y, z, dx, dy, dz)``, ``end`` a fate
-    or ``UNFINISHED``."""
+    it meets the face or a wall), as ``(state, act, x, y, z, dx, dy, dz)``, ``act`` a fate,
+    ``NEW_LEG`` on from there, or ``AT_WALL`` (its walk among the cavities came onto a
+    wall of the panel, where it now stands)."""
     if dz <= 0:  # going down: its path is walked where it meets the face, or a wall
-        return state, UNFINISHED, x, y, z, dxn, dyn, dz
+        return state, NEW_LEG, x, y, z, dxn, dyn, dz
     state, act, x, y, z, dxn, dyn, dz = _among_dots(
         state, li, face, n, x, y, z, z0, dots, walls, 0.0, dxn, dyn, dz
     )
-    return state, (act if act >= 0 else UNFINISHED), x, y, z, dxn, dyn, dz
+    return state, (NEW_LEG if act == SAME_LEG else act), x, y, z, dxn, dyn, dz
 
 
 @nb.njit(cache=True, inline="always")
 def _off_wall(
-    state, layer, li, face, normal, n, x, y, z, dots, walls, run, dxn, dyn, dz
+    state, layer, li, face, normal, n, x, y, z, dots, walls, run, ask, dxn, dyn, dz
 ):  # pragma: no cover - compiled
     """A ray meeting a wall of layer ``li`` (index ``n``) at ``(x, y, z)`` (mm; ``normal``
     the wall's into the layer; ``run`` how far, mm, it came on its course) going ``d``:
     coming down in the layer of a guide's cut dots, the cavity its path passes through
-    before the wall, if any (:func:`_among_dots`); else :func:`~.faces.meet_wall`, and a
-    ray sent back in going up among the cavities, when in their layer
-    (:func:`_born_among`): ``(state, end, x, y, z, dx, dy, dz)``, ``end`` a fate or
-    ``UNFINISHED``."""
+    before the wall, if any (:func:`_among_dots`; unless not ``ask``: its walk among the
+    cavities brought it here); else :func:`~.faces.meet_wall`, and a ray sent back in
+    going up among the cavities, when in their layer (:func:`_born_among`): ``(state, act,
+    x, y, z, dx, dy, dz)`` as :func:`_born_among`'s."""
     z0 = layer[li, L_Z0]
     z = min(max(z, z0), layer[li, L_Z1])
     nx_, ny_ = normal[0], normal[1]
-    if dz < 0:  # down: a cavity before the wall (x, y nudged off it, into the layer)
+    if ask and dz < 0:  # down: a cavity before the wall (x, y nudged off it, into the layer)
         state, act, x2, y2, z2, dx2, dy2, dz2 = _among_dots(
             state, li, face, n, x + nx_ * 1e-9, y + ny_ * 1e-9, z, z0, dots, walls, run,
             dxn, dyn, dz,
         )  # fmt: skip
         if act != SAME_LEG:
-            return state, (act if act >= 0 else UNFINISHED), x2, y2, z2, dx2, dy2, dz2
+            return state, act, x2, y2, z2, dx2, dy2, dz2
     cover = (layer[li, L_WALL_MODE], layer[li, L_WALL_COS], layer[li, L_WALL_R])
     state, end, dxn, dyn, dz = meet_wall(state, cover, nx_, ny_, n, dxn, dyn, dz)
     if end >= 0:
@@ -246,9 +248,11 @@ def _trace_rays(
         state, u = uniform(state)
         tau = -math.log(1.0 - u)  # optical depth the ray will travel
         _, z0, z1, n, absorb, budget = _enter_layer(layer, li, True, tau)
-        state, end, x, y, z, dxn, dyn, dz = _born_among(
+        state, act, x, y, z, dxn, dyn, dz = _born_among(
             state, li, face, n, x, y, z, z0, dots, walls, dxn, dyn, dz
         )
+        end = act if act >= 0 else UNFINISHED
+        ask = act != AT_WALL  # a wall met coming down asks for a cavity before it
         new_leg, s_wall, wall, h, ux, uy, run = True, np.inf, -1, 1.0, 0.0, 0.0, 0.0
         for _ in range(max_events if end == UNFINISHED else 0):
             if new_leg:  # the horizontal course changed: the wall ahead
@@ -270,13 +274,14 @@ def _trace_rays(
             budget -= path
             x, y, s_wall, run = x + ux * s, y + uy * s, s_wall - s, run + s
             if at_wall:
-                state, end, x, y, z, dxn, dyn, dz = _off_wall(
+                state, act, x, y, z, dxn, dyn, dz = _off_wall(
                     state, layer, li, face, normals[wall], n, x, y, z + dz * path, dots, walls,
-                    run, dxn, dyn, dz,
+                    run, ask, dxn, dyn, dz,
                 )  # fmt: skip
-                if end != UNFINISHED:
+                if act >= 0:
+                    end = act
                     break
-                new_leg = True
+                new_leg, ask = True, act != AT_WALL
                 continue
             up = dz > 0  # a face: fi under the layer (going down) or over it (going up)
             fi, z, to = (li + 1, z1, li + 1) if up else (li, z0, li - 1)
@@ -297,7 +302,7 @@ def _trace_rays(
             if act >= 0 or (act == CROSS and fi == top):
                 end = act if act >= 0 else EXTRACTED
                 break
-            new_leg = act == NEW_LEG
+            new_leg, ask = act == NEW_LEG or act == AT_WALL, act != AT_WALL
             if act != CROSS:
                 continue
             if absorb > 0:  # through the face into the layer on the other side

@@ -58,7 +58,8 @@ def meet_dots(state, f, n, on, x, y, pr, walls, run, dxn, dyn, dz):  # pragma: n
     cavities its path passes (``meet_cut``): ``(state, act, x, y, z, dx, dy, dz)``, and
     where the ray goes on from (a dot moves it; ``z`` mm over the face). Kept apart from
     :func:`meet_face`: the print's arrays handed to every face's kernel at every event cost
-    the tracer half its speed."""
+    the tracer half its speed. Among cut dots ``act`` may be ``AT_WALL``: their walk
+    brought the ray onto the panel's wall, at ``(x, y)``, ``z`` over the face."""
     profile = f[F_PROFILE]
     x2, y2, z2 = x, y, 0.0
     if profile == DIMPLE or profile == PRISM_CUT:  # among the cavities its path passes

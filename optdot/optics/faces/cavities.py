@@ -37,6 +37,7 @@ from ...geometry.shapes import half_width_packed
 from ..marks import BARE, INK, dot_frame
 from ..rays import lambert, uniform
 from ..tables import (
+    AT_WALL,
     BOTTOM,
     DOT,
     F_COS_DOWN,
@@ -139,17 +140,19 @@ def among_cavities(
     leaves their layer going up: the real dots' (``real``: the print's
     :func:`~optdot.optics.marks.dot_tables` ``pr``, face coordinates) or the coverage's
     twins (lattice ``lat`` of :func:`~.dot_profile.twin_lattice`, all of them met, in the
-    frame ``place = (ox, oy, c, s, phi, g)`` puts on the face; every twin's frame ``frame =
-    (hu, hv, rc, k)``). ``(x, y, z0)``: where the ray met the face or was born (mm, ``z0``
-    over the face); ``deep``: the layer's depth (mm, the deepest cavity's). Returns
-    ``(state, act, x, y, z, dx, dy, dz)``: ``NEW_LEG`` up into the guide from where it
-    leaves the layer (face coordinates, ``z`` mm over the face), ``SAME_LEG`` from ``(x, y,
-    z0)`` when a ray coming down met nothing but the flat face, which reflected it (its
-    course the same, turned up), or the fate ``BOTTOM`` (the reflector absorbed it), ``DOT``
-    (caught in a cavity, or after :data:`~.dot_profile.MAX_DOTS` events). A ray that would
-    leave the layer past the panel's ``walls`` goes on from where its last leg meets the
-    wall (:func:`_at_wall`; from ``(x, y, z0)`` when that leg began past it). ``met``: the
-    first cavity on its path (:func:`_next_cavity`'s)."""
+    frame ``place = (ox, oy, c, s, phi, g, turn)`` puts on the face; every twin's frame
+    ``frame = (hu, hv, rc, k)``). ``(x, y, z0)``: where the ray met the face or was born
+    (mm, ``z0`` over the face); ``deep``: the layer's depth (mm, the deepest cavity's).
+    Returns ``(state, act, x, y, z, dx, dy, dz)``: ``NEW_LEG`` up into the guide from where
+    it leaves the layer (face coordinates, ``z`` mm over the face), ``SAME_LEG`` from ``(x,
+    y, z0)`` when a ray coming down met nothing but the flat face, which reflected it (its
+    course the same, turned up), ``AT_WALL`` where a leg going down meets the panel's
+    ``walls`` before the face (the tracer turns it off the wall), or the fate ``BOTTOM``
+    (the reflector absorbed it), ``DOT`` (caught in a cavity, or after
+    :data:`~.dot_profile.MAX_DOTS` events). A ray that would leave the layer past the
+    walls goes on from where its last leg meets the wall (:func:`_at_wall`; from ``(x, y,
+    z0)`` when that leg began past it). ``met``: the first cavity on its path
+    (:func:`_next_cavity`'s)."""
     ox, oy, c0, s0, _, _, _ = place
     hu, hv, rc, k = frame
     cu, cv, c, s = 0.0, 0.0, 1.0, 0.0
@@ -201,7 +204,13 @@ def among_cavities(
                 pz = max(pz, deep)
             return state, NEW_LEG, ex, ey, pz, c0 * du - s0 * dv, s0 * du + c0 * dv, dz
         t = -pz / dz  # onto the bare face between the cavities
-        pu, pv, pz = pu + t * du, pv + t * dv, 0.0
+        lx, ly = ox + c0 * pu - s0 * pv, oy + s0 * pu + c0 * pv  # its leg's start
+        fu, fv = pu + t * du, pv + t * dv
+        ex, ey = ox + c0 * fu - s0 * fv, oy + s0 * fu + c0 * fv
+        if _past_wall(x, y, ex, ey, walls):  # the panel's wall comes first: onto it
+            ex, ey, pz = _at_wall(x, y, z0, lx, ly, pz, ex, ey, 0.0, walls)
+            return state, AT_WALL, ex, ey, pz, c0 * du - s0 * dv, s0 * du + c0 * dv, dz
+        pu, pv, pz = fu, fv, 0.0
         state, act, du, dv, dz = meet_reflector(state, f, n, False, du, dv, dz)
         if act >= 0:
             return state, act, x, y, 0.0, c0 * du - s0 * dv, s0 * du + c0 * dv, dz
