@@ -25,6 +25,7 @@ from optdot.optics.faces.dot_profile import (  # the twins' private helpers, to 
     _site,
     _twin_at,
     among_dots,
+    bare_point,
     enter_cap,
     enter_prism,
     next_dot,
@@ -360,6 +361,41 @@ def test_a_twin_in_the_print_s_field_stands_at_the_angle_of_its_own_place():
     for turn_ in (0.0, math.pi):
         _, other = twin_lattice(np.uint64(ray_state(5, 1)), hu, hv, rc, True, turn_, 0.3)
         assert all(_twin_at(other, i, 2, place) == _site(other, i, 2) for i in range(-5, 6))
+
+
+def _on_rounded(ru: float, rv: float, hu: float, hv: float, rc: float) -> bool:
+    """Whether ``(ru, rv)`` (mm, a footprint's own frame) lies on a rounded rectangle of
+    half sides ``hu``, ``hv`` and corner ``rc``."""
+    if abs(ru) > hu or abs(rv) > hv:
+        return False
+    qu, qv = abs(ru) - (hu - rc), abs(rv) - (hv - rc)
+    return qu <= 0 or qv <= 0 or qu * qu + qv * qv <= rc * rc
+
+
+def test_a_point_drawn_off_the_twins_of_a_field_is_off_every_one_of_them():
+    """:func:`bare_point` in a :data:`FIELD` draws its point off the twins as they stand
+    at their own angles (half a millimetre from an LED, where they turn fast), not as
+    they would stand at the frame's: every site about it tried, none covers it."""
+    hu, hv, rc = 0.06, 0.015, 0.005
+    led = (0.2, -0.5)
+    frame = math.atan2(0.5, -0.2)  # the field's angle at the face's point (0, 0)
+    place = _radial_field(led, frame)
+    c0, s0, phi, g, turn = place[2:]
+    near = 0
+    for i in range(300):
+        _, lat = twin_lattice(np.uint64(ray_state(8, i)), hu, hv, rc, True, FIELD, 0.6)
+        spot = (0.0, 0.0, c0, s0, phi, g, turn)
+        _, pu, pv = bare_point(np.uint64(ray_state(9, i)), lat, hu, hv, rc, True, spot)
+        at = (-c0 * pu + s0 * pv, -s0 * pu - c0 * pv, *place[2:])  # the lattice's origin
+        for si in range(-4, 6):
+            for sj in range(-4, 6):
+                cu, cv, c, s = _twin_at(lat, si, sj, at)
+                ru, rv = c * (pu - cu) + s * (pv - cv), c * (pv - cv) - s * (pu - cu)
+                assert not _on_rounded(ru, rv, hu, hv, rc), (i, si, sj)
+                cu, cv, c, s = _site(lat, si, sj)  # at the frame's angle
+                ru, rv = c * (pu - cu) + s * (pv - cv), c * (pv - cv) - s * (pu - cu)
+                near += _on_rounded(ru, rv, hu, hv, rc)
+    assert near > 5  # where twins at the frame's angle would have stood
 
 
 @nb.njit

@@ -94,17 +94,17 @@ def _sheet_back(state, f, du, dv, dz):  # pragma: no cover - compiled
 
 @nb.njit(cache=True, inline="always")
 def _at_wall(x, y, z0, lx, ly, lz, ex, ey, ez, walls):  # pragma: no cover - compiled
-    """Where a ray leaving the cavities' layer at ``(ex, ey, ez)`` (mm, face coordinates,
-    ``z`` over the face) on a straight leg from ``(lx, ly, lz)`` meets the panel's
-    ``walls`` first: ``(x, y, z)`` on that leg a nanometre short of the wall; where the
-    leg began past a wall already (seen from ``(x, y)``, where the ray met the face or the
-    wall), ``(x, y, z0)``."""
+    """Where a ray leaving the cavities' layer (or coming down onto the face) at ``(ex, ey,
+    ez)`` (mm, face coordinates, ``z`` over the face) on a straight leg from ``(lx, ly,
+    lz)`` meets the panel's ``walls`` first: ``(met, x, y, z)``, on that leg a nanometre
+    short of the wall; where the leg began past a wall already (seen from ``(x, y)``,
+    where the ray met the face or the wall), not met: ``(x, y, z0)``."""
     if _past_wall(x, y, lx, ly, walls):
-        return x, y, z0
+        return False, x, y, z0
     gx, gy = ex - lx, ey - ly
     g = math.sqrt(gx * gx + gy * gy)
-    f = max(wall_distance(lx, ly, gx / g, gy / g, walls)[0] - 1e-9, 0.0) / g
-    return lx + f * gx, ly + f * gy, lz + f * (ez - lz)
+    f = min(max(wall_distance(lx, ly, gx / g, gy / g, walls)[0] - 1e-9, 0.0) / g, 1.0)
+    return True, lx + f * gx, ly + f * gy, lz + f * (ez - lz)
 
 
 @nb.njit(cache=True, inline="always")
@@ -199,7 +199,7 @@ def among_cavities(
             pu, pv = pu + t * du, pv + t * dv
             ex, ey = ox + c0 * pu - s0 * pv, oy + s0 * pu + c0 * pv
             if _past_wall(x, y, ex, ey, walls):
-                ex, ey, pz = _at_wall(x, y, z0, lx, ly, pz, ex, ey, max(pz, deep), walls)
+                _, ex, ey, pz = _at_wall(x, y, z0, lx, ly, pz, ex, ey, max(pz, deep), walls)
             else:
                 pz = max(pz, deep)
             return state, NEW_LEG, ex, ey, pz, c0 * du - s0 * dv, s0 * du + c0 * dv, dz
@@ -208,8 +208,9 @@ def among_cavities(
         fu, fv = pu + t * du, pv + t * dv
         ex, ey = ox + c0 * fu - s0 * fv, oy + s0 * fu + c0 * fv
         if _past_wall(x, y, ex, ey, walls):  # the panel's wall comes first: onto it
-            ex, ey, pz = _at_wall(x, y, z0, lx, ly, pz, ex, ey, 0.0, walls)
-            return state, AT_WALL, ex, ey, pz, c0 * du - s0 * dv, s0 * du + c0 * dv, dz
+            met, ex, ey, pz = _at_wall(x, y, z0, lx, ly, pz, ex, ey, 0.0, walls)
+            act = AT_WALL if met else NEW_LEG  # (its leg began past it: from where it met)
+            return state, act, ex, ey, pz, c0 * du - s0 * dv, s0 * du + c0 * dv, dz
         pu, pv, pz = fu, fv, 0.0
         state, act, du, dv, dz = meet_reflector(state, f, n, False, du, dv, dz)
         if act >= 0:
@@ -272,7 +273,8 @@ def meet_cut(state, f, n, on, x, y, z, pr, walls, dxn, dyn, dz, run):  # pragma:
             _, _, c1, s1 = _site(lat, 0, 0)  # its own angle in the lattice's frame
             pu, pv = c1 * lu - s1 * lv, s1 * lu + c1 * lv
         else:
-            state, pu, pv = bare_point(state, lat, hu, hv, rc, code >= PRISM)
+            spot = (x, y, c, s, pr[1], pr[2], pr[8])
+            state, pu, pv = bare_point(state, lat, hu, hv, rc, code >= PRISM, spot)
         ox, oy = x - c * pu + s * pv, y - s * pu - c * pv  # the lattice's origin on the face
     du, dv = c * dxn + s * dyn, c * dyn - s * dxn
     pu, pv = pu - back * du, pv - back * dv

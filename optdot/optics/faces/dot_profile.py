@@ -685,7 +685,7 @@ def _twin_at(lat, i, j, place):  # pragma: no cover - compiled
     if lat[7] < 0 and (i != 0 or j != 0):
         ox, oy, c0, s0, phi, g, turn = place
         gc, gs, _ = cell_frame(ox + c0 * cu - s0 * cv, oy + s0 * cu + c0 * cv, phi, g, turn)
-        if gc == gc:
+        if gc == gc and (gc != c0 or gs != s0):  # (the frame's own: exactly)
             c, s = gc * c0 + gs * s0, gs * c0 - gc * s0
     return cu, cv, c, s
 
@@ -806,13 +806,13 @@ def next_twin(
 
 
 @nb.njit(cache=True)
-def _on_twin(lat, hu, hv, rc, pu, pv):  # pragma: no cover - compiled
+def _on_twin(lat, hu, hv, rc, pu, pv, place):  # pragma: no cover - compiled
     """Whether ``(pu, pv)`` (mm, the dot's frame) lies on a twin's footprint (an ellipse
-    for ``rc < 0``)."""
+    for ``rc < 0``; ``place`` as :func:`_twin_at`'s)."""
     i0, j0 = _nearest_site(lat, pu, pv)
     for i in range(i0 - lat[8], i0 + lat[8] + 1):
         for j in range(j0 - lat[8], j0 + lat[8] + 1):
-            cu, cv, c, s = _site(lat, i, j)
+            cu, cv, c, s = _twin_at(lat, i, j, place)
             ru, rv = c * (pu - cu) + s * (pv - cv), c * (pv - cv) - s * (pu - cu)
             if rc < 0:
                 if (ru / hu) ** 2 + (rv / hv) ** 2 <= 1.0:
@@ -825,18 +825,23 @@ def _on_twin(lat, hu, hv, rc, pu, pv):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True)
-def bare_point(state, lat, hu, hv, rc, prism):  # pragma: no cover - compiled
+def bare_point(state, lat, hu, hv, rc, prism, spot):  # pragma: no cover - compiled
     """A point drawn uniformly over lattice ``lat``'s cell off its twins' footprints
-    (half sides ``hu``, ``hv``, corner ``rc``; ellipses unless ``prism``): ``(state, pu,
-    pv)``, mm in the dot's frame: where a ray out through the bare face between the
-    coverage's raised dots leaves it."""
+    (half sides ``hu``, ``hv``, corner ``rc``; ellipses unless ``prism``), the point on
+    the face ``spot = (x, y, c, s, phi, g, turn)``: its place (mm), the frame's turn
+    there, the coverage and its angles (twins in a :data:`FIELD` at theirs,
+    :func:`_twin_at`): ``(state, pu, pv)``, mm in the dot's frame: where a ray out through
+    the bare face between the coverage's dots leaves it (the lattice's origin on the face
+    ``(x, y) - R (pu, pv)``)."""
     e, _, b1u, b1v, b2u, b2v, _, _, _ = lat
+    x, y, c, s, phi, g, turn = spot
     pu = pv = 0.0
     for _ in range(64):
         state, wa = uniform(state)
         state, wb = uniform(state)
         pu, pv = (wa * b1u + wb * b2u) * e, wa * b1v + wb * b2v
-        if not _on_twin(lat, hu, hv, rc if prism else -1.0, pu, pv):
+        place = (x - c * pu + s * pv, y - s * pu - c * pv, c, s, phi, g, turn)
+        if not _on_twin(lat, hu, hv, rc if prism else -1.0, pu, pv, place):
             break
     return state, pu, pv
 
@@ -1046,7 +1051,7 @@ def leave_between(state, f, n, x, y, pr, walls, dxn, dyn, dz):  # pragma: no cov
         c, s = 1.0, 0.0
     fill = _fill_at(x, y, pr[1], pr[2])
     state, lat = twin_lattice(state, hu, hv, rc, prism, lt, max(fill, 1e-9))
-    state, pu, pv = bare_point(state, lat, hu, hv, rc, prism)
+    state, pu, pv = bare_point(state, lat, hu, hv, rc, prism, (x, y, c, s, pr[1], pr[2], pr[8]))
     ox, oy = x - c * pu + s * pv, y - s * pu - c * pv  # the lattice's origin on the face
     return under_dots(
         state, f, n, False, pr, walls, x, y, (hu, hv, rc, k), lat, False,
