@@ -311,7 +311,7 @@ def test_the_tracer_turns_a_ray_by_the_cavity_it_passed_before_the_wall():
     @nb.njit
     def wall(x, z, d, walls, ask=True):  # pragma: no cover - compiled
         n = np.array([-1.0, 0.0])
-        _, end, ex, ey, ez, a, b, c = _off_wall(
+        _, end, _, ex, ey, ez, a, b, c = _off_wall(
             ray_state(3, 0), layer, 0, face, n, N, x, CENTRE[1], z, pr, walls, 5.0, ask, d[0],
             d[1], d[2],
         )  # fmt: skip
@@ -320,13 +320,13 @@ def test_the_tracer_turns_a_ray_by_the_cavity_it_passed_before_the_wall():
     d = np.array([H, 0.0, -H])
     end, out = wall(1.62, 0.01, d, np.array([[1.62, 0.0, 1.62, 2.0]]))
     hit = _first_on_sphere(np.array([1.62, CENTRE[1], 0.01]), d)
-    assert end == t.NEW_LEG
+    assert end == t.UNFINISHED
     assert np.allclose(out[3:], _tir((hit - [*CENTRE, 0.0]) / R, d), atol=1e-9)
     end, out = wall(1.35, 0.01, d, np.array([[1.35, 0.0, 1.35, 2.0]]))
-    assert end == t.NEW_LEG and np.allclose(out[3:], [-H, 0.0, -H])
+    assert end == t.UNFINISHED and np.allclose(out[3:], [-H, 0.0, -H])
     # brought onto the wall by its walk among the cavities (not asked): the wall's own
     end, out = wall(1.62, 0.01, d, np.array([[1.62, 0.0, 1.62, 2.0]]), False)
-    assert end == t.NEW_LEG and np.allclose(out[3:], [-H, 0.0, -H])
+    assert end == t.UNFINISHED and np.allclose(out[3:], [-H, 0.0, -H])
 
 
 def test_the_tracer_looks_the_wall_up_behind_a_ray_that_turned_off_it():

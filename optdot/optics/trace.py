@@ -183,15 +183,25 @@ def _among_dots(
 def _born_among(state, li, face, n, x, y, z, z0, dots, walls, dxn, dyn, dz):  # pragma: no cover
     """A ray just born (or sent back off a wall) in layer ``li`` at ``(x, y, z)`` going
     ``d``: going up, :func:`_among_dots` (going down, as it came: its path is walked where
-    it meets the face or a wall), as ``(state, act, x, y, z, dx, dy, dz)``, ``act`` a fate,
-    ``NEW_LEG`` on from there, or ``AT_WALL`` (its walk among the cavities came onto a
-    wall of the panel, where it now stands)."""
+    it meets the face or a wall), as ``(state, end, ask, x, y, z, dx, dy, dz)``, ``end`` a
+    fate or ``UNFINISHED``, ``ask`` whether a wall it meets coming down asks for a cavity
+    before it (not where its walk among the cavities brought it onto a wall, ``AT_WALL``,
+    where it now stands)."""
     if dz <= 0:  # going down: its path is walked where it meets the face, or a wall
-        return state, NEW_LEG, x, y, z, dxn, dyn, dz
+        return state, UNFINISHED, True, x, y, z, dxn, dyn, dz
     state, act, x, y, z, dxn, dyn, dz = _among_dots(
         state, li, face, n, x, y, z, z0, dots, walls, 0.0, dxn, dyn, dz
     )
-    return state, (NEW_LEG if act == SAME_LEG else act), x, y, z, dxn, dyn, dz
+    end, ask = _went_on(act)
+    return state, end, ask, x, y, z, dxn, dyn, dz
+
+
+@nb.njit(cache=True, inline="always")
+def _went_on(act):  # pragma: no cover - compiled
+    """What a ray's ``act`` (a fate, or how it goes on) leaves the tracer: ``(end, ask)``,
+    the fate or ``UNFINISHED``, and whether a wall met coming down asks for a cavity before
+    it (not after ``AT_WALL``)."""
+    return (act if act >= 0 else UNFINISHED), act != AT_WALL
 
 
 @nb.njit(cache=True, inline="always")
@@ -203,8 +213,8 @@ def _off_wall(
     coming down in the layer of a guide's cut dots, the cavity its path passes through
     before the wall, if any (:func:`_among_dots`; unless not ``ask``: its walk among the
     cavities brought it here); else :func:`~.faces.meet_wall`, and a ray sent back in
-    going up among the cavities, when in their layer (:func:`_born_among`): ``(state, act,
-    x, y, z, dx, dy, dz)`` as :func:`_born_among`'s."""
+    going up among the cavities, when in their layer (:func:`_born_among`): ``(state, end,
+    ask, x, y, z, dx, dy, dz)`` as :func:`_born_among`'s."""
     z0 = layer[li, L_Z0]
     z = min(max(z, z0), layer[li, L_Z1])
     nx_, ny_ = normal[0], normal[1]
@@ -214,11 +224,12 @@ def _off_wall(
             dxn, dyn, dz,
         )  # fmt: skip
         if act != SAME_LEG:
-            return state, act, x2, y2, z2, dx2, dy2, dz2
+            end, ask = _went_on(act)
+            return state, end, ask, x2, y2, z2, dx2, dy2, dz2
     cover = (layer[li, L_WALL_MODE], layer[li, L_WALL_COS], layer[li, L_WALL_R])
     state, end, dxn, dyn, dz = meet_wall(state, cover, nx_, ny_, n, dxn, dyn, dz)
     if end >= 0:
-        return state, end, x, y, z, dxn, dyn, dz
+        return state, end, True, x, y, z, dxn, dyn, dz
     x, y = x + nx_ * 1e-9, y + ny_ * 1e-9
     return _born_among(state, li, face, n, x, y, z, z0, dots, walls, dxn, dyn, dz)
 
@@ -248,11 +259,9 @@ def _trace_rays(
         state, u = uniform(state)
         tau = -math.log(1.0 - u)  # optical depth the ray will travel
         _, z0, z1, n, absorb, budget = _enter_layer(layer, li, True, tau)
-        state, act, x, y, z, dxn, dyn, dz = _born_among(
+        state, end, ask, x, y, z, dxn, dyn, dz = _born_among(
             state, li, face, n, x, y, z, z0, dots, walls, dxn, dyn, dz
         )
-        end = act if act >= 0 else UNFINISHED
-        ask = act != AT_WALL  # a wall met coming down asks for a cavity before it
         new_leg, s_wall, wall, h, ux, uy, run = True, np.inf, -1, 1.0, 0.0, 0.0, 0.0
         for _ in range(max_events if end == UNFINISHED else 0):
             if new_leg:  # the horizontal course changed: the wall ahead
@@ -274,14 +283,13 @@ def _trace_rays(
             budget -= path
             x, y, s_wall, run = x + ux * s, y + uy * s, s_wall - s, run + s
             if at_wall:
-                state, act, x, y, z, dxn, dyn, dz = _off_wall(
+                state, end, ask, x, y, z, dxn, dyn, dz = _off_wall(
                     state, layer, li, face, normals[wall], n, x, y, z + dz * path, dots, walls,
                     run, ask, dxn, dyn, dz,
                 )  # fmt: skip
-                if act >= 0:
-                    end = act
+                if end != UNFINISHED:
                     break
-                new_leg, ask = True, act != AT_WALL
+                new_leg = True
                 continue
             up = dz > 0  # a face: fi under the layer (going down) or over it (going up)
             fi, z, to = (li + 1, z1, li + 1) if up else (li, z0, li - 1)
