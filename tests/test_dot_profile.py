@@ -636,7 +636,7 @@ def test_real_prisms_turned_along_the_light_send_on_axis_what_their_coverage_doe
     it: these prisms are 60 µm deep on a 30 µm width, and every ray at the face meets
     the coverage's twins or the real dots along its path, a walk up to a millimetre long
     over which the angle toward the LED turns. Each twin stands at the print's angle
-    where it stands (session 47): 1.222 ± 0.022 on axis against the real dots' 1.265 ±
+    where it stands (session 47): 1.230 ± 0.022 on axis against the real dots' 1.267 ±
     0.023 (these 4·10⁵ rays); with every twin at the angle of the point the ray crossed
     the face at, 1.57, 9 sigma off (the gap 2.7 times within 1 mm of the LED)."""
     cover, real = _cover_and_real(tmp_path, 'toward = "leds"\nrelative = "parallel"')
@@ -651,9 +651,9 @@ def test_prisms_turned_toward_close_leds_trace_as_their_coverage_on_a_coarse_map
     its dots' angles on cells of 0.1 mm, and cut prisms facing two LEDs 5 mm apart send
     as much light on axis as coverage as through their real dots (1.420 and 1.427 at 8e6
     rays; one angle per 1 mm cell gave 1.369, 7 sigma off). Since session 43 (a cut
-    prism's cavity met wherever a ray's path passes through it) they part: 1.492 as the
+    prism's cavity met wherever a ray's path passes through it) they part: 1.495 as the
     coverage (its twins each at the print's angle where it stands, session 47; 1.856
-    with all at one) against 1.590 through the real dots (6 sigma). Not the field's
+    with all at one) against 1.593 through the real dots (6 sigma). Not the field's
     doing: at one angle everywhere (``angle = 90``) the coverage too sends more on axis
     within 1 mm of an LED (1727 against 1400 of 2e6 rays) and less 1 to 4 mm from it (2539
     against 2946), though the totals agree there (BENCHMARKS.md, session 47)."""
