@@ -506,9 +506,7 @@ def _off_line(rx, ry, ux, uy, reach):  # pragma: no cover - compiled
     return abs(rx * uy - ry * ux) > reach
 
 
-# inlined where it is called (a walk among the cavities, among raised dots): a call
-# handing it the print's tables costs a third of a cut dot's time (benchmarks/cut_costs.py)
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def next_dot(f, start, dx_, dy_, foot, cg, x, y, z, dx, dy, dz, fold):  # pragma: no cover
     """The first of the real raised dots (row ``f``'s profile; the print's cells ``start``,
     centres ``dx_``, ``dy_``, footprints ``foot``, grid ``cg``) a ray in the air under
