@@ -39,6 +39,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent))
 from _common import machine, peak_rss_mb  # noqa: E402
+from neighbours import speed_jobs  # noqa: E402
 
 from optdot.config.schema import load_job  # noqa: E402
 from optdot.optics.faces import meet_dots, meet_face  # noqa: E402
@@ -55,17 +56,11 @@ INK, SEARCH, CUT = 0, 1, 2
 
 def _scenes(root: Path) -> tuple:
     """The ink and dimple scenes over one generated pattern: ``(ink, dimple, box)``."""
-    text = (HERE.parent / "samples/lgp/job.toml").read_text().split("[design]")[0]
-    text = text.replace("[dots]\n", '[density]\ngrid = "fill.csv"\n\n[dots]\n')
-    grid = np.repeat(np.linspace(0.1, 0.4, 20)[:, None], 30, axis=1)
-    np.savetxt(root / "fill.csv", grid, delimiter=",")
-    (root / "ink.toml").write_text(text)
-    dimple = 'diameter = 0.046   # mm\nprofile = "dimple"\ndepth = 0.012\n'
-    (root / "dimple.toml").write_text(text.replace("diameter = 0.046   # mm\n", dimple))
-    ink = load_job(root / "ink.toml")
+    ink_path, _, dimple_path = speed_jobs(root)
+    ink = load_job(ink_path)
     pattern = generate(ink)
     print(f"{len(pattern.xy):,} real dots")
-    dim = load_job(root / "dimple.toml")
+    dim = load_job(dimple_path)
     box = np.array(ink.bench.box, np.float64)
     return scene_of(ink.bench, 1000, pattern), scene_of(dim.bench, 1000, pattern), box
 

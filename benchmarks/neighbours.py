@@ -75,7 +75,10 @@ def _case(root: Path, name: str, fill: tuple, dots: str, orientation: str, rays:
         )
 
 
-def _speed(root: Path, rays: int) -> None:
+def speed_jobs(root: Path) -> tuple[Path, Path, Path]:
+    """The speed case's jobs, written into ``root``: the lgp sample's guide with a map
+    graded 0.1 to 0.4 of 46 µm dots as white ink, 12 µm bumps and 12 µm dimples
+    (``ink.toml``, ``bump.toml``, ``dimple.toml``; the map ``fill.csv`` beside them)."""
     job_text = (HERE.parent / "samples/lgp/job.toml").read_text().split("[design]")[0]
     job_text = job_text.replace("[dots]\n", '[density]\ngrid = "fill.csv"\n\n[dots]\n')
     grid = np.repeat(np.linspace(0.1, 0.4, 20)[:, None], 30, axis=1)
@@ -85,7 +88,12 @@ def _speed(root: Path, rays: int) -> None:
     (root / "bump.toml").write_text(job_text.replace("diameter = 0.046   # mm\n", bump))
     dimple = 'diameter = 0.046   # mm\nprofile = "dimple"\ndepth = 0.012\n'
     (root / "dimple.toml").write_text(job_text.replace("diameter = 0.046   # mm\n", dimple))
-    ink, bumps = load_job(root / "ink.toml"), load_job(root / "bump.toml")
+    return root / "ink.toml", root / "bump.toml", root / "dimple.toml"
+
+
+def _speed(root: Path, rays: int) -> None:
+    ink_path, bump_path, dimple_path = speed_jobs(root)
+    ink, bumps = load_job(ink_path), load_job(bump_path)
     pattern = generate(ink)
     rounds = 10
     print(
@@ -95,7 +103,7 @@ def _speed(root: Path, rays: int) -> None:
     )
     scenes = {"ink": scene_of(ink.bench, rays, pattern)}
     scenes["bumps 12 µm"] = scene_of(bumps.bench, rays, pattern)
-    scenes["dimples 12 µm"] = scene_of(load_job(root / "dimple.toml").bench, rays, pattern)
+    scenes["dimples 12 µm"] = scene_of(load_job(dimple_path).bench, rays, pattern)
     for scene in scenes.values():
         trace(0, 0, 1000, scene)  # compiled
     cpu = dict.fromkeys(scenes, 0.0)
