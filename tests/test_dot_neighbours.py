@@ -20,9 +20,11 @@ from optdot.optics.faces.dot_profile import (  # the twins' private helpers, to 
     FIELD,
     INTO_AIR,
     INTO_GUIDE,
+    _lattice_fill,
     _layer_end,
     _meet_body,
     _site,
+    _stands,
     _twin_at,
     among_dots,
     bare_point,
@@ -535,9 +537,67 @@ def test_twins_stand_only_where_the_coverage_has_dots():
     assert min(hits.values()) > 20 and sum(hits.values()) > 200  # going either way
 
 
-def _first_twin_where(f, hu, hv, rc, k, lat, p, d, sites, place):
+def _kernel_lattice(seed: int, i: int, hu: float, fill: float) -> tuple:
+    """:func:`twin_lattice`'s lattice of discs of radius ``hu`` for ray ``i`` of run
+    ``seed``, its sites' key a ``uint64`` as the tracer holds it (numba hands it back to
+    Python as an ``int``, which a kernel called from Python would type ``int64``)."""
+    _, lat = twin_lattice(np.uint64(ray_state(seed, i)), hu, hu, 0.0, False, 0.0, fill)
+    return lat[:6] + (np.uint64(lat[6]),) + lat[7:]
+
+
+def test_twins_where_the_map_has_fewer_dots_stand_as_many_fewer():
+    """A lattice packed for fill 0.5 over a map of 0.5 on one side and 0.2 on the other:
+    every twin stands on the first side; on the second, each with the chance 0.2 / 0.5
+    (the share over 20,000 sites within binomial noise), the same site the same way every
+    time; the twin at (0, 0), the one the ray came to, always; none where the map has no
+    dots."""
+    lat = _kernel_lattice(5, 1, 0.1, 0.5)
+    assert _lattice_fill(lat, 0.1, 0.1, 0.0, False) == pytest.approx(0.5, rel=1e-12)
+    sites = [(i, j) for i in range(-70, 71) for j in range(-70, 71) if (i, j) != (0, 0)]
+    assert all(_stands(lat, i, j, 0.5, 0.5) for i, j in sites[:2000])
+    stood = np.array([_stands(lat, i, j, 0.5, 0.2) for i, j in sites])
+    share, n = stood.mean(), len(sites)
+    assert abs(share - 0.4) < 4 * math.sqrt(0.4 * 0.6 / n)
+    assert [_stands(lat, i, j, 0.5, 0.2) for i, j in sites[:500]] == list(stood[:500])
+    assert _stands(lat, 0, 0, 0.5, 0.01) and not _stands(lat, 0, 0, 0.5, 0.0)
+    other = _kernel_lattice(5, 2, 0.1, 0.5)
+    again = np.array([_stands(other, i, j, 0.5, 0.2) for i, j in sites])
+    assert 0.3 < np.mean(again == stood) < 0.7  # another ray's lattice: other twins
+
+
+def test_a_walk_into_cells_of_fewer_dots_meets_only_the_twins_that_stand_there():
+    """:func:`next_twin` over a lattice packed for the fill 0.5 where the ray met the face,
+    walking into cells of 0.2: it meets the twin a search of every site that stands
+    (:func:`_stands`) finds, and past the step in the map as many fewer as stand."""
+    f = _row(BUMP, 0.1, 0.1, 0.0, 0.8)
+    hu = hv = 0.1
+    k = 0.8
+    step = (
+        0.0, 0.0, 1.0, 0.0, np.array([[0.5, 0.2]]), np.array([-10.0, -10.0, 10.0, 20.0]),
+        np.zeros((0, 3)),
+    )  # fmt: skip
+    g = np.random.default_rng(10)
+    far = {True: 0, False: 0}
+    for i in range(600):
+        lat = _kernel_lattice(4, i, hu, 0.5)
+        p = np.array([g.uniform(-0.3, 0.3), g.uniform(-0.3, 0.3), -0.07])
+        a = g.uniform(-0.4, 0.4) + (0.0 if i % 2 else math.pi)
+        d = np.array([math.cos(a), math.sin(a), 0.05])
+        d /= np.linalg.norm(d)
+        gi, gj, gt = next_twin(f, hu, hv, 0.0, k, lat, False, step, *p, *d, False)[:3]
+        bi, bj, tt = _first_twin_where(f, hu, hv, 0.0, k, lat, p, d, 40, step, 0.5)
+        assert math.isfinite(gt) == math.isfinite(tt)
+        if math.isfinite(gt):
+            assert (gi, gj) == (bi, bj) and gt == pytest.approx(tt, abs=1e-12)
+            far[_site(lat, gi, gj)[0] > 0] += 1
+    assert far[True] > 50 and far[False] > 50  # twins met on both sides of the step
+
+
+def _first_twin_where(f, hu, hv, rc, k, lat, p, d, sites, place, fill=None):
     """The first twin of ``lat`` a ray meets among every site within ``sites`` whose
-    centre has dots in ``place``'s coverage (``(i, j, t)``, ``t`` inf for none)."""
+    centre has dots in ``place``'s coverage and, the lattice packed for ``fill``, stands
+    there (:func:`_stands`; every one where ``fill`` is None) (``(i, j, t)``, ``t`` inf for
+    none)."""
     best, bi, bj = math.inf, 0, 0
     end = _layer_end_py(f, hu, hv, k, p[2], d[2])
     phi, gr = place[4], place[5]
@@ -546,6 +606,8 @@ def _first_twin_where(f, hu, hv, rc, k, lat, p, d, sites, place):
             cu, cv, c, s = _site(lat, i, j)
             ix, iy = int(math.floor((cu - gr[0]) / gr[2])), int(math.floor((cv - gr[1]) / gr[3]))
             if not (0 <= ix < phi.shape[1] and 0 <= iy < phi.shape[0]) or phi[iy, ix] <= 0:
+                continue
+            if fill is not None and not _stands(lat, i, j, fill, phi[iy, ix]):
                 continue
             tt = _meet_body(f, hu, hv, rc, k, c, s, p[0] - cu, p[1] - cv, p[2], d[0], d[1], d[2])[0]
             if tt < best and tt < end:

@@ -645,18 +645,17 @@ def test_real_prisms_turned_along_the_light_send_on_axis_what_their_coverage_doe
 
 
 @pytest.mark.slow  # over 1.5 s: 4e6 rays
-@pytest.mark.xfail(strict=True, reason="coverage twins of cut prisms near LEDs, any angle")
 def test_prisms_turned_toward_close_leds_trace_as_their_coverage_on_a_coarse_map(tmp_path):
     """Near an LED the angle toward it turns within a map's 1 mm cell: the coverage takes
     its dots' angles on cells of 0.1 mm, and cut prisms facing two LEDs 5 mm apart send
     as much light on axis as coverage as through their real dots (1.420 and 1.427 at 8e6
     rays; one angle per 1 mm cell gave 1.369, 7 sigma off). Since session 43 (a cut
-    prism's cavity met wherever a ray's path passes through it) they part: 1.495 as the
-    coverage (its twins each at the print's angle where it stands, session 47; 1.856
-    with all at one) against 1.593 through the real dots (6 sigma). Not the field's
-    doing: at one angle everywhere (``angle = 90``) the coverage too sends more on axis
-    within 1 mm of an LED (1727 against 1400 of 2e6 rays) and less 1 to 4 mm from it (2539
-    against 2946), though the totals agree there (BENCHMARKS.md, session 47)."""
+    prism's cavity met wherever a ray's path passes through it) a walk among the twins
+    runs up to a millimetre, across the map's rows: 1.495 as the coverage (its twins each
+    at the print's angle where it stands, session 47; 1.856 with all at one) against 1.593
+    through the real dots (6.2 sigma) while every twin stood as packed for the fill where
+    the ray met the face; 1.551 (2.6 sigma) since twins in cells of fewer dots stand as
+    many fewer (session 48; BENCHMARKS.md)."""
     from optdot.orchestration.pipeline import generate
 
     dots = 'shape = "rounded_rectangle"\nlength = 0.120\nwidth = 0.030\ncorner_radius = 0.005'

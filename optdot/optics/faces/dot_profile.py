@@ -690,6 +690,39 @@ def _twin_at(lat, i, j, place):  # pragma: no cover - compiled
     return cu, cv, c, s
 
 
+@nb.njit(cache=True, inline="always")
+def _twin_area(hu, hv, rc, prism):  # pragma: no cover - compiled
+    """A twin's footprint area (mm²): a rounded rectangle of half sides ``hu``, ``hv`` and
+    corner ``rc`` (mm) for a ``prism``, else an ellipse of half axes ``hu``, ``hv``."""
+    return 4.0 * hu * hv - (4.0 - math.pi) * rc * rc if prism else math.pi * hu * hv
+
+
+@nb.njit(cache=True, inline="always")
+def _lattice_fill(lat, hu, hv, rc, prism):  # pragma: no cover - compiled
+    """The fill lattice ``lat`` of twins (half sides ``hu``, ``hv``, corner ``rc``, mm;
+    ``prism`` as :func:`_twin_area`'s) was packed for: one twin a cell of its basis."""
+    e, a = lat[0], lat[1]
+    return 2.0 * _twin_area(hu, hv, rc, prism) / (e * math.sqrt(3.0) * a * a)
+
+
+#: The salt of the draw that thins a lattice's twins (:func:`_stands`), apart from their
+#: angles' (:func:`_site_angle`).
+_THIN = np.uint64(0x5851F42D4C957F2D)
+
+
+@nb.njit(cache=True, inline="always")
+def _stands(lat, i, j, fill, there):  # pragma: no cover - compiled
+    """Whether lattice ``lat``'s twin ``(i, j)`` stands where the coverage's fill is
+    ``there``, the lattice packed for ``fill``: not where the map has no dots; where it has
+    fewer than the lattice, with the chance ``there / fill`` (drawn by the site, the same
+    every time the ray meets it). The twin at ``(0, 0)``, the one the ray came to, stands."""
+    if there <= 0:
+        return False
+    if there >= fill or (i == 0 and j == 0):
+        return True
+    return _site_angle(lat[6] ^ _THIN, i, j, 1.0) * fill < there
+
+
 @nb.njit(cache=True)
 def twin_lattice(state, hu, hv, rc, prism, turn, fill):  # pragma: no cover - compiled
     """The twins of a coverage dot (half sides ``hu``, ``hv``, corner ``rc``, mm) where
@@ -702,9 +735,8 @@ def twin_lattice(state, hu, hv, rc, prism, turn, fill):  # pragma: no cover - co
     a, b1u, b1v, b2u, b2v, key, turn, m)``, the stretch, the spacing (mm), the basis (mm,
     stretched coordinates ``u / e, v``), the sites' key, and how many sites about the
     nearest one a twin over a point may stand."""
-    area = 4.0 * hu * hv - (4.0 - math.pi) * rc * rc if prism else math.pi * hu * hv
     e = hu / hv if turn <= 0 else 1.0
-    a = math.sqrt(2.0 * area / (e * math.sqrt(3.0) * min(fill, 1.0)))
+    a = math.sqrt(2.0 * _twin_area(hu, hv, rc, prism) / (e * math.sqrt(3.0) * min(fill, 1.0)))
     state, w = uniform(state)
     state, key_u = uniform(state)
     ca, sa = math.cos(math.pi / 3.0 * w), math.sin(math.pi / 3.0 * w)
@@ -744,9 +776,11 @@ def next_twin(
     the site (``t`` inf for none), the distance (mm) and the normal, in the dot's frame. A
     twin stands only where the coverage has dots (``place``: the frame's origin and turn
     on the face, ``(ox, oy, c, s)`` mm, and the coverage ``phi`` over cells ``g``): none
-    past the panel's edge or in its holes. The path is walked a spacing at a time, each
-    step trying the sites within a twin's reach of it whose centres lie along it, so
-    each site is tried once."""
+    past the panel's edge or in its holes, and where the map has fewer than the lattice
+    (packed for the fill where the ray met the face), as many fewer (:func:`_stands`):
+    a walk a millimetre long toward an LED crosses the map's cells. The path is walked a
+    spacing at a time, each step trying the sites within a twin's reach of it whose
+    centres lie along it, so each site is tried once."""
     ox, oy, c0, s0, phi, g, _ = place
     a = lat[1]
     t_end = _layer_end(f, hu, hv, k, pz, dz)
@@ -758,6 +792,7 @@ def next_twin(
     step = a * min(lat[0], 1.0) / hs if hs > 1e-12 else np.inf  # a spacing along
     ux, uy = (du / hs, dv / hs) if hs > 1e-12 else (0.0, 0.0)
     e, b1u, b1v, b2u, b2v = lat[0], lat[2], lat[3], lat[4], lat[5]
+    fill = _lattice_fill(lat, hu, hv, rc, int(f[F_PROFILE]) >= PRISM)
     reach = math.sqrt(hu * hu + hv * hv)  # a twin's extent
     wide = reach * max(1.0, 1.0 / e) / (0.8660254037844386 * a)  # in the basis's units
     lag = reach / hs if hs > 1e-12 else np.inf  # a twin ahead is met this much before it
@@ -785,8 +820,9 @@ def next_twin(
                 if not lo <= ru * ux + rv * uy < hi or _off_line(ru, rv, ux, uy, reach):
                     continue  # another step's, or off the path
                 cu, cv, c, s = _twin_at(lat, i, j, place)
-                if _fill_at(ox + c0 * cu - s0 * cv, oy + s0 * cu + c0 * cv, phi, g) <= 0:
-                    continue  # no dots there
+                there = _fill_at(ox + c0 * cu - s0 * cv, oy + s0 * cu + c0 * cv, phi, g)
+                if not _stands(lat, i, j, fill, there):
+                    continue  # no dots there, or fewer than the lattice packs
                 t, mu, mv, mz = _meet_body(f, hu, hv, rc, k, c, s, pu - cu, pv - cv, pz, du, dv, dz)
                 if t < best:
                     best, bi, bj, bu, bv, bz = t, i, j, mu, mv, mz
