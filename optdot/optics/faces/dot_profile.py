@@ -715,7 +715,9 @@ def _stands(lat, i, j, fill, there):  # pragma: no cover - compiled
     """Whether lattice ``lat``'s twin ``(i, j)`` stands where the coverage's fill is
     ``there``, the lattice packed for ``fill``: not where the map has no dots; where it has
     fewer than the lattice, with the chance ``there / fill`` (drawn by the site, the same
-    every time the ray meets it). The twin at ``(0, 0)``, the one the ray came to, stands."""
+    every time the ray meets it). The twin at ``(0, 0)`` stands wherever the map has dots:
+    the one the ray came to, on a dot; off the dots, the lattice's origin by the point
+    drawn (:func:`bare_point`, which draws off every site's footprint, standing or not)."""
     if there <= 0:
         return False
     if there >= fill or (i == 0 and j == 0):
