@@ -507,34 +507,49 @@ def test_the_walk_over_close_long_twins_misses_none_a_step_ahead(aligned, fill):
     assert hits > 2000
 
 
+def _walks_meet_what_every_site_finds(place, fill, seed, heading):
+    """600 rays walked by :func:`next_twin` over bump twins (lattices packed for ``fill``,
+    keys as the tracer holds them) in ``place``'s coverage, each from a point near the
+    origin in a direction ``heading(rng, i)`` (radians) 0.05 up from the face, against a
+    search of every site that stands there (:func:`_first_twin_where`): the sites met, with
+    whether each ray went toward +x."""
+    f = _row(BUMP, 0.1, 0.1, 0.0, 0.8)
+    g = np.random.default_rng(seed)
+    met = []
+    for i in range(600):
+        lat = _kernel_lattice(4, i, 0.1, fill)
+        p = np.array([g.uniform(-0.3, 0.3), g.uniform(-0.3, 0.3), -0.07])
+        a = heading(g, i)
+        d = np.array([math.cos(a), math.sin(a), 0.05])  # out of the layer within 1.4 mm
+        d /= np.linalg.norm(d)
+        gi, gj, gt = next_twin(f, 0.1, 0.1, 0.0, 0.8, lat, False, place, *p, *d, False)[:3]
+        bi, bj, tt = _first_twin_where(f, 0.1, 0.1, 0.0, 0.8, lat, p, d, 40, place, fill)
+        assert math.isfinite(gt) == math.isfinite(tt)
+        if math.isfinite(gt):
+            assert (gi, gj) == (bi, bj) and gt == pytest.approx(tt, abs=1e-12)
+            met.append((_site(lat, gi, gj)[0], d[0] > 0))
+    return met
+
+
+def _two_cells(left: float, right: float) -> tuple:
+    """A frame's ``place`` on a coverage of two cells, ``left`` for x < 0 and ``right``
+    past it (mm)."""
+    return (
+        0.0, 0.0, 1.0, 0.0, np.array([[left, right]]), np.array([-10.0, -10.0, 10.0, 20.0]),
+        np.zeros((0, 3)),
+    )  # fmt: skip
+
+
 def test_twins_stand_only_where_the_coverage_has_dots():
     """:func:`next_twin` reads the coverage's fill under each twin: a ray crossing from
     cells with dots into cells with none (the panel's outside, a hole) meets the twins
     on the first side only, the ones a search of every site finds there."""
-    f = _row(BUMP, 0.1, 0.1, 0.0, 0.8)
-    hu = hv = 0.1
-    k = 0.8
-    half = (
-        0.0, 0.0, 1.0, 0.0, np.array([[1.0, 0.0]]), np.array([-10.0, -10.0, 10.0, 20.0]),
-        np.zeros((0, 3)),
-    )  # fmt: skip
-    g = np.random.default_rng(9)
-    hits = {True: 0, False: 0}
-    for i in range(600):
-        _, lat = twin_lattice(np.uint64(ray_state(4, i)), hu, hv, 0.0, False, 0.0, 0.5)
-        p = np.array([g.uniform(-0.3, 0.3), g.uniform(-0.3, 0.3), -0.07])
-        a = g.uniform(0, 2 * math.pi)
-        d = np.array([math.cos(a), math.sin(a), 0.05])  # out of the layer within 1.4 mm
-        d /= np.linalg.norm(d)
-        gi, gj, gt = next_twin(f, hu, hv, 0.0, k, lat, False, half, *p, *d, False)[:3]
-        bi, bj, tt = _first_twin_where(f, hu, hv, 0.0, k, lat, p, d, 40, half)
-        assert math.isfinite(gt) == math.isfinite(tt)
-        if math.isfinite(gt):
-            assert (gi, gj) == (bi, bj) and gt == pytest.approx(tt, abs=1e-12)
-            cu = _site(lat, gi, gj)[0]
-            assert cu < 0  # on the side with dots
-            hits[d[0] > 0] += 1
-    assert min(hits.values()) > 20 and sum(hits.values()) > 200  # going either way
+    met = _walks_meet_what_every_site_finds(
+        _two_cells(1.0, 0.0), 0.5, 9, lambda g, i: g.uniform(0, 2 * math.pi)
+    )
+    assert all(cu < 0 for cu, _ in met)  # on the side with dots
+    going = [sum(1 for _, right in met if right == way) for way in (True, False)]
+    assert min(going) > 20 and sum(going) > 200  # going either way
 
 
 def _kernel_lattice(seed: int, i: int, hu: float, fill: float) -> tuple:
@@ -569,35 +584,17 @@ def test_a_walk_into_cells_of_fewer_dots_meets_only_the_twins_that_stand_there()
     """:func:`next_twin` over a lattice packed for the fill 0.5 where the ray met the face,
     walking into cells of 0.2: it meets the twin a search of every site that stands
     (:func:`_stands`) finds, and past the step in the map as many fewer as stand."""
-    f = _row(BUMP, 0.1, 0.1, 0.0, 0.8)
-    hu = hv = 0.1
-    k = 0.8
-    step = (
-        0.0, 0.0, 1.0, 0.0, np.array([[0.5, 0.2]]), np.array([-10.0, -10.0, 10.0, 20.0]),
-        np.zeros((0, 3)),
-    )  # fmt: skip
-    g = np.random.default_rng(10)
-    far = {True: 0, False: 0}
-    for i in range(600):
-        lat = _kernel_lattice(4, i, hu, 0.5)
-        p = np.array([g.uniform(-0.3, 0.3), g.uniform(-0.3, 0.3), -0.07])
-        a = g.uniform(-0.4, 0.4) + (0.0 if i % 2 else math.pi)
-        d = np.array([math.cos(a), math.sin(a), 0.05])
-        d /= np.linalg.norm(d)
-        gi, gj, gt = next_twin(f, hu, hv, 0.0, k, lat, False, step, *p, *d, False)[:3]
-        bi, bj, tt = _first_twin_where(f, hu, hv, 0.0, k, lat, p, d, 40, step, 0.5)
-        assert math.isfinite(gt) == math.isfinite(tt)
-        if math.isfinite(gt):
-            assert (gi, gj) == (bi, bj) and gt == pytest.approx(tt, abs=1e-12)
-            far[_site(lat, gi, gj)[0] > 0] += 1
-    assert far[True] > 50 and far[False] > 50  # twins met on both sides of the step
+    met = _walks_meet_what_every_site_finds(
+        _two_cells(0.5, 0.2), 0.5, 10, lambda g, i: g.uniform(-0.4, 0.4) + (i % 2 == 0) * math.pi
+    )
+    past = sum(1 for cu, _ in met if cu > 0)
+    assert past > 50 and len(met) - past > 50  # twins met on both sides of the step
 
 
-def _first_twin_where(f, hu, hv, rc, k, lat, p, d, sites, place, fill=None):
+def _first_twin_where(f, hu, hv, rc, k, lat, p, d, sites, place, fill):
     """The first twin of ``lat`` a ray meets among every site within ``sites`` whose
     centre has dots in ``place``'s coverage and, the lattice packed for ``fill``, stands
-    there (:func:`_stands`; every one where ``fill`` is None) (``(i, j, t)``, ``t`` inf for
-    none)."""
+    there (:func:`_stands`) (``(i, j, t)``, ``t`` inf for none)."""
     best, bi, bj = math.inf, 0, 0
     end = _layer_end_py(f, hu, hv, k, p[2], d[2])
     phi, gr = place[4], place[5]
@@ -607,7 +604,7 @@ def _first_twin_where(f, hu, hv, rc, k, lat, p, d, sites, place, fill=None):
             ix, iy = int(math.floor((cu - gr[0]) / gr[2])), int(math.floor((cv - gr[1]) / gr[3]))
             if not (0 <= ix < phi.shape[1] and 0 <= iy < phi.shape[0]) or phi[iy, ix] <= 0:
                 continue
-            if fill is not None and not _stands(lat, i, j, fill, phi[iy, ix]):
+            if not _stands(lat, i, j, fill, phi[iy, ix]):
                 continue
             tt = _meet_body(f, hu, hv, rc, k, c, s, p[0] - cu, p[1] - cv, p[2], d[0], d[1], d[2])[0]
             if tt < best and tt < end:
