@@ -171,7 +171,9 @@ def test_an_interrupt_in_the_middle_of_a_set_replaces_nothing(tmp_path, tiny_pat
 @pytest.mark.slow
 def test_a_signal_during_export_leaves_the_old_files(tmp_path, signame, delay):
     """At any point of the run (imports, numba's cache load, relaxation, writing): exit 130,
-    one line, old files byte-identical, no temporary file left."""
+    one line, old files byte-identical, no temporary file left. With ``--overwrite``, a
+    run that would replace them: without it a quiet machine's run refused the old masks
+    (exit 2) about 1.6 s in, before the latest signal came."""
     import signal
     import time
 
@@ -181,6 +183,7 @@ def test_a_signal_during_export_leaves_the_old_files(tmp_path, signame, delay):
     args = [sys.executable, "-P", "-m", "optdot", "export", SAMPLES / "led" / "job.toml", "-q"]
     for f, p in outs.items():
         args += [f"--{f}", p]
+    args.append("--overwrite")
     proc = subprocess.Popen(list(map(str, args)), stderr=subprocess.PIPE, text=True)
     time.sleep(delay)
     proc.send_signal(getattr(signal, signame))
