@@ -29,6 +29,7 @@ from optdot.optics.faces.dot_profile import (  # the twins' private helpers, to 
     among_dots,
     bare_point,
     enter_cap,
+    fill_along,
     enter_prism,
     next_dot,
     next_twin,
@@ -589,6 +590,57 @@ def test_a_walk_into_cells_of_fewer_dots_meets_only_the_twins_that_stand_there()
     )
     past = sum(1 for cu, _ in met if cu > 0)
     assert past > 50 and len(met) - past > 50  # twins met on both sides of the step
+
+
+def test_the_fill_along_a_course_is_the_most_of_the_cells_it_crosses():
+    """:func:`fill_along` (what a cut dot's coverage packs its twins for): over random
+    maps of 7 × 5 cells and random courses, at least the fill of every cell the course
+    crosses over half a cell or more, at most the most of the cells it touches (both
+    found by a search every 1/400 of a cell along it); 0 off the map."""
+    g = np.random.default_rng(11)
+    grid = np.array([-1.0, -0.5, 0.3, 0.5])
+    for _ in range(400):
+        phi = g.uniform(0.0, 1.0, (5, 7))
+        x, y = g.uniform(-1.2, 1.4), g.uniform(-0.7, 2.2)
+        a = g.uniform(0, 2 * math.pi)
+        ux, uy = math.cos(a), math.sin(a)
+        lo, hi = sorted(g.uniform(-1.5, 1.5, 2))
+        top = fill_along(x, y, ux, uy, lo, hi, phi, grid)
+        ts = np.arange(lo, hi, 0.3 / 400)
+        ix = np.floor((x + ts * ux - grid[0]) / grid[2]).astype(int)
+        iy = np.floor((y + ts * uy - grid[1]) / grid[3]).astype(int)
+        inside = (ix >= 0) & (ix < 7) & (iy >= 0) & (iy < 5)
+        cells, counts = np.unique(iy[inside] * 7 + ix[inside], return_counts=True)
+        fills = phi.ravel()[cells]
+        long = fills[counts * 0.3 / 400 >= 0.15 + 0.3 / 200]
+        assert top <= (fills.max() if len(fills) else 0.0) + 1e-12
+        if len(long):
+            assert top >= long.max() - 1e-12
+    assert fill_along(5.0, 5.0, 1.0, 0.0, -0.1, 0.1, phi, grid) == 0.0
+
+
+def test_a_point_drawn_off_a_thinned_lattice_lies_off_the_twins_that_stand_only():
+    """:func:`bare_point` over a lattice packed for fill 0.5 where the map has 0.2 (a cut
+    dot's coverage packs its twins for the densest cell along the ray's path): its point
+    lies off every twin that stands (:func:`_stands`), and where the thinning took one
+    away, on its footprint as often as that footprint's share of the face says."""
+    hu = 0.05
+    place = _two_cells(0.2, 0.2)
+    spot = (0.0, 0.0, 1.0, 0.0, *place[4:])
+    on_gone = 0
+    draws = 400
+    for i in range(draws):
+        lat = _kernel_lattice(6, i, hu, 0.5)
+        _, pu, pv = bare_point(np.uint64(ray_state(7, i)), lat, hu, hu, 0.0, False, spot)
+        for si in range(-3, 4):
+            for sj in range(-3, 4):
+                cu, cv, _, _ = _site(lat, si, sj)
+                if (pu - cu) ** 2 + (pv - cv) ** 2 <= hu * hu:
+                    assert not _stands(lat, si, sj, 0.5, 0.2), (i, si, sj)
+                    on_gone += 1
+    # the face a point may lie on: 1 - 0.2 of it bare, 0.5 - 0.2 over twins taken away
+    # (the twin at (0, 0) always stands: a little less)
+    assert 0.2 * draws < on_gone < 0.45 * draws
 
 
 def _first_twin_where(f, hu, hv, rc, k, lat, p, d, sites, place, fill):

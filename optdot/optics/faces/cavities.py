@@ -65,6 +65,7 @@ from .dot_profile import (
     _twin_at,
     _walk_body,
     bare_point,
+    fill_along,
     next_dot,
     next_twin,
     tallest,
@@ -75,6 +76,11 @@ from .reflector import meet_reflector
 from .slab_walls import wall_distance
 
 __all__ = ["among_cavities", "meet_cut"]
+
+#: The farthest along a ray's course, either way from where it meets the face, that the
+#: coverage's fill is looked at to pack its twins (mm): a course nearly parallel to the
+#: face crosses the cavities' layer over a long way.
+_REACH = 2.0
 
 
 @nb.njit(cache=True, inline="always")
@@ -264,7 +270,16 @@ def meet_cut(state, f, n, on, x, y, z, pr, walls, dxn, dyn, dz, run):  # pragma:
         if c != c:
             c, s = 1.0, 0.0
         fill = _fill_at(x, y, pr[1], pr[2])
-        state, lat = twin_lattice(state, hu, hv, rc, code >= PRISM, lt, max(fill, 1e-9))
+        # packed for the densest cell its path crosses in the layer (and a twin's reach
+        # beside it), thinned where the map has fewer (next_twin): a walk toward the
+        # map's denser cells meets as many twins as stand there
+        ahead = (z0 + deep) / -dz if dz < 0 else (deep - z0) / dz if dz > 0 else np.inf
+        reach, ux, uy = math.hypot(hu, hv), 0.0, 0.0
+        if hs > 1e-12:
+            ux, uy = dxn / hs, dyn / hs
+        lo, hi = -min(back * hs, _REACH) - reach, min(ahead * hs, _REACH) + reach
+        top = max(fill, fill_along(x, y, ux, uy, lo, hi, pr[1], pr[2]))
+        state, lat = twin_lattice(state, hu, hv, rc, code >= PRISM, lt, max(top, 1e-9))
         if at_wall:  # the wall's point over a twin with the fill's chance, as at the face
             state, u = uniform(state)
             on = INK if u < fill else BARE

@@ -627,6 +627,21 @@ def _fill_at(x, y, phi, g):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, inline="always")
+def fill_along(x, y, ux, uy, lo, hi, phi, g):  # pragma: no cover - compiled
+    """The most fill the coverage (``phi`` over cells of ``g``) has along the course from
+    ``(x, y) + lo u`` to ``(x, y) + hi u`` (mm; ``u = (ux, uy)`` a unit direction, ``lo
+    <= hi``), looked up at most half a cell apart (at most 64 looks; a course longer
+    than that, nearly parallel to the face, is looked at 64 points along it)."""
+    half = 0.5 * min(g[2], g[3])
+    m = min(int(math.ceil((hi - lo) / half)), 64) if hi > lo else 0
+    top = _fill_at(x + lo * ux, y + lo * uy, phi, g)
+    for i in range(1, m + 1):
+        t = lo + (hi - lo) * i / m
+        top = max(top, _fill_at(x + t * ux, y + t * uy, phi, g))
+    return top
+
+
+@nb.njit(cache=True, inline="always")
 def _site_angle(key, i, j, turn):  # pragma: no cover - compiled
     """A twin's own angle (rad, ``0 .. turn``) at lattice site ``(i, j)`` of the ray whose
     draw is ``key``: the same every time the ray meets the site."""
@@ -717,7 +732,7 @@ def _stands(lat, i, j, fill, there):  # pragma: no cover - compiled
     fewer than the lattice, with the chance ``there / fill`` (drawn by the site, the same
     every time the ray meets it). The twin at ``(0, 0)`` stands wherever the map has dots:
     the one the ray came to, on a dot; off the dots, the lattice's origin by the point
-    drawn (:func:`bare_point`, which draws off every site's footprint, standing or not)."""
+    drawn (:func:`bare_point`, which draws off the footprints of the twins that stand)."""
     if there <= 0:
         return False
     if there >= fill or (i == 0 and j == 0):
@@ -846,11 +861,18 @@ def next_twin(
 @nb.njit(cache=True)
 def _on_twin(lat, hu, hv, rc, pu, pv, place):  # pragma: no cover - compiled
     """Whether ``(pu, pv)`` (mm, the dot's frame) lies on a twin's footprint (an ellipse
-    for ``rc < 0``; ``place`` as :func:`_twin_at`'s)."""
+    for ``rc < 0``; ``place`` as :func:`_twin_at`'s), of the twins that stand
+    (:func:`_stands`: none where the map has no dots, fewer where it has fewer than the
+    lattice was packed for)."""
+    ox, oy, c0, s0, phi, g, _ = place
+    fill = _lattice_fill(lat, hu, hv, max(rc, 0.0), rc >= 0)
     i0, j0 = _nearest_site(lat, pu, pv)
     for i in range(i0 - lat[8], i0 + lat[8] + 1):
         for j in range(j0 - lat[8], j0 + lat[8] + 1):
             cu, cv, c, s = _twin_at(lat, i, j, place)
+            there = _fill_at(ox + c0 * cu - s0 * cv, oy + s0 * cu + c0 * cv, phi, g)
+            if not _stands(lat, i, j, fill, there):
+                continue
             ru, rv = c * (pu - cu) + s * (pv - cv), c * (pv - cv) - s * (pu - cu)
             if rc < 0:
                 if (ru / hu) ** 2 + (rv / hv) ** 2 <= 1.0:
@@ -864,8 +886,8 @@ def _on_twin(lat, hu, hv, rc, pu, pv, place):  # pragma: no cover - compiled
 
 @nb.njit(cache=True)
 def bare_point(state, lat, hu, hv, rc, prism, spot):  # pragma: no cover - compiled
-    """A point drawn uniformly over lattice ``lat``'s cell off its twins' footprints
-    (half sides ``hu``, ``hv``, corner ``rc``; ellipses unless ``prism``), the point on
+    """A point drawn uniformly over lattice ``lat``'s cell off the footprints of its
+    twins that stand (:func:`_on_twin`; half sides ``hu``, ``hv``, corner ``rc``; ellipses unless ``prism``), the point on
     the face ``spot = (x, y, c, s, phi, g, turn)``: its place (mm), the frame's turn
     there, the coverage and its angles (twins in a :data:`FIELD` at theirs,
     :func:`_twin_at`): ``(state, pu, pv)``, mm in the dot's frame: where a ray out through
