@@ -887,12 +887,12 @@ def _on_twin(lat, hu, hv, rc, pu, pv, place):  # pragma: no cover - compiled
 @nb.njit(cache=True)
 def bare_point(state, lat, hu, hv, rc, prism, spot):  # pragma: no cover - compiled
     """A point drawn uniformly over lattice ``lat``'s cell off the footprints of its
-    twins that stand (:func:`_on_twin`; half sides ``hu``, ``hv``, corner ``rc``; ellipses unless ``prism``), the point on
-    the face ``spot = (x, y, c, s, phi, g, turn)``: its place (mm), the frame's turn
-    there, the coverage and its angles (twins in a :data:`FIELD` at theirs,
-    :func:`_twin_at`): ``(state, pu, pv)``, mm in the dot's frame: where a ray out through
-    the bare face between the coverage's dots leaves it (the lattice's origin on the face
-    ``(x, y) - R (pu, pv)``)."""
+    twins that stand (:func:`_on_twin`; half sides ``hu``, ``hv``, corner ``rc``;
+    ellipses unless ``prism``), the point on the face ``spot = (x, y, c, s, phi, g,
+    turn)``: its place (mm), the frame's turn there, the coverage and its angles (twins in
+    a :data:`FIELD` at theirs, :func:`_twin_at`): ``(state, pu, pv)``, mm in the dot's
+    frame: where a ray out through the bare face between the coverage's dots leaves it
+    (the lattice's origin on the face ``(x, y) - R (pu, pv)``)."""
     e, _, b1u, b1v, b2u, b2v, _, _, _ = lat
     x, y, c, s, phi, g, turn = spot
     pu = pv = 0.0
