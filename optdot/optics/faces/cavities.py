@@ -75,7 +75,7 @@ from .dot_profile import (
 from .reflector import meet_reflector
 from .slab_walls import wall_distance
 
-__all__ = ["among_cavities", "meet_cut"]
+__all__ = ["among_cavities", "meet_cut", "packed_for"]
 
 #: The farthest along a ray's course, either way from where it meets the face, that the
 #: coverage's fill is looked at to pack its twins (mm): a course nearly parallel to the
@@ -225,6 +225,25 @@ def among_cavities(
     return state, DOT, x, y, 0.0, c0 * du - s0 * dv, s0 * du + c0 * dv, dz
 
 
+@nb.njit(cache=True, inline="always")
+def packed_for(x, y, dxn, dyn, dz, z0, back, deep, reach, phi, g):  # pragma: no cover
+    """The fill the coverage (``phi`` over cells of ``g``) has where a ray going ``d``
+    (unit) meets a face of cut dots at ``(x, y)`` (mm; ``z0`` mm over it, where it was
+    born or met a wall), and the fill the twins it meets are packed for: the most of the
+    cells its path crosses in the cavities' layer, ``deep`` mm (from ``back`` back along
+    it, its length in the layer before it met the face, to where it leaves the layer after;
+    at most :data:`_REACH` each way over the face), and a twin's ``reach`` (mm) past either
+    end: ``(fill, top)``. Thinned where the map has fewer (:func:`~.dot_profile._stands`),
+    the twins along a walk toward the map's denser cells stand as densely as its dots do
+    there."""
+    fill = _fill_at(x, y, phi, g)
+    hs = math.sqrt(dxn * dxn + dyn * dyn)
+    ahead = (z0 + deep) / -dz if dz < 0 else (deep - z0) / dz if dz > 0 else np.inf
+    ux, uy = (dxn / hs, dyn / hs) if hs > 1e-12 else (0.0, 0.0)
+    lo, hi = -min(back * hs, _REACH) - reach, min(ahead * hs, _REACH) + reach
+    return fill, max(fill, fill_along(x, y, ux, uy, lo, hi, phi, g))
+
+
 # inlined into the tracer's loop: numba counts a reference to each of the print's
 # tables at every call they are handed to
 @nb.njit(cache=True, inline="always")
@@ -269,20 +288,12 @@ def meet_cut(state, f, n, on, x, y, z, pr, walls, dxn, dyn, dz, run):  # pragma:
         lt = twins_turn(f, hu, hv, c)
         if c != c:
             c, s = 1.0, 0.0
-        fill = _fill_at(x, y, pr[1], pr[2])
-        # packed for the densest cell its path crosses in the layer (and a twin's reach
-        # beside it), thinned where the map has fewer (next_twin): a walk toward the
-        # map's denser cells meets as many twins as stand there
-        ahead = (z0 + deep) / -dz if dz < 0 else (deep - z0) / dz if dz > 0 else np.inf
-        reach, ux, uy = math.hypot(hu, hv), 0.0, 0.0
-        if hs > 1e-12:
-            ux, uy = dxn / hs, dyn / hs
-        lo, hi = -min(back * hs, _REACH) - reach, min(ahead * hs, _REACH) + reach
-        top = max(fill, fill_along(x, y, ux, uy, lo, hi, pr[1], pr[2]))
-        state, lat = twin_lattice(state, hu, hv, rc, code >= PRISM, lt, max(top, 1e-9))
+        reach = math.hypot(hu, hv)
+        fill, top = packed_for(x, y, dxn, dyn, dz, z0, back, deep, reach, pr[1], pr[2])
         if at_wall:  # the wall's point over a twin with the fill's chance, as at the face
             state, u = uniform(state)
             on = INK if u < fill else BARE
+        state, lat = twin_lattice(state, hu, hv, rc, code >= PRISM, lt, max(top, 1e-9), on != BARE)
         if on != BARE:  # on the twin at the lattice's origin: where on it, drawn
             state, lu, lv = _on_footprint(state, code, hu, hv, rc)
             _, _, c1, s1 = _site(lat, 0, 0)  # its own angle in the lattice's frame

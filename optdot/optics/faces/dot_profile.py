@@ -628,16 +628,30 @@ def _fill_at(x, y, phi, g):  # pragma: no cover - compiled
 
 @nb.njit(cache=True, inline="always")
 def fill_along(x, y, ux, uy, lo, hi, phi, g):  # pragma: no cover - compiled
-    """The most fill the coverage (``phi`` over cells of ``g``) has along the course from
-    ``(x, y) + lo u`` to ``(x, y) + hi u`` (mm; ``u = (ux, uy)`` a unit direction, ``lo
-    <= hi``), looked up at most half a cell apart (at most 64 looks; a course longer
-    than that, nearly parallel to the face, is looked at 64 points along it)."""
-    half = 0.5 * min(g[2], g[3])
-    m = min(int(math.ceil((hi - lo) / half)), 64) if hi > lo else 0
-    top = _fill_at(x + lo * ux, y + lo * uy, phi, g)
-    for i in range(1, m + 1):
-        t = lo + (hi - lo) * i / m
-        top = max(top, _fill_at(x + t * ux, y + t * uy, phi, g))
+    """The most fill the coverage (``phi`` over cells of ``g``) has in the cells the course
+    from ``(x, y) + lo u`` to ``(x, y) + hi u`` crosses (mm; ``u = (ux, uy)`` a unit
+    direction, ``lo <= hi``), every one of them (a walk over the grid's lines, one cell at
+    a time); 0 off the map."""
+    nx, ny = phi.shape[1], phi.shape[0]
+    fx, fy = (x + lo * ux - g[0]) / g[2], (y + lo * uy - g[1]) / g[3]
+    ix, iy = int(math.floor(fx)), int(math.floor(fy))
+    vx, vy = ux / g[2], uy / g[3]  # cells a millimetre along the course
+    sx, sy = (1 if vx > 0 else -1), (1 if vy > 0 else -1)
+    # how far along the course (mm from its start) it crosses the next line of cells
+    nxt_x = ((ix + 1 - fx) / vx if vx > 0 else (ix - fx) / vx) if vx != 0 else np.inf
+    nxt_y = ((iy + 1 - fy) / vy if vy > 0 else (iy - fy) / vy) if vy != 0 else np.inf
+    dx_, dy_ = (abs(1.0 / vx) if vx != 0 else np.inf), (abs(1.0 / vy) if vy != 0 else np.inf)
+    length = hi - lo
+    top = phi[iy, ix] if 0 <= ix < nx and 0 <= iy < ny else 0.0
+    for _ in range(int(length * (abs(vx) + abs(vy))) + 3):
+        if nxt_x < nxt_y:
+            t, ix, nxt_x = nxt_x, ix + sx, nxt_x + dx_
+        else:
+            t, iy, nxt_y = nxt_y, iy + sy, nxt_y + dy_
+        if not t <= length:
+            break
+        if 0 <= ix < nx and 0 <= iy < ny:
+            top = max(top, phi[iy, ix])
     return top
 
 
@@ -679,7 +693,7 @@ def _site(lat, i, j):  # pragma: no cover - compiled
     """Lattice ``lat``'s site ``(i, j)``: its centre ``(cu, cv)`` (mm, the dot's frame)
     and its twin's angle ``(c, s)`` in that frame (the frame's own in a :data:`FIELD`:
     :func:`_twin_at` looks it up)."""
-    e, _, b1u, b1v, b2u, b2v, key, turn, _ = lat
+    e, _, b1u, b1v, b2u, b2v, key, turn, _, _ = lat
     c, s = 1.0, 0.0
     if turn > 0:
         g = _site_angle(key, i, j, turn)
@@ -730,18 +744,20 @@ def _stands(lat, i, j, fill, there):  # pragma: no cover - compiled
     """Whether lattice ``lat``'s twin ``(i, j)`` stands where the coverage's fill is
     ``there``, the lattice packed for ``fill``: not where the map has no dots; where it has
     fewer than the lattice, with the chance ``there / fill`` (drawn by the site, the same
-    every time the ray meets it). The twin at ``(0, 0)`` stands wherever the map has dots:
-    the one the ray came to, on a dot; off the dots, the lattice's origin by the point
-    drawn (:func:`bare_point`, which draws off the footprints of the twins that stand)."""
+    every time the ray meets it). The twin at ``(0, 0)`` of a lattice about a dot the ray
+    came to (``lat``'s ``own``) stands wherever the map has dots; about a point drawn on the
+    bare face between them (:func:`bare_point`) it is thinned as any other: a lattice
+    packed for a denser cell along the ray's path than where it met the face stands no
+    denser there than the map."""
     if there <= 0:
         return False
-    if there >= fill or (i == 0 and j == 0):
+    if there >= fill or (lat[9] and i == 0 and j == 0):
         return True
     return _site_angle(lat[6] ^ _THIN, i, j, 1.0) * fill < there
 
 
 @nb.njit(cache=True)
-def twin_lattice(state, hu, hv, rc, prism, turn, fill):  # pragma: no cover - compiled
+def twin_lattice(state, hu, hv, rc, prism, turn, fill, own):  # pragma: no cover - compiled
     """The twins of a coverage dot (half sides ``hu``, ``hv``, corner ``rc``, mm) where
     the cell's ``fill`` (> 0) puts them: a hexagonal lattice of the fill's density turned
     at random, stretched along ``u`` by the dot's elongation when the twins stand at its
@@ -749,9 +765,11 @@ def twin_lattice(state, hu, hv, rc, prism, turn, fill):  # pragma: no cover - co
     turns slowly from one twin to the next: :func:`_twin_at`), each at its own angle
     otherwise, drawn over ``turn`` (π, or 2π for a prism whose facets differ;
     :func:`_site_angle`): ``(state, lat)``, ``lat = (e,
-    a, b1u, b1v, b2u, b2v, key, turn, m)``, the stretch, the spacing (mm), the basis (mm,
-    stretched coordinates ``u / e, v``), the sites' key, and how many sites about the
-    nearest one a twin over a point may stand."""
+    a, b1u, b1v, b2u, b2v, key, turn, m, own)``, the stretch, the spacing (mm), the basis
+    (mm, stretched coordinates ``u / e, v``), the sites' key, how many sites about the
+    nearest one a twin over a point may stand, and whether the twin at ``(0, 0)`` is the
+    dot the ray came to (``own``: it stands wherever the map has dots, :func:`_stands`)
+    or the lattice is placed about a point on the bare face between them."""
     e = hu / hv if turn <= 0 else 1.0
     a = math.sqrt(2.0 * _twin_area(hu, hv, rc, prism) / (e * math.sqrt(3.0) * min(fill, 1.0)))
     state, w = uniform(state)
@@ -762,7 +780,7 @@ def twin_lattice(state, hu, hv, rc, prism, turn, fill):  # pragma: no cover - co
     m = int(math.ceil(reach / (h * a) + 1.3))  # the nearest site by rounding: 0.87 a off
     lat = (
         e, a, a * ca, a * sa, a * (0.5 * ca - h * sa), a * (0.5 * sa + h * ca),
-        np.uint64(key_u * 2.0**53), turn, m,
+        np.uint64(key_u * 2.0**53), turn, m, own,
     )  # fmt: skip
     return state, lat
 
@@ -770,7 +788,7 @@ def twin_lattice(state, hu, hv, rc, prism, turn, fill):  # pragma: no cover - co
 @nb.njit(cache=True, inline="always")
 def _lattice_at(lat, pu, pv):  # pragma: no cover - compiled
     """``(pu, pv)`` (mm, the dot's frame) in lattice ``lat``'s basis (fractional)."""
-    e, _, b1u, b1v, b2u, b2v, _, _, _ = lat
+    e, _, b1u, b1v, b2u, b2v, _, _, _, _ = lat
     det = b1u * b2v - b1v * b2u
     qu = pu / e
     return (qu * b2v - pv * b2u) / det, (b1u * pv - b1v * qu) / det
@@ -794,7 +812,8 @@ def next_twin(
     twin stands only where the coverage has dots (``place``: the frame's origin and turn
     on the face, ``(ox, oy, c, s)`` mm, and the coverage ``phi`` over cells ``g``): none
     past the panel's edge or in its holes, and where the map has fewer than the lattice
-    (packed for the fill where the ray met the face), as many fewer (:func:`_stands`):
+    (packed for the fill where the ray met the face, a cut dot's for the densest cell
+    along its path), as many fewer (:func:`_stands`):
     a walk a millimetre long toward an LED crosses the map's cells. The path is walked a
     spacing at a time, each step trying the sites within a twin's reach of it whose
     centres lie along it, so each site is tried once."""
@@ -893,7 +912,7 @@ def bare_point(state, lat, hu, hv, rc, prism, spot):  # pragma: no cover - compi
     a :data:`FIELD` at theirs, :func:`_twin_at`): ``(state, pu, pv)``, mm in the dot's
     frame: where a ray out through the bare face between the coverage's dots leaves it
     (the lattice's origin on the face ``(x, y) - R (pu, pv)``)."""
-    e, _, b1u, b1v, b2u, b2v, _, _, _ = lat
+    e, _, b1u, b1v, b2u, b2v, _, _, _, _ = lat
     x, y, c, s, phi, g, turn = spot
     pu = pv = 0.0
     for _ in range(64):
@@ -940,7 +959,7 @@ def among_twins(
 @nb.njit(cache=True, inline="always")
 def _no_lattice():  # pragma: no cover - compiled
     """The lattice :func:`under_dots` takes among real dots (unused there)."""
-    return (1.0, 1.0, 1.0, 0.0, 0.0, 1.0, np.uint64(0), 0.0, 0)
+    return (1.0, 1.0, 1.0, 0.0, 0.0, 1.0, np.uint64(0), 0.0, 0, False)
 
 
 @nb.njit(cache=True)
@@ -1056,7 +1075,7 @@ def meet_profile(state, f, n, at, x, y, pr, walls, dxn, dyn, dz):  # pragma: no 
                 oy + s * pu + c * pv, min(pz, 0.0), c * du - s * dv, s * du + c * dv, dz,
             )  # fmt: skip
         fill = _fill_at(x, y, pr[1], pr[2])
-        state, lat = twin_lattice(state, hu, hv, rc, code == PRISM, lt, max(fill, 1e-9))
+        state, lat = twin_lattice(state, hu, hv, rc, code == PRISM, lt, max(fill, 1e-9), True)
         return under_dots(
             state, f, n, False, pr, walls, x, y, frame, lat, True,
             (ox, oy, c, s, pr[1], pr[2], pr[8]), pu, pv, min(pz, 0.0), du, dv, dz,
@@ -1110,7 +1129,7 @@ def leave_between(state, f, n, x, y, pr, walls, dxn, dyn, dz):  # pragma: no cov
     if c != c:
         c, s = 1.0, 0.0
     fill = _fill_at(x, y, pr[1], pr[2])
-    state, lat = twin_lattice(state, hu, hv, rc, prism, lt, max(fill, 1e-9))
+    state, lat = twin_lattice(state, hu, hv, rc, prism, lt, max(fill, 1e-9), False)
     state, pu, pv = bare_point(state, lat, hu, hv, rc, prism, (x, y, c, s, pr[1], pr[2], pr[8]))
     ox, oy = x - c * pu + s * pv, y - s * pu - c * pv  # the lattice's origin on the face
     return under_dots(
