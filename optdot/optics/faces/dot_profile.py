@@ -802,6 +802,28 @@ def _nearest_site(lat, pu, pv):  # pragma: no cover - compiled
     return int(math.floor(fi + 0.5)), int(math.floor(fj + 0.5))
 
 
+@nb.njit(cache=True, inline="always")
+def _j_span(i, form, lo, hi, ja, jb):  # pragma: no cover - compiled
+    """The ``j`` of ``ja .. jb`` for which ``i a + j b + c`` (``form = (a, b, c)``) may lie
+    within ``lo .. hi`` (either may be infinite), a little generously: ``(ja, jb)``, empty
+    when ``ja > jb``. The sites it leaves out are those :func:`next_twin`'s own tests
+    would pass by."""
+    a, b, c = form
+    w = i * a + c
+    if abs(b) < 1e-12:  # the same for every j
+        return (ja, jb) if lo - 1e-9 <= w <= hi + 1e-9 else (ja, ja - 1)
+    x1, x2 = (lo - w) / b, (hi - w) / b
+    if x1 > x2:
+        x1, x2 = x2, x1
+    if x1 - 1e-7 > jb or x2 + 1e-7 < ja:
+        return ja, ja - 1
+    if x1 > ja:
+        ja = int(math.ceil(x1 - 1e-7))
+    if x2 < jb:
+        jb = int(math.floor(x2 + 1e-7))
+    return ja, jb
+
+
 @nb.njit(cache=True)
 def next_twin(
     f, hu, hv, rc, k, lat, skip0, place, pu, pv, pz, du, dv, dz, fold
@@ -833,6 +855,9 @@ def next_twin(
     wide = reach * max(1.0, 1.0 / e) / (0.8660254037844386 * a)  # in the basis's units
     lag = reach / hs if hs > 1e-12 else np.inf  # a twin ahead is met this much before it
     t_scan = t_all + lag  # the twins past it are not met
+    # a site's offset across the course and along it, linear in (i, j): i a + j b + c
+    across = (b1u * e * uy - b1v * ux, b2u * e * uy - b2v * ux, pv * ux - pu * uy)
+    along = (b1u * e * ux + b1v * uy, b2u * e * ux + b2v * uy, -pu * ux - pv * uy)
     best, bi, bj, bu, bv, bz = t_end, 0, 0, 0.0, 0.0, 0.0
     best2, bi2, bj2, bu2, bv2, bz2 = t_end2, 0, 0, 0.0, 0.0, 0.0  # after the face
     ta = 0.0
@@ -849,7 +874,11 @@ def next_twin(
         i1 = int(math.ceil(max(fi0, fi1) + wide))
         j1 = int(math.ceil(max(fj0, fj1) + wide))
         for i in range(i0, i1 + 1):  # the sites within a twin's reach of the step
-            for j in range(j0, j1 + 1):
+            ja, jb = j0, j1
+            if hs > 1e-12:  # only those whose offsets may pass the tests below
+                ja, jb = _j_span(i, across, -reach, reach, ja, jb)
+                ja, jb = _j_span(i, along, lo, hi, ja, jb)
+            for j in range(ja, jb + 1):
                 if skip0 and i == 0 and j == 0:
                     continue  # the dot the ray left
                 ru, rv = (i * b1u + j * b2u) * e - pu, i * b1v + j * b2v - pv
@@ -884,10 +913,15 @@ def _on_twin(lat, hu, hv, rc, pu, pv, place):  # pragma: no cover - compiled
     (:func:`_stands`: none where the map has no dots, fewer where it has fewer than the
     lattice was packed for)."""
     ox, oy, c0, s0, phi, g, _ = place
+    e, _, b1u, b1v, b2u, b2v, _, _, _, _ = lat
     fill = _lattice_fill(lat, hu, hv, max(rc, 0.0), rc >= 0)
+    r2 = (hu * hu + hv * hv) * (1.0 + 1e-9)  # a twin's extent, squared: sites farther off pass
     i0, j0 = _nearest_site(lat, pu, pv)
     for i in range(i0 - lat[8], i0 + lat[8] + 1):
         for j in range(j0 - lat[8], j0 + lat[8] + 1):
+            du, dv = pu - (i * b1u + j * b2u) * e, pv - (i * b1v + j * b2v)
+            if du * du + dv * dv > r2:
+                continue
             cu, cv, c, s = _twin_at(lat, i, j, place)
             there = _fill_at(ox + c0 * cu - s0 * cv, oy + s0 * cu + c0 * cv, phi, g)
             if not _stands(lat, i, j, fill, there):
