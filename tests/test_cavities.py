@@ -16,6 +16,7 @@ from optdot.optics.faces.cavities import meet_cut
 from optdot.optics.marks import BARE
 from optdot.optics.rays import ray_state, uniform
 from optdot.optics.scene import dot_grid
+from optdot.optics.trace import _off_wall
 from optdot.pattern import Pattern
 
 N = 1.49
@@ -37,7 +38,7 @@ def _setup() -> tuple[tuple, tuple]:
     return tuple(float(v) for v in row), (*pr, np.zeros((0, 3)))
 
 
-@nb.njit
+@nb.njit(cache=True)
 def _meet(f, pr, x, y, z, d, rays, walls=NO_WALLS, run=0.0):  # pragma: no cover - compiled
     """``meet_cut`` for ``rays`` rays at ``(x, y, z)`` going ``d`` (the panel's ``walls``,
     none by default; ``run`` how far the ray came on its course, 0: not known):
@@ -295,27 +296,33 @@ def test_the_tracer_turns_a_ray_its_walk_brought_onto_the_wall_off_that_wall():
     assert np.all(fate[~edge] == t.UNCOUPLED) and np.isclose(ed[edge & ~mine], d, atol=1e-6).all()
 
 
+@nb.njit(cache=True)
+def _at_the_wall(layer, face, pr, x, z, d, walls, ask):  # pragma: no cover - compiled
+    """The tracer's ``_off_wall`` for a ray at ``(x, CENTRE[1], z)`` going ``d`` onto a
+    wall facing -x (``layer``'s, ``face`` its faces, ``pr`` the print's tables):
+    ``(end, [x, y, z, dx, dy, dz])``. At module level and cached: compiled in the test,
+    the tracer's inlined kernels took 90 s a run."""
+    n = np.array([-1.0, 0.0])
+    _, end, _, ex, ey, ez, a, b, c = _off_wall(
+        ray_state(3, 0), layer, 0, face, n, N, x, CENTRE[1], z, pr, walls, 5.0, ask, d[0],
+        d[1], d[2],
+    )  # fmt: skip
+    return end, np.array([ex, ey, ez, a, b, c])
+
+
 def test_the_tracer_turns_a_ray_by_the_cavity_it_passed_before_the_wall():
     """The tracer's wall (``_off_wall``): the ray of the test above, met at the wall by
     the tracer, is turned by the cavity its path passed through, not reflected by the
     wall (a polished glass wall would send it back at -45°, total internal reflection);
     the ray that reaches the wall before any cavity is."""
-    from optdot.optics.trace import _off_wall
-
     f, pr = _setup()
     face = np.array([f, f])
     layer = np.zeros((1, t.L_COLS))
     layer[0, [t.L_Z0, t.L_Z1, t.L_N]] = 0.0, 2.0, N
     layer[0, [t.L_WALL_R, t.L_WALL_MODE, t.L_WALL_COS]] = 0.9, 0.0, math.sqrt(1 - 1 / N**2)
 
-    @nb.njit
-    def wall(x, z, d, walls, ask=True):  # pragma: no cover - compiled
-        n = np.array([-1.0, 0.0])
-        _, end, _, ex, ey, ez, a, b, c = _off_wall(
-            ray_state(3, 0), layer, 0, face, n, N, x, CENTRE[1], z, pr, walls, 5.0, ask, d[0],
-            d[1], d[2],
-        )  # fmt: skip
-        return end, np.array([ex, ey, ez, a, b, c])
+    def wall(x, z, d, walls, ask=True):
+        return _at_the_wall(layer, face, pr, x, z, d, walls, ask)
 
     d = np.array([H, 0.0, -H])
     end, out = wall(1.62, 0.01, d, np.array([[1.62, 0.0, 1.62, 2.0]]))
@@ -386,7 +393,7 @@ def test_the_tracer_looks_the_wall_up_behind_a_ray_that_turned_off_it():
     assert np.all(d[here, 2] > 0)
 
 
-@nb.njit
+@nb.njit(cache=True)
 def _met_before_wall(f, pr, walls, rays):  # pragma: no cover - compiled
     """Of ``rays`` rays coming down onto the wall ``x = 6`` (0.02 to 0.74 of a unit in
     ``-z``, within 80° of the wall's normal, anywhere along it, at any height in the

@@ -130,7 +130,7 @@ def test_a_ray_meets_a_prism_where_its_body_begins(rc):
     assert met > 300
 
 
-@nb.njit
+@nb.njit(cache=True)
 def _first_of_all(f, x_, y_, foot, x, y, z, d, tall):  # pragma: no cover - compiled
     """The first dot a ray meets, every dot tried: ``(k, t)``."""
     best, bk = np.inf, -1
@@ -244,7 +244,7 @@ def test_a_dot_centred_past_a_step_s_span_met_before_the_one_met_within_it_is_fo
     assert got[0] == k and got[1] == pytest.approx(tt, abs=1e-12)
 
 
-@nb.njit
+@nb.njit(cache=True)
 def _among(f, n, pr, x, y, z, d, rays):  # pragma: no cover - compiled
     out = np.zeros((rays, 4))
     for i in range(rays):
@@ -274,7 +274,7 @@ def test_a_ray_meeting_a_hemisphere_head_on_passes_into_the_guide_as_fresnel_say
     assert np.allclose(out[~into, 1:], -d, atol=1e-9)
 
 
-@nb.njit
+@nb.njit(cache=True)
 def _under(f, n, pr, walls, x, y, d, rays):  # pragma: no cover - compiled
     """``under_dots`` among real dots for ``rays`` rays leaving the bare face at ``(x,
     y)`` going ``d`` (in the air): ``[rays, 6]`` (act, x, y, dx, dy, dz)."""
@@ -402,7 +402,7 @@ def test_a_point_drawn_off_the_twins_of_a_field_is_off_every_one_of_them():
     assert near > 5  # where twins at the frame's angle would have stood
 
 
-@nb.njit
+@nb.njit(cache=True)
 def _first_twin(f, hu, hv, rc, k, lat, skip0, p, d, sites, place):  # pragma: no cover
     """The first twin of ``lat`` a ray meets, every site within ``sites`` tried
     (``place`` as :func:`next_twin`'s, its fill not looked at)."""

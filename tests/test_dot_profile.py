@@ -43,7 +43,7 @@ NO_PRINT = (
 R0 = ((N - 1) / (N + 1)) ** 2
 
 
-@nb.njit
+@nb.njit(cache=True)
 def _caps(code, k, n, px, py, d, e=1.0):  # pragma: no cover - compiled
     """``trace_cap`` for rays ``i`` entering at ``(px[i], py[i])`` going ``d[i]`` (a cap
     ``e`` times longer than wide): ``[m, 4]`` (where, dx, dy, dz)."""
@@ -207,7 +207,7 @@ def test_a_dimple_sends_some_light_onto_the_face_beside_it():
 CRITICAL = math.degrees(math.asin(1 / N))
 
 
-@nb.njit
+@nb.njit(cache=True)
 def _prisms(cut, hu, hv, rc, t1, t2, n, pu, pv, d):  # pragma: no cover - compiled
     """``trace_prism`` for rays ``i`` entering at ``(pu[i], pv[i])`` going ``d[i]``:
     ``[m, 4]`` (where, du, dv, dz)."""
@@ -698,7 +698,7 @@ def test_a_prism_profile_traces_the_same_rays_on_any_thread_count(tmp_path):
     assert one.fates == two.fates and np.array_equal(one.luminance, two.luminance)
 
 
-@nb.njit
+@nb.njit(cache=True)
 def _meet(f, at, d, seed):  # pragma: no cover - compiled
     """``meet_profile`` for rays ``i`` going ``d[i]``: ``[m, 4]`` (act, dx, dy, dz)."""
     out = np.zeros((len(d), 4))

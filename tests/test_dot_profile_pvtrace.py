@@ -450,7 +450,7 @@ def _pv_comes_back(pv, scene, next_hit, start, d, steps: int = 200):
     raise AssertionError("a ray among the bumps took over 200 surfaces")
 
 
-@nb.njit
+@nb.njit(cache=True)
 def _meet_one(f, dots, walls, xy, d, seed):  # pragma: no cover - compiled
     """optdot's ``meet_profile`` for a ray from the guide going ``d`` onto the real dot
     at each point ``xy[i]``: ``[m, 4]`` (came back into the guide: 1, its direction)."""

@@ -24,7 +24,7 @@ def _row(n: float = 1.58, apex: float = 90.0, along_y: bool = True) -> tuple:
     return tuple(f)
 
 
-@nb.njit
+@nb.njit(cache=True)
 def _meet(count, up, dx, dy, dz, f):  # pragma: no cover - compiled
     out = np.zeros((count, 4))
     for i in range(count):
