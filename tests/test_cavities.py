@@ -34,19 +34,26 @@ def _setup() -> tuple[tuple, tuple]:
     row[[t.F_PROF_U, t.F_PROF_V, t.F_PROF_C]] = R, R, 0.0
     row[t.F_COS_DOWN], row[t.F_REFL] = math.sqrt(1 - 1 / N**2), 0.9
     p = Pattern(np.array([CENTRE]), 2 * R, (0.0, 0.0, 3.0, 2.0))
-    pr = (1, np.ones((1, 1)), np.array([0.0, 0.0, 3.0, 2.0]), *dot_grid(p, p.box))
+    pr = (True, np.ones((1, 1)), np.array([0.0, 0.0, 3.0, 2.0]), *dot_grid(p, p.box))
     return tuple(float(v) for v in row), (*pr, np.zeros((0, 3)))
 
 
-@nb.njit(cache=True)
-def _meet(f, pr, x, y, z, d, rays, walls=NO_WALLS, run=0.0):  # pragma: no cover - compiled
+def _meet(f, pr, x, y, z, d, rays, walls=NO_WALLS, run=0.0):
     """``meet_cut`` for ``rays`` rays at ``(x, y, z)`` going ``d`` (the panel's ``walls``,
     none by default; ``run`` how far the ray came on its course, 0: not known):
-    ``[rays, 7]`` (act, x, y, z, dx, dy, dz)."""
+    ``[rays, 7]`` (act, x, y, z, dx, dy, dz). Every argument handed to the compiled
+    :func:`_meet_rays`: a default array there is typed anew in each process, so its
+    cache is never found."""
+    return _meet_rays(f, pr, float(x), float(y), float(z), d, rays, walls, float(run))
+
+
+@nb.njit(cache=True)
+def _meet_rays(f, pr, x, y, z, d, rays, walls, run):  # pragma: no cover - compiled
+    """:func:`_meet`'s rays."""
     out = np.zeros((rays, 7))
     for i in range(rays):
         _, act, ex, ey, ez, a, b, c = meet_cut(
-            ray_state(5, i), f, N, -1, x, y, z, pr, walls, d[0], d[1], d[2], run
+            ray_state(5, i), f, N, t.var_int(BARE), x, y, z, pr, walls, d[0], d[1], d[2], run
         )
         out[i, 0], out[i, 1], out[i, 2], out[i, 3] = act, ex, ey, ez
         out[i, 4], out[i, 5], out[i, 6] = a, b, c
@@ -408,7 +415,7 @@ def _met_before_wall(f, pr, walls, rays):  # pragma: no cover - compiled
         phi, dz = (u2 - 0.5) * math.radians(160), -(0.02 + 0.72 * u3)
         h = math.sqrt(1 - dz * dz)
         st, act, _, _, _, _, _, _ = meet_cut(
-            st, f, N, BARE, 6.0 - 1e-9, 1.0 + 4.0 * u4, u1 * 0.075, pr, walls,
+            st, f, N, t.var_int(BARE), 6.0 - 1e-9, 1.0 + 4.0 * u4, u1 * 0.075, pr, walls,
             h * math.cos(phi), h * math.sin(phi), dz, 50.0,
         )  # fmt: skip
         met += act != t.SAME_LEG

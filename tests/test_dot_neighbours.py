@@ -24,6 +24,7 @@ from optdot.optics.faces.dot_profile import (  # the twins' private helpers, to 
     _lattice_fill,
     _layer_end,
     _meet_body,
+    _no_lattice,
     _site,
     _stands,
     _twin_at,
@@ -39,6 +40,7 @@ from optdot.optics.faces.dot_profile import (  # the twins' private helpers, to 
 )
 from optdot.optics.rays import fresnel, ray_state
 from optdot.optics.scene import dot_grid
+from optdot.optics.tables import var_bool
 from optdot.pattern import Pattern
 
 from .conftest import graded_guide
@@ -279,12 +281,11 @@ def _under(f, n, pr, walls, x, y, d, rays):  # pragma: no cover - compiled
     """``under_dots`` among real dots for ``rays`` rays leaving the bare face at ``(x,
     y)`` going ``d`` (in the air): ``[rays, 6]`` (act, x, y, dx, dy, dz)."""
     out = np.zeros((rays, 6))
-    lat = (1.0, 1.0, 1.0, 0.0, 0.0, 1.0, np.uint64(0), 0.0, 0, False)
     place = (0.0, 0.0, 1.0, 0.0, pr[1], pr[2], pr[8])
-    for i in range(rays):
+    for i in range(rays):  # no literal handed on: under_dots as the tracer compiles it
         _, act, ex, ey, a, b, c = under_dots(
-            ray_state(13, i), f, n, True, pr, walls, x, y, (0.0, 0.0, 0.0, 0.0), lat, False,
-            place, x, y, 0.0, d[0], d[1], d[2],
+            ray_state(13, i), f, n, var_bool(True), pr, walls, x, y, (0.0, 0.0, 0.0, 0.0),
+            _no_lattice(), var_bool(False), place, x, y, 0.0, d[0], d[1], d[2],
         )  # fmt: skip
         out[i, 0], out[i, 1], out[i, 2], out[i, 3], out[i, 4], out[i, 5] = act, ex, ey, a, b, c
     return out
@@ -302,7 +303,7 @@ def test_a_mirror_on_the_tips_of_hemispheres_sends_light_up_into_the_one_it_aims
     r = 0.1
     p = Pattern(np.array([[1.5, 1.0]]), 2 * r, BOX)
     phi, g = np.ones((1, 1)), np.array([0.0, 0.0, 3.0, 2.0])
-    pr = (1, phi, g, *dot_grid(p, p.box), np.zeros((0, 3)))
+    pr = (True, phi, g, *dot_grid(p, p.box), np.zeros((0, 3)))
     row = np.array(_row(BUMP, r, r, 0.0, 1.0))
     row[[t.F_REFL, t.F_REFL_FINISH, t.F_PROF_H]] = 1.0, 1.0, r
     f = tuple(float(v) for v in row)
@@ -543,6 +544,7 @@ def _two_cells(left: float, right: float) -> tuple:
     )  # fmt: skip
 
 
+@pytest.mark.slow  # over 2 s on 2 cores
 def test_twins_stand_only_where_the_coverage_has_dots():
     """:func:`next_twin` reads the coverage's fill under each twin: a ray crossing from
     cells with dots into cells with none (the panel's outside, a hole) meets the twins
@@ -586,6 +588,7 @@ def test_twins_where_the_map_has_fewer_dots_stand_as_many_fewer():
     assert 0.3 < np.mean(again == stood) < 0.7  # another ray's lattice: other twins
 
 
+@pytest.mark.slow  # over 2 s on 2 cores
 def test_a_walk_into_cells_of_fewer_dots_meets_only_the_twins_that_stand_there():
     """:func:`next_twin` over a lattice packed for the fill 0.5 where the ray met the face,
     walking into cells of 0.2: it meets the twin a search of every site that stands

@@ -36,7 +36,7 @@ NO_WALLS = np.zeros((0, 4))
 #: (``marks.dot_tables``: the coverage and its cells at 1, 2; cells, centres, footprints,
 #: grid at 3 .. 7; the cells' angles at 8): a ray leaving a dot meets no other.
 NO_PRINT = (
-    0, np.zeros((1, 1)), np.ones(4), np.zeros(2, np.int64), np.zeros(0), np.zeros(0),
+    False, np.zeros((1, 1)), np.ones(4), np.zeros(2, np.int64), np.zeros(0), np.zeros(0),
     np.zeros((0, 6)), np.array([0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0]), np.full((1, 3), np.nan),
 )  # fmt: skip
 #: Normal-incidence Fresnel reflectance of PMMA in air.
@@ -612,6 +612,7 @@ def _cover_and_real(tmp_path, orientation: str, rays: int = 400_000) -> tuple[di
     return sims[0].summary(), sims[1].summary()
 
 
+@pytest.mark.slow  # over 2 s on 2 cores
 def test_real_prisms_trace_as_their_coverage_and_absorb_nothing(tmp_path):
     """Cut prisms at random angles traced through the real dots (each met where the ray's
     path passes through its cavity, in its own frame) and as the map's coverage (the
@@ -623,6 +624,7 @@ def test_real_prisms_trace_as_their_coverage_and_absorb_nothing(tmp_path):
     assert abs(a["on_axis"] - b["on_axis"]) < 4 * math.hypot(a["on_axis_sigma"], b["on_axis_sigma"])
 
 
+@pytest.mark.slow  # over 2 s on 2 cores
 def test_real_prisms_turned_along_the_light_extract_as_their_coverage(tmp_path):
     """Cut prisms turned along the light from their LED: the real dots and the coverage
     extract the same (on axis, see the next test)."""
@@ -670,6 +672,7 @@ def test_prisms_turned_toward_close_leds_trace_as_their_coverage_on_a_coarse_map
     assert abs(cover["on_axis"] - real["on_axis"]) < 3 * sigma, (cover["on_axis"], real["on_axis"])
 
 
+@pytest.mark.slow  # over 2 s on 2 cores
 def test_prisms_facing_their_led_send_more_light_on_axis_than_random_ones(tmp_path):
     """Cut 45° prisms whose facets face the LED (their length along the light) send more
     light straight out of the guide than prisms at random angles on the same map: on-axis
@@ -699,15 +702,23 @@ def test_a_prism_profile_traces_the_same_rays_on_any_thread_count(tmp_path):
 
 
 @nb.njit(cache=True)
-def _meet(f, at, d, seed):  # pragma: no cover - compiled
-    """``meet_profile`` for rays ``i`` going ``d[i]``: ``[m, 4]`` (act, dx, dy, dz)."""
+def _meet_rays(f, at, d, seed, pr, walls):  # pragma: no cover - compiled
+    """``meet_profile`` for rays ``i`` going ``d[i]`` (the print's tables ``pr``, the
+    panel's ``walls``): ``[m, 4]`` (act, dx, dy, dz)."""
     out = np.zeros((len(d), 4))
     for i in range(len(d)):
         _, act, _, _, a, b, c = meet_profile(
-            ray_state(seed, i), f, N, at, 0.0, 0.0, NO_PRINT, NO_WALLS, d[i, 0], d[i, 1], d[i, 2]
+            ray_state(seed, i), f, N, at, 0.0, 0.0, pr, walls, d[i, 0], d[i, 1], d[i, 2]
         )
         out[i, 0], out[i, 1], out[i, 2], out[i, 3] = act, a, b, c
     return out
+
+
+def _meet(f, at, d, seed):
+    """:func:`_meet_rays` on :data:`NO_PRINT`, no walls. The print is handed in (not read
+    as a global, whose arrays numba types read-only): the kernels ``meet_profile`` calls
+    are then the tracer's, compiled once."""
+    return _meet_rays(f, at, d, seed, NO_PRINT, NO_WALLS)
 
 
 def test_a_turned_dot_meets_a_ray_as_the_unturned_dot_meets_the_ray_turned_back():

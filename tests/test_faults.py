@@ -63,6 +63,7 @@ def test_a_write_past_the_file_size_limit_keeps_the_old_file(tmp_path, tiny_csv,
     assert sorted(p.name for p in tmp_path.iterdir()) == [f"full.{fmt}", f"v.{fmt}"]
 
 
+@pytest.mark.slow  # over 2 s on 2 cores
 def test_generate_under_a_file_size_limit_keeps_the_old_pattern(tmp_path):
     warm = tmp_path.parent / "warm.npz"  # kernels compiled and cached, unlimited: the
     optdot_limited(1 << 30, "generate", TINY, "-o", warm, "-q")  # limit hits the pattern

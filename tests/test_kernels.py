@@ -82,7 +82,7 @@ def test_manifest_installed_and_loaded():
     names = {(k.module, k.name) for k in listed if "generate" in k.groups}
     assert ("optdot.relax.penalty", "_penalty_kernel") in names
     traced = {(k.module, k.name) for k in listed if "simulate" in k.groups}
-    assert ("optdot.optics.trace", "trace") in traced
+    assert ("optdot.optics.trace", "_trace_part") in traced
     doc = json.loads(kernels.MANIFEST.read_text())
     if not _recorded_with_this_numba():
         assert all(k.signature is None for k in listed)  # another numba: the list unused

@@ -128,6 +128,7 @@ def test_a_server_that_speaks_first_is_not_taken_for_a_scheduler(tmp_path, banne
     assert list(tmp_path.iterdir()) == []  # no staging directory left with nothing in it
 
 
+@pytest.mark.slow  # over 2 s on 2 cores
 def test_the_embedded_cluster_is_private_loopback_tls_and_cleans_its_scratch():
     from distributed import Client
 

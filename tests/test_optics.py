@@ -218,25 +218,27 @@ def test_same_seed_same_counts_on_any_thread_count(lossy):
 
 
 def test_a_ray_ends_the_same_whatever_call_or_chunk_traced_it(lossy):
-    """The tracer's parallel loop runs chunks of :data:`RAY_CHUNK` rays: every ray, at a
-    chunk's edges too and from any first index, ends as it does traced alone."""
+    """The tracer's threads run chunks of :data:`RAY_CHUNK` rays: every ray, at a chunk's
+    edges too and from any first index, ends as it does traced alone (and a ray turned
+    back at birth has the direction 0 wherever it was traced)."""
     from optdot.optics.scene import scene_of
 
     job, pattern = lossy
     scene = scene_of(job.bench, 10_000, dots=pattern)
     first, count = 37, 3 * RAY_CHUNK + 5
     fate, x, y, d = trace(11, first, count, scene)
-    came = fate != UNCOUPLED  # a ray turned back at birth has no direction written
+    came = fate != UNCOUPLED  # a ray turned back at birth has the direction 0
+    assert not came.all() and not d[~came].any()
     edges = [0, 1, RAY_CHUNK - 1, RAY_CHUNK, 2 * RAY_CHUNK + 1, count - 2, count - 1]
     for j in edges + list(range(5, count, 97)):
         f1, x1, y1, d1 = trace(11, first + j, 1, scene)
         assert (f1[0], x1[0], y1[0]) == (fate[j], x[j], y[j]), j
-        assert not came[j] or np.array_equal(d1[0], d[j]), j
+        assert np.array_equal(d1[0], d[j]), j
     tail = trace(11, first + RAY_CHUNK + 3, count - RAY_CHUNK - 3, scene)
     assert all(
         np.array_equal(a[RAY_CHUNK + 3 :], b) for a, b in zip((fate, x, y), tail[:3], strict=True)
     )
-    assert np.array_equal(d[RAY_CHUNK + 3 :][came[RAY_CHUNK + 3 :]], tail[3][came[RAY_CHUNK + 3 :]])
+    assert np.array_equal(d[RAY_CHUNK + 3 :], tail[3])
     assert len(set(fate.tolist())) > 2  # rays end in several ways
 
 

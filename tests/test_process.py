@@ -215,6 +215,7 @@ def test_qa_judges_the_print(circles, tmp_path):
     assert any("not the job's circle 46 µm (the first: circle 61.77 µm" in f for f in fails), out
 
 
+@pytest.mark.slow  # over 2 s on 2 cores
 def test_shaped_dots_print_exactly_after_the_grid(tmp_path):
     """Turned ellipses on a coarse grid (each a polygon of its own, every vertex on the
     grid): every near pair's printed gap, by shapely on the mask's own polygons unscaled

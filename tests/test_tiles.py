@@ -386,6 +386,7 @@ def test_a_directory_that_is_not_a_dataset_is_never_replaced(tmp_path):
     assert (victim / "notes.txt").read_text() == "keep me"
 
 
+@pytest.mark.slow  # over 2 s on 2 cores
 def test_a_small_job_writes_a_one_part_dataset_with_todays_dots(tmp_path, tiny_pattern):
     out = tmp_path / "t.parquet"
     optdot("generate", SAMPLES / "tiny" / "job.toml", "-o", out, "-q")

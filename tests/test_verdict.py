@@ -94,6 +94,7 @@ def test_a_failing_gate_is_fail_and_numbers_are_not_reprs(tmp_path):
     assert number_text(np.float64(0.875)) == "0.875" and number_text(np.int64(3)) == "3"
 
 
+@pytest.mark.slow  # over 2 s on 2 cores
 def test_export_prints_the_verdict_each_file_and_keeps_the_report(led):
     out_dir = led / "out"
     out_dir.mkdir()

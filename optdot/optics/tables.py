@@ -56,6 +56,20 @@ F_PROF_H = 23
 F_COLS = 24
 
 
+# numba types a constant handed to a kernel as a literal (``True``, ``-1``) and compiles
+# the kernel again for each: the tracer's kernels are handed these instead, and compile once.
+@nb.njit(cache=True, inline="always")
+def var_bool(value):  # pragma: no cover - compiled
+    """``value`` as a bool typed at run time, not as the literal constant it may be."""
+    return bool(value)
+
+
+@nb.njit(cache=True, inline="always")
+def var_int(value):  # pragma: no cover - compiled
+    """``value`` as an int typed at run time, not as the literal constant it may be."""
+    return int(value)
+
+
 @nb.njit(cache=True, inline="always")
 def face_row(face, fi):  # pragma: no cover - compiled
     """Face ``fi`` of the table ``face`` as a tuple of its ``F_COLS`` numbers, read by the

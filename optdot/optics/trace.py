@@ -57,6 +57,7 @@ replaced, so it gives the same counts for the same seed.
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 
 import numba as nb
 import numpy as np
@@ -93,6 +94,7 @@ from .tables import (
     SAME_LEG,
     UNCOUPLED,
     UNFINISHED,
+    Scene,
     face_row,
 )
 
@@ -234,9 +236,9 @@ def _off_wall(
     return _born_among(state, li, face, n, x, y, z, z0, dots, walls, dxn, dyn, dz)
 
 
-# A serial loop of its own, which :func:`trace` runs in parallel over chunks: numba's
-# parallel passes analyse a ``prange`` loop's whole body, which a ray's whole life makes
-# compile several times longer (the same results: rays draw their own numbers).
+# A serial loop over a chunk of rays: :func:`trace` runs chunks on several threads (the
+# same results: rays draw their own numbers). Not numba's ``prange``: its parallel passes
+# analyse the loop's whole body, which a ray's whole life makes compile several times longer.
 @nb.njit(cache=True)
 def _trace_rays(
     seed, first, lo, hi, emit, emit_start, prof_theta, prof_cdf, prof_mode, layer, face,
@@ -320,29 +322,13 @@ def _trace_rays(
         fate[j], ex[j], ey[j], ed[j, 0], ed[j, 1], ed[j, 2] = end, x, y, dxn, dyn, dz
 
 
-@nb.njit(cache=True, parallel=True)
-def trace(seed, first, count, scene):  # pragma: no cover - compiled
-    """Trace rays ``first .. first + count - 1`` through ``scene``.
-
-    Args:
-        seed: run seed (int). first, count: global index of the first ray, number of rays.
-        scene: a :class:`Scene`.
-
-    Returns:
-        ``(fate [count] int8, x [count] float32, y [count] float32, d [count, 3]
-        float32)``: how and where each ray ended (where it left the top face, for
-        extracted rays) and its direction then (in the air above, for those).
-    """
+@nb.njit(cache=True, nogil=True)
+def _trace_part(seed, first, count, scene, part, parts, fate, ex, ey, ed):  # pragma: no cover
+    """Chunks ``part, part + parts, ...`` of :data:`RAY_CHUNK` rays of :func:`trace`'s
+    ``count`` (its arguments; its outputs filled at the chunks' rays), without the GIL:
+    :func:`trace` runs one part a thread."""
     src, st, pr = scene.sources, scene.stack, scene.print
-    emit, emit_start, prof_theta, prof_cdf, prof_mode = (
-        src.emit,
-        src.start,
-        src.theta,
-        src.cdf,
-        src.mode,
-    )
-    layer, face, walls, normals = st.layer, st.face, st.walls, st.normals
-    # the print as a plain tuple (numba's parallel loop cannot carry a record inside it)
+    # the print as a plain tuple, and what a face of 3-D dots reads of it
     pr_arrays = (
         pr.explicit,
         pr.phi,
@@ -360,16 +346,41 @@ def trace(seed, first, count, scene):  # pragma: no cover - compiled
         pr.cap_ring,
         pr.turn,
     )
-    dots = dot_tables(pr_arrays)  # what a face of 3-D dots reads of it
-    max_events = st.max_events
+    dots = dot_tables(pr_arrays)
+    for c in range(part, (count + RAY_CHUNK - 1) // RAY_CHUNK, parts):
+        _trace_rays(
+            seed, first, c * RAY_CHUNK, min(count, (c + 1) * RAY_CHUNK), src.emit, src.start,
+            src.theta, src.cdf, src.mode, st.layer, st.face, st.walls, st.normals, pr_arrays,
+            dots, st.max_events, fate, ex, ey, ed,
+        )  # fmt: skip
+
+
+def trace(seed: int, first: int, count: int, scene: Scene) -> tuple:
+    """Trace rays ``first .. first + count - 1`` through ``scene``, on numba's threads
+    (``numba.get_num_threads()``; each ray draws its own numbers, so the result does not
+    depend on how many).
+
+    Args:
+        seed: run seed (int). first, count: global index of the first ray, number of rays.
+        scene: a :class:`Scene`.
+
+    Returns:
+        ``(fate [count] int8, x [count] float32, y [count] float32, d [count, 3]
+        float32)``: how and where each ray ended (where it left the top face, for
+        extracted rays) and its direction then (in the air above, for those).
+    """
     fate = np.empty(count, np.int8)
     ex = np.empty(count, np.float32)
     ey = np.empty(count, np.float32)
-    ed = np.empty((count, 3), np.float32)
-    for c in nb.prange((count + RAY_CHUNK - 1) // RAY_CHUNK):
-        _trace_rays(
-            seed, first, c * RAY_CHUNK, min(count, (c + 1) * RAY_CHUNK), emit, emit_start,
-            prof_theta, prof_cdf, prof_mode, layer, face, walls, normals, pr_arrays, dots,
-            max_events, fate, ex, ey, ed,
-        )  # fmt: skip
+    ed = np.zeros((count, 3), np.float32)  # rays not coupled leave theirs 0
+    parts = max(1, min(nb.get_num_threads(), (count + RAY_CHUNK - 1) // RAY_CHUNK))
+    args = (seed, first, count, scene)
+    if parts == 1:
+        _trace_part(*args, 0, 1, fate, ex, ey, ed)
+    else:  # threads, not a compiled parallel loop: its wrapper took a fifth of the compile
+        with ThreadPoolExecutor(parts) as pool:
+            for done in [
+                pool.submit(_trace_part, *args, p, parts, fate, ex, ey, ed) for p in range(parts)
+            ]:
+                done.result()
     return fate, ex, ey, ed

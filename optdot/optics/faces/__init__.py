@@ -19,7 +19,16 @@ from __future__ import annotations
 import numba as nb
 
 from ..marks import BARE, dot_frame
-from ..tables import BOTTOM_FACE, F_COS_DOWN, F_KIND, F_PROFILE, PRISM_FACE, SAME_LEG, SHEET_FACE
+from ..tables import (
+    BOTTOM_FACE,
+    F_COS_DOWN,
+    F_KIND,
+    F_PROFILE,
+    PRISM_FACE,
+    SAME_LEG,
+    SHEET_FACE,
+    var_int,
+)
 from .cavities import meet_cut
 from .diffuser_sheet import meet_sheet
 from .dot_profile import BUMP, DIMPLE, PRISM, PRISM_CUT, leave_between, meet_profile
@@ -78,7 +87,7 @@ def meet_dots(state, f, n, on, x, y, pr, walls, run, dxn, dyn, dz):  # pragma: n
     return state, act, x2, y2, z2, dxn, dyn, dz
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def born_among_dots(state, f, n, x, y, z, pr, walls, run, dxn, dyn, dz):  # pragma: no cover
     """A ray in the guide at ``(x, y)``, ``z`` mm over its bottom face of 3-D dots (row
     ``f``; index ``n``; ``pr``, ``walls`` and ``run`` as :func:`meet_dots`'), off the face:
@@ -89,7 +98,7 @@ def born_among_dots(state, f, n, x, y, z, pr, walls, run, dxn, dyn, dz):  # prag
     cavity as it came (``SAME_LEG``)."""
     profile = f[F_PROFILE]
     if (profile == DIMPLE or profile == PRISM_CUT) and (dz > 0 or (dz < 0 and z > 0)):
-        return meet_cut(state, f, n, BARE, x, y, z, pr, walls, dxn, dyn, dz, run)
+        return meet_cut(state, f, n, var_int(BARE), x, y, z, pr, walls, dxn, dyn, dz, run)
     return state, SAME_LEG, x, y, z, dxn, dyn, dz
 
 

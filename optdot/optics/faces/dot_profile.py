@@ -71,6 +71,8 @@ from ..tables import (
     F_REFL_FINISH,
     NEW_LEG,
     SAME_LEG,
+    var_bool,
+    var_int,
 )
 from .slab_walls import wall_distance
 
@@ -599,7 +601,9 @@ def among_dots(state, f, n, pr, x, y, z, dxn, dyn, dz):  # pragma: no cover - co
     :func:`~optdot.optics.marks.dot_tables`."""
     start, dx_, dy_, foot, cg = pr[3], pr[4], pr[5], pr[6], pr[7]
     for _ in range(MAX_DOTS):
-        k, t, mx, my, mz, _ = next_dot(f, start, dx_, dy_, foot, cg, x, y, z, dxn, dyn, dz, False)
+        k, t, mx, my, mz, _ = next_dot(
+            f, start, dx_, dy_, foot, cg, x, y, z, dxn, dyn, dz, var_bool(False)
+        )
         if k < 0:
             return state, INTO_AIR, x, y, z, dxn, dyn, dz
         hu, hv, rc, kk = _sized(
@@ -780,7 +784,7 @@ def twin_lattice(state, hu, hv, rc, prism, turn, fill, own):  # pragma: no cover
     m = int(math.ceil(reach / (h * a) + 1.3))  # the nearest site by rounding: 0.87 a off
     lat = (
         e, a, a * ca, a * sa, a * (0.5 * ca - h * sa), a * (0.5 * sa + h * ca),
-        np.uint64(key_u * 2.0**53), turn, m, own,
+        np.uint64(key_u * 2.0**53), turn, m, var_bool(own),
     )  # fmt: skip
     return state, lat
 
@@ -974,7 +978,7 @@ def among_twins(
     the dot's frame."""
     for _ in range(MAX_DOTS):
         i, j, t, mu, mv, mz, _ = next_twin(
-            f, hu, hv, rc, k, lat, skip0, place, pu, pv, pz, du, dv, dz, False
+            f, hu, hv, rc, k, lat, skip0, place, pu, pv, pz, du, dv, dz, var_bool(False)
         )
         if t == np.inf:
             return state, INTO_AIR, pu, pv, pz, du, dv, dz
@@ -993,7 +997,7 @@ def among_twins(
 @nb.njit(cache=True, inline="always")
 def _no_lattice():  # pragma: no cover - compiled
     """The lattice :func:`under_dots` takes among real dots (unused there)."""
-    return (1.0, 1.0, 1.0, 0.0, 0.0, 1.0, np.uint64(0), 0.0, 0, False)
+    return (1.0, 1.0, 1.0, 0.0, 0.0, 1.0, np.uint64(0), 0.0, var_int(0), var_bool(False))
 
 
 @nb.njit(cache=True)
@@ -1104,14 +1108,14 @@ def meet_profile(state, f, n, at, x, y, pr, walls, dxn, dyn, dz):  # pragma: no 
         frame = (hu, hv, rc, k)
         if real:
             return under_dots(
-                state, f, n, True, pr, walls, x, y, frame, _no_lattice(), False,
+                state, f, n, real, pr, walls, x, y, frame, _no_lattice(), var_bool(False),
                 (0.0, 0.0, 1.0, 0.0, pr[1], pr[2], pr[8]), ox + c * pu - s * pv,
                 oy + s * pu + c * pv, min(pz, 0.0), c * du - s * dv, s * du + c * dv, dz,
             )  # fmt: skip
         fill = _fill_at(x, y, pr[1], pr[2])
         state, lat = twin_lattice(state, hu, hv, rc, code == PRISM, lt, max(fill, 1e-9), True)
         return under_dots(
-            state, f, n, False, pr, walls, x, y, frame, lat, True,
+            state, f, n, real, pr, walls, x, y, frame, lat, var_bool(True),
             (ox, oy, c, s, pr[1], pr[2], pr[8]), pu, pv, min(pz, 0.0), du, dv, dz,
         )  # fmt: skip
     dxn, dyn = c * du - s * dv, s * du + c * dv
@@ -1153,8 +1157,8 @@ def leave_between(state, f, n, x, y, pr, walls, dxn, dyn, dz):  # pragma: no cov
     dxn, dyn, dz = refract(dxn, dyn, dz, n, 1.0)
     if pr[0]:  # real dots
         return under_dots(
-            state, f, n, True, pr, walls, x, y, (0.0, 0.0, 0.0, 0.0), _no_lattice(), False,
-            (0.0, 0.0, 1.0, 0.0, pr[1], pr[2], pr[8]), x, y, 0.0, dxn, dyn, dz,
+            state, f, n, pr[0], pr, walls, x, y, (0.0, 0.0, 0.0, 0.0), _no_lattice(),
+            var_bool(False), (0.0, 0.0, 1.0, 0.0, pr[1], pr[2], pr[8]), x, y, 0.0, dxn, dyn, dz,
         )  # fmt: skip
     _, _, c, s, half = dot_frame(x, y, INK, pr)  # the coverage cell's angle and size
     hu, hv, rc, k = _sized(f[F_PROF_U], f[F_PROF_V], f[F_PROF_C], f[F_PROF_K], half)
@@ -1167,6 +1171,6 @@ def leave_between(state, f, n, x, y, pr, walls, dxn, dyn, dz):  # pragma: no cov
     state, pu, pv = bare_point(state, lat, hu, hv, rc, prism, (x, y, c, s, pr[1], pr[2], pr[8]))
     ox, oy = x - c * pu + s * pv, y - s * pu - c * pv  # the lattice's origin on the face
     return under_dots(
-        state, f, n, False, pr, walls, x, y, (hu, hv, rc, k), lat, False,
+        state, f, n, pr[0], pr, walls, x, y, (hu, hv, rc, k), lat, var_bool(False),
         (ox, oy, c, s, pr[1], pr[2], pr[8]), pu, pv, 0.0, c * dxn + s * dyn, c * dyn - s * dxn, dz,
     )  # fmt: skip
