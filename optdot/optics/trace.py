@@ -98,7 +98,7 @@ from .tables import (
     face_row,
 )
 
-#: Rays a task of :func:`trace`'s parallel loop traces (:func:`_trace_rays`).
+#: Rays in a chunk: :func:`trace`'s threads each run every few chunks (:func:`_trace_part`).
 RAY_CHUNK = 1024
 
 
@@ -367,7 +367,8 @@ def trace(seed: int, first: int, count: int, scene: Scene) -> tuple:
     Returns:
         ``(fate [count] int8, x [count] float32, y [count] float32, d [count, 3]
         float32)``: how and where each ray ended (where it left the top face, for
-        extracted rays) and its direction then (in the air above, for those).
+        extracted rays) and its direction then (in the air above, for those; 0 for a
+        ray not coupled at birth).
     """
     fate = np.empty(count, np.int8)
     ex = np.empty(count, np.float32)
