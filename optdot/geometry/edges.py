@@ -240,7 +240,8 @@ def signed_distance(
         if max(gx, gy) >= need_out:
             return -far, 0.0, 0.0
     if d == np.inf:
-        d, px, py, ins = _nearest(x, y, seg, prev, nxt, np.arange(seg.shape[0]), 0, seg.shape[0])
+        every = np.arange(seg.shape[0])  # (lo as a variable: a literal 0 compiled _nearest again)
+        d, px, py, ins = _nearest(x, y, seg, prev, nxt, every, every.shape[0] * 0, seg.shape[0])
     if d < 1e-15:
         return 0.0, 0.0, 0.0
     ux, uy = (x - px) / d, (y - py) / d

@@ -95,7 +95,7 @@ def _sheet_back(state, f, du, dv, dz):  # pragma: no cover - compiled
         return state, False, du, dv, dz
     if f[F_REFL_FINISH] > 0.5:
         return state, True, du, dv, -dz
-    state, du, dv, dz = lambert(state, True)
+    state, du, dv, dz = lambert(state, var_bool(True))
     return state, True, du, dv, dz
 
 

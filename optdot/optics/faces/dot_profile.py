@@ -1050,7 +1050,7 @@ def under_dots(
                 if f[F_REFL_FINISH] > 0.5:  # a mirror: back up at the angle it came
                     dz = -dz
                 else:
-                    state, du, dv, dz = lambert(state, True)
+                    state, du, dv, dz = lambert(state, var_bool(True))
                 continue
             if u < fresnel(dz, 1.0, n):  # the face: Fresnel, into the guide or down again
                 dz = -dz
@@ -1113,7 +1113,9 @@ def meet_profile(state, f, n, at, x, y, pr, walls, dxn, dyn, dz):  # pragma: no 
                 oy + s * pu + c * pv, min(pz, 0.0), c * du - s * dv, s * du + c * dv, dz,
             )  # fmt: skip
         fill = _fill_at(x, y, pr[1], pr[2])
-        state, lat = twin_lattice(state, hu, hv, rc, code == PRISM, lt, max(fill, 1e-9), True)
+        state, lat = twin_lattice(
+            state, hu, hv, rc, code == PRISM, lt, max(fill, 1e-9), var_bool(True)
+        )
         return under_dots(
             state, f, n, real, pr, walls, x, y, frame, lat, var_bool(True),
             (ox, oy, c, s, pr[1], pr[2], pr[8]), pu, pv, min(pz, 0.0), du, dv, dz,
@@ -1167,7 +1169,7 @@ def leave_between(state, f, n, x, y, pr, walls, dxn, dyn, dz):  # pragma: no cov
     if c != c:
         c, s = 1.0, 0.0
     fill = _fill_at(x, y, pr[1], pr[2])
-    state, lat = twin_lattice(state, hu, hv, rc, prism, lt, max(fill, 1e-9), False)
+    state, lat = twin_lattice(state, hu, hv, rc, prism, lt, max(fill, 1e-9), var_bool(False))
     state, pu, pv = bare_point(state, lat, hu, hv, rc, prism, (x, y, c, s, pr[1], pr[2], pr[8]))
     ox, oy = x - c * pu + s * pv, y - s * pu - c * pv  # the lattice's origin on the face
     return under_dots(

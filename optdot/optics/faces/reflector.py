@@ -22,6 +22,7 @@ from ..tables import (
     F_REFL_FINISH,
     NEW_LEG,
     SAME_LEG,
+    var_bool,
 )
 
 
@@ -37,7 +38,7 @@ def meet_reflector(state, f, n, ink, dxn, dyn, dz):  # pragma: no cover - compil
             return state, DOT, dxn, dyn, dz
         if f[F_EXTRACT] > 0.5:
             return state, EXTRACTED, dxn, dyn, dz
-        state, dxn, dyn, dz = lambert(state, True)  # back into the slab
+        state, dxn, dyn, dz = lambert(state, var_bool(True))  # back into the slab
         return state, NEW_LEG, dxn, dyn, dz
     if -dz > f[F_COS_DOWN]:
         state, u = uniform(state)
