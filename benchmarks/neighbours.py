@@ -14,7 +14,9 @@ flux) with its 1-sigma noise, seconds and rays/s. Then the speed: the lgp sample
 (30 x 20 mm) with a map graded 0.1 to 0.4 of 46 µm dots, traced through the same real
 dots as white ink, as 12 µm bumps and as 12 µm dimples (ten runs of each in turn, after
 a first that compiles; the CPU seconds summed), rays per CPU second and each 3-D dot's
-time a ray over ink's. At the end the peak memory.
+time a ray over ink's, and how many events (a face or a wall met) a ray takes with each
+(the share of 100k rays still unfinished when given up after 1, 2, 4, ... 4096 events,
+summed). At the end the peak memory.
 """
 
 from __future__ import annotations
@@ -33,8 +35,9 @@ sys.path.insert(0, str(HERE.parent))
 from _common import machine, peak_rss_mb  # noqa: E402
 
 from optdot.config.schema import load_job  # noqa: E402
-from optdot.optics.scene import scene_of  # noqa: E402
+from optdot.optics.scene import probe, scene_of  # noqa: E402
 from optdot.optics.simulate import simulate  # noqa: E402
+from optdot.optics.tables import UNFINISHED  # noqa: E402
 from optdot.optics.trace import trace  # noqa: E402
 from optdot.orchestration.pipeline import generate  # noqa: E402
 from tests.conftest import graded_guide  # noqa: E402
@@ -116,6 +119,21 @@ def _speed(root: Path, rays: int) -> None:
         print(f"  {name:<12} {sec:.2f} CPU s  {rays / sec / 1e6:.2f} M rays per CPU s")
     for name in ("bumps 12 µm", "dimples 12 µm"):
         print(f"  {name.split()[0]} / ink, time a ray: {cpu[name] / cpu['ink']:.2f}")
+    for name, scene in scenes.items():
+        print(f"  {name:<12} {_events(scene):.1f} events a ray")
+
+
+#: The event limits :func:`_events` gives rays up after.
+LIMITS = (1, 2, 4, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256, 384, 512, 768, 1024, 2048, 4096)
+
+
+def _events(scene, rays: int = 100_000) -> float:
+    """The mean number of events (a face or a wall met) a coupled or uncoupled ray of
+    ``scene`` takes: the sum over ``k`` of the share of rays not finished after ``k``
+    events, from traces given up after each of :data:`LIMITS` (trapezoids between them)."""
+    alive = [float(np.mean(trace(1, 0, rays, probe(scene, k))[0] == UNFINISHED)) for k in LIMITS]
+    steps = zip(LIMITS, LIMITS[1:], alive, alive[1:], strict=False)
+    return LIMITS[0] + sum((k2 - k1) * (a1 + a2) / 2 for k1, k2, a1, a2 in steps)
 
 
 def main() -> None:
