@@ -113,7 +113,7 @@ def dot_tables(pr):
 NO_FRAME = (math.nan, math.nan, math.nan, math.nan, math.nan)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def dot_frame(x, y, k, dots):
     """Where on its dot the point (x, y) of the job's print lies, for a 3-D dot (``k``:
     :func:`printed`'s there, the real dot's index or :data:`INK`; ``dots``: the print's
@@ -135,7 +135,7 @@ def dot_frame(x, y, k, dots):
     return (math.nan, math.nan, c, s, w)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def cell_frame(x, y, phi, g, turn):
     """The coverage's angle and size at ``(x, y)`` (mm; ``phi`` over cells of ``g``, the
     print's ``turn`` over those cells split ``f`` × ``f``): ``(c, s, w)``, the cosine and

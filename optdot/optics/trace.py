@@ -163,7 +163,7 @@ def _enter_layer(layer, li, up, tau):  # pragma: no cover - compiled
     return (z0 if up else z1), z0, z1, n, absorb, budget
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def _among_dots(
     state, li, face, n, x, y, z, z0, dots, walls, run, dxn, dyn, dz
 ):  # pragma: no cover - compiled
@@ -181,7 +181,7 @@ def _among_dots(
     return state, act, x, y, z0 + zc, dxn, dyn, dz
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def _born_among(state, li, face, n, x, y, z, z0, dots, walls, dxn, dyn, dz):  # pragma: no cover
     """A ray just born (or sent back off a wall) in layer ``li`` at ``(x, y, z)`` going
     ``d``: going up, :func:`_among_dots` (going down, as it came: its path is walked where

@@ -56,7 +56,11 @@ def meet_face(state, f, up, n, n_to, is_top, ink, dxn, dyn, dz):  # pragma: no c
     return meet_interface(state, f, up, n, n_to, is_top, ink, dxn, dyn, dz)
 
 
-@nb.njit(cache=True, inline="always")
+# The 3-D dots' kernels (this one, dot_profile's, cavities') are inlined by LLVM
+# (``forceinline``), not by numba (``inline="always"``): numba copies and retypes an
+# inlined function's code at every place it is called, which took the tracer's compile
+# from 81 s to 116 s (this machine, one process) for no speed.
+@nb.njit(cache=True, forceinline=True)
 def meet_dots(state, f, n, on, x, y, pr, walls, run, dxn, dyn, dz):  # pragma: no cover
     """A ray going down onto the bottom face of 3-D dots (its row ``f``) from the guide of
     index ``n`` at ``(x, y)`` (mm), on a dot or not (``on``: what

@@ -84,7 +84,7 @@ __all__ = ["among_cavities", "meet_cut", "packed_for"]
 _REACH = 2.0
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def _sheet_back(state, f, du, dv, dz):  # pragma: no cover - compiled
     """A ray going down out of a cavity's open base onto the reflector sheet against the
     face (row ``f``'s ``F_REFL``, ``F_REFL_FINISH``): ``(state, back, du, dv, dz)``,
@@ -99,7 +99,7 @@ def _sheet_back(state, f, du, dv, dz):  # pragma: no cover - compiled
     return state, True, du, dv, dz
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def _at_wall(x, y, z0, lx, ly, lz, ex, ey, ez, walls):  # pragma: no cover - compiled
     """Where a ray leaving the cavities' layer (or coming down onto the face) at ``(ex, ey,
     ez)`` (mm, face coordinates, ``z`` over the face) on a straight leg from ``(lx, ly,
@@ -114,7 +114,7 @@ def _at_wall(x, y, z0, lx, ly, lz, ex, ey, ez, walls):  # pragma: no cover - com
     return True, lx + f * gx, ly + f * gy, lz + f * (ez - lz)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def _next_cavity(f, real, pr, frame, lat, place, pu, pv, pz, du, dv, dz):  # pragma: no cover
     """The first cavity a ray in the glass at ``(pu, pv)``, ``pz`` mm over the face of cut
     dots (row ``f``), going ``d`` (unit) meets before it leaves their layer: a real dot
@@ -226,7 +226,7 @@ def among_cavities(
     return state, DOT, x, y, 0.0, c0 * du - s0 * dv, s0 * du + c0 * dv, dz
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def packed_for(x, y, dxn, dyn, dz, z0, back, deep, reach, phi, g):  # pragma: no cover
     """The fill the coverage (``phi`` over cells of ``g``) has where a ray going ``d``
     (unit) meets a face of cut dots at ``(x, y)`` (mm; ``z0`` mm over it, where it was
@@ -247,7 +247,7 @@ def packed_for(x, y, dxn, dyn, dz, z0, back, deep, reach, phi, g):  # pragma: no
 
 # inlined into the tracer's loop: numba counts a reference to each of the print's
 # tables at every call they are handed to (called instead, dimples took ~20 % longer a ray)
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def meet_cut(state, f, n, on, x, y, z, pr, walls, dxn, dyn, dz, run):  # pragma: no cover
     """A ray in the guide of index ``n`` over a face of cut dots (row ``f``): going down, its
     path crossing the face's plane at ``(x, y)`` (mm), on a dot or not (``on``:

@@ -404,7 +404,7 @@ def enter_cap(k, e, ox, oy, oz, dx, dy, dz):  # pragma: no cover - compiled
     return t, mx, my, mz
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def _meet_body(f, hu, hv, rc, k, c, s, rx, ry, z, dx, dy, dz):  # pragma: no cover
     """Where a ray from outside a raised dot of row ``f``'s profile (its frame ``hu``,
     ``hv``, ``rc``, ``k``, turned by ``(c, s)``) first meets it: from ``(rx, ry, z)`` (mm,
@@ -630,7 +630,7 @@ def _fill_at(x, y, phi, g):  # pragma: no cover - compiled
     return phi[iy, ix]
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def fill_along(x, y, ux, uy, lo, hi, phi, g):  # pragma: no cover - compiled
     """The most fill the coverage (``phi`` over cells of ``g``) has in the cells the course
     from ``(x, y) + lo u`` to ``(x, y) + hi u`` crosses (mm; ``u = (ux, uy)`` a unit
@@ -659,7 +659,7 @@ def fill_along(x, y, ux, uy, lo, hi, phi, g):  # pragma: no cover - compiled
     return top
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def _site_angle(key, i, j, turn):  # pragma: no cover - compiled
     """A twin's own angle (rad, ``0 .. turn``) at lattice site ``(i, j)`` of the ray whose
     draw is ``key``: the same every time the ray meets the site."""
@@ -681,7 +681,7 @@ def _turn(f):  # pragma: no cover - compiled
 FIELD = -1.0
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def twins_turn(f, hu, hv, c):  # pragma: no cover - compiled
     """How the twins of a coverage dot of row ``f`` (half sides ``hu``, ``hv``, mm) stand
     turned where the print's cell angle has cosine ``c`` (NaN where the dot draws its
@@ -692,7 +692,7 @@ def twins_turn(f, hu, hv, c):  # pragma: no cover - compiled
     return FIELD if c == c else _turn(f)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def _site(lat, i, j):  # pragma: no cover - compiled
     """Lattice ``lat``'s site ``(i, j)``: its centre ``(cu, cv)`` (mm, the dot's frame)
     and its twin's angle ``(c, s)`` in that frame (the frame's own in a :data:`FIELD`:
@@ -705,7 +705,7 @@ def _site(lat, i, j):  # pragma: no cover - compiled
     return (i * b1u + j * b2u) * e, i * b1v + j * b2v, c, s
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def _twin_at(lat, i, j, place):  # pragma: no cover - compiled
     """:func:`_site`'s centre and angle of lattice ``lat``'s twin ``(i, j)``, in a
     :data:`FIELD` at the print's angle where its centre stands on the face (``place``:
@@ -723,14 +723,14 @@ def _twin_at(lat, i, j, place):  # pragma: no cover - compiled
     return cu, cv, c, s
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def _twin_area(hu, hv, rc, prism):  # pragma: no cover - compiled
     """A twin's footprint area (mm²): a rounded rectangle of half sides ``hu``, ``hv`` and
     corner ``rc`` (mm) for a ``prism``, else an ellipse of half axes ``hu``, ``hv``."""
     return 4.0 * hu * hv - (4.0 - math.pi) * rc * rc if prism else math.pi * hu * hv
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def _lattice_fill(lat, hu, hv, rc, prism):  # pragma: no cover - compiled
     """The fill lattice ``lat`` of twins (half sides ``hu``, ``hv``, corner ``rc``, mm;
     ``prism`` as :func:`_twin_area`'s) was packed for: one twin a cell of its basis."""
@@ -743,7 +743,7 @@ def _lattice_fill(lat, hu, hv, rc, prism):  # pragma: no cover - compiled
 _THIN = np.uint64(0x5851F42D4C957F2D)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def _stands(lat, i, j, fill, there):  # pragma: no cover - compiled
     """Whether lattice ``lat``'s twin ``(i, j)`` stands where the coverage's fill is
     ``there``, the lattice packed for ``fill``: not where the map has no dots; where it has
@@ -789,7 +789,7 @@ def twin_lattice(state, hu, hv, rc, prism, turn, fill, own):  # pragma: no cover
     return state, lat
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def _lattice_at(lat, pu, pv):  # pragma: no cover - compiled
     """``(pu, pv)`` (mm, the dot's frame) in lattice ``lat``'s basis (fractional)."""
     e, _, b1u, b1v, b2u, b2v, _, _, _, _ = lat
@@ -798,7 +798,7 @@ def _lattice_at(lat, pu, pv):  # pragma: no cover - compiled
     return (qu * b2v - pv * b2u) / det, (b1u * pv - b1v * qu) / det
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def _nearest_site(lat, pu, pv):  # pragma: no cover - compiled
     """The lattice site nearest ``(pu, pv)`` (mm, the dot's frame) in the basis's
     coordinates (rounded)."""
@@ -806,7 +806,7 @@ def _nearest_site(lat, pu, pv):  # pragma: no cover - compiled
     return int(math.floor(fi + 0.5)), int(math.floor(fj + 0.5))
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def _j_span(i, form, lo, hi, ja, jb):  # pragma: no cover - compiled
     """The ``j`` of ``ja .. jb`` for which ``i a + j b + c`` (``form = (a, b, c)``) may lie
     within ``lo .. hi`` (either may be infinite), a little generously: ``(ja, jb)``, empty
@@ -1066,7 +1066,7 @@ def under_dots(
 
 # inlined into the tracer's loop: numba counts a reference to each of the print's
 # tables at every call they are handed to (a tenth of a raised dot's time)
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def meet_profile(state, f, n, at, x, y, pr, walls, dxn, dyn, dz):  # pragma: no cover - compiled
     """A ray going down onto a raised dot of the bottom face (its row ``f``: the profile's
     code, its body, the reflector) from the guide of index ``n``, where the print test found
@@ -1130,7 +1130,7 @@ def meet_profile(state, f, n, at, x, y, pr, walls, dxn, dyn, dz):  # pragma: no 
     return state, DOT, x, y, dxn, dyn, dz  # caught
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def _past_wall(x, y, x2, y2, walls):  # pragma: no cover - compiled
     """Whether the step from ``(x, y)`` to ``(x2, y2)`` (mm) crosses one of the panel's
     ``walls``: a coverage dot drawn over the edge, or light out of a dot by the edge that
@@ -1142,7 +1142,7 @@ def _past_wall(x, y, x2, y2, walls):  # pragma: no cover - compiled
 
 # inlined into the tracer's loop: numba counts a reference to each of the print's
 # tables at every call they are handed to (a tenth of a raised dot's time)
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, forceinline=True)
 def leave_between(state, f, n, x, y, pr, walls, dxn, dyn, dz):  # pragma: no cover - compiled
     """A ray going down onto the bare face between raised dots (row ``f``) from the
     guide of index ``n`` at ``(x, y)`` (mm; ``pr`` the print's ``dot_tables``): totally
