@@ -152,6 +152,7 @@ def _module_files() -> dict[str, Path]:
     return out
 
 
+@pytest.mark.slow
 def test_no_import_cycle_lazy_imports_included():
     """No module reaches itself through imports, counting imports inside functions too
     (a lazy import hides a cycle from Python, not from the design)."""
@@ -268,6 +269,7 @@ def test_no_module_name_twice():
 TAKE_THE_JOB = ("cli/", "config/", "orchestration/")
 
 
+@pytest.mark.slow
 def test_below_the_orchestration_functions_take_values_not_the_job():
     """The stages take the run's :class:`~optdot.stages.StageSettings`, the optics a
     :class:`~optdot.config.bench.Bench`, QA and the writers their records: a function

@@ -672,6 +672,7 @@ def test_a_guide_design_needs_two_iterations_too(tmp_path):
     assert not (tmp_path / "m.csv").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("leak, refused", [(0.0002, True), (0.0006, False)])
 def test_a_near_lossless_stack_is_refused_or_warned_of(tmp_path, leak, refused):
     """Reflector 1, a specular frame of 1, ink that reflects all, no haze and one sheet

@@ -44,6 +44,7 @@ def test_a_cap_is_cut_out_of_the_dots_domain_with_qa_s_gap(tmp_path):
     assert bare.domain.caps is None and bare.domain.rectangle
 
 
+@pytest.mark.slow
 def test_generated_dots_keep_out_of_every_cap_and_its_gap(tmp_path):
     from optdot.orchestration.pipeline import generate
 
@@ -95,6 +96,7 @@ def test_a_cap_over_a_bare_film_is_ink_exactly_where_the_disc_is(tmp_path):
     assert big.efficiency < small.efficiency < none.efficiency
 
 
+@pytest.mark.slow
 def test_the_coverage_mode_with_caps_matches_real_dots_with_caps(tmp_path):
     from optdot.orchestration.pipeline import generate
 
@@ -129,6 +131,7 @@ def test_the_design_s_shares_add_up_and_cap_shares_match_the_discs(tmp_path):
     assert cap_shares(caps, 0.0, 0.0, 0.5, 0.5, 4, 2).shape == (2, 4)  # another grid
 
 
+@pytest.mark.slow
 def test_designing_with_caps_evens_lambertian_leds_that_dots_alone_cannot(tmp_path):
     """Lambertian LEDs 1.5 mm under the film: the dots alone stop at their top fill over
     each LED; with caps the designed luminance's RMS (0.5 mm cells, noise 2.8 %) falls
@@ -161,6 +164,7 @@ def test_bad_caps_get_one_line(tmp_path, leds, words):
     one_error(("simulate", path, "--rays", "1000"), 2, str(path), *words)
 
 
+@pytest.mark.slow
 def test_caps_survive_npz_and_datasets_and_bad_caps_are_refused(tmp_path):
     from optdot.io.dataset import load_dataset
     from optdot.io.patterns import load_pattern, save_pattern
@@ -255,6 +259,7 @@ def test_edge_distances_on_a_capped_panel_match_shapely(tmp_path):
         assert np.all(d[~exact] == np.inf)
 
 
+@pytest.mark.slow
 def test_qa_fails_a_pattern_whose_caps_differ_from_the_job_s(tmp_path):
     """QA with the job: every cap the job asks for is printed, at its place and size; a
     pattern without them (made for the uncapped job) fails, naming a missing cap."""
@@ -286,6 +291,7 @@ def test_qa_fails_a_pattern_whose_caps_differ_from_the_job_s(tmp_path):
     assert load_pattern(tmp_path / "capped.npz").outline.caps.shape == (4, 3)
 
 
+@pytest.mark.slow
 def test_a_csv_refuses_caps_and_a_speos_mapping_carries_them(tmp_path):
     job_path = direct_job(tmp_path, 10.0, 10.0, 0.3, leds=CAPPED)
     assert cli("generate", job_path, "-o", tmp_path / "p.npz", "-q")[0] == 0
@@ -351,6 +357,7 @@ def test_caps_keep_the_led_grid_s_symmetry_for_the_design(tmp_path):
     assert period_classes(load_job(other, need_map=False), *design_grid(job.bench)) is not None
 
 
+@pytest.mark.slow
 def test_the_print_names_the_real_dot_under_a_cap_s_ink_and_ink_elsewhere_on_the_cap():
     """``marks.printed`` on print 1 with caps (rows ``(x, y, diameter)``) over real dots:
     on a cap's ink over a dot, that dot's index (a 3-D dot's frame is read from it); on

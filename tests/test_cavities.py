@@ -9,6 +9,7 @@ import math
 
 import numba as nb
 import numpy as np
+import pytest
 
 from optdot.geometry.profile import DIMPLE
 from optdot.optics import tables as t
@@ -65,6 +66,7 @@ def _tir(m: np.ndarray, d: np.ndarray) -> np.ndarray:
     return d - 2 * (d @ m) * m
 
 
+@pytest.mark.slow
 def test_light_coming_down_beyond_a_dimple_s_rim_is_turned_by_its_wall():
     """A ray at 45° crossing the face's plane 0.12 mm from a hemispherical cavity's
     centre (0.02 beyond its rim) passes through the cavity first: it meets the wall at
@@ -317,6 +319,7 @@ def _at_the_wall(layer, face, pr, x, z, d, walls, ask):  # pragma: no cover - co
     return end, np.array([ex, ey, ez, a, b, c])
 
 
+@pytest.mark.slow
 def test_the_tracer_turns_a_ray_by_the_cavity_it_passed_before_the_wall():
     """The tracer's wall (``_off_wall``): the ray of the test above, met at the wall by
     the tracer, is turned by the cavity its path passed through, not reflected by the
@@ -422,6 +425,7 @@ def _met_before_wall(f, pr, walls, rays):  # pragma: no cover - compiled
     return met / rays
 
 
+@pytest.mark.slow
 def test_as_the_coverage_a_ray_coming_down_onto_the_wall_meets_as_many_cavities_as_real():
     """Dimples 0.3 mm across, 0.075 mm deep, at a fill of 0.4: rays coming down onto the
     panel's wall inside their layer meet a cavity before it as often among the coverage's

@@ -255,6 +255,7 @@ def _among(f, n, pr, x, y, z, d, rays):  # pragma: no cover - compiled
     return out
 
 
+@pytest.mark.slow
 def test_a_ray_meeting_a_hemisphere_head_on_passes_into_the_guide_as_fresnel_says():
     """A ray in the air aimed at a hemisphere's centre (on the face) meets it at normal
     incidence: ``1 - R0`` of the rays go in, straight through its centre and up into
@@ -291,6 +292,7 @@ def _under(f, n, pr, walls, x, y, d, rays):  # pragma: no cover - compiled
     return out
 
 
+@pytest.mark.slow
 def test_a_mirror_on_the_tips_of_hemispheres_sends_light_up_into_the_one_it_aims_at():
     """The reflector sheet lies on the raised dots' tips: light out of the bare face at
     45° toward a hemisphere (radius 0.1 mm, its tip 0.1 mm under the face) misses it on
@@ -337,6 +339,7 @@ def _radial_field(led: tuple[float, float], frame: float) -> tuple:
     return 0.0, 0.0, math.cos(frame), math.sin(frame), phi, g, turn
 
 
+@pytest.mark.slow
 def test_a_twin_in_the_print_s_field_stands_at_the_angle_of_its_own_place():
     """In a :data:`FIELD` each twin takes the print's angle in the cell its centre stands
     in, turned into the frame (a ray's walk crosses a field that turns toward an LED
@@ -377,6 +380,7 @@ def _on_rounded(ru: float, rv: float, hu: float, hv: float, rc: float) -> bool:
     return qu <= 0 or qv <= 0 or qu * qu + qv * qv <= rc * rc
 
 
+@pytest.mark.slow
 def test_a_point_drawn_off_the_twins_of_a_field_is_off_every_one_of_them():
     """:func:`bare_point` in a :data:`FIELD` draws its point off the twins as they stand
     at their own angles (half a millimetre from an LED, where they turn fast), not as
@@ -419,6 +423,7 @@ def _first_twin(f, hu, hv, rc, k, lat, skip0, p, d, sites, place):  # pragma: no
     return bi, bj, best
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("code", "aligned", "fill"),
     [
@@ -481,6 +486,7 @@ def test_the_first_twin_along_a_ray_is_the_one_a_search_of_every_site_finds(code
     assert hits > 100 and folded > 20
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("aligned", "fill"), [(True, 0.8), (False, 0.7)], ids=["aligned", "turned"]
 )
@@ -600,6 +606,7 @@ def test_a_walk_into_cells_of_fewer_dots_meets_only_the_twins_that_stand_there()
     assert past > 50 and len(met) - past > 50  # twins met on both sides of the step
 
 
+@pytest.mark.slow
 def test_the_fill_along_a_course_is_the_most_of_the_cells_it_crosses():
     """:func:`fill_along` (what a cut dot's coverage packs its twins for): over random
     maps of 7 × 5 cells and random courses, the most fill of the cells the course
@@ -743,6 +750,7 @@ def _layer_end_py(f, hu, hv, k, z, dz) -> float:
     return float(_layer_end(f, hu, hv, k, z, dz))
 
 
+@pytest.mark.slow
 def test_the_coverage_s_twins_trace_as_real_close_tall_bumps(tmp_path):
     """Bumps 80 µm high on 200 µm dots, filling 0.1 to 0.6 of a guide over a white
     sheet: light leaving one meets its neighbours, and what the sheet returns meets them
@@ -767,6 +775,7 @@ def test_the_coverage_s_twins_trace_as_real_close_tall_bumps(tmp_path):
         assert sim["efficiency"] < 0.77 and sim["angles"]["on_axis"] < 1.0
 
 
+@pytest.mark.slow
 def test_the_coverage_traces_as_real_hemispheres_packed_up_to_black_edges(tmp_path):
     """Hemispheres at fill 0.7 up to black edges (a hostile tester's guide): the coverage
     and the real dots extract within 1.2 points of each other, and their far rows within

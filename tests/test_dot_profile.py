@@ -168,6 +168,7 @@ def test_a_bump_passes_the_share_of_a_lambertian_flux_an_independent_integral_gi
     assert np.mean(out[:, 0] == CAUGHT) < 1e-3
 
 
+@pytest.mark.slow
 def test_a_bump_on_an_ellipse_passes_the_share_an_independent_integral_gives():
     """A cap on an ellipse 2.5 times longer than wide (the circle's cap across the short
     axis, stretched along the long one): the tracer against the weighted quadrature over
@@ -346,6 +347,7 @@ def _weighted_prism_share(t1, t2, n, nu=40, nv=6, ntheta=24, npsi=48, bounces=80
     return passed
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("facets", [(40.0, 55.0), (25.0, 70.0)])
 def test_a_raised_prism_passes_the_share_an_independent_integral_gives(facets):
     """The tracer's random rays against every Fresnel split followed with its weight
@@ -721,6 +723,7 @@ def _meet(f, at, d, seed):
     return _meet_rays(f, at, d, seed, NO_PRINT, NO_WALLS)
 
 
+@pytest.mark.slow
 def test_a_turned_dot_meets_a_ray_as_the_unturned_dot_meets_the_ray_turned_back():
     """A prism (and a cap on an ellipse) turned by 35° meets a ray as the unturned one
     meets that ray turned by -35°, and sends it on turned by +35°: the dot's frame is
@@ -787,6 +790,7 @@ def test_a_dot_of_another_size_is_its_footprint_scaled_under_the_same_height():
         assert (np.abs(unscaled[:, 1:] - own[:, 1:]).max(axis=1) > 1e-6).mean() > 0.05
 
 
+@pytest.mark.slow
 def test_bumps_of_several_sizes_trace_as_their_coverage(tmp_path):
     """Bumps 12 um high on dots 30-120 um wide (a hybrid pitch rule over a map from 0.08
     to 0.45): traced through the real dots (each its own size, read off its footprint)

@@ -85,6 +85,7 @@ def test_a_replaced_file_keeps_its_permissions(tmp_path, tiny_csv):
     assert stat.S_IMODE(new.stat().st_mode) == 0o644
 
 
+@pytest.mark.slow
 def test_a_read_only_target_is_never_replaced(tmp_path, tiny_csv):
     """A mask whose write bits are off was protected on purpose (also for root, which
     os.access would let through): refused before the run, old bytes kept."""
@@ -103,6 +104,7 @@ def test_a_read_only_target_is_never_replaced(tmp_path, tiny_csv):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["v.dxf", "v.gds"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("where", ["/sys/optdot-test.gds", "/proc/optdot-test.gds"])
 def test_an_unwritable_place_is_one_line(tiny_csv, where):
     r = optdot_limited(10**9, "export", tiny_csv, "--gds", where, "--no-job")

@@ -177,6 +177,7 @@ def test_a_keep_out_touching_the_edge_is_clear_slab_not_a_notch(tmp_path):
     assert abs(a - b) < 3 * (sa**2 + sb**2) ** 0.5, effs
 
 
+@pytest.mark.slow
 def test_simulate_with_a_pattern_needs_no_map(tmp_path):
     """The real dots are traced, so a guide job without [density] runs with a pattern
     ("no [density] map yet; design one" before); without one it still asks for a map."""
@@ -254,6 +255,7 @@ def test_an_existing_mask_is_kept_unless_overwrite(tmp_path):
     assert csv.read_bytes() == first[csv]
 
 
+@pytest.mark.slow
 def test_a_guide_that_keeps_its_light_is_refused_in_a_second(tmp_path):
     """Hardly a dot (a fill of 1e-5), no absorption, mirror edges: light that enters never
     leaves (every ray ran to the event limit, days for a default run, Ctrl-C unheard). A
@@ -296,6 +298,7 @@ def test_ray_counts_may_be_written_as_a_tracer_user_writes_them():
             RAYS.convert(bad, None, None)
 
 
+@pytest.mark.slow
 def test_a_mask_is_kept_whatever_option_names_it(tmp_path):
     """A CSV, a report or a preview given a mask's name (any case) does not replace a
     different mask there: ``export --csv w.gds``, ``qa --json W.OAS`` exit 2 and change

@@ -118,6 +118,7 @@ def test_a_dip_s_containers_take_their_neighbourhood_s_fill_and_a_sparse_map_kee
     assert np.array_equal(stage_settings(split).container_fill(far), split.density.at(far))
 
 
+@pytest.mark.slow
 def test_stages_split_the_iterations(tiny_job):
     job = dataclasses.replace(
         tiny_job, optimize=dataclasses.replace(tiny_job.optimize, max_iter=30, ftol=0.0)

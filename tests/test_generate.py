@@ -93,6 +93,7 @@ def test_same_bytes_on_one_and_two_threads(method):
     assert one.xy.tobytes() == two.xy.tobytes()
 
 
+@pytest.mark.slow
 def test_the_generate_command_loads_only_what_generating_needs():
     """Imports are a quarter of a small job's command: QA (scipy.spatial among it),
     scipy's sparse solvers (a map with dead cells), Dask, pyarrow, matplotlib and the

@@ -278,6 +278,7 @@ def test_qa_fails_a_pattern_whose_rings_differ_from_the_job_s():
     assert caps_check(caps, caps, None, None).passed
 
 
+@pytest.mark.slow
 def test_the_tracer_s_rings_pass_the_light_their_coverage_does(tmp_path):
     """Real rings against coverage mode: the film with graded caps (no dots) passes the
     light a film without caps passes through a coverage raster of the rings' share of
@@ -304,6 +305,7 @@ def test_the_tracer_s_rings_pass_the_light_their_coverage_does(tmp_path):
     assert abs(rings - raster.efficiency) <= noise + 0.002
 
 
+@pytest.mark.slow
 def test_rings_survive_datasets_and_damaged_rings_are_refused(tmp_path):
     import io
     import zipfile

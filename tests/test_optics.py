@@ -521,6 +521,7 @@ def test_updates_agree_while_the_map_converges_and_disagree_once_noise_moves_it(
     assert math.isnan(Update().agreement) and not Update().settled()
 
 
+@pytest.mark.slow
 def test_design_stops_when_the_map_no_longer_changes_anything_the_rays_resolve(tmp_path):
     """``design`` ran its 16 iterations whatever happened (the lgp sample's RMS sat at the
     rays' noise from its 7th). It stops once a full trace finds no structure beyond the

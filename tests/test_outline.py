@@ -128,6 +128,7 @@ def test_outline_job_generates_inside_with_coverage_to_the_edges(tmp_path):
     assert m["coverage_rel_rms_smoothed"] < 0.03
 
 
+@pytest.mark.slow
 def test_outline_exports_read_back_by_klayout_and_ezdxf(tmp_path):
     import klayout.db as kdb
 

@@ -275,6 +275,7 @@ def test_files_keep_the_polygon(triangles, tmp_path):
     assert rc == 1 and "FAIL  dots whose footprint is not the job's polygon" in out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmt", ["gds", "oas", "dxf"])
 def test_masks_read_back_as_the_job_s_polygons(triangles, tmp_path, fmt):
     """A mask passes QA with its job (hexagons turned 45° too); without the job it is
@@ -323,6 +324,7 @@ def test_klayout_reads_the_polygon_and_its_turns(triangles, tmp_path):
     assert np.abs((off + 180) % 360 - 180).max() < 0.01
 
 
+@pytest.mark.slow
 def test_a_positive_gain_is_refused_and_an_etch_prints_the_polygon(tmp_path):
     """Sharp corners print exactly only without gain: ``dot_gain > 0`` is refused in one
     line; an etch's bias (``< 0``) draws each side moved out on the mask, which QA reads

@@ -33,6 +33,7 @@ def _meet(count, up, dx, dy, dz, f):  # pragma: no cover - compiled
     return out
 
 
+@pytest.mark.slow
 def test_light_at_normal_incidence_or_along_the_grooves_is_sent_back():
     """A 90° prism of index 1.58 meets a normal ray at 45° inside, over the critical angle
     (39.3°): total internal reflection at both facets sends everything back down (the

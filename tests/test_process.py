@@ -449,6 +449,7 @@ def test_oasis_and_gds_agree_without_a_grid(tmp_path):
     assert rc == 0, err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("dots", "orientation", "grid"),
     [

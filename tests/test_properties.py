@@ -141,6 +141,7 @@ def _job_dir() -> Path:
     return d
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(job_texts())
 def test_any_job_file_loads_or_is_refused_in_one_line(text):
@@ -199,6 +200,7 @@ npy_dtypes = st.one_of(
 )
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(
     hnp.arrays(npy_dtypes, hnp.array_shapes(min_dims=0, max_dims=3, min_side=0, max_side=5)),
@@ -243,6 +245,7 @@ def wkt_ring(r) -> str:
     return "(" + ", ".join(f"{x!r} {y!r}" for x, y in r) + ")"
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(
     st.sampled_from(["POLYGON", "MULTIPOLYGON", "LINESTRING", "POINT", "GEOMETRYCOLLECTION", "X"]),
@@ -293,6 +296,7 @@ geojson_like = st.fixed_dictionaries(
 )
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(st.one_of(geojson_like, json_any))
 def test_any_geojson_outline_loads_or_is_refused(data):
@@ -383,6 +387,7 @@ small_arrays = hnp.arrays(
 )
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(
     st.dictionaries(

@@ -32,6 +32,7 @@ def test_grain_on_a_changing_map_is_not_judged_against_random_dots():
     assert "<b>" not in text and "not compared with random dots' 1" in text
 
 
+@pytest.mark.slow
 def test_a_shaped_report_draws_footprints_and_their_angles(tmp_path):
     """The QA report of prisms drew 121.8 µm circles in its true-scale zoom and said
     "diameter 121.8–121.8 µm"; the angle histogram was in the JSON only."""

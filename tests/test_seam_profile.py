@@ -86,6 +86,7 @@ def _own_window_only(job_, plan_, dots, *around):
     return tasks.TileDots(dots.tile, dots.xy0, dots.xy + err.field(window, dots.xy, cap))
 
 
+@pytest.mark.slow
 def test_a_correction_solved_tile_by_tile_is_seen_on_the_seams(led, monkeypatch):
     """The same run with each tile moved by its own window's field alone and no wide pass
     after it: its error piles onto the seams."""

@@ -323,6 +323,7 @@ def test_an_angle_map_with_nan_and_a_fill_the_shape_cannot_reach(tmp_path):
     assert "at most" in line and "ellipse" in line
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dots", [ELLIPSE, PRISM], ids=["ellipse", "rounded_rectangle"])
 def test_the_tracer_meets_the_true_oriented_footprints(tmp_path, dots):
     """The tracer's test of a point on the bottom face (its dot grid and footprints, as

@@ -71,6 +71,7 @@ def _field_error(p, job) -> float:
     return float(np.degrees(np.abs(axis(p.dots.angles - want))).max())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "dots,orientation",
     [(ELLIPSE, {"random": "true"}), (PRISM, {"toward": '"leds"'})],
@@ -190,6 +191,7 @@ def test_a_shaped_dataset_is_exported_and_checked_part_by_part(tiled_shapes, tmp
     assert np.abs(off).max() < 2e-6
 
 
+@pytest.mark.slow
 def test_an_interrupted_shaped_tiled_run_resumes_with_the_bytes_of_an_uninterrupted_one(
     tmp_path,
 ):
@@ -200,6 +202,7 @@ def test_an_interrupted_shaped_tiled_run_resumes_with_the_bytes_of_an_uninterrup
     assert _resumed(job, tmp_path, stop_after=2) == 4
 
 
+@pytest.mark.slow
 def test_scaled_shapes_resume_with_the_bytes_of_an_uninterrupted_run(tmp_path):
     """Sizes that vary: a kept tile's dots are held at the sizes they were made at (their
     area-equivalent diameters recovered from the footprints on the rule's steps), so the

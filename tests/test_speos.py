@@ -27,6 +27,7 @@ def parse(path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 run = optdot  # the command in a child process (tests/conftest.py)
 
 
+@pytest.mark.slow
 def test_fixed_size_dots_map_to_their_centres_at_scale_one(tmp_path, tiny_pattern):
     src = tmp_path / "p.npz"
     save_pattern(tiny_pattern, src)
@@ -41,6 +42,7 @@ def test_fixed_size_dots_map_to_their_centres_at_scale_one(tmp_path, tiny_patter
     assert np.all(scale == 1.0)
 
 
+@pytest.mark.slow
 def test_varying_sizes_scale_by_the_reference_diameter(tmp_path, tiny_pattern):
     rng = np.random.default_rng(3)
     d = np.round(rng.uniform(0.030, 0.046, tiny_pattern.n), 6)
@@ -67,6 +69,7 @@ def test_a_dataset_streams_the_same_file(tmp_path, tiny_pattern):
     assert (tmp_path / "p.npz.map").read_bytes() == (tmp_path / "p.parquet.map").read_bytes()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("ref", ["0", "-1", "inf"])
 def test_a_bad_reference_diameter_is_one_line(tmp_path, tiny_pattern, ref):
     save_pattern(tiny_pattern, tmp_path / "p.npz")

@@ -97,6 +97,7 @@ def brute_wall_profile(xy, d, allowed_fn, box, band, reach, px=0.002):
     return got / area
 
 
+@pytest.mark.slow
 def test_wall_profile_matches_rasterised_discs_with_a_hole_and_a_zero_cell():
     grid = np.full((4, 4), 0.3)
     grid[3, 0] = 0.0  # a zero-fill cell in a corner: its border is a wall too
@@ -128,6 +129,7 @@ def wall_job(tmp_path, fill):
     return load_job(write_job(tmp_path, grid, domain=domain, optimize={"max_iter": 200}))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fill", [0.2, 0.4])
 def test_generated_coverage_is_flat_up_to_every_wall(tmp_path, fill):
     """0.1 mm bands within 1 mm of the panel edges, the hole and the zero-fill block carry
@@ -152,6 +154,7 @@ def test_without_phantoms_the_first_band_is_bright(tmp_path):
     assert wp.relative[0] > 0.05
 
 
+@pytest.mark.slow
 def test_qa_warns_of_layering_at_walls_and_passes_the_flat_pattern(tmp_path):
     """QA's advisory wall check: the pre-issue-24 relaxation layers (WARN, the verdict says
     PASS WITH WARNINGS), the default does not."""
@@ -193,6 +196,7 @@ def test_long_wavelength_correction_removes_the_grain(tmp_path, passes):
     assert not job.domain.protruding(p.xy, 0.023).any()
 
 
+@pytest.mark.slow
 def test_qa_reports_the_grain_on_the_densest_patch(tmp_path):
     """QA's grain figure: S at k·a 0.3-1 over a 10 mm square around the densest region,
     ~1 for random dots, tiny for optdot's pattern; shown in the HTML report."""

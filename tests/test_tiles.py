@@ -377,6 +377,7 @@ def test_a_full_disk_while_writing_the_dataset_keeps_the_old_one(tiled, tmp_path
     _only_the_staging_dir_beside(out)
 
 
+@pytest.mark.slow
 def test_a_directory_that_is_not_a_dataset_is_never_replaced(tmp_path):
     victim = tmp_path / "precious.parquet"
     victim.mkdir()

@@ -68,6 +68,7 @@ def test_a_pattern_a_viewer_sees_passes_with_warnings(led):
     assert rc == 0 and out.splitlines()[-1] == "verdict: PASS", out
 
 
+@pytest.mark.slow
 def test_qa_without_a_job_names_what_it_did_not_check(led):
     """Without a job the map's checks are skipped: the verdict says so and the exit code
     is 5 (a script gating on 0 does not pass a pattern whose coverage nobody checked),
@@ -114,6 +115,7 @@ def test_export_prints_the_verdict_each_file_and_keeps_the_report(led):
     assert "r.json" in (out_dir / "r.html").read_text()  # the HTML links its JSON
 
 
+@pytest.mark.slow
 def test_an_svg_of_a_window_says_so(tmp_path):
     from optdot.exporters.preview import SVG_MAX_DOTS
     from optdot.pattern import Pattern

@@ -143,6 +143,7 @@ def _lgp_with(tmp_path, domain_line: str):
     return path
 
 
+@pytest.mark.slow
 def test_simulate_measures_the_viewing_area_and_reports_the_hot_spots_hidden_outside(tmp_path):
     """With a 3 mm bezel at the LED edge: the measured bins are the viewing area's, the
     9 spots sit at 1/6, 1/2, 5/6 of it, the LED hot spots under the bezel are reported
@@ -271,6 +272,7 @@ def _dashed_frames(monkeypatch):
     return drawn
 
 
+@pytest.mark.slow
 def test_the_jnd_figure_draws_the_viewing_area(monkeypatch):
     from optdot.quality.gate import QAResult
     from optdot.quality.report import _jnd_figure
@@ -288,6 +290,7 @@ def test_the_jnd_figure_draws_the_viewing_area(monkeypatch):
     assert (min(xs), min(ys), max(xs), max(ys)) == area
 
 
+@pytest.mark.slow
 def test_the_luminance_plot_draws_the_measured_region(tmp_path, monkeypatch):
     from optdot.optics.simulate import simulate
     from optdot.optics.writing import luminance_png

@@ -104,6 +104,7 @@ def test_a_grating_of_modulation_m_reads_m_times_s(period_mm):
     assert metrics["max_jnd"] == pytest.approx(expected, rel=0.15)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fill", [0.1, 0.6])
 def test_ink_on_a_film_reads_a_coverage_grating_through_its_transmission(fill):
     """On a printed film the luminance goes as 1 - k phi: a coverage grating phi (1 + m
@@ -173,6 +174,7 @@ def _at(img, x, y, p) -> float:
     return float(img[np.abs(y - p[1]).argmin(), np.abs(x - p[0]).argmin()])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("amplitude, visible", [(0.01, True), (0.002, False)])
 def test_a_coverage_bump_is_seen_at_notebook_distance_only_when_large(led, amplitude, visible):
     """A Gaussian coverage bump (sigma 3 mm) planted by scaling dot areas: +1 % is
@@ -219,6 +221,7 @@ def test_a_seam_of_missing_dots_is_seen_at_half_a_metre_not_from_a_tv_sofa(led):
     assert seen["notebook"] >= 1 > seen["tv"] > 0, seen
 
 
+@pytest.mark.slow
 def test_the_clean_led_sample_reports_its_own_largest_jnd(led, tmp_path):
     """The report states the clean pattern's largest |JND|, well under 1, and lists a
     blob only from :data:`BLOB_JND` on. The LED edge, where the map is at its lowest
@@ -269,6 +272,7 @@ def test_the_outline_sample_is_not_seen_at_its_notch():
     assert vis["max_jnd"] < 0.7, vis["blobs"][:3]
 
 
+@pytest.mark.slow
 def test_an_outline_filled_exactly_is_not_seen():
     """The outline sample's map delivered exactly inside its outline (a dense cloud):
     under 0.5 JND (0.32; the cloud's own steps at the curved edges). Against the cells'
@@ -515,6 +519,7 @@ def test_a_steep_sparse_map_in_front_of_leds_is_not_seen(tmp_path):
     assert vis["max_jnd"] < 0.5, vis["blobs"][:3]
 
 
+@pytest.mark.slow
 def test_a_steep_sparse_map_in_front_of_leds_is_not_seen_in_tiles(tmp_path):
     """The same in tiles: every round of the wide pass is a barrier over the panel's
     tiles (one round left 8.4 JND and 24 blobs on a designed 120 x 70 mm guide tiled,
