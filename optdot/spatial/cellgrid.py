@@ -365,11 +365,14 @@ def _search(
     :data:`CELLS_PER_POINT` cells a dot takes larger cells (the same pairs, rows in
     another order), unless ``crowd`` is off. The arrays returned live in ``ws`` when
     given."""
-    xy = np.ascontiguousarray(xy, dtype=np.float64)
+    xy = np.ascontiguousarray(xy, dtype=np.float64).view()
     n = xy.shape[0]
     reff = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, np.float64), (n,)))
-    # read-only whether a view (radii per dot) or a copy (one radius): one signature for
-    # the compiled search, not two (each took numba 7 s to compile on a first run)
+    # read-only whether a view (radii per dot, a pattern's frozen centres) or a copy (one
+    # radius, centres being moved): one signature for the compiled search, not two (each
+    # took numba 7-15 s to compile on a first run); the centres as a read-only view, the
+    # caller's array left writable
+    xy.flags.writeable = False
     reff.flags.writeable = False
     mid, has_cross = np.zeros(n if split else 0, np.int64), np.zeros(n if split else 0, bool)
     if n == 0:
