@@ -206,6 +206,23 @@ def test_the_search_compiles_once_for_one_radius_and_for_radii_per_dot():
     assert radii and all(not t.mutable for t in radii), radii
 
 
+def test_the_search_compiles_once_for_moving_and_frozen_centres():
+    """Centres being moved (writable) and a pattern's frozen centres (read-only) reach the
+    compiled search and binning with the same types (a second compile took 7-15 s), and
+    the caller's array stays writable."""
+    from optdot.spatial.cellgrid import _bin_points, _pairs_csr, neighbor_grid
+
+    xy = np.random.default_rng(4).random((500, 2))
+    frozen = xy.copy()
+    frozen.flags.writeable = False
+    neighbor_grid(xy, 0.02)
+    neighbor_grid(frozen, 0.02)
+    assert xy.flags.writeable
+    for kernel in (_pairs_csr, _bin_points):
+        centres = {sig[0] for sig in kernel.signatures}
+        assert len(centres) == 1 and not next(iter(centres)).mutable, centres
+
+
 @settings(max_examples=20, deadline=None)
 @given(
     sizes=st.lists(st.integers(1, 12000), min_size=2, max_size=3),
