@@ -7,6 +7,8 @@ again with those rays lost under the guide, as optdot lost them before. With
 ``--mirror``, both trace the guide over a perfect mirror lying on the bumps' tips (optdot
 since session 41: what the mirror returns comes up among the bumps), pvtrace once.
 
+Needs pvtrace: pip install '.[test,validation]'.
+
 Run: python benchmarks/profiles_pvtrace.py [--rays 2000] [--pitch 0.5] [--diameter 0.4]
      [--height 0.1] [--mirror]
 
