@@ -54,8 +54,8 @@ class Angles:
 
     def add(self, air: np.ndarray) -> None:
         """Count rays of directions ``air`` (``[m, 3]`` unit, in air; those not going up,
-        ``z <= 0``, are left out)."""
-        _count(np.ascontiguousarray(air), self.counts)
+        ``z <= 0``, are left out), as float32, the tracer's (one compiled kernel)."""
+        _count(np.ascontiguousarray(air, dtype=np.float32), self.counts)
 
     @property
     def total(self) -> int:
