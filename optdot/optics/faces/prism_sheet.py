@@ -28,9 +28,11 @@ import numba as nb
 from ..rays import fresnel, uniform
 from ..tables import CROSS, F_SHEET_T, F_SPREAD, F_SPREAD_SIG, NEW_LEG, SHEET
 
-#: Surfaces a ray may meet inside one sheet before it counts as absorbed (a ray caught
-#: between facets at grazing angles; never reached by the tests' rays).
-MAX_BOUNCES = 64
+#: Surfaces a ray may meet inside one sheet before it counts as absorbed. Light near 30°
+#: across the grooves can skim from prism to prism, out of a facet, into the next, totally
+#: reflected by the base: 0.28 % of such rays outlived 64 surfaces (an independent tracer
+#: let them all out within 200 legs); none of 10⁶ at 28°, 30° or 32° outlives 4,096.
+MAX_BOUNCES = 4096
 
 
 @nb.njit(cache=True)
