@@ -922,3 +922,53 @@ def test_simulate_says_what_dots_it_traced(tmp_path):
     _print_simulation(bump, 1.0, echo=said.append)
     assert "(dimples 12 µm deep)" in said[0]
     assert "dot_profile" not in simulate(_guide(tmp_path, "", "i").bench, 20_000, 1).summary()
+
+
+@pytest.mark.parametrize(("facets", "refused"), [("[70, 20]", True), ("[45, 45]", False)])
+def test_prisms_read_from_a_dxf_are_refused_only_when_their_facets_differ(
+    tmp_path, facets, refused
+):
+    """The trace's check before it reads a DXF's prisms: facets that differ need the
+    direction a DXF does not hold; equal facets look the same either way round."""
+    from pathlib import Path
+
+    from optdot.cli.tooling import traced_as_made
+
+    job = _prism_guide(tmp_path, f'profile = "prism"\nfacets = {facets}')
+    if not refused:  # on to the next check, which needs the dots
+        with pytest.raises(AttributeError):
+            traced_as_made(Path("p.dxf"), None, job)
+        return
+    with pytest.raises(JobError, match=r"p\.dxf: a DXF holds each prism's outline, not which"):
+        traced_as_made(Path("p.dxf"), None, job)
+
+
+@pytest.mark.slow
+def test_a_dxf_of_prisms_whose_facets_differ_is_refused_by_simulate_not_traced(tmp_path):
+    """A DXF keeps each prism's outline, the same either way round: read back, about half
+    of the 70° / 20° prisms facing their LEDs came turned half a turn, and the trace said
+    1.4 points more efficiency than the pattern's (a hostile tester's guide). ``simulate``
+    refuses it in one line naming the facets; the GDSII mask of the same dots, which
+    places each prism by its direction, traces as the pattern file does."""
+    import json
+
+    from .conftest import cli, one_error
+
+    turned = 'toward = "leds"\nrelative = "parallel"'
+    _prism_guide(tmp_path, 'profile = "prism"\nfacets = [70, 20]', turned)
+    job, npz = tmp_path / "p.toml", tmp_path / "p.npz"
+    dxf, gds = tmp_path / "p.dxf", tmp_path / "p.gds"
+    for args in (
+        ("generate", job, "-o", npz),
+        ("export", npz, "--job", job, "--dxf", dxf, "--gds", gds),
+    ):
+        rc, err, _ = cli(*args, "-q")
+        assert rc == 0, err
+    one_error(("simulate", job, dxf, "--rays", "1000"), 2, str(dxf), "DXF", "[70, 20]")
+    got = []
+    for f in (npz, gds):
+        out = tmp_path / f"{f.name}.json"
+        rc, err, _ = cli("simulate", job, f, "--rays", "20000", "--json", out, "-q")
+        assert rc == 0, err
+        got.append(json.loads(out.read_text()))
+    assert got[0]["efficiency"] == got[1]["efficiency"] and got[0]["angles"] == got[1]["angles"]

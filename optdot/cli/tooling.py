@@ -102,16 +102,26 @@ def traced_as_made(path: Path, pattern, job) -> None:
     """Refuse to trace a pattern that is not ``job``'s: footprints of another kind or size
     than the job's dots (an ellipse pattern under a prism job), or dots that leave a band
     of the panel empty where the map asks for dots (a CSV of a smaller panel: a CSV keeps
-    no panel box for :func:`made_for` to compare). QA reports both as failed checks; a
-    trace would report the luminance of a guide nobody asked for.
+    no panel box for :func:`made_for` to compare), or prisms whose facets differ read from a
+    DXF (its outlines say nothing of which end is which: half of them would be traced turned
+    half a turn). QA reports the first two as failed checks; a trace would report the
+    luminance of a guide nobody asked for.
 
     Raises:
         JobError: one line naming the file and what differs.
     """
     from ..errors import JobError
+    from ..geometry.profile import PRISM
     from ..orchestration.pipeline import dot_rule
     from ..quality.conformance import footprint_text
 
+    prof = job.profile
+    if path.suffix.lower() == ".dxf" and prof.code >= PRISM and prof.facets[0] != prof.facets[1]:
+        raise JobError(
+            f"{path}: a DXF holds each prism's outline, not which way it points, and this "
+            f"job's facets differ (dots.facets = [{prof.facets[0]:g}, {prof.facets[1]:g}]): "
+            "trace its pattern file (NPZ, CSV or dataset) or its GDSII / OASIS mask"
+        )
     rule = dot_rule(job)
     feet = pattern.shape
     stray = rule.stray(feet, pattern.xy)
