@@ -127,10 +127,12 @@ def test_a_prism_sheet_over_a_recycling_cavity_brightens_the_axis_within_the_pub
 @pytest.mark.parametrize(
     "key, value, words",
     [
-        ("apex_angle", "180", "apex_angle = 180 must be under 180"),
+        ("apex_angle", "180", "apex_angle = 180.0 must be in degrees, 10 <= x < 180"),
+        ("apex_angle", "5", "apex_angle = 5.0 must be in degrees, 10 <= x < 180"),
         ("grooves", '"z"', 'grooves = \'z\' must be "x" or "y"'),
         ("transmittance", "0.5", "transmittance is not a key of a prism sheet"),
         ("refractive_index", "0.9", "refractive_index"),
+        ("pitch", "0.05", "(allowed in [backlight.sheets[1]]: kind, gap, refractive_index, apex"),
     ],
 )
 def test_a_prism_sheet_s_keys_are_checked(tmp_path, key, value, words):

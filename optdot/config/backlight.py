@@ -388,23 +388,30 @@ def _spread(value: Any, lab: str, where: str, allow_none: bool = False) -> str |
     return v
 
 
+#: The sharpest prism sheet traced, degrees (films are made 60-110°): of Lambertian light
+#: from below, a 0.01° apex holds 89 % between its facets past 4,096 surfaces (counted
+#: absorbed, by a film that absorbs nothing), 1° 0.3 %, 10° 3 in 10⁶, 20° none of 10⁶.
+MIN_APEX = 10.0
+
+
 def _sheet(sec: Any, k: int, where: str) -> Sheet:
     lab = f"backlight.sheets[{k}]"
     if not isinstance(sec, dict):
         raise JobError(f"{where}: {lab} must be a table ([[backlight.sheets]])")
-    typed_keys(sec, SHEET_KEYS, lab, where)
     kind = sec.get("kind", "diffuser")
-    if kind not in SHEET_KINDS:
+    if not isinstance(kind, str) or kind not in SHEET_KINDS:
         raise JobError(f"{where}: {lab}.kind = {kind!r} must be one of {', '.join(SHEET_KINDS)}")
-    other = [k for k in sec if k not in ("kind", "gap", *SHEET_KIND_KEYS[kind])]
-    if other:
+    mine = ("kind", "gap", *SHEET_KIND_KEYS[kind])
+    other = [k for k in sec if k in SHEET_KEYS and k not in mine]
+    if other:  # another kind's key
         raise JobError(f"{where}: {lab}.{other[0]} is not a key of a {kind} sheet")
+    typed_keys(sec, {k: SHEET_KEYS[k] for k in mine}, lab, where)  # unknown: this kind's listed
     gap = number_in(sec, "gap", 0.0, 0, 1000, where, lab, "in mm, ")
     if kind == "prism":
         n = number_in(sec, "refractive_index", 1.58, 1.0, 3.0, where, lab, "", lo_open=True)
-        apex = number_in(sec, "apex_angle", 90.0, 0, 180, where, lab, "in degrees, ", lo_open=True)
-        if apex >= 180:
-            raise JobError(f"{where}: {lab}.apex_angle = {apex:g} must be under 180 degrees")
+        apex = number_in(
+            sec, "apex_angle", 90.0, MIN_APEX, 180, where, lab, "in degrees, ", hi_open=True
+        )
         grooves = sec.get("grooves", "x")
         if grooves not in ("x", "y"):
             raise JobError(f'{where}: {lab}.grooves = {grooves!r} must be "x" or "y"')
