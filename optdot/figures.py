@@ -13,6 +13,16 @@ import numpy as np
 #: Gaussian sigma of the smoothed luminance view, bins.
 SMOOTH_BINS = 1.5
 
+#: Rays within the first polar ring (5° of the normal) under which the on-axis luminance
+#: and the half-luminance angles are not stated: their noise would be 10 % or more.
+MIN_ON_AXIS_RAYS = 100
+
+
+def angles_judged(angles: dict) -> bool:
+    """Whether a simulation's ``angles`` figures hold rays enough on axis to state the
+    on-axis luminance and its half angles (:data:`MIN_ON_AXIS_RAYS`)."""
+    return (angles.get("on_axis_rays", MIN_ON_AXIS_RAYS) or 0) >= MIN_ON_AXIS_RAYS
+
 
 def smoothed(lum: np.ndarray, sigma: float = SMOOTH_BINS) -> tuple[np.ndarray, float]:
     """``(lum smoothed, factor)``: ``lum`` (``[ny, nx]``) under a Gaussian of ``sigma``
@@ -136,20 +146,25 @@ def angles_pair(axes: Sequence, table, angles: dict) -> list:
     pr = axes[1]
     centres = (np.arange(nt) + 0.5) * (90 / nt)
     half = angles.get("half_luminance_deg") or {}
+    judged = angles_judged(angles)
     for (name, prof), color in zip(
         (angles.get("profiles") or {}).items(), "C0 C1".split(), strict=False
     ):
         prof = np.array([np.nan if v is None else v for v in prof], np.float64)
         h = half.get(name)
         label = f"{name}: half at {h:.1f}°" if h is not None else f"{name}: over half to 90°"
+        label = label if judged else name
         pr.plot(centres, prof, color=color, lw=1.2, label=label)
         if h is not None:
             pr.axvline(h, color=color, lw=0.8, ls="--")
     on = angles.get("on_axis")
-    if on is not None and math.isfinite(on):
+    if on is not None and math.isfinite(on) and judged:
         pr.axhline(0.5 * on, color="0.4", lw=0.7, ls=":")
     pr.axhline(1.0, color="k", lw=0.6)
     pr.set(xlabel="polar angle, degrees", ylabel="luminance / Lambertian's", xlim=(0, 90))
     pr.legend(fontsize=8)
-    pr.set_title(f"on axis {on:.3f} of a Lambertian's" if on is not None else "", fontsize=9)
+    title = f"on axis {on:.3f} of a Lambertian's" if on is not None else ""
+    if not judged:
+        title = f"{angles.get('on_axis_rays', 0)} rays within 5° of the normal: too few to judge"
+    pr.set_title(title, fontsize=9)
     return [ax, pr]

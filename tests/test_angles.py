@@ -126,6 +126,15 @@ def test_a_simulation_file_s_angles_are_checked_and_the_command_says_what_it_can
     assert rc == 0 and "angles: on-axis luminance" in out, out
     np.savetxt(tmp_path / "d.csv", np.array([[1.0, 1.0]]), delimiter=",", header="x_mm,y_mm")
     good = json.loads((tmp_path / "s.json").read_text())
+    few = good["angles"]  # the file says it too: no half angle, not judged
+    assert few["on_axis_rays"] < 100 and few["on_axis_judged"] is False
+    assert few["half_luminance_deg"] == {"horizontal": None, "vertical": None}
+    (tmp_path / "two.csv").write_text("x_mm,y_mm,diameter_mm\n1,1,0.046\n3,3,0.046\n")
+    rc, err, _ = cli("qa", tmp_path / "two.csv", "--no-job", "--simulation", tmp_path / "s.json",
+                     "--html", tmp_path / "r.html")  # fmt: skip
+    assert rc in (0, 1) and not err, err  # (two dots on a panel: the gate may fail)
+    page = (tmp_path / "r.html").read_text()
+    assert "too few to judge the on-axis luminance" in page and "half luminance at" not in page
     for field, bad, words in (
         ("angular_luminance", [[1, 2], [3]], "all as long"),
         ("angular_luminance", [[1, "x"], [0, 1]], "not a number >= 0"),

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import click
 
+from ..figures import angles_judged
 from ..runtime.kernels import warm
 from .app import main, user_errors
 from .records import Count, Finite, record
@@ -23,10 +24,6 @@ SEED = click.option(
     show_default=True,
     help="Monte Carlo seed: the same job, rays and seed give the same figures.",
 )
-
-#: Rays within the first polar ring under which ``simulate`` does not state the on-axis
-#: luminance and half angles (their noise would be 10 % or more).
-MIN_ON_AXIS_RAYS = 100
 
 
 @dataclass(frozen=True)
@@ -209,7 +206,7 @@ def _print_simulation(sim, seconds: float, echo=click.echo) -> None:
     if a is not None and not a.get("rays"):
         if s["counts"].get("extracted"):
             echo("angles: none measured: the rays ended at the dots (an idealised extractor)")
-    elif a is not None and a.get("on_axis_rays", 0) < MIN_ON_AXIS_RAYS:
+    elif a is not None and not angles_judged(a):
         echo(
             f"angles: {a.get('on_axis_rays', 0)} rays left within 5 deg of the normal, too few "
             f"to judge the on-axis luminance and its half angles (trace more rays)"

@@ -111,12 +111,11 @@ def traced_as_made(path: Path, pattern, job) -> None:
         JobError: one line naming the file and what differs.
     """
     from ..errors import JobError
-    from ..geometry.profile import PRISM
     from ..orchestration.pipeline import dot_rule
     from ..quality.conformance import footprint_text
 
     prof = job.profile
-    if path.suffix.lower() == ".dxf" and prof.code >= PRISM and prof.facets[0] != prof.facets[1]:
+    if path.suffix.lower() == ".dxf" and prof.facets[0] != prof.facets[1]:  # (0, 0) off prisms
         raise JobError(
             f"{path}: a DXF holds each prism's outline, not which way it points, and this "
             f"job's facets differ (dots.facets = [{prof.facets[0]:g}, {prof.facets[1]:g}]): "

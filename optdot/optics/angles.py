@@ -16,7 +16,9 @@ Figures (:meth:`Angles.figures`):
 - ``half_luminance_deg``: horizontal (the x-z plane) and vertical (the y-z plane): the
   polar angle at which the luminance in that plane (the bins within
   :data:`PLANE_DEG` of it, both sides) falls to half its on-axis value, linear between
-  ring centres; None when it stays above half to the last ring.
+  ring centres; None when it stays above half to the last ring, and both None when
+  fewer than :data:`~optdot.figures.MIN_ON_AXIS_RAYS` rays fall in the first ring
+  (``on_axis_rays``; the figures say so in ``on_axis_judged``).
 
 Each figure's Monte Carlo noise is Poisson in the rays counted (``on_axis_sigma``).
 """
@@ -28,6 +30,8 @@ from dataclasses import dataclass
 
 import numba as nb
 import numpy as np
+
+from ..figures import MIN_ON_AXIS_RAYS
 
 #: Width of the polar and azimuth bins, degrees (the issue asks for 5 at most).
 STEP_DEG = 5.0
@@ -95,12 +99,16 @@ class Angles:
         on_axis = ring / max(n, 1) / (lam[0] * self.counts.shape[1]) if n else math.nan
         sigma = on_axis / math.sqrt(ring) if ring > 0 else math.nan
         profiles = {name: self.profile(plane) for name, plane in PLANES}
+        judged = int(ring) >= MIN_ON_AXIS_RAYS
         return {
             "rays": n,
             "on_axis_rays": int(ring),
+            "on_axis_judged": judged,
             "on_axis": float(on_axis),
             "on_axis_sigma": float(sigma),
-            "half_luminance_deg": {k: _half_angle(v) for k, v in profiles.items()},
+            "half_luminance_deg": {
+                k: _half_angle(v) if judged else None for k, v in profiles.items()
+            },
             "profiles": {k: [round(float(x), 4) for x in v] for k, v in profiles.items()},
         }
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..figures import angles_pair, halo_pair, luminance_pair, structure_text
+from ..figures import angles_judged, angles_pair, halo_pair, luminance_pair, structure_text
 from ..io.atomic import atomic_path, expect_tail
 from .gate import QAResult, jnd_text
 from .visibility import BLOB_JND
@@ -322,7 +322,12 @@ def _simulation_section(result: QAResult) -> str:
             f" The LED at ({hx:.2f}, {hy:.2f}) mm lit alone (below): its halo is {w50} wide at "
             f"half its peak and {w10} at a tenth."
         )
-    if angles:
+    if angles and not angles_judged(sim["angles"]):
+        halo_text += (
+            f" By direction (below): {sim['angles'].get('on_axis_rays', 0)} rays left within 5° "
+            "of the normal, too few to judge the on-axis luminance and its half angles."
+        )
+    elif angles:
         a = sim["angles"]
         halves = ", ".join(
             f"{k} {'over 87.5°' if v is None else f'{v:.1f}°'}"
