@@ -972,3 +972,15 @@ def test_a_dxf_of_prisms_whose_facets_differ_is_refused_by_simulate_not_traced(t
         assert rc == 0, err
         got.append(json.loads(out.read_text()))
     assert got[0]["efficiency"] == got[1]["efficiency"] and got[0]["angles"] == got[1]["angles"]
+
+
+def test_check_names_the_profile_and_a_ray_count_that_is_no_number_is_refused(tmp_path):
+    """``optdot check`` says what the dots are (prisms, their height and facets), and
+    ``--rays abc`` is refused in one line that shows how to write a count."""
+    from .conftest import cli, one_error
+
+    _prism_guide(tmp_path, 'profile = "prism"\nfacets = [45, 30]\ncut = true')
+    rc, err, out = cli("check", tmp_path / "p.toml")
+    assert rc == 0 and "prisms cut 43.9 µm deep, facets 45° / 30° (" in out, (err, out)
+    one_error(("simulate", tmp_path / "p.toml", "--rays", "abc"), 2,
+              "'abc' is not a whole number (2000000, 2e6 or 2_000_000)")  # fmt: skip

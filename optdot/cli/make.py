@@ -49,9 +49,10 @@ def check(job_file, run, tiling):
         + ("" if job.domain.rectangle else " (outline)")
         + f", map {d.shape[1]} x {d.shape[0]} cells, fill {d.min():.3g}..{d.max():.3g}"
     )
+    relief = "" if job.profile.kind == "ink" else f", {job.profile.words()}"
     click.echo(
-        f"dots: {got.n_dots:,} of {_diameter_text(job)} ({opt.method}, seed {opt.seed}, "
-        f"{opt.max_iter} iterations)"
+        f"dots: {got.n_dots:,} of {_diameter_text(job)}{relief} ({opt.method}, seed "
+        f"{opt.seed}, {opt.max_iter} iterations)"
     )
     click.echo(f"run: {how}")
     c = got.cost

@@ -109,7 +109,10 @@ class Count(click.IntRange):
                 number = float(text)
             except ValueError:
                 number = None
-            if number is not None and "e" in text.lower():
+            if number is None:
+                self.fail(f"{value[:40]!r} is not a whole number (2000000, 2e6 or 2_000_000)",
+                          param, ctx)  # fmt: skip
+            if "e" in text.lower():
                 if not (number.is_integer() and abs(number) < 2**63):
                     self.fail(f"{value[:40]!r} is not a whole number in range", param, ctx)
                 value = int(number)
