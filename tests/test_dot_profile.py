@@ -984,3 +984,22 @@ def test_check_names_the_profile_and_a_ray_count_that_is_no_number_is_refused(tm
     assert rc == 0 and "prisms cut 43.9 µm deep, facets 45° / 30° (" in out, (err, out)
     one_error(("simulate", tmp_path / "p.toml", "--rays", "abc"), 2,
               "'abc' is not a whole number (2000000, 2e6 or 2_000_000)")  # fmt: skip
+
+
+def test_dots_of_a_size_the_rule_does_not_give_there_are_refused_naming_what_it_gives(tmp_path):
+    """A graded job's dots (30-120 µm by the fill) traced from a CSV of 46 µm dots: 46 µm
+    is in the range, on a step, and still not the job's where the dot stands; the one
+    line says what the rule gives there."""
+    from .conftest import one_error
+
+    np.savetxt(tmp_path / "map.csv", np.full((8, 12), 0.2), delimiter=",")
+    (tmp_path / "g.toml").write_text(
+        '[domain]\nwidth = 12.0\nheight = 8.0\n[density]\ngrid = "map.csv"\n'
+        '[dots]\ndiameter = [0.03, 0.12]\nspacing = 0.15\nprofile = "bump"\nheight = 0.015\n'
+        '[light_guide]\nthickness = 0.4\n[[light_guide.leds]]\nedge = "bottom"\n'
+        "positions = [6.0]\nwidth = 2.0\n"
+    )
+    (tmp_path / "d.csv").write_text("x_mm,y_mm,diameter_mm\n5,3,0.046\n7,5,0.046\n")
+    args = ("simulate", tmp_path / "g.toml", tmp_path / "d.csv", "--rays", "1000")
+    line = one_error(args, 2, "d.csv: 2 of its 2 dots are not this job's circle 30–120 µm on")
+    assert "(the first: circle 46 µm at (5.000, 3.000) mm, where the job's size rule gives" in line

@@ -126,9 +126,15 @@ def traced_as_made(path: Path, pattern, job) -> None:
     stray = rule.stray(feet, pattern.xy)
     if stray.any():
         i = int(np.flatnonzero(stray)[0])
+        where = ""
+        if rule.band is not None:  # a size of the range, but not the one the rule gives there
+            lo, hi = (float(v[0]) * 1e3 for v in rule.band.at(pattern.xy[i : i + 1]))
+            x, y = pattern.xy[i]
+            span = f"{lo:.4g}" if abs(hi - lo) < 1e-9 else f"{lo:.4g}–{hi:.4g}"
+            where = f" at ({x:.3f}, {y:.3f}) mm, where the job's size rule gives {span} µm"
         raise JobError(
             f"{path}: {int(stray.sum()):,} of its {pattern.n:,} dots are not this job's "
-            f"{rule.describe()} (the first: {footprint_text(feet.kind, feet.size[i])}): "
+            f"{rule.describe()} (the first: {footprint_text(feet.kind, feet.size[i])}{where}): "
             "trace a pattern with the job it was made for"
         )
     band = _empty_band(pattern, job)
