@@ -102,6 +102,24 @@ transmittance = 0.65
 PRISM = '[[backlight.sheets]]\nkind = "prism"\n'
 
 
+def _gain(tmp_path, stack: str, rays: int) -> tuple[float, float, dict]:
+    """``stack`` (a job's text) traced by ``simulate`` without and with a 90° prism sheet
+    on top: ``(gain, sigma, summaries)``, the on-axis gain (efficiency times on-axis
+    luminance, with over without) and its noise, and each run's JSON by name."""
+    np.savetxt(tmp_path / "m.csv", np.full((2, 2), 0.001), delimiter=",")
+    got = {}
+    for name, text in (("plain", stack), ("bef", stack + PRISM + 'grooves = "y"\n')):
+        job = tmp_path / f"{name}.toml"
+        job.write_text(text + '[density]\ngrid = "m.csv"\n')
+        rc, err, _ = cli("simulate", job, "--rays", str(rays), "--json", tmp_path / f"{name}.json")
+        assert rc == 0, err
+        got[name] = json.loads((tmp_path / f"{name}.json").read_text())
+    on = {k: v["efficiency"] * v["angles"]["on_axis"] for k, v in got.items()}
+    rel = [v["angles"]["on_axis_sigma"] / v["angles"]["on_axis"] for v in got.values()]
+    gain = on["bef"] / on["plain"]
+    return gain, gain * math.hypot(*rel), got
+
+
 def test_a_prism_sheet_over_a_recycling_cavity_brightens_the_axis_within_the_published_band(
     tmp_path,
 ):
@@ -109,16 +127,7 @@ def test_a_prism_sheet_over_a_recycling_cavity_brightens_the_axis_within_the_pub
     on-axis luminance (efficiency times the on-axis luminance of a Lambertian of the same
     flux) rises by the 1.4-1.8 published for such a film; the light narrows across the
     grooves (x) more than along them."""
-    np.savetxt(tmp_path / "m.csv", np.full((2, 2), 0.001), delimiter=",")
-    got = {}
-    for name, text in (("plain", STACK), ("bef", STACK + PRISM + 'grooves = "y"\n')):
-        job = tmp_path / f"{name}.toml"
-        job.write_text(text + '[density]\ngrid = "m.csv"\n')
-        rc, err, _ = cli("simulate", job, "--rays", "400000", "--json", tmp_path / f"{name}.json")
-        assert rc == 0, err
-        got[name] = json.loads((tmp_path / f"{name}.json").read_text())
-    on = {k: v["efficiency"] * v["angles"]["on_axis"] for k, v in got.items()}
-    gain = on["bef"] / on["plain"]
+    gain, _, got = _gain(tmp_path, STACK, 400_000)
     assert 1.4 < gain < 1.9, gain
     half = got["bef"]["angles"]["half_luminance_deg"]
     assert half["horizontal"] < 40 < half["vertical"]
@@ -272,16 +281,5 @@ def test_the_gain_over_an_ideal_recycler_is_what_one_pass_through_the_film_gives
     above = np.column_stack([s * np.cos(phi), s * np.sin(phi), -np.sqrt(1 - a)])
     through = float(np.mean(_meet_each(above, False, _row()) == CROSS))
     want = through / (1 - 0.8 * rho)
-    np.savetxt(tmp_path / "m.csv", np.full((2, 2), 0.001), delimiter=",")
-    got = {}
-    for name, text in (("plain", IDEAL), ("bef", IDEAL + PRISM + 'grooves = "y"\n')):
-        job = tmp_path / f"{name}.toml"
-        job.write_text(text + '[density]\ngrid = "m.csv"\n')
-        rc, err, _ = cli("simulate", job, "--rays", "2000000", "--json", tmp_path / f"{name}.json")
-        assert rc == 0, err
-        got[name] = json.loads((tmp_path / f"{name}.json").read_text())
-    on = {k: v["efficiency"] * v["angles"]["on_axis"] for k, v in got.items()}
-    rel = {k: v["angles"]["on_axis_sigma"] / v["angles"]["on_axis"] for k, v in got.items()}
-    gain = on["bef"] / on["plain"]
-    sigma = gain * math.hypot(rel["bef"], rel["plain"])
+    gain, sigma, _ = _gain(tmp_path, IDEAL, 2_000_000)
     assert abs(gain - want) < 4 * sigma, (gain, want, sigma, rho, through)
