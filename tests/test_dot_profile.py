@@ -1003,3 +1003,61 @@ def test_dots_of_a_size_the_rule_does_not_give_there_are_refused_naming_what_it_
     args = ("simulate", tmp_path / "g.toml", tmp_path / "d.csv", "--rays", "1000")
     line = one_error(args, 2, "d.csv: 2 of its 2 dots are not this job's circle 30–120 µm on")
     assert "(the first: circle 46 µm at (5.000, 3.000) mm, where the job's size rule gives" in line
+
+
+DIRECTED = """name = "p"
+[domain]
+width = 6.0
+height = 3.0
+[density]
+grid = "pmap.csv"
+[dots]
+shape = "rounded_rectangle"
+length = 0.120
+width = 0.030
+corner_radius = 0.0
+profile = "prism"
+facets = [70, 20]
+cut = true
+[orientation]
+toward = "leds"
+relative = "parallel"
+[optimize]
+seed = 1
+gap = 0.005
+[light_guide]
+thickness = 0.4
+[[light_guide.leds]]
+edge = "bottom"
+positions = [1.5, 4.5]
+width = 1.0
+"""
+
+
+def test_the_gate_fails_prisms_turned_half_a_turn_when_their_facets_differ(tmp_path):
+    """70° / 20° prisms facing their LEDs (a hostile tester's job): their outlines are the
+    same turned half a turn, their light is not (9-point 0.447 against 0.313 traced). The
+    gate passed a CSV of every prism turned 180° and the led sample's DXF; now the angle
+    check reads directions over 360° for such prisms: the turned CSV fails, the DXF fails
+    saying a DXF holds outlines only, the pattern's own CSV and its GDSII mask pass."""
+    from .conftest import cli
+
+    np.savetxt(tmp_path / "pmap.csv", np.tile(np.linspace(0.1, 0.43, 12), (4, 1)), delimiter=",")
+    job = tmp_path / "p.toml"
+    job.write_text(DIRECTED)
+    csv, gds, dxf = (tmp_path / f"p.{e}" for e in ("csv", "gds", "dxf"))
+    rc, err, _ = cli("export", job, "--csv", csv, "--gds", gds, "--dxf", dxf, "-q")
+    assert rc == 0, err
+    lines = csv.read_text().splitlines()
+    turned = [lines[0]] + [
+        ",".join([*r.split(",")[:-1], f"{float(r.split(',')[-1]) + 180:.6f}"]) for r in lines[1:]
+    ]
+    (tmp_path / "turned.csv").write_text("\n".join(turned) + "\n")
+    verdict = {}
+    for f in (csv, gds, tmp_path / "turned.csv", dxf):
+        rc, err, out = cli("qa", f, "--job", job)
+        verdict[f.name] = (rc, [x for x in out.splitlines() if "orientation field" in x])
+    assert verdict["p.csv"][0] == 0 and verdict["p.gds"][0] == 0, verdict
+    assert verdict["turned.csv"][0] == 1 and "FAIL" in verdict["turned.csv"][1][0], verdict
+    assert ": 180 (limit" in verdict["turned.csv"][1][0]
+    assert verdict["p.dxf"][0] == 1 and "a DXF holds outlines" in verdict["p.dxf"][1][0]

@@ -239,9 +239,17 @@ def judge(
     turned = m.get("orientation") or {}
     field_limit = MAX_FIELD_ERROR_DEG + (rule.angle_slack_deg() if rule is not None else 0.0)
     if "field_error_max_deg" in turned:
+        turned_back = turned["field_error_max_deg"] > 179.0  # directions: a half turn off
         checks.append(
             Check(
-                "largest angle of a dot off the orientation field where it stands, degrees",
+                "largest angle of a dot off the orientation field where it stands, degrees"
+                + (
+                    " (a prism whose facets differ, turned half a turn, faces away from its "
+                    "LED; a DXF holds outlines, not which way prisms point: check the "
+                    "GDSII, OASIS or pattern file)"
+                    if turned_back
+                    else ""
+                ),
                 turned["field_error_max_deg"],
                 field_limit,
                 turned["field_error_max_deg"] <= field_limit,

@@ -241,16 +241,20 @@ def _add_angles(
     f: FirstSums, xy: np.ndarray, angle: np.ndarray, field: Orientation | None, period: float
 ):
     """Shaped dots' axes per 5° (-90..90°) and, with the field, their difference from it
-    (modulo the footprint's ``period``, rad: turns that map it onto itself)."""
+    (modulo the footprint's ``period``, rad: turns that map it onto itself; modulo 2π
+    where the field gives directions, prisms whose facets differ: turned half a turn,
+    such a prism faces away from its LED, though its outline is the same)."""
     deg = np.degrees(axis(angle))
     h, _ = np.histogram(deg, bins=36, range=(-90.0, 90.0))
     f.angle_hist = h if f.angle_hist is None else f.angle_hist + h
+    if field is not None and field.period > np.pi:
+        period = field.period
     if field is not None:  # the field where the dot stands, or across a jump next to it
         here = field.at(xy)
         err = np.abs(np.degrees(axis(angle - here, period)))
         for step in ((1, 0), (-1, 0), (0, 1), (0, -1)):
             there = field.at(xy + FIELD_REACH_MM * np.array(step))
-            jump = np.abs(np.degrees(axis(there - here))) > FIELD_JUMP_DEG
+            jump = np.abs(np.degrees(axis(there - here, field.period))) > FIELD_JUMP_DEG
             near = np.abs(np.degrees(axis(angle - there, period)))
             err = np.where(jump, np.minimum(err, near), err)
         f.field_error_max = max(f.field_error_max, float(err.max()))
