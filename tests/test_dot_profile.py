@@ -1061,3 +1061,25 @@ def test_the_gate_fails_prisms_turned_half_a_turn_when_their_facets_differ(tmp_p
     assert verdict["turned.csv"][0] == 1 and "FAIL" in verdict["turned.csv"][1][0], verdict
     assert ": 180 (limit" in verdict["turned.csv"][1][0]
     assert verdict["p.dxf"][0] == 1 and "a DXF holds outlines" in verdict["p.dxf"][1][0]
+
+
+def test_the_gate_judges_random_angles_by_their_spread(tmp_path):
+    """A job of randomly turned prisms draws each angle where its dot was thrown, so no
+    dot's angle can be checked: the gate judges their spread against uniform instead (a
+    chi-square of the 5° histogram). The job's own export passes; a mask of the same
+    panel's prisms facing their LEDs (a hostile tester's: 9 to 82 dots a bin) failed
+    nothing before and fails now."""
+    from .conftest import cli
+
+    np.savetxt(tmp_path / "pmap.csv", np.tile(np.linspace(0.1, 0.43, 12), (4, 1)), delimiter=",")
+    toward, rand = tmp_path / "toward.toml", tmp_path / "random.toml"
+    toward.write_text(DIRECTED)
+    rand.write_text(DIRECTED.replace('toward = "leds"\nrelative = "parallel"', "random = true"))
+    for job in (toward, rand):
+        rc, err, _ = cli("export", job, "--gds", tmp_path / f"{job.stem}.gds", "-q")
+        assert rc == 0, err
+    rc, _, out = cli("qa", tmp_path / "random.gds", "--job", rand)
+    assert rc == 0 and "verdict: PASS\n" in out + "\n", out
+    rc, _, out = cli("qa", tmp_path / "toward.gds", "--job", rand)
+    line = [x for x in out.splitlines() if "random angles" in x]
+    assert rc == 1 and line and line[0].startswith("FAIL"), out

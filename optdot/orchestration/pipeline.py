@@ -372,11 +372,7 @@ def qa(
             gap = job.collision_distance - job.diameter
             if params.close_gap is None:
                 params = replace(params, close_gap=max(params.close_distance - job.diameter, 0))
-        field = (
-            job.orientation
-            if not job.shape.kind.round and job.orientation.follows_position
-            else None
-        )
+        field = job.orientation if not job.shape.kind.round else None
         result = run_qa(
             dots,
             job.density,

@@ -97,6 +97,13 @@ class QAResult:
         }
 
 
+#: Randomly turned dots: the most ``-log10`` of the chance (chi-square, 35 degrees of
+#: freedom) that uniform angles spread as far from uniform as theirs (6: one in a
+#: million), and the fewest dots it is judged on (five to a 5° bin). A job's seeded angles
+#: are uniform: a mask whose angles follow anything else (another job's field) fails.
+RANDOM_MAX_RARITY = 6.0
+RANDOM_MIN_DOTS = 180
+
 #: Largest angle a shaped dot may be off its orientation field, degrees.
 MAX_FIELD_ERROR_DEG = 0.5
 
@@ -176,6 +183,7 @@ def judge(
         rule,
     )
     m, w = got.metrics, got.where
+    skipped: list[str] = []
     if gaps is None:
         collide_text = f"pairs closer than {collision * 1e3:.1f} µm (collisions)"
         close_text = f"share of dots in pairs closer than {close * 1e3:.1f} µm"
@@ -255,6 +263,21 @@ def judge(
                 turned["field_error_max_deg"] <= field_limit,
             )
         )
+    hist = turned.get("histogram_5deg_from_-90")
+    random_field = orientation is not None and not orientation.follows_position
+    if random_field and hist is not None and sum(hist) >= RANDOM_MIN_DOTS:
+        rare = -np.log10(max(_uniform_p(np.asarray(hist, np.float64)), 1e-300))
+        checks.append(
+            Check(
+                "random angles: how unlikely their spread is from uniform ones, -log10 of "
+                "the chance (chi-square of their 5° histogram)",
+                float(rare),
+                RANDOM_MAX_RARITY,
+                bool(rare <= RANDOM_MAX_RARITY),
+            )
+        )
+    elif random_field and hist is not None:
+        skipped.append(f"random angles' spread (under {RANDOM_MIN_DOTS} shaped dots)")
     if density is not None:
         checks.append(
             Check(
@@ -314,9 +337,8 @@ def judge(
                 advisory=True,
             )
         )
-    skipped = []
     if density is None:
-        skipped = [
+        skipped += [
             "coverage error (no target map: give --job)",
             "dots in zero-density cells (no target map: give --job)",
             "visibility (no target map: give --job)",
@@ -400,3 +422,12 @@ def jnd_text(v: float, limit: float = 1.0) -> str:
         if (shown < limit) == (v < limit) and (shown > limit) == (v > limit):
             return text
     return text
+
+
+def _uniform_p(hist: np.ndarray) -> float:
+    """The chance that uniform angles spread over ``hist``'s bins at least as unevenly
+    (Pearson's chi-square against equal bins)."""
+    from scipy.stats import chi2
+
+    e = hist.sum() / len(hist)
+    return float(chi2.sf(((hist - e) ** 2 / e).sum(), len(hist) - 1))

@@ -247,18 +247,19 @@ def _add_angles(
     deg = np.degrees(axis(angle))
     h, _ = np.histogram(deg, bins=36, range=(-90.0, 90.0))
     f.angle_hist = h if f.angle_hist is None else f.angle_hist + h
-    if field is not None and field.period > np.pi:
+    if field is None or not field.follows_position:  # random angles: their spread, judged
+        return
+    if field.period > np.pi:
         period = field.period
-    if field is not None:  # the field where the dot stands, or across a jump next to it
-        here = field.at(xy)
-        err = np.abs(np.degrees(axis(angle - here, period)))
-        for step in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-            there = field.at(xy + FIELD_REACH_MM * np.array(step))
-            jump = np.abs(np.degrees(axis(there - here, field.period))) > FIELD_JUMP_DEG
-            near = np.abs(np.degrees(axis(angle - there, period)))
-            err = np.where(jump, np.minimum(err, near), err)
-        f.field_error_max = max(f.field_error_max, float(err.max()))
-        f.field_error_sum += float(err.sum())
+    here = field.at(xy)  # the field where the dot stands, or across a jump next to it
+    err = np.abs(np.degrees(axis(angle - here, period)))
+    for step in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        there = field.at(xy + FIELD_REACH_MM * np.array(step))
+        jump = np.abs(np.degrees(axis(there - here, field.period))) > FIELD_JUMP_DEG
+        near = np.abs(np.degrees(axis(angle - there, period)))
+        err = np.where(jump, np.minimum(err, near), err)
+    f.field_error_max = max(f.field_error_max, float(err.max()))
+    f.field_error_sum += float(err.sum())
 
 
 def _add_strays(f: FirstSums, xy: np.ndarray, dots: Footprints, rule: DotRule) -> None:

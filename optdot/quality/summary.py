@@ -79,7 +79,7 @@ def summarize(
         }
     if f.angle_hist is not None:
         m["orientation"] = {"histogram_5deg_from_-90": f.angle_hist.tolist()}
-        if field is not None:
+        if field is not None and field.follows_position:
             m["orientation"]["field_error_max_deg"] = f.field_error_max
             m["orientation"]["field_error_mean_deg"] = f.field_error_sum / max(n, 1)
     m["pairs_below_collision"] = s.pairs_collision
