@@ -28,6 +28,7 @@ from optdot.optics.rays import ray_state
 from optdot.optics.simulate import simulate, traced_what
 
 from .conftest import graded_guide
+from .test_shaped_dots import PRISM_JOB
 
 N = 1.49  # PMMA
 #: No walls: a dot's ray is moved freely.
@@ -1005,33 +1006,15 @@ def test_dots_of_a_size_the_rule_does_not_give_there_are_refused_naming_what_it_
     assert "(the first: circle 46 µm at (5.000, 3.000) mm, where the job's size rule gives" in line
 
 
-DIRECTED = """name = "p"
-[domain]
-width = 6.0
-height = 3.0
-[density]
-grid = "pmap.csv"
-[dots]
-shape = "rounded_rectangle"
-length = 0.120
-width = 0.030
-corner_radius = 0.0
-profile = "prism"
-facets = [70, 20]
-cut = true
-[orientation]
-toward = "leds"
-relative = "parallel"
-[optimize]
-seed = 1
-gap = 0.005
-[light_guide]
-thickness = 0.4
-[[light_guide.leds]]
-edge = "bottom"
-positions = [1.5, 4.5]
-width = 1.0
-"""
+#: Cut 70° / 20° prisms facing two LEDs on a 6 x 3 mm guide (a hostile tester's job):
+#: the direction test's guide, its facets given, on ``pmap.csv``.
+DIRECTED = (
+    PRISM_JOB.replace("height = 4.0", "height = 3.0")
+    .replace('grid = "m.csv"', 'grid = "pmap.csv"')
+    .replace("width = 0.04\ncorner_radius = 0.005", "width = 0.030\ncorner_radius = 0.0")
+    .replace("FACETS", "[70, 20]\ncut = true")
+    .replace("[light_guide]", "[optimize]\nseed = 1\ngap = 0.005\n[light_guide]")
+)
 
 
 def test_the_gate_fails_prisms_turned_half_a_turn_when_their_facets_differ(tmp_path):
