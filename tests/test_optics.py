@@ -291,6 +291,18 @@ def test_bad_leds_are_refused_in_one_line(tmp_path, leds, words):
     assert not (tmp_path / "m.csv").exists()
 
 
+def test_a_design_whose_written_job_would_be_the_job_it_reads_names_the_option(tmp_path):
+    """``design g.toml -o g.csv`` writes its job to g.toml by default, the job it reads:
+    refused before anything runs, in one line naming ``--job-out``."""
+    (tmp_path / "g.toml").write_text(
+        (SAMPLES / "lgp" / "job.toml").read_text().replace('"lgp_map.csv"', '"none.csv"')
+    )
+    before = (tmp_path / "g.toml").read_bytes()
+    one_error(["design", tmp_path / "g.toml", "-o", tmp_path / "g.csv"], 2, "'--job-out'",
+              "defaults to the map's name with .toml")  # fmt: skip
+    assert (tmp_path / "g.toml").read_bytes() == before and not (tmp_path / "g.csv").exists()
+
+
 @pytest.mark.parametrize(
     "key,value,words",
     [

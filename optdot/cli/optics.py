@@ -288,6 +288,12 @@ def design(job_file, output, png_path, job_out, rays, iterations, seed, quiet):
     if output.suffix.lower() != ".csv":
         raise click.BadParameter("must end in .csv", param_hint="'-o' / '--output'")
     png_path = png_path or output.with_suffix(".png")
+    if job_out is None and output.with_suffix(".toml").resolve() == job_file.resolve():
+        raise click.BadParameter(
+            f"the written job defaults to the map's name with .toml, {job_file}, the job "
+            "read: give --job-out another name (or the map another name)",
+            param_hint="'--job-out'",
+        )
     job_out = job_out or output.with_suffix(".toml")
     job = load_job(job_file, need_map=False)
     check_outputs({"output": output, "png": png_path, "job-out": job_out}, job.inputs)
