@@ -114,3 +114,12 @@ def test_pvtrace_agrees_on_extraction_and_losses():
     # the comparison can tell: the extraction differs by a quarter without the dots
     bare = simulate(job.bench, 200_000, seed=3, dots=Pattern(centres[:0], D, (0.0, 0.0, W, H)))
     assert bare.efficiency < 0.05 < theirs["extracted"] / injected
+
+
+def test_a_missing_pvtrace_fails_the_comparisons_naming_its_extra(monkeypatch):
+    """Without pvtrace (the `validation` extra) a comparison fails, never skips."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "pvtrace", None)
+    with pytest.raises(pytest.fail.Exception, match=r"pip install '\.\[validation\]'"):
+        load_pvtrace()

@@ -283,3 +283,14 @@ def test_the_gain_over_an_ideal_recycler_is_what_one_pass_through_the_film_gives
     want = through / (1 - 0.8 * rho)
     gain, sigma, _ = _gain(tmp_path, IDEAL, 2_000_000)
     assert abs(gain - want) < 4 * sigma, (gain, want, sigma, rho, through)
+
+
+def test_light_skimming_from_prism_to_prism_gets_out():
+    """Near 30° across the grooves, light leaves a facet, enters the next prism and is
+    reflected totally by the base, for up to ~200 surfaces: none of it counts as caught in
+    the sheet (0.28 % did under a 64-surface limit)."""
+    from optdot.optics.tables import SHEET
+
+    t = math.radians(30.0)
+    out = _meet(100_000, True, math.sin(t), 0.0, math.cos(t), _row())
+    assert not np.any(out[:, 0] == SHEET)
