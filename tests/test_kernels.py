@@ -93,6 +93,23 @@ def test_manifest_installed_and_loaded():
     assert [k.types for k in again] == [k.types for k in listed]
 
 
+def test_helpers_import_this_optdot_wherever_the_command_runs(tmp_path, monkeypatch):
+    """A command run in a folder holding another ``optdot`` (the checkout a package was
+    installed from): its helpers compile this process's optdot, not that one (they would
+    cache the other's kernels where the run never looks, and it would compile its own)."""
+    decoy = tmp_path / "optdot"
+    (decoy / "runtime").mkdir(parents=True)
+    marker = tmp_path / "imported"
+    (decoy / "__init__.py").write_text(f"open({str(marker)!r}, 'w').close()\n")
+    (decoy / "runtime" / "__init__.py").write_text("")
+    (decoy / "runtime" / "kernels.py").write_text("")
+    monkeypatch.chdir(tmp_path)
+    kernels._compile_together([[]], 2)  # a helper started, nothing to compile
+    assert not marker.exists()
+    home = Path(kernels.package_home())
+    assert (home / "optdot" / "runtime" / "kernels.py").samefile(kernels.__file__)
+
+
 def test_processes_allowed(monkeypatch):
     monkeypatch.setenv(kernels.PROCESSES_ENV, "1")
     assert kernels.processes_allowed() == 1

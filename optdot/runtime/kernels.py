@@ -270,6 +270,15 @@ def warm(group: str | tuple[str, ...], processes: int | None = None, announce=No
     return len(todo) - len(cold(group))
 
 
+def package_home() -> str:
+    """The folder holding the optdot package this process runs: a helper started there
+    (``python -m`` puts the folder it starts in first on the import path) compiles this optdot's
+    kernels into this optdot's cache. Started from a checkout's folder instead, as a
+    command run in the checkout a package was installed from is, it would compile the
+    checkout's modules into their own cache, and the run would compile its own again."""
+    return str(Path(__file__).resolve().parents[2])
+
+
 def _compile_together(work: list[list[int]], count: int) -> None:
     """:func:`compile_claimed` in this process and ``count - 1`` helpers, sharing a
     temporary claims folder; the helpers are stopped if this process stops."""
@@ -279,7 +288,11 @@ def _compile_together(work: list[list[int]], count: int) -> None:
         helpers: list[subprocess.Popen] = []
         try:
             for _ in range(count - 1):
-                helpers.append(subprocess.Popen(args, stdin=quiet, stdout=quiet, stderr=quiet))
+                helpers.append(
+                    subprocess.Popen(
+                        args, stdin=quiet, stdout=quiet, stderr=quiet, cwd=package_home()
+                    )
+                )
             compile_claimed(work, claims)
             for p in helpers:
                 while p.poll() is None:
