@@ -91,47 +91,16 @@ def _checkout_exporters() -> None:
 
 _checkout_exporters()
 
-#: Caches of compiled kernels kept for a checkout (the newest; older sources' removed).
-KERNEL_CACHES = 3
+
+def _kernel_cache() -> None:
+    """Where numba caches the kernels, read safely (:mod:`optdot.runtime.kernel_cache`),
+    settled before numba loads."""
+    from .runtime.kernel_cache import settle
+
+    settle()
 
 
-def _checkout_kernel_cache() -> None:
-    """Compile a source checkout's kernels into a numba cache of their own, named by the
-    sources of every module that holds kernels (unless ``NUMBA_CACHE_DIR`` is set). numba
-    keys a cached kernel by its own file only: a kernel that inlines another module's
-    (the registry's dispatch of a kind's ``inside``, the tracer's of a face's ``meet``)
-    would run the old code after that module is edited. An installed copy does not
-    change (an upgrade rewrites every file), so it keeps numba's own cache."""
-    import hashlib
-    import os
-    import shutil
-    import sys
-    from pathlib import Path
-
-    root = Path(__file__).resolve().parent.parent
-    checkout = (root / "pyproject.toml").is_file() and (root / "exporters").is_dir()
-    if "NUMBA_CACHE_DIR" in os.environ or not checkout:
-        return
-    digest = hashlib.sha256()
-    for path in sorted(root.glob("optdot/**/*.py")) + sorted(root.glob("exporters/**/*.py")):
-        text = path.read_bytes()
-        if b"numba" in text:
-            digest.update(path.relative_to(root).as_posix().encode() + b"\0" + text)
-    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "optdot-kernels"
-    here = base / digest.hexdigest()[:16]
-    try:
-        here.mkdir(parents=True, exist_ok=True)
-        here.touch()  # the newest
-        for old in sorted(base.iterdir(), key=lambda p: p.stat().st_mtime)[:-KERNEL_CACHES]:
-            shutil.rmtree(old, ignore_errors=True)
-    except OSError:  # no writable cache home: numba's own cache, as installed
-        return
-    os.environ["NUMBA_CACHE_DIR"] = str(here)  # read when numba is imported, and by workers
-    if "numba" in sys.modules:  # imported already: its config, before any kernel is made
-        sys.modules["numba"].config.CACHE_DIR = str(here)
-
-
-_checkout_kernel_cache()
+_kernel_cache()
 
 
 def __getattr__(name: str):

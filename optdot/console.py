@@ -22,6 +22,10 @@ import sys
 
 from .runtime.stop import interrupted, mark_interrupted
 
+#: Exit code when the command line cannot load (a broken install): the internal error's,
+#: sysexits' EX_SOFTWARE (:data:`optdot.cli.app.EXIT_INTERNAL`, which did not load).
+EXIT_CANNOT_LOAD = 70
+
 
 def _note(signum, frame) -> None:
     mark_interrupted()
@@ -80,7 +84,15 @@ def run() -> None:
         sys.stdout = QuietStdout(sys.stdout)
     for s in (signal.SIGINT, signal.SIGTERM):
         signal.signal(s, _note)
-    from .cli import main
+    try:
+        from .cli import main
+    except Exception as e:  # noqa: BLE001 - a broken install: one line, not a traceback
+        first = (str(e).strip().splitlines() or [""])[0]
+        sys.stderr.write(
+            f"optdot: internal error: cannot load the command line: {type(e).__name__}: {first}\n"
+        )
+        sys.stderr.flush()
+        os._exit(EXIT_CANNOT_LOAD)
 
     if interrupted():
         sys.stderr.write("optdot: interrupted\n")

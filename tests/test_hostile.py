@@ -314,6 +314,40 @@ def test_no_gdstk_lines_or_warnings_on_stderr(tmp_path):
         assert "[GDSTK]" not in msg
 
 
+def test_a_command_line_that_cannot_load_says_so_in_one_line():
+    """An install broken under the command line (a library that fails to import, numba
+    with nowhere to cache): a 36-line traceback and exit 1, the QA gate's failure code."""
+    import subprocess
+    import sys
+
+    code = "import sys; sys.modules['optdot.cli'] = None; from optdot.console import run; run()"
+    r = subprocess.run([sys.executable, "-P", "-c", code], capture_output=True, text=True)
+    assert r.returncode == EXIT_INTERNAL, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in r.stderr, lines
+    assert lines[0].startswith("optdot: internal error: cannot load the command line: ")
+
+
+def test_an_eof_error_is_an_internal_error_not_an_interrupt(tiny, monkeypatch, tmp_path):
+    """click reads an ``EOFError`` as a prompt's input ended and aborts: the command said
+    "interrupted" (exit 130) after a blank line though no signal came (a numba cache file
+    cut short raised one)."""
+    import optdot.orchestration.pipeline
+
+    def cut_short(*a, **k):
+        raise EOFError("Ran out of input")
+
+    monkeypatch.setattr(optdot.orchestration.pipeline, "generate", cut_short)
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", None)
+    rc, err, _ = cli("generate", tiny / "job.toml", "-o", tiny / "x.csv")
+    assert rc == EXIT_INTERNAL, err
+    assert err == [err[0]] and err[0].startswith("optdot: internal error: "), err
+    assert "EOFError: Ran out of input" in err[0]
+
+
 def test_an_internal_error_is_one_line_with_a_log(tiny, monkeypatch, tmp_path):
     import optdot.orchestration.pipeline
 

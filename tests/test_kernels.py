@@ -6,8 +6,10 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -60,6 +62,104 @@ def test_claimed_units_are_left_to_their_claimer(tmp_path, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["0", "1", "2"]
     assert kernels.compile_claimed(work, str(tmp_path)) == 0  # all claimed now
     assert compiled == [[4, 7], [2, 3, 5]]
+
+
+def test_a_helper_whose_run_is_gone_compiles_nothing(tmp_path, monkeypatch):
+    compiled: list[list[int]] = []
+    monkeypatch.setattr(kernels, "compile_kernels", lambda m: compiled.append(m) or len(m))
+    assert kernels.compile_claimed([[1], [2]], str(tmp_path), parent=os.getppid() + 1) == 0
+    assert compiled == [] and not list(tmp_path.iterdir())
+    assert kernels.compile_claimed([[1], [2]], str(tmp_path), parent=os.getppid()) == 2
+
+
+FIRST_RUN = [
+    sys.executable,
+    "-P",
+    "-m",
+    "optdot",
+    "generate",
+    str(ROOT / "samples" / "tiny" / "job.toml"),
+]
+
+
+def _helpers_of(pid: int) -> list[int]:
+    """The kernel helpers whose parent is ``pid`` (Linux /proc)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+            cmd = (stat.parent / "cmdline").read_bytes()
+        except OSError:
+            continue
+        if int(fields[1]) == pid and b"optdot.runtime.kernels" in cmd:
+            found.append(int(stat.parent.name))
+    return found
+
+
+def _cpu_seconds(pid: int) -> float:
+    """The CPU time process ``pid`` has used, s (Linux /proc: utime + stime)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (not gone, not a zombie)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def _first_run_with_helpers(tmp_path) -> tuple[subprocess.Popen, list[int]]:
+    """``optdot generate`` on the tiny sample with an empty kernel cache, once its
+    helpers compile: the process and the helpers' ids."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), OPTDOT_COMPILE_PROCESSES="2")
+    run = subprocess.Popen(
+        [*FIRST_RUN, "-o", str(tmp_path / "t.csv")], env=env, stderr=subprocess.PIPE, text=True
+    )
+    for _ in range(600):
+        helpers = _helpers_of(run.pid)
+        if len(helpers) == 2:
+            time.sleep(1.0)  # into their compile
+            return run, helpers
+        time.sleep(0.05)
+    run.kill()
+    pytest.fail("no helpers started")
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+def test_a_first_run_stops_at_once_and_takes_its_helpers_along(tmp_path):
+    """SIGTERM while a first run's helpers compile: the run compiled a unit itself and saw
+    the stop only between kernels (9 s into the penalty kernel's, past a container's 10 s
+    grace); now it waits on them and ends within a second, its helpers with it."""
+    run, helpers = _first_run_with_helpers(tmp_path)
+    used = _cpu_seconds(run.pid)
+    time.sleep(2.0)
+    assert _cpu_seconds(run.pid) - used < 0.5  # waiting on its helpers, not compiling
+    start = time.monotonic()
+    run.send_signal(signal.SIGTERM)
+    _, err = run.communicate(timeout=30)
+    assert time.monotonic() - start < 1.5 and run.returncode == 130, err
+    assert err.strip() == "optdot: interrupted"
+    time.sleep(0.3)
+    assert not [h for h in helpers if _alive(h)]
+    assert not (tmp_path / "t.csv").exists()
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the parent-death signal")
+def test_helpers_end_with_their_run_even_killed(tmp_path):
+    """A first run killed outright (SIGKILL, the OOM killer) left its helpers compiling
+    every unit still unclaimed, for ~25 s, children of init."""
+    run, helpers = _first_run_with_helpers(tmp_path)
+    run.kill()
+    run.communicate(timeout=30)
+    for _ in range(40):
+        if not [h for h in helpers if _alive(h)]:
+            break
+        time.sleep(0.05)
+    assert not [h for h in helpers if _alive(h)]
 
 
 @pytest.mark.slow
@@ -115,7 +215,7 @@ def test_processes_allowed(monkeypatch):
     assert kernels.processes_allowed() == 1
     monkeypatch.setenv(kernels.PROCESSES_ENV, "64")
     assert kernels.processes_allowed() == kernels.MAX_PROCESSES
-    for bad in ("", "zero", "-2", "0"):
+    for bad in ("", "zero", "-2", "0", "1.5", "²", "٣"):
         monkeypatch.setenv(kernels.PROCESSES_ENV, bad)
         assert kernels.processes_allowed() == min(kernels.usable_cores(), kernels.MAX_PROCESSES)
 

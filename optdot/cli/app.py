@@ -112,6 +112,17 @@ class _Command(click.Group):
     """The ``optdot`` group: one top-level handler, so that every failure, a usage error
     or a bug, ends as one line and a documented exit code (never a traceback)."""
 
+    def invoke(self, ctx):
+        """The command; an ``EOFError`` out of it passed on as the failure it is. click
+        reads one as a prompt's input ended (an abort: "interrupted", exit 130, after a
+        blank line); optdot prompts for nothing, so one is a file or a library cut short."""
+        try:
+            return super().invoke(ctx)
+        except EOFError as e:
+            if _caused_by_interrupt(e):
+                raise KeyboardInterrupt from e
+            raise RuntimeError(f"EOFError: {one_line(e) or 'input ended early'}") from e
+
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, False, **extra)

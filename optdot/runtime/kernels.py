@@ -14,11 +14,12 @@ calls with their signatures (numba types, pickled) and what each took to compile
 recorded from real runs by ``python benchmarks/kernels.py --write`` and a test holds it
 to what the code calls. :func:`warm` finds the group's kernels with no cache on disk and
 compiles them, a unit at a time (a kernel with the functions it calls), the longest
-first, in this process and in helpers (``python -m optdot.runtime.kernels``): each
-process claims the next unit as it finishes one (:func:`compile_claimed`), so the
-recorded times, which a process's own first compile skews, only order the work. Each
-writes numba's cache; the run then loads every kernel. The machine code is the same
-whoever compiled it, so the output's bytes are too. A tiled run does the same on its workers.
+first, in helper processes (``python -m optdot.runtime.kernels``) while the run waits,
+answering a stop at once: each helper claims the next unit as it finishes one
+(:func:`compile_claimed`), so the recorded times, which a process's own first compile
+skews, only order the work. Each writes numba's cache; the run then loads every kernel.
+The machine code is the same whoever compiled it, so the output's bytes are too. A tiled
+run does the same on its workers.
 
 Nothing here is needed for a correct run: a kernel the list misses, a signature that
 changed, a helper that failed or another numba version (the list is then not used) all
@@ -212,13 +213,16 @@ def compile_kernels(indices: list[int]) -> int:
     return done
 
 
-def compile_claimed(work: list[list[int]], claims: str) -> int:
+def compile_claimed(work: list[list[int]], claims: str, parent: int | None = None) -> int:
     """Compile the units ``work`` (:func:`units`) that no other process has claimed in
     the folder ``claims``, in turn: a unit is claimed by creating the file of its number
     there (exclusively), so processes sharing the folder take the next unit as each
-    finishes one, whatever the recorded times. Returns the kernels compiled here."""
+    finishes one, whatever the recorded times. With ``parent`` (a process id), stop
+    before a unit once that process is gone. Returns the kernels compiled here."""
     done = 0
     for u, members in enumerate(work):
+        if parent is not None and os.getppid() != parent:
+            break  # the run that started this helper is gone
         try:
             os.close(os.open(os.path.join(claims, str(u)), os.O_CREAT | os.O_EXCL | os.O_WRONLY))
         except FileExistsError:
@@ -239,13 +243,14 @@ def processes_allowed() -> int:
     """Processes a first run's compile may use: :data:`PROCESSES_ENV` when it is a
     positive whole number, else the usable cores; at most :data:`MAX_PROCESSES`."""
     text = os.environ.get(PROCESSES_ENV, "").strip()
-    count = int(text) if text.isdigit() and int(text) > 0 else usable_cores()
+    whole = text.isascii() and text.isdigit()  # not "²", which isdigit() takes
+    count = int(text) if whole and int(text) > 0 else usable_cores()
     return min(count, MAX_PROCESSES)
 
 
 def warm(group: str | tuple[str, ...], processes: int | None = None, announce=None) -> int:
     """Compile ``group``'s uncached kernels (or several groups') in up to ``processes``
-    processes at once (this one and helpers; default :func:`processes_allowed`), telling
+    helper processes at once (default :func:`processes_allowed`), telling
     ``announce`` (a callable taking one line) first. Returns the kernels now cached that
     were not; 0 when all were cached or one process would do it (the run then compiles
     them on first call, as it would).
@@ -279,21 +284,25 @@ def package_home() -> str:
     return str(Path(__file__).resolve().parents[2])
 
 
+def start_helper(work: list[list[int]], claims: str) -> subprocess.Popen:
+    """A helper process compiling the units ``work`` not claimed in the folder ``claims``
+    (:func:`compile_claimed`), started in :func:`package_home`, with nothing to read or
+    print; it stops when this process is gone (:func:`main`)."""
+    args = [sys.executable, "-m", __name__, claims, json.dumps(work), str(os.getpid())]
+    quiet = subprocess.DEVNULL
+    return subprocess.Popen(args, stdin=quiet, stdout=quiet, stderr=quiet, cwd=package_home())
+
+
 def _compile_together(work: list[list[int]], count: int) -> None:
-    """:func:`compile_claimed` in this process and ``count - 1`` helpers, sharing a
-    temporary claims folder; the helpers are stopped if this process stops."""
+    """:func:`compile_claimed` in ``count`` helpers sharing a temporary claims folder,
+    while this process only waits: it sees a stop asked for within 50 ms (compiling a
+    unit itself, it saw one only between kernels: 9 s into the penalty kernel's). The
+    helpers are stopped if this process stops, and stop if it dies."""
     with tempfile.TemporaryDirectory(prefix="optdot-compile-") as claims:
-        args = [sys.executable, "-m", __name__, claims, json.dumps(work)]
-        quiet = subprocess.DEVNULL
         helpers: list[subprocess.Popen] = []
         try:
-            for _ in range(count - 1):
-                helpers.append(
-                    subprocess.Popen(
-                        args, stdin=quiet, stdout=quiet, stderr=quiet, cwd=package_home()
-                    )
-                )
-            compile_claimed(work, claims)
+            for _ in range(count):
+                helpers.append(start_helper(work, claims))
             for p in helpers:
                 while p.poll() is None:
                     check_interrupt()
@@ -305,9 +314,27 @@ def _compile_together(work: list[list[int]], count: int) -> None:
                     p.wait()
 
 
+def _die_with(parent: int) -> None:
+    """End this helper when the process ``parent`` ends, even killed (Linux: the
+    kernel's parent-death signal; elsewhere :func:`compile_claimed` looks between units)."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, 9)  # PR_SET_PDEATHSIG, SIGKILL
+    except (OSError, AttributeError):
+        pass
+    if os.getppid() != parent:  # gone before the signal was asked for
+        sys.exit(0)
+
+
 def main(argv: list[str]) -> int:
-    """A helper: ``CLAIMS WORK``, :func:`compile_claimed` with the units ``WORK`` (JSON)."""
-    compile_claimed(json.loads(argv[1]), argv[0])
+    """A helper: ``CLAIMS WORK PARENT``, :func:`compile_claimed` with the units ``WORK``
+    (JSON) while the process ``PARENT`` lives."""
+    parent = int(argv[2]) if len(argv) > 2 else None
+    if parent is not None:
+        _die_with(parent)
+    compile_claimed(json.loads(argv[1]), argv[0], parent)
     return 0
 
 
