@@ -20,6 +20,7 @@ import os
 import signal
 import sys
 
+from .runtime.kernel_cache import discard_temporary
 from .runtime.stop import interrupted, mark_interrupted
 
 #: Exit code when the command line cannot load (a broken install): the internal error's,
@@ -92,11 +93,13 @@ def run() -> None:
             f"optdot: internal error: cannot load the command line: {type(e).__name__}: {first}\n"
         )
         sys.stderr.flush()
+        discard_temporary()
         os._exit(EXIT_CANNOT_LOAD)
 
     if interrupted():
         sys.stderr.write("optdot: interrupted\n")
         sys.stderr.flush()
+        discard_temporary()
         os._exit(130)  # nothing is open yet
     try:
         main(prog_name="optdot")

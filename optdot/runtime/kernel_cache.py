@@ -34,8 +34,13 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def settle() -> None:
     """Choose the kernel cache and make reading it safe (see the module doc); a
-    ``NUMBA_CACHE_DIR`` the user set is kept."""
-    if "NUMBA_CACHE_DIR" not in os.environ and not checkout_cache():
+    ``NUMBA_CACHE_DIR`` the user set is kept where it can be written (numba caches only
+    there, and raised at import where it could not: every command failed)."""
+    chosen = os.environ.get("NUMBA_CACHE_DIR", "")
+    if chosen:
+        if not writable(Path(chosen)):
+            temporary_cache()
+    elif not checkout_cache():
         if not writable(ROOT / "optdot" / "__pycache__") and not writable(numba_user_cache()):
             temporary_cache()
     tolerate_damaged_entries()
@@ -77,8 +82,9 @@ def checkout_cache() -> bool:
 
 def numba_user_cache() -> Path:
     """The folder numba caches in when it cannot write beside a kernel's source (its
-    user-wide cache: ``$XDG_CACHE_HOME/numba``, else ``~/.cache/numba``)."""
-    home = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    user-wide cache: ``$XDG_CACHE_HOME/numba``, else ``~/.cache/numba``; an empty
+    ``XDG_CACHE_HOME`` gives ``numba`` in the working folder, as numba reads it)."""
+    home = os.getenv("XDG_CACHE_HOME", os.path.expanduser("~/.cache"))  # "" kept, as numba does
     return Path(home) / "numba"
 
 
@@ -93,22 +99,32 @@ def writable(folder: Path) -> bool:
     return p.is_dir() and os.access(p, os.W_OK | os.X_OK)
 
 
+#: The temporary kernel cache this process made, and the process (:func:`temporary_cache`).
+_temporary: tuple[str, int] | None = None
+
+
 def temporary_cache() -> str | None:
-    """Cache kernels in a new temporary folder, removed when this process exits (the
-    workers and helpers it starts share it); its path, or None when none can be made."""
+    """Cache kernels in a new temporary folder, removed when this process exits
+    (:func:`discard_temporary`; the workers and helpers it starts share it); its path, or
+    None when none can be made."""
+    global _temporary
     try:
         folder = tempfile.mkdtemp(prefix="optdot-kernels-")
     except OSError:
         return None
-    owner = os.getpid()
-
-    def remove() -> None:
-        if os.getpid() == owner:  # not in a forked child
-            shutil.rmtree(folder, ignore_errors=True)
-
-    atexit.register(remove)
+    _temporary = (folder, os.getpid())
+    atexit.register(discard_temporary)
     _use(folder)
     return folder
+
+
+def discard_temporary() -> None:
+    """Remove the temporary kernel cache this process made, if any (not in a forked
+    child); called at exit, and before an exit that skips Python's (``os._exit``)."""
+    global _temporary
+    if _temporary is not None and _temporary[1] == os.getpid():
+        shutil.rmtree(_temporary[0], ignore_errors=True)
+        _temporary = None
 
 
 def _tolerant(module) -> None:
@@ -121,19 +137,27 @@ def _tolerant(module) -> None:
 
     def _load_index(self):
         try:
-            return load_index(self)
+            found = load_index(self)
         except OSError:
             raise
         except Exception:  # noqa: BLE001 - cut short, or not numba's: no entries
             return {}
+        return found if isinstance(found, dict) else {}
 
     def _load_overload(self, sig, target_context):
         try:
-            return load_overload(self, sig, target_context)
+            found = load_overload(self, sig, target_context)
         except OSError:
             raise
         except Exception:  # noqa: BLE001 - an entry that cannot be rebuilt: compile it
             return None
+        # another signature's machine code under this one's name (two processes that
+        # wrote a function's signatures at once, a file copied over): run, it could not
+        # unbox its arguments (every later run failed), or read them wrongly
+        args = getattr(getattr(found, "signature", None), "args", None)
+        if found is not None and (args is None or tuple(args) != tuple(sig)):
+            return None
+        return found
 
     index_file._load_index, cache._load_overload = _load_index, _load_overload
     cache._optdot_tolerant = True
