@@ -328,31 +328,20 @@ def test_a_command_line_that_cannot_load_says_so_in_one_line():
     assert lines[0].startswith("optdot: internal error: cannot load the command line: ")
 
 
-def test_an_eof_error_is_an_internal_error_not_an_interrupt(tiny, monkeypatch, tmp_path):
-    """click reads an ``EOFError`` as a prompt's input ended and aborts: the command said
-    "interrupted" (exit 130) after a blank line though no signal came (a numba cache file
-    cut short raised one)."""
-    import optdot.orchestration.pipeline
-
-    def cut_short(*a, **k):
-        raise EOFError("Ran out of input")
-
-    monkeypatch.setattr(optdot.orchestration.pipeline, "generate", cut_short)
-    monkeypatch.setenv("TMPDIR", str(tmp_path))
-    import tempfile
-
-    monkeypatch.setattr(tempfile, "tempdir", None)
-    rc, err, _ = cli("generate", tiny / "job.toml", "-o", tiny / "x.csv")
-    assert rc == EXIT_INTERNAL, err
-    assert err == [err[0]] and err[0].startswith("optdot: internal error: "), err
-    assert "EOFError: Ran out of input" in err[0]
-
-
-def test_an_internal_error_is_one_line_with_a_log(tiny, monkeypatch, tmp_path):
+@pytest.mark.parametrize(
+    "planted",
+    [ZeroDivisionError("a planted bug"), EOFError("Ran out of input")],
+    ids=["bug", "eof"],
+)
+def test_an_internal_error_is_one_line_with_a_log(tiny, monkeypatch, tmp_path, planted):
+    """An unexpected exception: one line naming a log with the traceback, exit 70. An
+    ``EOFError`` too: click read it as a prompt's input ended and aborted, and the command
+    said "interrupted" (exit 130) after a blank line though no signal came (a numba cache
+    file cut short raised one)."""
     import optdot.orchestration.pipeline
 
     def bug(*a, **k):
-        raise ZeroDivisionError("a planted bug")
+        raise planted
 
     monkeypatch.setattr(optdot.orchestration.pipeline, "generate", bug)
     monkeypatch.setenv("TMPDIR", str(tmp_path))
@@ -360,11 +349,12 @@ def test_an_internal_error_is_one_line_with_a_log(tiny, monkeypatch, tmp_path):
 
     monkeypatch.setattr(tempfile, "tempdir", None)
     rc, err, _ = cli("generate", tiny / "job.toml", "-o", tiny / "x.csv")
-    assert rc == EXIT_INTERNAL
-    assert len(err) == 1 and err[0].startswith("optdot: internal error: ZeroDivisionError")
+    assert rc == EXIT_INTERNAL, err
+    assert len(err) == 1 and err[0].startswith("optdot: internal error: "), err
+    assert f"{type(planted).__name__}: {planted}" in err[0]
     log = err[0].split("traceback in ")[1].rstrip(")")
     text = open(log).read()
-    assert "Traceback" in text and "a planted bug" in text and "generate" in text
+    assert "Traceback" in text and str(planted) in text and "generate" in text
     assert log.startswith(str(tmp_path))
     assert not (tiny / "x.csv").exists()
 
