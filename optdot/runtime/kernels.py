@@ -42,6 +42,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
+from .kernel_cache import ROOT
 from .stop import check_interrupt
 
 #: The list of kernels (recorded by ``benchmarks/kernels.py --write``).
@@ -281,7 +282,7 @@ def package_home() -> str:
     kernels into this optdot's cache. Started from a checkout's folder instead, as a
     command run in the checkout a package was installed from is, it would compile the
     checkout's modules into their own cache, and the run would compile its own again."""
-    return str(Path(__file__).resolve().parents[2])
+    return str(ROOT)
 
 
 def start_helper(work: list[list[int]], claims: str) -> subprocess.Popen:
